@@ -1,0 +1,121 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Static equilibrium, linearised modes and the structural damping matrix."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+from .model import (
+    P_J4,
+    P_JG,
+    P_JW,
+    forces,
+    linear_stiffness,
+    mass_matrix,
+    pack_parameters,
+    rigid_motion_vector,
+)
+from .params import Config
+
+__all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix']
+
+
+def static_equilibrium(p: np.ndarray, theta1: float, u_guess=None, tol: float = 1e-15,
+                       max_iter: int = 50) -> np.ndarray:
+    """Solve Q(u, 0, theta1) = 0 (at rest, so no sliding friction) by Newton's method."""
+    u = rigid_motion_vector(p) * theta1 if u_guess is None else np.array(u_guess, float)
+    v = np.zeros(3)
+    for _ in range(max_iter):
+        Q, dQdu, _, _ = forces(p, u, v, theta1)
+        du = np.linalg.solve(dQdu, -Q)
+        u = u + du
+        if np.all(np.abs(du) <= tol * (1.0 + np.abs(u))):
+            break
+    return u
+
+
+@dataclass(frozen=True)
+class ModalResult:
+    """Linearised modes at an operating point, lowest first."""
+
+    frequencies_hz: np.ndarray      # damped natural frequencies (undamped if no damping)
+    undamped_hz: np.ndarray         # sqrt of eig(K, M) / 2 pi
+    damping_ratios: np.ndarray      # from the state-space eigenvalues (friction linearised)
+    shapes: np.ndarray              # columns: (theta2, theta3, theta4), max |entry| = 1
+    M: np.ndarray
+    K: np.ndarray
+    C: np.ndarray
+    operating_point: np.ndarray     # u at which the model was linearised
+
+    def table(self) -> str:
+        lines = ['mode  f [Hz]      f_undamped [Hz]  zeta        shape (theta2, theta3, theta4)']
+        for i in range(len(self.undamped_hz)):
+            s = ', '.join(f'{x:+.4f}' for x in self.shapes[:, i])
+            lines.append(f'{i + 1:<5d} {self.frequencies_hz[i]:<11.4f} '
+                         f'{self.undamped_hz[i]:<16.4f} {self.damping_ratios[i]:<11.3e} ({s})')
+        return '\n'.join(lines)
+
+
+def modes(cfg: Config, theta1: float = 0.0, sliding_rate: float = 0.0,
+          include_damping: bool = True) -> ModalResult:
+    """Linearise Eq. 15 about the static equilibrium at ``theta1`` (motor end held).
+
+    ``sliding_rate`` is a worm speed [rad/s] of the operating point (steady slewing); the
+    friction terms are linearised there (at rest, tanh makes friction act like viscous
+    damping of slope mu/v_eps).
+    """
+    p = pack_parameters(cfg)
+    u = static_equilibrium(p, theta1)
+    v = rigid_motion_vector(p) * sliding_rate
+    _, dQdu, dQdv, _ = forces(p, u, v, theta1)
+    M = mass_matrix(p)
+    K = -dQdu
+    C = damping_matrix(cfg, p) - dQdv if include_damping else np.zeros((3, 3))
+    w2, vecs = sla.eig(K, M)
+    order = np.argsort(w2.real)
+    w2 = w2.real[order]
+    undamped = np.sqrt(np.clip(w2, 0.0, None)) / (2 * np.pi)
+    shapes = vecs.real[:, order]
+    shapes = shapes / np.max(np.abs(shapes), axis=0) * np.sign(shapes[np.argmax(
+        np.abs(shapes), axis=0), np.arange(3)])
+    # state-space eigenvalues for damped frequencies and damping ratios
+    Minv = np.linalg.inv(M)
+    A = np.block([[np.zeros((3, 3)), np.eye(3)], [-Minv @ K, -Minv @ C]])
+    lam = np.linalg.eigvals(A)
+    lam = lam[lam.imag >= 0]
+    wn = np.abs(lam)
+    zeta = np.where(wn > 0, -lam.real / np.where(wn > 0, wn, 1.0), 0.0)
+    idx = np.argsort(wn)[:3]
+    damped = np.abs(lam.imag[idx]) / (2 * np.pi)
+    zeta = zeta[idx]
+    if len(idx) < 3:  # over-damped modes: pad so the table stays aligned
+        damped = np.pad(damped, (0, 3 - len(idx)))
+        zeta = np.pad(zeta, (0, 3 - len(idx)), constant_values=1.0)
+    return ModalResult(frequencies_hz=damped, undamped_hz=undamped, damping_ratios=zeta,
+                       shapes=shapes, M=M, K=K, C=C, operating_point=u)
+
+
+def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:
+    """Structural damping C (acts on velocities relative to the rigid kinematic motion):
+    Rayleigh alpha M + beta K0 plus modal damping M Phi diag(2 zeta w) Phi^T M, with K0 the
+    frictionless stiffness at the mean mesh stiffness."""
+    if p is None:
+        p = pack_parameters(cfg)
+    d = cfg.damping
+    M = mass_matrix(p)
+    K0 = linear_stiffness(p)
+    C = d.rayleigh_alpha * M + d.rayleigh_beta * K0
+    zetas = np.asarray(d.modal_damping_ratios, float)
+    if np.any(zetas > 0):
+        w2, phi = sla.eigh(K0, M)            # mass-normalised: phi^T M phi = I
+        w = np.sqrt(np.clip(w2, 0.0, None))
+        C = C + M @ phi @ np.diag(2.0 * zetas * w) @ phi.T @ M
+    return np.ascontiguousarray(C)
+
+
+def inertias(p: np.ndarray) -> tuple[float, float, float]:
+    return float(p[P_JW]), float(p[P_JG]), float(p[P_J4])

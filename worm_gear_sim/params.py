@@ -1,0 +1,606 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Parameters of the worm-gear drive: typed, immutable, validated, loaded from YAML.
+
+One YAML file (``config/worm_gear_sim.yaml``) in the ROS ``worm_gear_sim: ros__parameters:``
+layout holds every default; the dataclasses below carry the same defaults (a test checks
+that they agree).  Nested YAML groups become sections here and dotted ROS parameter names
+(``mesh.stiffness_model``) in the node.
+
+Every field carries metadata (description, unit, range, choices, read-only) so that the
+ROS node can declare descriptors and the CLI can print help from the same source.
+
+SI units and radians throughout (REP 103).  Derived quantities (inertias, stiffnesses,
+lead per radian, ratio) are computed in exactly one place: :func:`derive`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+__all__ = [
+    'ConfigError', 'Config', 'Derived', 'derive', 'load_config', 'config_from_mapping',
+    'default_config', 'default_config_path', 'NODE_NAME',
+]
+
+NODE_NAME = 'worm_gear_sim'
+DEG = math.pi / 180.0
+
+
+class ConfigError(ValueError):
+    """An invalid parameter value or configuration file; ``key`` names the bad parameter."""
+
+    def __init__(self, key: str, message: str):
+        self.key = key
+        self.reason = message
+        super().__init__(f'{key}: {message}' if key else message)
+
+
+def _f(default: Any, description: str, unit: str = '', lo: float | None = None,
+       hi: float | None = None, lo_open: bool = False, choices: tuple[str, ...] = (),
+       read_only: bool = False, length: int | None = None):
+    """Declare a parameter field with its metadata (single source for docs, ROS, checks)."""
+    meta = dict(description=description, unit=unit, lo=lo, hi=hi, lo_open=lo_open,
+                choices=choices, read_only=read_only, length=length)
+    if isinstance(default, list):
+        return field(default_factory=lambda: tuple(default), metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Worm-gear set geometry (Table 1, module M2). R in Table 1 is a radius."""
+
+    module: float = _f(2.0, 'Gear module M in mm (multiplies Eqs. 16-17)', 'mm', 0.0, 50.0,
+                       lo_open=True)
+    worm_pitch_radius: float = _f(0.0158, 'Worm pitch radius r_w = R2', 'm', 0.0, 1.0,
+                                  lo_open=True)
+    worm_length: float = _f(0.015, 'Worm body length L2 (inertia J_w)', 'm', 0.0, 2.0,
+                            lo_open=True)
+    gear_pitch_radius: float = _f(0.056, 'Worm-gear pitch radius r_g = R3', 'm', 0.0, 5.0,
+                                  lo_open=True)
+    gear_width: float = _f(0.02, 'Worm-gear body width L3 (inertia J_g)', 'm', 0.0, 2.0,
+                           lo_open=True)
+    lead: float = _f(0.006283185, 'Worm lead per revolution (Table 1)', 'm/rev', 0.0, 1.0,
+                     lo_open=True)
+    lead_convention: str = _f('kinematic', 'kinematic: l_w = lead/2pi (ratio 1:56); paper: '
+                              'lead used as if per radian (reproduces the printed 0.0127 rad)',
+                              choices=('kinematic', 'paper'))
+    lead_angle: float = _f(0.0, 'Lead angle lambda; 0 derives tan(lambda) = l_w/r_w '
+                           '(conservative mesh). Table 1 prints 3deg41min = 0.064286 rad',
+                           'rad', 0.0, 0.8)
+    pressure_angle: float = _f(0.30543261909900765, 'Normal pressure angle phi_n (17deg30min)',
+                               'rad', 0.0, 0.8, lo_open=True)
+    flywheel_enabled: bool = _f(True, 'Flywheel J_4 on the gear shaft; false leaves the '
+                                'gear-shaft end inertia only')
+    flywheel_radius: float = _f(0.12, 'Flywheel radius R5', 'm', 0.0, 5.0, lo_open=True)
+    flywheel_length: float = _f(0.03, 'Flywheel length L5', 'm', 0.0, 5.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Materials:
+    """Densities and elastic moduli."""
+
+    worm_density: float = _f(7850.0, 'Worm (Cr-Mo steel) density', 'kg/m^3', 0.0, 3e4,
+                             lo_open=True)
+    gear_density: float = _f(8800.0, 'Worm-gear (phosphor bronze) density', 'kg/m^3', 0.0,
+                             3e4, lo_open=True)
+    flywheel_density: float = _f(7850.0, 'Flywheel (steel) density', 'kg/m^3', 0.0, 3e4,
+                                 lo_open=True)
+    shaft_density: float = _f(7850.0, 'Shaft (steel) density, used by the shaft inertia '
+                              'fractions', 'kg/m^3', 0.0, 3e4, lo_open=True)
+    worm_shaft_shear_modulus: float = _f(77e9, 'Shear modulus G of the worm shaft', 'Pa',
+                                         0.0, 1e16, lo_open=True)
+    gear_shaft_shear_modulus: float = _f(77e9, 'Shear modulus G of the worm-gear shaft', 'Pa',
+                                         0.0, 1e16, lo_open=True)
+    youngs_modulus: float = _f(206e9, "Young's modulus E of both shafts (axial stiffness)",
+                               'Pa', 0.0, 1e16, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Shafts:
+    """Shafts (massless torsional springs, assumption 8) and bearings."""
+
+    worm_shaft_radius: float = _f(0.01534, 'Worm shaft radius R1', 'm', 0.0, 1.0, lo_open=True)
+    worm_shaft_length: float = _f(0.20, 'Worm shaft length L1', 'm', 0.0, 10.0, lo_open=True)
+    gear_shaft_radius: float = _f(0.0175, 'Worm-gear shaft radius R4', 'm', 0.0, 1.0,
+                                  lo_open=True)
+    gear_shaft_length: float = _f(0.37, 'Worm-gear shaft length L4', 'm', 0.0, 10.0,
+                                  lo_open=True)
+    worm_shaft_inertia_fraction: float = _f(0.0, 'Share of the worm shaft polar inertia lumped '
+                                            'on the worm (paper: 0, usual lumped value 1/3)',
+                                            '', 0.0, 1.0)
+    gear_shaft_inertia_fraction: float = _f(0.0, 'Share of the gear shaft polar inertia lumped '
+                                            'on the gear and on the flywheel end each', '',
+                                            0.0, 1.0)
+    worm_bearing_axial_stiffness: float = _f(2e8, 'Axial stiffness K_bTws of the worm bearing',
+                                             'N/m', 0.0, 1e14, lo_open=True)
+    gear_bearing_axial_stiffness: float = _f(2e8, 'Axial stiffness K_bTgs of the gear bearing',
+                                             'N/m', 0.0, 1e14, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """Tooth mesh stiffness, Eqs. (16)-(17)."""
+
+    stiffness_model: str = _f('nonlinear', 'nonlinear: Eqs. 16-17 over the mesh cycle; linear: '
+                              'constant tooth stiffnesses (paper Figs. 10-11)',
+                              choices=('nonlinear', 'linear'))
+    worm_tooth_stiffness_linear: float = _f(3.5e8, 'c_w k_w in linear mode', 'N/m', 0.0, 1e14,
+                                            lo_open=True)
+    gear_tooth_stiffness_linear: float = _f(2.5e8, 'c_g k_g in linear mode', 'N/m', 0.0, 1e14,
+                                            lo_open=True)
+    worm_fit_a: float = _f(19.38843319, 'a_w of Eq. 16', '', -100.0, 100.0)
+    worm_fit_b: float = _f(0.000656069, 'b_w of Eq. 16', '1/deg', -1.0, 1.0)
+    gear_fit_a: float = _f(19.64527077, 'a_g of Eq. 17', '', -100.0, 100.0)
+    gear_fit_b: float = _f(-0.00055956, 'b_g of Eq. 17', '1/deg', -1.0, 1.0)
+    calibrate_to_linear_mean: bool = _f(True, 'Shift the contact-position origin so that the '
+                                        'mean of Eqs. 16-17 over a mesh cycle equals the '
+                                        'linear values')
+    phase_offset: float = _f(0.0, 'Mesh-cycle phase (worm rotation) at theta2 = theta3 = 0',
+                             'rad', 0.0, 2.0 * math.pi)
+    worm_tooth_stiffness_multiplier: float = _f(1.0, 'Multiplier on c_w k_w (Fig. 17 study)',
+                                                '', 0.0, 1e6, lo_open=True)
+    gear_tooth_stiffness_multiplier: float = _f(1.0, 'Multiplier on c_g k_g (Fig. 17 study)',
+                                                '', 0.0, 1e6, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Tooth friction, Eq. (18), in SI with the sliding velocity along the thread."""
+
+    model: str = _f('stribeck', 'stribeck: Eq. 18; constant: constant_coefficient; off',
+                    choices=('stribeck', 'constant', 'off'))
+    direction: str = _f('regularized', 'regularized: opposes sliding, sgn ~ tanh(v/v_eps); '
+                        'paper: fixed sign as printed in Eqs. 1-2 (cannot dissipate)',
+                        choices=('regularized', 'paper'))
+    mu_kinetic: float = _f(0.0470713, 'mu at high sliding speed (Eq. 18 constant term)', '',
+                           0.0, 2.0)
+    mu_stribeck_drop: float = _f(0.1056549, 'mu(0) - mu_kinetic (Eq. 18 exponential term)', '',
+                                 0.0, 2.0)
+    stribeck_velocity: float = _f(0.07454, 'v_S in mu = mu_k + drop*exp(-sqrt(v/v_S)); '
+                                  '1/(0.223607*60) m/s reads Eq. 18 in m/min', 'm/s',
+                                  0.0, 1e3, lo_open=True)
+    constant_coefficient: float = _f(0.145, 'mu of the constant model (paper linear case)', '',
+                                     0.0, 2.0)
+    regularization_velocity: float = _f(1e-4, 'v_eps of tanh(v_s/v_eps)', 'm/s', 0.0, 1.0,
+                                        lo_open=True)
+    in_compliance: bool = _f(True, 'Keep the friction terms of KGWS (Eq. 10): friction loads '
+                             'the shaft bearings axially')
+
+
+@dataclass(frozen=True)
+class Damping:
+    """Optional structural damping (assumption 10 of the paper: none)."""
+
+    rayleigh_alpha: float = _f(0.0, 'Mass-proportional damping alpha (relative to the rigid '
+                               'kinematic motion)', '1/s', 0.0, 1e6)
+    rayleigh_beta: float = _f(0.0, 'Stiffness-proportional damping beta', 's', 0.0, 1.0)
+    modal_damping_ratios: tuple = _f([0.0, 0.0, 0.0], 'Damping ratio of each linearised mode, '
+                                     'lowest first', '', 0.0, 1.0, length=3)
+
+
+@dataclass(frozen=True)
+class Load:
+    """External load on the output (antenna). The paper has none (defaults zero)."""
+
+    output_torque: float = _f(0.0, 'Constant external torque on theta4 (wind, unbalance)',
+                              'N*m', -1e5, 1e5)
+    output_viscous_coefficient: float = _f(0.0, 'Viscous bearing drag on theta4', 'N*m*s/rad',
+                                           0.0, 1e5)
+
+
+@dataclass(frozen=True)
+class Integrator:
+    """Newmark-beta with Newton-Raphson on the end-of-step state."""
+
+    time_step: float = _f(1e-5, 'Fixed Newmark step dt', 's', 0.0, 1e-2, lo_open=True,
+                          read_only=True)
+    newmark_beta: float = _f(0.25, 'Newmark beta (1/4: average acceleration)', '', 0.0, 0.5,
+                             lo_open=True)
+    newmark_gamma: float = _f(0.5, 'Newmark gamma (1/2: no numerical damping)', '', 0.5, 1.0)
+    newton_rtol: float = _f(1e-10, 'Relative tolerance of the scaled Newton residual', '',
+                            0.0, 1e-2, lo_open=True)
+    newton_atol: float = _f(1e-14, 'Absolute tolerance (rad) of the scaled Newton residual',
+                            'rad', 0.0, 1e-3, lo_open=True)
+    newton_max_iterations: int = _f(12, 'Newton iterations before a step is subdivided', '',
+                                    1, 200)
+    max_subdivision_level: int = _f(10, 'A failing step is split in 2, 4, ... 2^level parts',
+                                    '', 0, 20)
+
+
+@dataclass(frozen=True)
+class InputProfile:
+    """Commanded worm angle theta1(t) for offline runs (the node takes it from a topic)."""
+
+    profile: str = _f('trapezoidal', 'step | ramp | trapezoidal | s_curve | csv',
+                      choices=('step', 'ramp', 'trapezoidal', 's_curve', 'csv'))
+    target_angle: float = _f(0.11309733552923255, 'Move size: 18 steps of 0.36 deg', 'rad',
+                             -1e4, 1e4)
+    start_time: float = _f(0.0, 'Time at which the move starts', 's', 0.0, 1e6)
+    move_time: float = _f(0.020, 'Duration of the move (ramp, trapezoidal, s_curve)', 's',
+                          0.0, 1e4, lo_open=True)
+    accel_time: float = _f(0.004, 'Acceleration (= deceleration) time of trapezoidal and '
+                           's_curve moves', 's', 0.0, 1e4, lo_open=True)
+    csv_path: str = _f('', 'CSV file with columns t, theta1 (profile: csv)')
+    end_time: float = _f(0.5, 'Simulated duration of offline runs', 's', 0.0, 1e6,
+                         lo_open=True)
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    """ROS node settings (read by worm_gear_sim.node; pure data, no rclpy here)."""
+
+    publish_rate_hz: float = _f(1000.0, 'Tick (publish) rate', 'Hz', 1.0, 20000.0,
+                                read_only=True)
+    joint_names: tuple = _f(['worm_input_joint', 'worm_joint', 'worm_gear_joint',
+                             'antenna_joint'], 'JointState names for theta1..theta4',
+                            read_only=True, length=4)
+    executor: str = _f('events', 'events | single_threaded', choices=('events',
+                       'single_threaded'), read_only=True)
+    max_command_jump: float = _f(1.0, 'Largest accepted change of theta1 between two '
+                                 'commands', 'rad', 0.0, 1e4, lo_open=True)
+    max_command_abs: float = _f(1e4, 'Largest accepted |theta1|', 'rad', 0.0, 1e9,
+                                lo_open=True)
+    max_catch_up: float = _f(0.05, 'Largest simulated time integrated in one tick; the rest '
+                             'is dropped and counted as an overrun', 's', 0.0, 10.0,
+                             lo_open=True)
+    command_interpolation: str = _f('linear', 'How theta1 moves between commands inside a '
+                                    'tick: linear or hold', choices=('linear', 'hold'))
+    compensation_applied: bool = _f(False, 'Predict the drive as if ~/feedforward were added '
+                                    'to the command')
+    diagnostic_period: float = _f(1.0, 'Period of /diagnostics', 's', 0.01, 60.0,
+                                  read_only=True)
+
+
+@dataclass(frozen=True)
+class CompensationSettings:
+    """Feed-forward compensation (worm_gear_sim.compensation)."""
+
+    enabled: bool = _f(True, 'Compute the feed-forward correction')
+    quasi_static: bool = _f(True, 'Compensate compliance and friction wind-up')
+    shaper: str = _f('zvd', 'Input shaper: none | zv | zvd | ei', choices=('none', 'zv', 'zvd',
+                     'ei'))
+    preview_time: float = _f(0.0, 'Preview horizon of future command samples', 's', 0.0, 1.0)
+
+
+SECTIONS: dict[str, type] = {
+    'geometry': Geometry,
+    'materials': Materials,
+    'shafts': Shafts,
+    'mesh': Mesh,
+    'friction': Friction,
+    'damping': Damping,
+    'load': Load,
+    'integrator': Integrator,
+    'input': InputProfile,
+    'node': NodeSettings,
+    'compensation': CompensationSettings,
+}
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole parameter set; immutable. Build variants with :meth:`replace`."""
+
+    geometry: Geometry = field(default_factory=Geometry)
+    materials: Materials = field(default_factory=Materials)
+    shafts: Shafts = field(default_factory=Shafts)
+    mesh: Mesh = field(default_factory=Mesh)
+    friction: Friction = field(default_factory=Friction)
+    damping: Damping = field(default_factory=Damping)
+    load: Load = field(default_factory=Load)
+    integrator: Integrator = field(default_factory=Integrator)
+    input: InputProfile = field(default_factory=InputProfile)
+    node: NodeSettings = field(default_factory=NodeSettings)
+    compensation: CompensationSettings = field(default_factory=CompensationSettings)
+
+    def __post_init__(self):
+        validate(self)
+
+    def to_flat_dict(self) -> dict[str, Any]:
+        """Dotted names (``'mesh.stiffness_model'``) to values, in declaration order."""
+        out: dict[str, Any] = {}
+        for sec in SECTIONS:
+            obj = getattr(self, sec)
+            for f in fields(obj):
+                v = getattr(obj, f.name)
+                out[f'{sec}.{f.name}'] = list(v) if isinstance(v, tuple) else v
+        return out
+
+    def to_nested_dict(self) -> dict[str, dict[str, Any]]:
+        """Sections to plain dicts (for JSON/YAML)."""
+        nested: dict[str, dict[str, Any]] = {}
+        for key, v in self.to_flat_dict().items():
+            sec, name = key.split('.', 1)
+            nested.setdefault(sec, {})[name] = v
+        return nested
+
+    def replace(self, overrides: Mapping[str, Any] | None = None, **kw: Any) -> Config:
+        """Return a validated copy with dotted-name overrides applied (all or nothing)."""
+        changes = dict(overrides or {})
+        changes.update({k.replace('__', '.'): v for k, v in kw.items()})
+        nested = self.to_nested_dict()
+        for key, value in changes.items():
+            sec, _, name = key.partition('.')
+            if sec not in nested or name not in nested[sec]:
+                raise ConfigError(key, 'unknown parameter' + _suggest(key, self.to_flat_dict()))
+            nested[sec][name] = value
+        return config_from_mapping(nested, source='overrides')
+
+    @staticmethod
+    def metadata() -> dict[str, dict[str, Any]]:
+        """Dotted name -> field metadata (description, unit, lo, hi, choices, ...)."""
+        out = {}
+        for sec, cls in SECTIONS.items():
+            for f in fields(cls):
+                out[f'{sec}.{f.name}'] = dict(f.metadata)
+        return out
+
+
+def _suggest(key: str, known: Mapping[str, Any]) -> str:
+    close = difflib.get_close_matches(key, list(known), n=1, cutoff=0.6)
+    return f' (did you mean {close[0]}?)' if close else ''
+
+
+def _coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
+    """Type-check one value against its field's default type and metadata."""
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(key, f'must be true or false, got {value!r}')
+        return value
+    if isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                value = int(value)
+            else:
+                raise ConfigError(key, f'must be an integer, got {value!r}')
+        _check_range(key, float(value), meta)
+        return value
+    if isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(key, f'must be a number, got {value!r}')
+        value = float(value)
+        _check_range(key, value, meta)
+        return value
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            raise ConfigError(key, f'must be a string, got {value!r}')
+        if meta.get('choices') and value not in meta['choices']:
+            raise ConfigError(key, f'must be one of {", ".join(meta["choices"])}; got {value!r}')
+        return value
+    if isinstance(default, tuple):
+        if isinstance(value, (str, bytes)) or not hasattr(value, '__iter__'):
+            raise ConfigError(key, f'must be a list, got {value!r}')
+        value = tuple(value)
+        if meta.get('length') is not None and len(value) != meta['length']:
+            raise ConfigError(key, f'must have {meta["length"]} entries, got {len(value)}')
+        if default and isinstance(default[0], str):
+            if not all(isinstance(v, str) and v for v in value):
+                raise ConfigError(key, 'entries must be non-empty strings')
+            if len(set(value)) != len(value):
+                raise ConfigError(key, 'entries must be unique')
+            return value
+        out = []
+        for i, v in enumerate(value):
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise ConfigError(key, f'entry {i} must be a number, got {v!r}')
+            _check_range(f'{key}[{i}]', float(v), meta)
+            out.append(float(v))
+        return tuple(out)
+    raise ConfigError(key, f'unsupported type {type(default).__name__}')  # pragma: no cover
+
+
+def _check_range(key: str, value: float, meta: Mapping[str, Any]) -> None:
+    if not math.isfinite(value):
+        raise ConfigError(key, f'must be finite, got {value!r}')
+    lo, hi = meta.get('lo'), meta.get('hi')
+    if lo is not None:
+        if meta.get('lo_open') and value <= lo:
+            raise ConfigError(key, f'must be > {lo:g}, got {value!r}')
+        if value < lo:
+            raise ConfigError(key, f'must be >= {lo:g}, got {value!r}')
+    if hi is not None and value > hi:
+        raise ConfigError(key, f'must be <= {hi:g}, got {value!r}')
+
+
+def validate(cfg: Config) -> None:
+    """Per-field checks (types, finiteness, ranges, choices) and cross-field checks."""
+    for sec in SECTIONS:
+        obj = getattr(cfg, sec)
+        for f in fields(obj):
+            key = f'{sec}.{f.name}'
+            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+            _coerce(key, getattr(obj, f.name), default, f.metadata)
+    integ = cfg.integrator
+    if not (2.0 * integ.newmark_beta >= integ.newmark_gamma - 1e-15):
+        raise ConfigError('integrator.newmark_beta', f'{integ.newmark_beta:g} with gamma '
+                          f'{integ.newmark_gamma:g} is only conditionally stable: need '
+                          '2*beta >= gamma >= 1/2')
+    inp = cfg.input
+    if inp.profile in ('trapezoidal', 's_curve') and 2.0 * inp.accel_time > inp.move_time:
+        raise ConfigError('input.accel_time', f'2*accel_time ({2 * inp.accel_time:g} s) must '
+                          f'not exceed move_time ({inp.move_time:g} s)')
+    if inp.profile == 'csv' and not inp.csv_path:
+        raise ConfigError('input.csv_path', 'is required when input.profile is csv')
+    g = cfg.geometry
+    if g.lead_angle == 0.0 and g.lead / (2 * math.pi) >= g.worm_pitch_radius:
+        raise ConfigError('geometry.lead', 'lead/2pi must be smaller than the worm pitch radius')
+    if g.gear_pitch_radius <= 0 or g.lead <= 0:  # pragma: no cover - range checks catch it
+        raise ConfigError('geometry.lead', 'must be > 0')
+    if cfg.integrator.time_step * cfg.node.publish_rate_hz > 1.0 + 1e-9:
+        raise ConfigError('integrator.time_step', 'must not exceed the node tick period '
+                          f'1/publish_rate_hz = {1.0 / cfg.node.publish_rate_hz:g} s')
+
+
+def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>') -> Config:
+    """Build a Config from nested sections (the ``ros__parameters`` content) or dotted keys."""
+    if not isinstance(data, Mapping):
+        raise ConfigError('', f'{source}: parameters must be a mapping, got {type(data).__name__}')
+    nested: dict[str, dict[str, Any]] = {}
+    for key, value in data.items():
+        if not isinstance(key, str):
+            raise ConfigError(str(key), 'parameter names must be strings')
+        if '.' in key:  # dotted form, as ROS would flatten it
+            sec, _, name = key.partition('.')
+            nested.setdefault(sec, {})[name] = value
+        elif isinstance(value, Mapping):
+            nested.setdefault(key, {}).update(value)
+        else:
+            raise ConfigError(key, 'unknown parameter' + _suggest(key, SECTIONS)
+                              + f' (top level holds the sections {", ".join(SECTIONS)})')
+    known = Config.metadata()
+    kwargs = {}
+    for sec, values in nested.items():
+        if sec not in SECTIONS:
+            raise ConfigError(sec, 'unknown section' + _suggest(sec, SECTIONS))
+        cls = SECTIONS[sec]
+        names = {f.name: f for f in fields(cls)}
+        sec_kwargs = {}
+        for name, value in values.items():
+            key = f'{sec}.{name}'
+            if name not in names:
+                raise ConfigError(key, 'unknown parameter' + _suggest(key, known))
+            f = names[name]
+            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+            sec_kwargs[name] = _coerce(key, value, default, f.metadata)
+        kwargs[sec] = cls(**sec_kwargs)
+    return Config(**kwargs)
+
+
+def _ros_parameters(doc: Any, path: str, node_name: str) -> Mapping[str, Any]:
+    if not isinstance(doc, Mapping):
+        raise ConfigError('', f'{path}: expected a mapping with "{node_name}: ros__parameters:"')
+    for key in (node_name, f'/{node_name}', '/**'):
+        if key in doc:
+            block = doc[key]
+            if not isinstance(block, Mapping) or 'ros__parameters' not in block:
+                raise ConfigError(key, f'{path}: "{key}" must hold a "ros__parameters" mapping')
+            params = block['ros__parameters']
+            return params if params is not None else {}
+    for key, block in doc.items():  # namespaced node, e.g. /radar/worm_gear_sim
+        if isinstance(key, str) and key.endswith('/' + node_name) and isinstance(block, Mapping):
+            return block.get('ros__parameters') or {}
+    if 'ros__parameters' in doc:
+        raise ConfigError('', f'{path}: put ros__parameters under "{node_name}:"')
+    # Plain sections at top level are accepted for offline use.
+    return doc
+
+
+def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
+                node_name: str = NODE_NAME) -> Config:
+    """Load a YAML parameter file (ROS layout or plain sections) and validate it."""
+    if path is None:
+        path = default_config_path()
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError('', f'config file not found: {p}')
+    try:
+        doc = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
+        problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
+        raise ConfigError('', f'{p}: broken YAML{where}: {problem}') from None
+    if doc is None:
+        doc = {}
+    params = _ros_parameters(doc, str(p), node_name)
+    params = {k: v for k, v in params.items() if k not in _ROS_RESERVED}
+    cfg = config_from_mapping(params, source=str(p))
+    return cfg.replace(overrides) if overrides else cfg
+
+
+# Parameters rclpy itself may find in a params file; they are not model parameters.
+_ROS_RESERVED = frozenset({'use_sim_time', 'qos_overrides', 'diagnostic_updater',
+                           'start_type_description_service'})
+
+
+def default_config_path() -> Path:
+    """The package's default YAML: source tree, or installed share/worm_gear_sim/config."""
+    here = Path(__file__).resolve().parent
+    candidates = [here.parent / 'config' / 'worm_gear_sim.yaml',
+                  here / 'config' / 'worm_gear_sim.yaml']
+    import sys
+    candidates.append(Path(sys.prefix) / 'share' / 'worm_gear_sim' / 'config'
+                      / 'worm_gear_sim.yaml')
+    for c in candidates:
+        if c.is_file():
+            return c
+    return candidates[0]
+
+
+def default_config() -> Config:
+    """The code defaults (equal to config/worm_gear_sim.yaml, checked by a test)."""
+    return Config()
+
+
+@dataclass(frozen=True)
+class Derived:
+    """Quantities computed from the parameters (one place; used by model, node, studies)."""
+
+    J_w: float          # worm inertia [kg m^2]
+    J_g: float          # worm-gear inertia [kg m^2]
+    J_4: float          # flywheel (antenna) inertia [kg m^2]
+    K_w: float          # worm shaft torsional stiffness [N m/rad]
+    K_g: float          # worm-gear shaft torsional stiffness [N m/rad]
+    K_Lws: float        # worm shaft axial stiffness [N/m]
+    K_Lgs: float        # gear shaft axial stiffness [N/m]
+    k_ws: float         # worm shaft + bearing axial stiffness, in series [N/m]
+    k_gs: float         # gear shaft + bearing axial stiffness, in series [N/m]
+    l_w: float          # worm travel per radian used in Eq. 8 [m/rad]
+    lead_angle: float   # lambda [rad]
+    ratio: float        # r_g / l_w (56 with the kinematic lead)
+    gear_teeth: float   # z_g = 2 pi r_g / lead (mesh cycles per gear revolution)
+    lead_angle_consistent: bool  # tan(lambda) == l_w/r_w (virtual work holds)
+
+    @property
+    def output_per_input(self) -> float:
+        """Rigid kinematic ratio theta4/theta1 = l_w / r_g."""
+        return 1.0 / self.ratio
+
+
+def derive(cfg: Config) -> Derived:
+    """Inertias (solid cylinders), shaft stiffnesses, lead per radian, ratio."""
+    g, m, s = cfg.geometry, cfg.materials, cfg.shafts
+    cyl = lambda rho, L, R: 0.5 * rho * math.pi * L * R ** 4  # noqa: E731
+    J_ws = cyl(m.shaft_density, s.worm_shaft_length, s.worm_shaft_radius)
+    J_gs = cyl(m.shaft_density, s.gear_shaft_length, s.gear_shaft_radius)
+    J_w = cyl(m.worm_density, g.worm_length, g.worm_pitch_radius) \
+        + s.worm_shaft_inertia_fraction * J_ws
+    J_g = cyl(m.gear_density, g.gear_width, g.gear_pitch_radius) \
+        + s.gear_shaft_inertia_fraction * J_gs
+    J_4 = s.gear_shaft_inertia_fraction * J_gs
+    if g.flywheel_enabled:
+        J_4 += cyl(m.flywheel_density, g.flywheel_length, g.flywheel_radius)
+    else:
+        # Without a flywheel the gear-shaft end keeps a third of the shaft's own inertia, so
+        # that theta4 stays a dynamic degree of freedom (documented in the README).
+        J_4 += J_gs / 3.0
+    K_w = m.worm_shaft_shear_modulus * math.pi * s.worm_shaft_radius ** 4 \
+        / (2.0 * s.worm_shaft_length)
+    K_g = m.gear_shaft_shear_modulus * math.pi * s.gear_shaft_radius ** 4 \
+        / (2.0 * s.gear_shaft_length)
+    K_Lws = m.youngs_modulus * math.pi * s.worm_shaft_radius ** 2 / s.worm_shaft_length
+    K_Lgs = m.youngs_modulus * math.pi * s.gear_shaft_radius ** 2 / s.gear_shaft_length
+    k_ws = K_Lws * s.worm_bearing_axial_stiffness / (K_Lws + s.worm_bearing_axial_stiffness)
+    k_gs = K_Lgs * s.gear_bearing_axial_stiffness / (K_Lgs + s.gear_bearing_axial_stiffness)
+    lead_per_rad = g.lead / (2.0 * math.pi)
+    l_w = lead_per_rad if g.lead_convention == 'kinematic' else g.lead
+    if g.lead_angle > 0.0:
+        lam = g.lead_angle
+    else:
+        lam = math.atan(lead_per_rad / g.worm_pitch_radius)
+    consistent = abs(g.worm_pitch_radius * math.tan(lam) - l_w) <= 1e-9 * l_w
+    return Derived(J_w=J_w, J_g=J_g, J_4=J_4, K_w=K_w, K_g=K_g, K_Lws=K_Lws, K_Lgs=K_Lgs,
+                   k_ws=k_ws, k_gs=k_gs, l_w=l_w, lead_angle=lam,
+                   ratio=g.gear_pitch_radius / l_w,
+                   gear_teeth=2.0 * math.pi * g.gear_pitch_radius / g.lead,
+                   lead_angle_consistent=consistent)

@@ -1,0 +1,220 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Commanded worm-angle profiles theta1(t) and their rates, vectorised over time."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .params import ConfigError, InputProfile
+
+__all__ = ['Profile', 'StepProfile', 'RampProfile', 'TrapezoidalProfile', 'SCurveProfile',
+           'SampledProfile', 'make_profile']
+
+
+class Profile:
+    """theta1(t) [rad] and d theta1/dt [rad/s]; subclasses implement both on arrays."""
+
+    name = 'profile'
+
+    def theta1(self, t: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def theta1_dot(self, t: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        return self.name
+
+    @property
+    def final_value(self) -> float:
+        return float(self.theta1(np.array([1e12]))[0])
+
+
+@dataclass(frozen=True)
+class StepProfile(Profile):
+    """Ideal step of ``amplitude`` just after ``t0``: theta1(t0) = 0, later amplitude."""
+
+    amplitude: float
+    t0: float = 0.0
+    name = 'step'
+
+    def theta1(self, t):
+        return np.where(np.asarray(t, float) > self.t0, self.amplitude, 0.0)
+
+    def theta1_dot(self, t):
+        return np.zeros_like(np.asarray(t, float))
+
+    def describe(self):
+        return f'step {self.amplitude:.9g} rad at {self.t0:g} s'
+
+
+@dataclass(frozen=True)
+class RampProfile(Profile):
+    """Constant rate from 0 to ``amplitude`` over [t0, t0 + duration]."""
+
+    amplitude: float
+    duration: float
+    t0: float = 0.0
+    name = 'ramp'
+
+    def theta1(self, t):
+        s = np.clip((np.asarray(t, float) - self.t0) / self.duration, 0.0, 1.0)
+        return self.amplitude * s
+
+    def theta1_dot(self, t):
+        t = np.asarray(t, float)
+        inside = (t > self.t0) & (t < self.t0 + self.duration)
+        return np.where(inside, self.amplitude / self.duration, 0.0)
+
+    def describe(self):
+        return f'ramp {self.amplitude:.9g} rad in {self.duration:g} s from {self.t0:g} s'
+
+
+@dataclass(frozen=True)
+class TrapezoidalProfile(Profile):
+    """Trapezoidal velocity: accelerate for ``accel_time``, cruise, decelerate; reaches
+    ``amplitude`` at t0 + duration (MODEL-NOTES default: 20 ms with 4 ms ramps)."""
+
+    amplitude: float
+    duration: float
+    accel_time: float
+    t0: float = 0.0
+    name = 'trapezoidal'
+
+    @property
+    def peak_rate(self) -> float:
+        return self.amplitude / (self.duration - self.accel_time)
+
+    def theta1(self, t):
+        tau = np.clip(np.asarray(t, float) - self.t0, 0.0, self.duration)
+        ta, T, w = self.accel_time, self.duration, self.peak_rate
+        acc = 0.5 * w / ta * tau ** 2
+        cru = w * (tau - 0.5 * ta)
+        dec = self.amplitude - 0.5 * w / ta * (T - tau) ** 2
+        return np.where(tau < ta, acc, np.where(tau <= T - ta, cru, dec))
+
+    def theta1_dot(self, t):
+        tau = np.asarray(t, float) - self.t0
+        ta, T, w = self.accel_time, self.duration, self.peak_rate
+        out = np.where(tau < ta, w * tau / ta, np.where(tau <= T - ta, w, w * (T - tau) / ta))
+        return np.where((tau <= 0.0) | (tau >= T), 0.0, out)
+
+    def describe(self):
+        return (f'trapezoidal {self.amplitude:.9g} rad in {self.duration:g} s '
+                f'({self.accel_time:g} s ramps) from {self.t0:g} s')
+
+
+@dataclass(frozen=True)
+class SCurveProfile(Profile):
+    """Jerk-limited move: the rate rises along a raised cosine over ``accel_time``, cruises,
+    and falls symmetrically (continuous acceleration)."""
+
+    amplitude: float
+    duration: float
+    accel_time: float
+    t0: float = 0.0
+    name = 's_curve'
+
+    @property
+    def peak_rate(self) -> float:
+        return self.amplitude / (self.duration - self.accel_time)
+
+    def theta1_dot(self, t):
+        tau = np.asarray(t, float) - self.t0
+        ta, T, w = self.accel_time, self.duration, self.peak_rate
+        up = 0.5 * w * (1.0 - np.cos(math.pi * tau / ta))
+        down = 0.5 * w * (1.0 - np.cos(math.pi * (T - tau) / ta))
+        out = np.where(tau < ta, up, np.where(tau <= T - ta, w, down))
+        return np.where((tau <= 0.0) | (tau >= T), 0.0, out)
+
+    def theta1(self, t):
+        tau = np.clip(np.asarray(t, float) - self.t0, 0.0, self.duration)
+        ta, T, w = self.accel_time, self.duration, self.peak_rate
+        acc = 0.5 * w * (tau - ta / math.pi * np.sin(math.pi * tau / ta))
+        cru = 0.5 * w * ta + w * (tau - ta)
+        r = T - tau
+        dec = self.amplitude - 0.5 * w * (r - ta / math.pi * np.sin(math.pi * r / ta))
+        return np.where(tau < ta, acc, np.where(tau <= T - ta, cru, dec))
+
+    def describe(self):
+        return (f's-curve {self.amplitude:.9g} rad in {self.duration:g} s '
+                f'({self.accel_time:g} s ramps) from {self.t0:g} s')
+
+
+class SampledProfile(Profile):
+    """A sampled command series; linear interpolation (rate = slope) or zero-order hold.
+
+    With ``interpolation='hold'`` a sample takes effect at its own time stamp; with
+    ``'linear'`` theta1 moves linearly between samples.  Before the first sample theta1
+    equals the first value, after the last it stays at the last value.
+    """
+
+    name = 'sampled'
+
+    def __init__(self, times, values, interpolation: str = 'linear', source: str = ''):
+        t = np.asarray(times, float)
+        y = np.asarray(values, float)
+        if t.ndim != 1 or y.shape != t.shape or t.size == 0:
+            raise ConfigError('input.csv_path', 'need equal-length 1-D time and value series')
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(y))):
+            raise ConfigError('input.csv_path', 'samples must be finite')
+        if np.any(np.diff(t) <= 0):
+            raise ConfigError('input.csv_path', 'sample times must increase strictly')
+        if interpolation not in ('linear', 'hold'):
+            raise ConfigError('interpolation', f'must be linear or hold, got {interpolation!r}')
+        self.times, self.values, self.interpolation, self.source = t, y, interpolation, source
+
+    def theta1(self, t):
+        t = np.asarray(t, float)
+        if self.interpolation == 'linear':
+            return np.interp(t, self.times, self.values)
+        idx = np.searchsorted(self.times, t, side='right') - 1
+        return self.values[np.clip(idx, 0, None)]
+
+    def theta1_dot(self, t):
+        t = np.asarray(t, float)
+        if self.interpolation == 'hold' or self.times.size < 2:
+            return np.zeros_like(t)
+        slopes = np.diff(self.values) / np.diff(self.times)
+        idx = np.searchsorted(self.times, t, side='right') - 1
+        inside = (idx >= 0) & (idx < slopes.size)
+        return np.where(inside, slopes[np.clip(idx, 0, slopes.size - 1)], 0.0)
+
+    @classmethod
+    def from_csv(cls, path: str | Path, interpolation: str = 'linear') -> SampledProfile:
+        """Read columns ``t, theta1`` (header line optional, '#' comments allowed)."""
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigError('input.csv_path', f'file not found: {p}')
+        try:
+            data = np.genfromtxt(p, delimiter=',', comments='#', dtype=float)
+        except ValueError as exc:
+            raise ConfigError('input.csv_path', f'{p}: not a numeric CSV ({exc})') from None
+        if data.ndim == 2 and np.all(np.isnan(data[0])):
+            data = data[1:]   # header row
+        if data.ndim != 2 or data.shape[1] < 2 or data.shape[0] < 1:
+            raise ConfigError('input.csv_path', f'{p}: need at least two columns t, theta1')
+        return cls(data[:, 0], data[:, 1], interpolation, source=str(p))
+
+    def describe(self):
+        src = f' from {self.source}' if self.source else ''
+        return f'sampled {self.times.size} points ({self.interpolation}){src}'
+
+
+def make_profile(inp: InputProfile) -> Profile:
+    """Build the profile described by the ``input`` section of the config."""
+    if inp.profile == 'step':
+        return StepProfile(inp.target_angle, inp.start_time)
+    if inp.profile == 'ramp':
+        return RampProfile(inp.target_angle, inp.move_time, inp.start_time)
+    if inp.profile == 'trapezoidal':
+        return TrapezoidalProfile(inp.target_angle, inp.move_time, inp.accel_time,
+                                  inp.start_time)
+    if inp.profile == 's_curve':
+        return SCurveProfile(inp.target_angle, inp.move_time, inp.accel_time, inp.start_time)
+    return SampledProfile.from_csv(inp.csv_path)
