@@ -168,6 +168,19 @@ class Simulator:
         self._cmd_value = float(theta1)
         consistent_acceleration(self.p, self.C, self._u, self._v, self._theta1, 0.0, self._a)
 
+    def reconfigure(self, config: Config) -> None:
+        """Swap in new (already validated) parameters, keeping time, state and command.
+        The time step cannot change (it is read-only in the node)."""
+        if config.integrator.time_step != self.dt:
+            raise ValueError('integrator.time_step cannot change on a running simulator')
+        p = pack_parameters(config)
+        C = damping_matrix(config, p)
+        a = np.zeros(3)
+        consistent_acceleration(p, C, self._u, self._v, self._theta1, self._theta1_dot, a)
+        if not np.all(np.isfinite(a)):
+            raise ValueError('the new parameters give a non-finite acceleration')
+        self.config, self.p, self.C, self.derived, self._a = config, p, C, derive(config), a
+
     @property
     def t(self) -> float:
         """Simulated time of the current state (exactly t0 + k dt)."""
