@@ -1,0 +1,178 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""PNG figures for the CLI (matplotlib's Agg canvas; pyplot and its global backend state are
+never touched, so importing this module is safe anywhere)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+__all__ = ['plot_trajectory', 'plot_experiment', 'plot_sweep', 'plot_modes', 'plot_traces']
+
+_DPI = 110
+_STYLES = ('-o', '-s', '-^', '-D', '-v', '-x', '-*', '-P')
+
+
+def _new(nrows: int, ncols: int, size: tuple[float, float]):
+    fig = Figure(figsize=size, layout='constrained')
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    return fig, axes
+
+
+def _save(fig: Figure, path: str | Path) -> Path:
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(p, dpi=_DPI, format='png')
+    return p
+
+
+def plot_trajectory(traj: Any, path: str | Path, title: str = '') -> Path:
+    """Angles, errors and mesh quantities of one run (simulate)."""
+    fig, ax = _new(3, 1, (8.0, 8.5))
+    t = traj.t
+    ratio = traj.output_ratio
+    a = ax[0, 0]
+    a.plot(t, traj.theta1, 'k--', lw=1, label='theta1 (command)')
+    a.plot(t, traj.theta2, lw=1, label='theta2 (worm)')
+    a.plot(t, traj.theta4 / ratio, lw=1, label='theta4 r_g/l_w (antenna, scaled)')
+    a.set_ylabel('angle [rad]')
+    a.legend(loc='lower right', fontsize=8)
+    a.set_title(title or f'worm_gear_sim: {traj.profile}', fontsize=10)
+    a = ax[1, 0]
+    a.plot(t, traj.worm_error, lw=0.8, label='theta2 - theta1')
+    a.plot(t, traj.output_error, lw=0.8, label='theta4 - theta1 l_w/r_g')
+    a.set_ylabel('error [rad]')
+    a.legend(loc='upper right', fontsize=8)
+    a = ax[2, 0]
+    a.plot(t, traj.normal_force, lw=0.8, color='C2')
+    a.set_ylabel('W_n [N]', color='C2')
+    a.set_xlabel('t [s]')
+    b = a.twinx()
+    b.plot(t, traj.friction_coefficient, lw=0.6, color='C3')
+    b.set_ylabel('mu (signed)', color='C3')
+    for row in ax[:, 0]:
+        row.grid(True, alpha=0.3)
+    return _save(fig, path)
+
+
+def plot_experiment(trajs: Mapping[str, Any], rows: Sequence[Mapping[str, Any]],
+                    path: str | Path, t_move: float = 0.0, zoom: float = 0.03) -> Path:
+    """Oscillating parts (paper Figs. 10-11): theta2 - theta1 and theta4 - theta1 l_w/r_g,
+    nonlinear (solid) vs linear (dashed), one column per lead convention; rows 2 and 4 zoom
+    on the ``zoom`` seconds after the move."""
+    convs = sorted({k.split('/')[1] for k in trajs}, key=lambda c: c != 'kinematic')
+    fig, ax = _new(4, len(convs), (6.0 * len(convs), 12.0))
+    panels = (('worm_error', 1e6, 'theta2 - theta1 [urad]', False),
+              ('worm_error', 1e6, 'theta2 - theta1 [urad]', True),
+              ('output_error', 1e3, 'theta4 - theta1 l_w/r_g [mrad]', False),
+              ('output_error', 1e3, 'theta4 - theta1 l_w/r_g [mrad]', True))
+    for j, conv in enumerate(convs):
+        for i, (attr, scale, ylabel, zoomed) in enumerate(panels):
+            a = ax[i, j]
+            for model, style in (('nonlinear', '-'), ('linear', '--')):
+                tr = trajs.get(f'{model}/{conv}')
+                if tr is None:
+                    continue
+                t, y = tr.t, getattr(tr, attr)
+                if zoomed:
+                    sel = (t >= t_move) & (t <= t_move + zoom)
+                    t, y = t[sel], y[sel]
+                a.plot(t * 1e3, y * scale, style, lw=0.8 if zoomed else 0.6, label=model)
+            a.set_ylabel(ylabel)
+            a.grid(True, alpha=0.3)
+            a.legend(fontsize=8, loc='upper right')
+            if t_move > 0 and not zoomed:
+                a.axvline(t_move * 1e3, color='0.6', lw=0.8, ls=':')
+            if zoomed:
+                a.set_title(f'zoom: {zoom * 1e3:g} ms after the move', fontsize=9)
+        ax[0, j].set_title(f'lead convention: {conv}', fontsize=10)
+        ax[3, j].set_xlabel('t [ms]')
+    fig.suptitle('18-step move: oscillating parts (paper Figs. 10-11); dotted: end of move',
+                 fontsize=10)
+    return _save(fig, path)
+
+
+def _series(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[str, Any]]]:
+    out: dict[str, list[Mapping[str, Any]]] = {}
+    for r in rows:
+        out.setdefault(str(r['series']), []).append(r)
+    return out
+
+
+def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | Path, title: str,
+               x_label: str, x_log: bool = False, categorical: bool = False) -> Path:
+    """Max oscillation amplitudes of theta2 and theta4 per case (paper Figs. 14-18)."""
+    fig, ax = _new(1, 2, (11.0, 4.4))
+    groups = _series(rows)
+    for i, (key, label) in enumerate((('amp2', 'theta2 (worm)'), ('amp4', 'theta4 (antenna)'))):
+        a = ax[0, i]
+        if categorical:
+            labels = list(dict.fromkeys(str(r['label']) for r in rows))
+            width = 0.8 / max(1, len(groups))
+            for k, (name, rs) in enumerate(groups.items()):
+                pos = [labels.index(str(r['label'])) + (k - (len(groups) - 1) / 2) * width
+                       for r in rs]
+                a.bar(pos, [r[key] for r in rs], width=width, label=name)
+            a.set_xticks(range(len(labels)))
+            a.set_xticklabels(labels, rotation=30 if len(labels) > 4 else 0, fontsize=8)
+        else:
+            for k, (name, rs) in enumerate(groups.items()):
+                rs = sorted(rs, key=lambda r: r['x'])
+                a.plot([r['x'] for r in rs], [r[key] for r in rs], _STYLES[k % len(_STYLES)],
+                       ms=4, lw=1, label=name)
+            if x_log:
+                a.set_xscale('log')
+        vals = [r[key] for r in rows if isinstance(r[key], float) and math.isfinite(r[key])]
+        if vals and min(vals) > 0 and max(vals) / min(vals) > 30:
+            a.set_yscale('log')
+        a.set_title(f'max |{label.split()[0]} - equilibrium| after the move', fontsize=9)
+        a.set_ylabel(f'amplitude of {label} [rad]')
+        a.set_xlabel(x_label)
+        a.grid(True, alpha=0.3, which='both')
+        a.legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
+def plot_traces(trajs: Mapping[str, Any], path: str | Path, title: str,
+                t_move: float = 0.0) -> Path:
+    """Oscillating parts of a few runs on common axes (paper Figs. 12-13 style)."""
+    fig, ax = _new(2, 1, (8.0, 6.5))
+    for k, (name, tr) in enumerate(trajs.items()):
+        ax[0, 0].plot(tr.t * 1e3, tr.worm_error * 1e6, lw=0.7, label=name, color=f'C{k}')
+        ax[1, 0].plot(tr.t * 1e3, tr.output_error * 1e6, lw=0.7, label=name, color=f'C{k}')
+    ax[0, 0].set_ylabel('theta2 - theta1 [urad]')
+    ax[1, 0].set_ylabel('theta4 - theta1 l_w/r_g [urad]')
+    ax[1, 0].set_xlabel('t [ms]')
+    for a in ax[:, 0]:
+        a.grid(True, alpha=0.3)
+        a.legend(fontsize=8, loc='upper right')
+        if t_move > 0:
+            a.axvline(t_move * 1e3, color='0.6', lw=0.8, ls=':')
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
+def plot_modes(result: Any, path: str | Path, title: str = '') -> Path:
+    """Mode shapes (theta2, theta3, theta4) as bars, one panel per mode."""
+    n = len(result.undamped_hz)
+    fig, ax = _new(1, n, (3.6 * n, 3.4))
+    names = ('theta2', 'theta3', 'theta4')
+    for i in range(n):
+        a = ax[0, i]
+        a.bar(names, np.asarray(result.shapes[:, i]), color=['C0', 'C1', 'C2'])
+        a.axhline(0.0, color='k', lw=0.6)
+        a.set_ylim(-1.1, 1.1)
+        a.set_title(f'mode {i + 1}: {result.frequencies_hz[i]:.1f} Hz, '
+                    f'zeta {result.damping_ratios[i]:.2e}', fontsize=9)
+        a.grid(True, alpha=0.3)
+    fig.suptitle(title or 'Linearised modes (max |entry| = 1)', fontsize=10)
+    return _save(fig, path)
