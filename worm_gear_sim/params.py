@@ -270,6 +270,12 @@ class CompensationSettings:
     shaper: str = _f('zvd', 'Input shaper: none | zv | zvd | ei', choices=('none', 'zv', 'zvd',
                      'ei'))
     preview_time: float = _f(0.0, 'Preview horizon of future command samples', 's', 0.0, 1.0)
+    model_inverse: bool = _f(True, 'Add the dynamic terms of the model inverse (gear and worm '
+                             'body inertia, 3rd/4th reference derivatives) to quasi_static')
+    smoothing_time: float = _f(0.006, 'Width of the B-spline smoothing of the reference (gives '
+                               'its derivatives causally)', 's', 0.0, 0.1, lo_open=True)
+    lag_order: int = _f(2, 'Lead of the reference filter: it tracks polynomials of this '
+                        'degree without lag (0: plain delay, 1: ramps, 2: parabolas)', '', 0, 2)
 
 
 SECTIONS: dict[str, type] = {

@@ -1,0 +1,137 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Feed-forward compensator: contract, causality, quasi-static exactness, bad input."""
+
+import math
+
+import numpy as np
+import pytest
+
+from worm_gear_sim.compensation import (
+    Compensator,
+    design_filter,
+    design_shaper,
+    feedforward_series,
+)
+from worm_gear_sim.modal import static_equilibrium
+from worm_gear_sim.model import pack_parameters
+from worm_gear_sim.params import Config, derive
+
+LOADED = {'load.output_torque': 5.0, 'load.output_viscous_coefficient': 2.0}
+
+
+def test_static_load_is_compensated_exactly():
+    cfg = Config().replace(LOADED)
+    comp = Compensator(cfg)
+    x = 0.37
+    comp.reset(x, 0.0)
+    delta = comp.update(0.001, x)
+    p = pack_parameters(cfg)
+    ratio = derive(cfg).ratio
+    u_plain = static_equilibrium(p, x)
+    u_comp = static_equilibrium(p, x + delta)
+    err_plain = u_plain[2] - x / ratio
+    err_comp = u_comp[2] - x / ratio
+    assert abs(err_plain) > 1e-4                      # the load really deflects the drive
+    assert abs(err_comp) < 1e-6 * abs(err_plain)
+
+
+def test_no_load_at_rest_gives_no_correction():
+    comp = Compensator(Config())
+    comp.reset(1.0, 2.0)
+    assert comp.update(2.001, 1.0) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_constant_rate_correction_matches_steady_quasi_static():
+    """At constant rate the filter has settled: the correction is the steady wind-up under
+    load, drag and friction (it varies only slightly with the mesh phase)."""
+    cfg = Config().replace(LOADED)
+    ts = np.arange(0.0, 0.05, 1e-3)
+    x = 5.0 * ts
+    d = feedforward_series(cfg, ts, x)
+    assert np.ptp(d[-20:]) < 1e-5 * abs(d[-1])
+    # driving against load and drag: the worm must lead
+    assert d[-1] > 0.0
+
+
+def test_causal_future_samples_do_not_change_past_output():
+    cfg = Config()
+    ts = np.arange(0.0, 0.04, 1e-3)
+    a = np.where(ts > 0.01, (ts - 0.01) * 3.0, 0.0)
+    b = a.copy()
+    b[25:] += 0.05                                   # different future from sample 25
+    da = feedforward_series(cfg, ts, a)
+    db = feedforward_series(cfg, ts, b)
+    np.testing.assert_array_equal(da[:25], db[:25])
+    assert np.any(da[25:] != db[25:])
+
+
+def test_preview_uses_future_samples_only_within_horizon():
+    cfg = Config().replace({'compensation.preview_time': 0.003})
+    ts = np.arange(0.0, 0.04, 1e-3)
+    a = np.zeros_like(ts)
+    b = a.copy()
+    b[25:] = 0.05
+    da = feedforward_series(cfg, ts, a)
+    db = feedforward_series(cfg, ts, b)
+    np.testing.assert_array_equal(da[:22], db[:22])   # 25 - 3 samples of preview
+    assert np.any(da[22:25] != db[22:25])
+
+
+def test_disabled_returns_zero():
+    cfg = Config().replace({'compensation.enabled': False, **LOADED})
+    comp = Compensator(cfg)
+    assert comp.update(0.001, 1.0) == 0.0
+
+
+def test_filter_reproduces_polynomials():
+    f = design_filter(design_shaper('zvd', 94.5, 0.0), 0.006, lag_order=2)
+    t = 0.2
+    for coeffs in ([1.0, 2.0], [0.5, -1.0, 30.0]):
+        x = np.polyval(coeffs[::-1], t - f.tau)
+        r = f.weights @ x
+        exact = [np.polyval(np.polyder(np.poly1d(coeffs[::-1]), m), t) if m else
+                 np.polyval(coeffs[::-1], t) for m in range(3)]
+        for m, atol in enumerate((1e-12, 1e-9, 1e-5)):   # round-off grows with the order
+            assert r[m] == pytest.approx(exact[m], rel=1e-9, abs=atol)
+
+
+@pytest.mark.parametrize('kind', ['zv', 'zvd', 'ei'])
+def test_shapers_cancel_their_mode(kind):
+    f, zeta = 94.5, 0.02
+    s = design_shaper(kind, f, zeta)
+    assert s.amplitudes.sum() == pytest.approx(1.0)
+    wn = 2 * math.pi * f / math.sqrt(1 - zeta ** 2)
+    grow = s.amplitudes * np.exp(zeta * wn * s.times)
+    resid = abs(np.sum(grow * np.exp(2j * math.pi * f * s.times))) / np.sum(grow)
+    assert resid < (0.06 if kind == 'ei' else 1e-6)
+
+
+@pytest.mark.parametrize('bad', [(math.nan, 0.0), (0.001, math.inf)])
+def test_update_rejects_non_finite(bad):
+    comp = Compensator(Config())
+    with pytest.raises(ValueError):
+        comp.update(*bad)
+
+
+def test_update_rejects_time_going_backwards():
+    comp = Compensator(Config())
+    comp.update(0.002, 0.0)
+    with pytest.raises(ValueError, match='backwards'):
+        comp.update(0.001, 0.0)
+
+
+def test_reset_rejects_non_finite():
+    with pytest.raises(ValueError):
+        Compensator(Config()).reset(math.nan, 0.0)
+
+
+def test_design_rejects_bad_values():
+    with pytest.raises(ValueError):
+        design_shaper('zzz', 94.5)
+    with pytest.raises(ValueError):
+        design_shaper('zv', -1.0)
+    with pytest.raises(ValueError):
+        design_filter(design_shaper('none', 1.0), 0.0)
+    with pytest.raises(ValueError):
+        design_filter(design_shaper('none', 1.0), 0.006, lag_order=3)
