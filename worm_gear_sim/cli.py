@@ -39,16 +39,20 @@ _RESERVED_JSON_KEYS = ('format', 'derived')
 class CliError(Exception):
     """A usage or input error: reported as one line, exit status 2."""
 
+    def __init__(self, message: str, prog: str = PROG):
+        super().__init__(message)
+        self.prog = prog
+
 
 class _Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors become :class:`CliError` (one line, no usage dump)."""
 
     def error(self, message: str):  # type: ignore[override]
-        raise CliError(f'{self.prog}: {message}')
+        raise CliError(message, self.prog)
 
     def exit(self, status: int = 0, message: str | None = None):  # type: ignore[override]
         if status:
-            raise CliError((message or '').strip() or f'exit status {status}')
+            raise CliError((message or '').strip() or f'exit status {status}', self.prog)
         if message:
             sys.stdout.write(message)
         raise SystemExit(0)
@@ -696,8 +700,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser = build_parser()
         args = parser.parse_args(argv)
         if not getattr(args, 'func', None):
-            raise CliError(f'{PROG}: a command is required (simulate, experiment, sweep, '
-                           f'modes, params); see {PROG} --help')
+            raise CliError('a command is required (simulate, experiment, sweep, modes, '
+                           f'params); see {PROG} --help')
         args._argv = argv
         status = args.func(args)
         return int(status or 0)
@@ -711,7 +715,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if debug:
             raise
         status, text = _describe(exc)
-        print(f'{PROG}: error: {_one_line(text)}', file=sys.stderr)
+        prog = exc.prog if isinstance(exc, CliError) else PROG
+        print(f'{prog}: error: {_one_line(text)}', file=sys.stderr)
         return status
 
 

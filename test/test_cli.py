@@ -1,0 +1,279 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The worm-gear-sim CLI: every command on a small case, params round trip, bad input."""
+
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from worm_gear_sim import cli
+from worm_gear_sim.params import Config, default_config_path
+
+REPO = Path(__file__).resolve().parents[1]
+SHORT = ['--end-time', '0.03']       # the move ends at 0.02 s
+PNG_MAGIC = b'\x89PNG\r\n\x1a\n'
+
+
+def run(capsys, *argv):
+    status = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def assert_png(path: Path, min_bytes: int = 10_000):
+    data = path.read_bytes()
+    assert data[:8] == PNG_MAGIC, path
+    assert len(data) >= min_bytes, (path, len(data))
+
+
+def read_csv(path: Path):
+    with open(path) as fh:
+        rows = list(csv.reader(line for line in fh if not line.startswith('#')))
+    return rows[0], rows[1:]
+
+
+def assert_finite_columns(header, rows, columns):
+    for c in columns:
+        i = header.index(c)
+        vals = [float(r[i]) for r in rows]
+        assert vals and all(math.isfinite(v) for v in vals), c
+
+
+def assert_one_line_error(status, err, *fragments):
+    assert status != 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith('worm-gear-sim') and ' error: ' in lines[0], err
+    assert 'Traceback' not in err
+    for f in fragments:
+        assert f in lines[0], (f, lines[0])
+
+
+# ---- commands on small cases ------------------------------------------------------------
+def test_simulate_writes_csv_and_png(tmp_path, capsys):
+    out = tmp_path / 'run.csv'
+    status, stdout, _ = run(capsys, 'simulate', *SHORT, '-o', out, '--record-every', '2')
+    assert status == 0
+    header, rows = read_csv(out)
+    names = [h.split('[')[0] for h in header]
+    for c in ('t', 'theta1', 'theta2', 'theta3', 'theta4', 'omega2', 'omega4',
+              'normal_force', 'mu', 'worm_error', 'output_error'):
+        assert c in names
+    assert len(rows) == 1501                  # 3000 steps, every 2nd, plus t = 0
+    assert_finite_columns(header, rows, header)
+    assert float(rows[-1][0]) == pytest.approx(0.03)
+    assert_png(out.with_suffix('.png'))
+    assert 'rings at' in stdout and 'wrote' in stdout
+
+
+def test_simulate_from_input_csv(tmp_path, capsys):
+    prof = tmp_path / 'cmd.csv'
+    prof.write_text('t,theta1\n0,0\n0.01,0.05\n0.02,0.05\n')
+    out = tmp_path / 'o.csv'
+    status, stdout, _ = run(capsys, 'simulate', '--csv', prof, *SHORT, '-o', out,
+                            '--no-plot')
+    assert status == 0 and not out.with_suffix('.png').exists()
+    header, rows = read_csv(out)
+    i = [h.split('[')[0] for h in header].index('theta1')
+    assert float(rows[-1][i]) == pytest.approx(0.05)
+    assert 'sampled 3 points' in stdout
+
+
+def test_experiment_table_and_plot(tmp_path, capsys):
+    status, stdout, _ = run(capsys, 'experiment', *SHORT, '-o', tmp_path, '--traces')
+    assert status == 0
+    header, rows = read_csv(tmp_path / 'experiment.csv')
+    assert {(r[0], r[1]) for r in rows} == {(m, c) for m in ('nonlinear', 'linear')
+                                            for c in ('kinematic', 'paper')}
+    assert_finite_columns(header, rows, ['eq2', 'eq4', 'mean4', 'freq4_hz', 'amp2', 'amp4'])
+    eq4 = {(r[0], r[1]): float(r[header.index('eq4')]) for r in rows}
+    assert eq4['nonlinear', 'kinematic'] == pytest.approx(0.0020196, rel=1e-4)
+    assert eq4['nonlinear', 'paper'] == pytest.approx(0.012689, rel=1e-4)
+    assert_png(tmp_path / 'experiment.png')
+    th, tr = read_csv(tmp_path / 'experiment_traces.csv')
+    assert len(th) == 1 + 8 and len(tr) > 50
+    assert 'nonlinear' in stdout and 'paper' in stdout
+
+
+def test_sweep_paper_study_serial(tmp_path, capsys):
+    status, stdout, _ = run(capsys, 'sweep', 'flywheel', *SHORT, '--serial', '--no-progress',
+                            '-o', tmp_path)
+    assert status == 0
+    header, rows = read_csv(tmp_path / 'flywheel.csv')
+    assert header[:4] == ['study', 'series', 'label', 'x']
+    assert_finite_columns(header, rows, ['x', 'amp2', 'amp4', 'half_pp4', 'eq4', 'max_err4'])
+    amp4 = {r[2]: float(r[header.index('amp4')]) for r in rows}
+    assert amp4['with'] > 10 * amp4['without']           # paper Sec. 4.1
+    assert_png(tmp_path / 'flywheel.png')
+    params = json.loads((tmp_path / 'sweep_params.json').read_text())
+    assert params['input']['end_time'] == 0.03
+
+
+def test_sweep_user_parameter_with_compare(tmp_path, capsys):
+    status, stdout, _ = run(capsys, 'sweep', '--param', 'mesh.phase_offset', '--values',
+                            '0,3', '--compare', 'input.move_time=0.02,0.025', '--name',
+                            'phase', *SHORT, '--serial', '--no-progress', '-o', tmp_path)
+    assert status == 0
+    header, rows = read_csv(tmp_path / 'phase.csv')
+    assert len(rows) == 4
+    assert {r[header.index('x')] for r in rows} == {'0.0', '3.0'}
+    assert len({r[1] for r in rows}) == 2                 # one series per compared value
+    assert_finite_columns(header, rows, ['amp2', 'amp4'])
+    assert_png(tmp_path / 'phase.png')
+
+
+def test_modes_outputs(tmp_path, capsys):
+    status, stdout, _ = run(capsys, 'modes', '-o', tmp_path / 'm.csv', '--json',
+                            tmp_path / 'm.json', '--plot', tmp_path / 'm.png')
+    assert status == 0
+    header, rows = read_csv(tmp_path / 'm.csv')
+    f = [float(r[header.index('undamped_hz')]) for r in rows]
+    assert f == pytest.approx([94.5, 1561, 8588], rel=0.01)   # MODEL-NOTES reference
+    doc = json.loads((tmp_path / 'm.json').read_text())
+    assert len(doc['modes']) == 3 and np.shape(doc['K']) == (3, 3)
+    assert_png(tmp_path / 'm.png')
+    assert 'steps/period' in stdout
+
+
+# ---- params: reproducible runs ------------------------------------------------------------
+def test_params_json_round_trip_is_bit_exact(tmp_path, capsys):
+    sets = ['--set', 'mesh.stiffness_model=linear', '--set', 'friction.model=constant',
+            '--set', 'mesh.phase_offset=0.7', '--end-time', '0.025']
+    pj = tmp_path / 'p.json'
+    status, _, err = run(capsys, 'params', *sets, '-o', pj)
+    assert status == 0
+    doc = json.loads(pj.read_text())
+    assert doc['format'] == cli.PARAMS_FORMAT
+    assert doc['derived']['ratio'] == pytest.approx(56.0)
+    assert doc['derived']['natural_frequencies_hz'][0] == pytest.approx(94.5, rel=0.01)
+    assert doc['mesh']['stiffness_model'] == 'linear'
+    cfg_direct = cli.resolve_config(None, ['mesh.stiffness_model=linear',
+                                           'friction.model=constant', 'mesh.phase_offset=0.7',
+                                           'input.end_time=0.025'])
+    assert cli.resolve_config(pj) == cfg_direct
+    a, b = tmp_path / 'a', tmp_path / 'b'
+    assert run(capsys, 'simulate', *sets, '-o', a.with_suffix('.csv'), '--no-plot',
+               '--npz', a.with_suffix('.npz'))[0] == 0
+    assert run(capsys, 'simulate', '--config', pj, '-o', b.with_suffix('.csv'), '--no-plot',
+               '--npz', b.with_suffix('.npz'))[0] == 0
+    za, zb = np.load(a.with_suffix('.npz')), np.load(b.with_suffix('.npz'))
+    assert sorted(za.files) == sorted(zb.files)
+    for k in za.files:
+        assert za[k].tobytes() == zb[k].tobytes(), k            # bit for bit
+    # the JSON of the JSON is the same JSON
+    status, out, _ = run(capsys, 'params', '--config', pj)
+    assert json.loads(out) == doc
+
+
+def test_params_yaml_output_loads_back(tmp_path, capsys):
+    y = tmp_path / 'p.yaml'
+    assert run(capsys, 'params', '--format', 'yaml', '--set', 'geometry.flywheel_radius=0.1',
+               '-o', y)[0] == 0
+    assert cli.resolve_config(y) == Config().replace({'geometry.flywheel_radius': 0.1})
+
+
+def test_params_default_equals_package_yaml(capsys):
+    status, out, _ = run(capsys, 'params')
+    assert status == 0
+    doc = json.loads(out)
+    assert cli.load_params_json('stdin.json', doc) == cli.resolve_config(default_config_path())
+
+
+# ---- bad input: one line on stderr, non-zero exit, no traceback -----------------------------
+@pytest.fixture
+def broken_files(tmp_path):
+    bad_yaml = tmp_path / 'broken.yaml'
+    bad_yaml.write_text('worm_gear_sim:\n  ros__parameters:\n    mesh: [unclosed\n')
+    bad_json = tmp_path / 'broken.json'
+    bad_json.write_text('{"mesh": {"phase_offset": 0.1,}')
+    doc = cli.params_document(Config())
+    doc['derived']['J_4'] *= 1.5
+    tampered = tmp_path / 'tampered.json'
+    tampered.write_text(json.dumps(doc))
+    return {'yaml': bad_yaml, 'json': bad_json, 'tampered': tampered}
+
+
+@pytest.mark.parametrize('argv,fragments', [
+    (['simulate', '--set', 'mesh.stifness_model=linear'],
+     ['mesh.stifness_model', 'unknown parameter', 'did you mean mesh.stiffness_model']),
+    (['simulate', '--set', 'mesh.stiffness_model=cubic'], ['must be one of']),
+    (['simulate', '--set', 'integrator.time_step=fast'], ['must be a number']),
+    (['simulate', '--set', 'integrator.time_step=-1'], ['must be > 0']),
+    (['simulate', '--set', 'geometry.flywheel_enabled=maybe'], ['true or false']),
+    (['params', '--set', 'mesh.phase_offset'], ['expected KEY=VALUE']),
+    (['simulate', '--config', 'does/not/exist.yaml'], ['not found']),
+    (['simulate', '--csv', 'missing.csv'], ['not found']),
+    (['simulate', '--end-time', 'soon'], ['invalid float value']),
+    (['frobnicate'], ['invalid choice']),
+    ([], ['a command is required']),
+    (['sweep', '--serial'], ['nothing to sweep']),
+    (['sweep', 'gravity', '--serial'], ['unknown study']),
+    (['sweep', '--param', 'mesh.phase_offset', '--range', '0:1', '--serial'], ['--range']),
+    (['sweep', '--param', 'mesh.phase', '--values', '1', '--serial'], ['unknown parameter']),
+    (['sweep', '--param', 'mesh.phase_offset', '--values', '1,x', '--serial'],
+     ['must be a number']),
+    (['sweep', '--param', 'mesh.phase_offset', '--values', '99', '--serial'], ['must be <=']),
+    (['sweep', 'flywheel', '--workers', '0'], ['--workers']),
+    (['modes', '--theta1', 'nan'], ['finite']),
+    (['simulate', '--end-time', '0.01', '-o', 'x.txt'], ['.csv']),
+])
+def test_bad_arguments_give_one_line(capsys, tmp_path, monkeypatch, argv, fragments):
+    monkeypatch.chdir(tmp_path)
+    status, _, err = run(capsys, *argv)
+    assert status == 2
+    assert_one_line_error(status, err, *fragments)
+
+
+@pytest.mark.parametrize('which,fragments', [
+    ('yaml', ['broken YAML', 'line']), ('json', ['broken JSON']),
+    ('tampered', ['derived.J_4', 'does not match'])])
+def test_broken_config_files(capsys, broken_files, which, fragments):
+    status, _, err = run(capsys, 'simulate', '--config', broken_files[which])
+    assert_one_line_error(status, err, *fragments)
+
+
+def test_run_failure_is_one_line(capsys, tmp_path, monkeypatch):
+    from worm_gear_sim import simulation
+
+    def boom(*a, **k):
+        raise simulation.SimulationError('integration stopped at t = 0.001 s: test')
+    monkeypatch.setattr(simulation, 'simulate', boom)
+    status, _, err = run(capsys, 'simulate', '-o', tmp_path / 'x.csv')
+    assert status == 1
+    assert_one_line_error(status, err, 'simulation failed')
+
+
+def test_subprocess_entry_point_errors_and_help(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get('PYTHONPATH', ''))
+    bad = subprocess.run([sys.executable, '-m', 'worm_gear_sim', 'simulate', '--set',
+                          'nope.key=1'], capture_output=True, text=True, cwd=tmp_path, env=env,
+                         timeout=120)
+    assert bad.returncode == 2 and bad.stdout == ''
+    assert_one_line_error(bad.returncode, bad.stderr, 'nope.key')
+    ok = subprocess.run([sys.executable, '-m', 'worm_gear_sim', 'sweep', '--help'],
+                        capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
+    assert ok.returncode == 0 and '--scheduler' in ok.stdout and ok.stderr == ''
+
+
+def test_compensate_is_registered_when_importable(monkeypatch, capsys):
+    calls = []
+
+    def add_parser(sub):
+        p = sub.add_parser('compensate', help='test stub')
+        p.set_defaults(func=lambda args: calls.append(args) or 0)
+
+    import worm_gear_sim
+    fake = types.ModuleType('worm_gear_sim.compensation_cli')
+    fake.add_parser = add_parser
+    monkeypatch.setitem(sys.modules, 'worm_gear_sim.compensation_cli', fake)
+    monkeypatch.setattr(worm_gear_sim, 'compensation_cli', fake, raising=False)
+    status, _, _ = run(capsys, 'compensate')
+    assert status == 0 and len(calls) == 1
