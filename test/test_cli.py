@@ -128,6 +128,14 @@ def test_sweep_user_parameter_with_compare(tmp_path, capsys):
     assert len({r[1] for r in rows}) == 2                 # one series per compared value
     assert_finite_columns(header, rows, ['amp2', 'amp4'])
     assert_png(tmp_path / 'phase.png')
+    eh, er = read_csv(tmp_path / 'phase_envelope.csv')       # worst case over move_time
+    assert len(er) == 2 and all(r[eh.index('cases')] == '2' for r in er)
+    for e in er:
+        same_x = [float(r[header.index('amp4')]) for r in rows
+                  if r[header.index('x')] == e[eh.index('x')]]
+        assert float(e[eh.index('amp4')]) == max(same_x)
+        assert e[eh.index('amp4_at')] in ('move_time=0.02', 'move_time=0.025')
+    assert_png(tmp_path / 'phase_envelope.png')
 
 
 def test_modes_outputs(tmp_path, capsys):

@@ -413,7 +413,7 @@ def _sweep_studies(args: argparse.Namespace, cfg: Config) -> list:
 
 
 def _with_compare(study, spec: str, cfg: Config):
-    from .studies import Case
+    from .studies import COMPARE_SEP, Case
     key, sep, vals = spec.partition('=')
     key = key.strip()
     defaults = Config().to_flat_dict()
@@ -428,7 +428,7 @@ def _with_compare(study, spec: str, cfg: Config):
         for c in study.cases:
             if key in c.overrides:
                 raise CliError(f'--compare {key}: the {study.name} study sets it itself')
-            cases.append(Case(c.study, f'{c.series} | {key.split(".")[-1]}={raw}', c.x,
+            cases.append(Case(c.study, f'{c.series}{COMPARE_SEP}{key.split(".")[-1]}={raw}', c.x,
                               c.label, {key: v, **c.overrides}))
     return dataclasses.replace(study, cases=tuple(cases),
                                title=f'{study.title}; compare {key}')
@@ -436,7 +436,7 @@ def _with_compare(study, spec: str, cfg: Config):
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     from .plotting import plot_sweep
-    from .studies import rows_to_csv, run_cases
+    from .studies import ENVELOPE_COLUMNS, envelope_rows, rows_to_csv, run_cases
     cfg = _config_from_args(args)
     if args.workers is not None and args.workers < 1:
         raise CliError('--workers must be >= 1 (use --serial to run in this process)')
@@ -471,12 +471,26 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                                      ('freq4_hz', 'f4 [Hz]', '.2f'),
                                      ('max_err4', 'max|err4| [rad]', '.4e')]))
         _say(args, f'wrote {csv_path}, {png_path}')
+        if args.compare:
+            env = envelope_rows(part)
+            env_csv, env_png = outdir / f'{st.name}_envelope.csv', \
+                outdir / f'{st.name}_envelope.png'
+            rows_to_csv(env, ENVELOPE_COLUMNS, env_csv)
+            plot_sweep(env, env_png, f'{st.title}: worst case over {args.compare}',
+                       st.x_label, st.x_log, st.categorical)
+            _say(args, f'worst case over {args.compare}:')
+            _say(args, _fmt_table(env, [('series', 'series', ''), ('label', 'case', ''),
+                                        ('amp2', 'amp theta2 [rad]', '.4e'),
+                                        ('amp2_at', 'at', ''),
+                                        ('amp4', 'amp theta4 [rad]', '.4e'),
+                                        ('amp4_at', 'at', '')]))
+            _say(args, f'wrote {env_csv}, {env_png}')
         if args.traces and len(st.cases) <= 8:
             _sweep_traces(cfg, st, outdir / f'{st.name}_traces.png')
             _say(args, f'wrote {outdir / (st.name + "_traces.png")}')
     kernel = sum(r.get('kernel_s', 0.0) for r in rows)
     _say(args, f'\n{len(rows)} cases in {wall:.2f} s wall ({len(rows) / wall:.2f} cases/s; '
-         f'integration {kernel:.2f} s CPU in total)')
+         f'integration time summed over the cases {kernel:.2f} s)')
     return 0
 
 
@@ -646,7 +660,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--name', metavar='NAME', help='file name of a --param sweep '
                    '(default: custom)')
     p.add_argument('--compare', metavar='KEY=V1,V2', help='repeat every case for each value '
-                   'of KEY (one line per value), e.g. input.move_time=0.02,0.04')
+                   'of KEY (one line per value), e.g. input.move_time=0.02,0.04; also writes '
+                   '<study>_envelope.csv/png, the worst case over those values')
     p.add_argument('--out-dir', '-o', default='sweep', metavar='DIR',
                    help='output directory (default: %(default)s)')
     p.add_argument('--workers', '-j', type=int, metavar='N',

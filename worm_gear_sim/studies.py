@@ -45,7 +45,8 @@ __all__ = [
     'Case', 'Study', 'PAPER_STUDIES', 'METRIC_COLUMNS', 'move_end_time', 'equilibrium',
     'oscillation_metrics', 'dominant_frequency', 'zero_crossing_frequency', 'run_case',
     'run_cases', 'paper_study', 'param_study', 'module_overrides', 'experiment_cases',
-    'experiment_table', 'EXPERIMENT_COLUMNS', 'parse_values',
+    'experiment_table', 'EXPERIMENT_COLUMNS', 'parse_values', 'envelope_rows',
+    'ENVELOPE_COLUMNS', 'COMPARE_SEP',
 ]
 
 
@@ -526,6 +527,29 @@ class _dask_client:
 def local_cluster_client(workers: int | None = None):
     """A started LocalCluster client (caller closes client and cluster); for benchmarks."""
     return _dask_client(None, None, workers)
+
+
+COMPARE_SEP = ' | '
+ENVELOPE_COLUMNS: tuple[str, ...] = ('study', 'series', 'label', 'x', 'amp2', 'amp4',
+                                     'amp2_at', 'amp4_at', 'cases')
+
+
+def envelope_rows(rows: Sequence[Mapping[str, Any]], sep: str = COMPARE_SEP) -> list[dict]:
+    """Worst case over a ``--compare`` family: rows whose series read ``'<base> | k=v'`` are
+    grouped by (base series, label) and reduced to the maximum amplitudes, with the compared
+    value that produced each maximum (``amp2_at``, ``amp4_at``)."""
+    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
+    for r in rows:
+        base, _, tag = str(r['series']).partition(sep)
+        groups.setdefault((base, str(r['label'])), []).append({**r, '_tag': tag})
+    out = []
+    for (base, label), rs in groups.items():
+        i2 = max(range(len(rs)), key=lambda i: rs[i]['amp2'])
+        i4 = max(range(len(rs)), key=lambda i: rs[i]['amp4'])
+        out.append({'study': rs[0]['study'], 'series': base, 'label': label, 'x': rs[0]['x'],
+                    'amp2': rs[i2]['amp2'], 'amp4': rs[i4]['amp4'],
+                    'amp2_at': rs[i2]['_tag'], 'amp4_at': rs[i4]['_tag'], 'cases': len(rs)})
+    return out
 
 
 # ---- the paper's Sec. 3 experiment --------------------------------------------------------
