@@ -85,7 +85,7 @@ def test_disabled_returns_zero():
 
 
 def test_filter_reproduces_polynomials():
-    f = design_filter(design_shaper('zvd', 94.5, 0.0), 0.006, lag_order=2)
+    f = design_filter(design_shaper('zvd', 94.5, 0.0), 0.001, degree=4, lag_order=2)
     t = 0.2
     for coeffs in ([1.0, 2.0], [0.5, -1.0, 30.0]):
         x = np.polyval(coeffs[::-1], t - f.tau)
@@ -134,4 +134,8 @@ def test_design_rejects_bad_values():
     with pytest.raises(ValueError):
         design_filter(design_shaper('none', 1.0), 0.0)
     with pytest.raises(ValueError):
-        design_filter(design_shaper('none', 1.0), 0.006, lag_order=3)
+        design_filter(design_shaper('none', 1.0), 0.001, lag_order=3)
+    with pytest.raises(ValueError, match='degree'):
+        design_filter(design_shaper('none', 1.0), 0.001, degree=3, lag_order=2, n_deriv=3)
+    with pytest.raises(ValueError):
+        design_filter(design_shaper('none', 1.0), 0.001, n_deriv=6)

@@ -6,38 +6,52 @@ Given the servo's intended worm-angle command ``theta1_ref(t)``, streamed sample
 :class:`Compensator` returns a correction ``delta`` so that, with ``theta1 = theta1_ref +
 delta`` applied to the drive, the antenna angle ``theta4`` follows ``theta1_ref * l_w / r_g``.
 
-Design (everything is computed from the NOMINAL model at construction / reconfigure):
+Design (computed from the NOMINAL model at construction / :meth:`Compensator.reconfigure`):
 
-1. Reference filter F (causal unless ``compensation.preview_time`` > 0).  The streamed,
-   piecewise-linear reference is convolved with a short smooth kernel g: an optional input
-   shaper (ZV / ZVD / EI impulses tuned to the antenna mode given by
-   :func:`worm_gear_sim.modal.modes` at the operating point) convolved with a B-spline of
-   width ``compensation.smoothing_time``.  The filtered reference r and its time
-   derivatives up to 4th order are exact quadratures of the stored history with
-   precomputed weights (the derivatives of g are analytic).  A polynomial lead
-   P(s) = 1 + p1 s + p2 s^2 is folded in so that F = G P = 1 + O(s^(n+1)),
-   n = ``compensation.lag_order``: the filter then has no lag at constant rate (n >= 1) and
-   none at constant acceleration (n = 2), so constant-rate tracking is not spoiled by the
-   filter's delay.  With a preview the kernel is shifted earlier by up to the preview time.
-2. Model inverse (flat output theta4).  The desired antenna path y = r l_w / r_g and its
-   derivatives give, through the nominal model's equations (Eqs. 6, 9-13 with the Eq. 18
-   friction of the rigid sliding speed and the mesh stiffness of Eqs. 16-17 at the
-   predicted mesh phase), the gear-shaft torque, the gear angle, the mesh force, the mesh
-   approach, the worm angle and finally the worm-shaft input theta1 that makes
-   theta4 = y.  ``quasi_static`` keeps the terms up to y'' (compliance of gear shaft,
-   teeth, bearings and worm shaft under load, viscous drag, friction and the rigid-body
-   inertia torques: this alone cancels the antenna mode when y'' is smooth and timely);
-   ``model_inverse`` adds the y''' / y'''' terms (gear-body and worm-body inertia,
-   derivative of the drag), i.e. the full flat inverse of the 3-DOF chain.
+1. Reference filter F (causal unless ``compensation.preview_time`` > 0).  The streamed
+   reference (samples joined by straight lines, as the simulator and the node apply
+   commands) is convolved with a short smooth kernel g: a B-spline whose knots are one
+   command period apart (``node.publish_rate_hz``; degree 4, 5 ms at 1 kHz), optionally
+   convolved with an input shaper (ZV / ZVD / EI impulses tuned to the antenna mode of
+   :func:`worm_gear_sim.modal.modes`).  The filtered reference r and its derivatives are
+   quadratures of the stored history with precomputed weights (the derivatives of g are
+   analytic), exact for polynomial references.  A lead P(s) = 1 + p1 s + p2 s^2 is folded
+   in so that F = g P = 1 + O(s^(n+1)), n = ``compensation.lag_order``: the filter has no
+   lag at constant rate (n >= 1) nor at constant acceleration (n = 2).  With a preview the
+   kernel is moved earlier by up to its mean delay (centred: no lead needed).
+   Knots one command period apart put (degree+1)-fold spectral zeros on the command rate
+   and its harmonics: the correction, sampled at that rate and joined by straight lines,
+   then does not alias into the antenna mode (at f_rate - f_mode).
+2. Model inverse with theta4 as flat output.  The desired antenna path y = r l_w / r_g and
+   its derivatives give, through the nominal model's equations (Eqs. 6, 9-13; Eq. 18
+   friction at the rigid sliding speed, flank from the sign of the mesh torque; tooth
+   stiffness of Eqs. 16-17 at the predicted mesh phase), the gear-shaft torque, the gear
+   angle, the normal force, the mesh approach, the worm angle and the worm-shaft input
+   theta1 that makes theta4 = y.  ``quasi_static`` keeps the terms up to y'': twist of
+   both shafts, tooth and bearing deflection under the load torque, the bearing drag, the
+   friction (efficiency) and the rigid-body inertia torques J y''.  Fed with a smooth and
+   timely y'', the inertia terms cancel the 94.5 Hz antenna mode.  ``model_inverse`` adds
+   the y''' / y'''' terms (gear- and worm-body inertia, drag rate); they need a degree-6
+   kernel and measure worse at a 1 kHz command rate, so they are off by default.
 
 ``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one ``np.interp`` of the history
-at the quadrature nodes, one small matrix-vector product and ~60 float operations.
+at ~120 quadrature nodes, a small matrix-vector product and ~60 float operations (about
+40 us in CPython).  Structural damping (``damping.*``) is not in the inverse (zero by
+default; it only makes the drive ring less).
+
+Why no input shaper by default (see docs/compensation.md for the measurements): a
+lag-free filter (needed for constant-rate tracking) that contains a shaper one antenna
+period long overshoots at every rate change, which costs more than the shaper's
+robustness gains; a plain shaper (``lag_order: 0``) delays the whole move, so its
+constant-rate tracking error is many times the uncompensated one.  Shaping with
+``lag_order: 0`` remains the robust choice for pure point-to-point moves.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.interpolate import BSpline
@@ -64,15 +78,16 @@ from .model import (
     pack_parameters,
     tooth_stiffness,
 )
-from .params import Config
+from .params import Config, derive
 
 __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_filter',
-           'feedforward_series', 'SHAPERS']
+           'feedforward_series', 'SHAPERS', 'Scenario', 'paper_step_scenario',
+           'radar_slew_scenario', 'run_scenario', 'move_metrics', 'CompensationRun',
+           'DETUNINGS', 'detuned', 'detuning_cases', 'RADAR_LOAD', 'SETTLE_TOLERANCE',
+           'METRIC_FLOOR', 'METRICS', 'improvement', 'not_worse']
 
 SHAPERS = ('none', 'zv', 'zvd', 'ei')
-N_DERIV = 5              # r, r', r'', r''', r''''
-SPLINE_DEGREE = 7        # C^6 kernel: derivatives up to 4 plus a 2nd-order lead stay bounded
-NODES_PER_SPLINE = 96    # quadrature nodes across one B-spline width
+NODES_PER_KNOT = 24      # quadrature nodes per B-spline knot interval
 
 
 # ---- input shapers -------------------------------------------------------------------------
@@ -131,20 +146,22 @@ class FilterDesign:
     """Quadrature of the reference filter: r^(m)(t) = weights[m] @ x(t - tau)."""
 
     tau: np.ndarray          # lags of the quadrature nodes [s] (negative: preview)
-    weights: np.ndarray      # (N_DERIV, n) weights for r, r', ..., r''''
+    weights: np.ndarray      # (n_deriv, n) weights for r, r', r'', ...
     shaper: Shaper
-    smoothing_time: float
+    knot_spacing: float      # B-spline knot spacing [s]
+    degree: int              # B-spline degree
     lead: tuple              # (p1, p2) of P(s) = 1 + p1 s + p2 s^2
     shift: float             # how much earlier the kernel was moved (preview) [s]
 
     @property
-    def lag_span(self) -> float:
-        """Longest lag of the kernel [s] (history needed)."""
-        return float(self.tau[-1])
+    def smoothing_time(self) -> float:
+        """Width of the B-spline [s]."""
+        return self.knot_spacing * (self.degree + 1)
 
     @property
-    def settle_time(self) -> float:
-        """Time after a reference feature during which the filter still acts on it."""
+    def lag_span(self) -> float:
+        """Longest lag of the kernel [s]: the history needed, and how long after a feature
+        of the reference the filter still acts on it."""
         return float(self.tau[-1])
 
 
@@ -160,37 +177,46 @@ def _spline_derivs(width: float, degree: int, orders: int):
     return out
 
 
-def design_filter(shaper: Shaper, smoothing_time: float, lag_order: int = 2,
-                  preview: float = 0.0, degree: int = SPLINE_DEGREE) -> FilterDesign:
-    """Quadrature weights for the filtered reference and its first four derivatives.
+def design_filter(shaper: Shaper, knot_spacing: float, degree: int = 4, lag_order: int = 2,
+                  preview: float = 0.0, n_deriv: int = 3) -> FilterDesign:
+    """Quadrature weights for the filtered reference r and its first ``n_deriv - 1``
+    derivatives.
 
-    Kernel g = shaper * B-spline(width ``smoothing_time``); F = g * (1 + p1 d/dt + p2 d2/dt2)
-    with p chosen so that F reproduces polynomials up to degree ``lag_order``; the kernel is
-    moved earlier by min(preview, mean delay of g).
+    Kernel g = shaper * B-spline (``degree``, uniform knots ``knot_spacing`` apart);
+    F = g * (1 + p1 d/dt + p2 d2/dt2) with p chosen so that F reproduces polynomials up to
+    degree ``lag_order`` (no lag at constant rate / acceleration); the kernel is moved
+    earlier by min(preview, mean delay of g).  The highest derivative of the spline used is
+    n_deriv - 1 + lag_order, which must not exceed ``degree``.
     """
-    if not (smoothing_time > 0.0 and math.isfinite(smoothing_time)):
-        raise ValueError(f'smoothing_time must be > 0, got {smoothing_time!r}')
+    if not (knot_spacing > 0.0 and math.isfinite(knot_spacing)):
+        raise ValueError(f'knot_spacing must be > 0, got {knot_spacing!r}')
     if lag_order not in (0, 1, 2):
         raise ValueError(f'lag_order must be 0, 1 or 2, got {lag_order!r}')
-    h = float(smoothing_time)
+    if not (1 <= n_deriv <= 5):
+        raise ValueError(f'n_deriv must be 1..5, got {n_deriv!r}')
     d = int(degree)
-    need = N_DERIV - 1 + lag_order              # highest derivative of the spline used
-    bders = _spline_derivs(h, d, min(need, d))
+    need = n_deriv - 1 + lag_order               # highest derivative of the spline used
+    if d < max(need, 1) or d > 12:
+        raise ValueError(f'degree {d} cannot give {n_deriv - 1} derivatives with lead order '
+                         f'{lag_order} (need {max(need, 1)}..12)')
+    h = float(knot_spacing) * (d + 1)
+    bders = _spline_derivs(h, d, need)
     # moments of g: spline moments (symmetric about h/2) combined with the impulses
     A, ti = shaper.amplitudes, shaper.times
     mean_b = 0.5 * h
-    var_b = (d + 1) * (h / (d + 1)) ** 2 / 12.0   # sum of d+1 uniform boxes of width h/(d+1)
-    mu1 = float(np.sum(A * ti)) + mean_b
-    mu2 = float(np.sum(A * ti ** 2)) + 2.0 * mean_b * float(np.sum(A * ti)) + var_b + mean_b ** 2
+    var_b = (d + 1) * knot_spacing ** 2 / 12.0    # d+1 uniform boxes of width knot_spacing
+    mA = float(np.sum(A * ti))
+    mu1 = mA + mean_b
+    mu2 = float(np.sum(A * ti ** 2)) + 2.0 * mean_b * mA + var_b + mean_b ** 2
     shift = min(max(preview, 0.0), mu1)
     mu1s = mu1 - shift
     mu2s = mu2 - 2.0 * shift * mu1 + shift ** 2
     # G(s) = 1 - mu1 s + mu2 s^2 / 2 + ...;  P = 1/G to order lag_order
     p1 = mu1s if lag_order >= 1 else 0.0
     p2 = (mu1s ** 2 - 0.5 * mu2s) if lag_order >= 2 else 0.0
-    # quadrature nodes covering every shifted spline copy
+    # quadrature nodes covering every shifted spline copy, NODES_PER_KNOT per knot interval
     span = float(ti[-1]) + h
-    n = int(math.ceil(span / h * NODES_PER_SPLINE)) + 1
+    n = int(math.ceil(span / knot_spacing * NODES_PER_KNOT)) + 1
     tau = np.linspace(0.0, span, n)
     dtau = tau[1] - tau[0]
     wq = np.full(n, dtau)
@@ -200,18 +226,16 @@ def design_filter(shaper: Shaper, smoothing_time: float, lag_order: int = 2,
         for a, t0 in zip(A, ti):
             gder[m] += a * bders[m](tau - t0)
     coef = (1.0, p1, p2)
-    W = np.zeros((N_DERIV, n))
-    for m in range(N_DERIV):
+    W = np.zeros((n_deriv, n))
+    for m in range(n_deriv):
         for k in range(lag_order + 1):
-            if coef[k] != 0.0 or k == 0:
-                W[m] += coef[k] * gder[m + k]
+            W[m] += coef[k] * gder[m + k]
         W[m] *= wq
     tau_s = tau - shift
-    # exact moments: sum_j W[m, j] (-tau_j)^k must equal d^m/dt^m (t^k) at t=0 for the
-    # polynomial x(t) = t^k, k = 0..m+lag_order+1 (reproduction of low-degree references)
+    # exact moments: polynomial references of low degree are filtered exactly
     W = _enforce_moments(W, tau_s, lag_order)
-    return FilterDesign(tau=tau_s, weights=W, shaper=shaper, smoothing_time=h,
-                        lead=(p1, p2), shift=shift)
+    return FilterDesign(tau=tau_s, weights=W, shaper=shaper, knot_spacing=float(knot_spacing),
+                        degree=d, lead=(p1, p2), shift=shift)
 
 
 def _enforce_moments(W: np.ndarray, tau: np.ndarray, lag_order: int) -> np.ndarray:
@@ -313,12 +337,22 @@ class Compensator:
         k = int(np.argmax(np.abs(res.shapes[2, :])))
         self.mode_frequency_hz = float(res.frequencies_hz[k] or res.undamped_hz[k])
         self.mode_damping_ratio = float(max(res.damping_ratios[k], 0.0))
-        shaper = design_shaper(cs.shaper, self.mode_frequency_hz, self.mode_damping_ratio,
-                               0.05)
-        self.filter = design_filter(shaper, float(cs.smoothing_time), int(cs.lag_order),
-                                    self.preview)
+        shaper = design_shaper(cs.shaper, self.mode_frequency_hz, self.mode_damping_ratio)
+        # derivatives the inverse needs (r..r'' or r..r''''), plus the lead order: the
+        # B-spline degree is the lowest that keeps them bounded
+        n_deriv = 5 if self.dynamic else (3 if self.quasi_static else 1)
+        lag = int(cs.lag_order)
+        degree = max(n_deriv - 1 + lag, 1)
+        # knots one command period apart (by default): the kernel's spectrum then has
+        # (degree+1)-fold zeros at the command rate and its harmonics, so the correction,
+        # sampled at that rate and joined by straight lines, does not alias into the
+        # antenna mode (at f_rate - f_mode)
+        width = float(cs.smoothing_time) or (degree + 1) / config.node.publish_rate_hz
+        self.filter = design_filter(shaper, width / (degree + 1), degree, lag, self.preview,
+                                    n_deriv)
         self._tau = np.ascontiguousarray(self.filter.tau)
         self._W = np.ascontiguousarray(self.filter.weights)
+        self._n_deriv = n_deriv
         self._inv = _Inverse(config)
         self._span = self.filter.lag_span + self.preview
         self._out_per_in = 1.0 / self._inv.ratio
@@ -332,7 +366,8 @@ class Compensator:
         self._hist_x = [float(theta1_ref)]
         self._last_delta = 0.0
         self._reference = float(theta1_ref)
-        self._derivs = np.array([float(theta1_ref), 0.0, 0.0, 0.0, 0.0])
+        self._derivs = np.zeros(self._n_deriv)
+        self._derivs[0] = float(theta1_ref)
 
     def update(self, t: float, theta1_ref: float) -> float:
         """Add the sample (t, theta1_ref) and return the correction delta [rad] for time
@@ -369,8 +404,10 @@ class Compensator:
         self._derivs = r
         if self.quasi_static:
             c = self._out_per_in
-            th1 = self._inv.theta1(r[0] * c, r[1] * c, r[2] * c, r[3] * c, r[4] * c,
-                                   self.dynamic)
+            if self._n_deriv == 5:
+                th1 = self._inv.theta1(r[0] * c, r[1] * c, r[2] * c, r[3] * c, r[4] * c, True)
+            else:
+                th1 = self._inv.theta1(r[0] * c, r[1] * c, r[2] * c, 0.0, 0.0, False)
         else:
             th1 = float(r[0])            # shaping (filtering) only
         self._last_delta = th1 - self._reference
@@ -388,26 +425,31 @@ class Compensator:
 
     @property
     def filtered_reference(self) -> np.ndarray:
-        """Last filtered worm reference r and its derivatives r' .. r'''' (copy)."""
+        """Last filtered worm reference and its derivatives (r, r', r'' [, r''', r''''])."""
         return np.array(self._derivs, float)
 
     def describe(self) -> str:
         f = self.filter
         return (f'shaper {f.shaper.kind} at {self.mode_frequency_hz:.4g} Hz '
                 f'(zeta {self.mode_damping_ratio:.3g}, {f.shaper.duration * 1e3:.3g} ms), '
-                f'smoothing {f.smoothing_time * 1e3:.3g} ms, lead {f.lead[0]:.3g} s / '
+                f'B-spline degree {f.degree} over {f.smoothing_time * 1e3:.3g} ms, '
+                f'lead {f.lead[0]:.3g} s / '
                 f'{f.lead[1]:.3g} s^2, preview {self.preview * 1e3:.3g} ms, '
                 f'quasi_static {self.quasi_static}, model_inverse {self.dynamic}')
 
 
 def feedforward_series(config: Config, times, theta1_ref) -> np.ndarray:
-    """Stream a sampled reference through a fresh :class:`Compensator` (batch helper).
+    """Stream a sampled reference through a fresh :class:`Compensator` (batch helper) and
+    return the correction for each sample time.
 
-    Returns the delta for each sample time (with a preview, the delta for ``times[i]`` is
-    produced once the sample at ``times[i] + preview_time`` has been streamed; samples past
-    the end hold the last value)."""
+    Without preview, sample i is streamed at its own time.  With a preview P the stream runs
+    P ahead (the sample at t_j + P is passed at t_j; past the end the reference holds its
+    last value) and the corrections, produced for t_j, are returned on the sample grid
+    (interpolated when P is not a multiple of the sample spacing)."""
     t = np.asarray(times, float)
     x = np.asarray(theta1_ref, float)
+    if t.ndim != 1 or x.shape != t.shape or t.size == 0:
+        raise ValueError('times and theta1_ref must be equal-length 1-D arrays')
     comp = Compensator(config)
     comp.reset(float(x[0]), float(t[0]))
     out = np.empty(t.size)
@@ -416,14 +458,252 @@ def feedforward_series(config: Config, times, theta1_ref) -> np.ndarray:
         for i in range(t.size):
             out[i] = comp.update(t[i], x[i])
         return out
-    # the stream runs P ahead (past the end it holds the last value)
-    j = 0
-    for i in range(t.size):
-        target = t[i] + P
-        while j < t.size and t[j] <= target + 1e-12:
-            comp._add_sample(float(t[j]), float(x[j]))
-            j += 1
-        if j == t.size and comp._hist_t[-1] < target:
-            comp._add_sample(target, float(x[-1]))
-        out[i] = comp._evaluate(float(t[i]))
-    return out
+    # samples after the end hold the last value, on the same spacing
+    dt = float(t[-1] - t[-2]) if t.size > 1 else 1e-3
+    n_extra = int(math.ceil(P / dt)) + 2
+    t_ext = np.concatenate((t, t[-1] + dt * np.arange(1, n_extra + 1)))
+    x_ext = np.concatenate((x, np.full(n_extra, x[-1])))
+    t_for = t_ext - P
+    d = np.empty(t_ext.size)
+    for j in range(t_ext.size):
+        d[j] = comp.update(t_ext[j], x_ext[j])
+    # before the first streamed correction the reference had rested: no correction yet
+    return np.interp(t, t_for, d, left=0.0)
+
+
+# ---- evaluation: scenarios, runs with and without compensation, metrics ---------------------
+SETTLE_TOLERANCE = 10e-6          # rad: settling band of theta4 about its target
+SETTLE_HOLD = 0.05                # s: settled only if inside the band for the run's last 50 ms
+COMMAND_PERIOD = 1e-3             # s: the servo streams theta1_ref at 1 kHz (node rate)
+
+#: Illustrative antenna load of the radar scenarios (the paper has none): a steady wind
+#: torque on the antenna and the viscous drag of its bearing and seals.  With these values
+#: the static wind-up (about 1.8e-4 rad at the antenna) is of the order of the ringing.
+RADAR_LOAD = {'load.output_torque': 5.0, 'load.output_viscous_coefficient': 2.0}
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A sampled reference move: samples at ``times`` (the servo's 1 kHz stream), the time
+    ``move_end`` after which the reference rests, and the constant-rate intervals."""
+
+    name: str
+    times: np.ndarray
+    theta1_ref: np.ndarray
+    move_end: float
+    constant_rate: tuple          # ((t_a, t_b), ...) where theta1_ref has a constant rate
+    description: str = ''
+
+    @property
+    def t_end(self) -> float:
+        return float(self.times[-1])
+
+
+def _piecewise_accel_profile(t0: float, segments, period: float, t_total: float):
+    """Worm angle from (duration, acceleration) segments starting at rest at t0, sampled
+    every ``period``; returns (times, theta1, rate-change instants)."""
+    times = np.arange(0.0, t_total + 0.5 * period, period)
+    th = np.zeros_like(times)
+    knots = [t0]
+    pos, vel, t = 0.0, 0.0, t0
+    starts = []
+    for dur, acc in segments:
+        starts.append((t, pos, vel, acc))
+        pos += vel * dur + 0.5 * acc * dur * dur
+        vel += acc * dur
+        t += dur
+        knots.append(t)
+    for (ts_, p0, v0, a0), te in zip(starts, knots[1:]):
+        m = (times >= ts_) & (times < te)
+        tau = times[m] - ts_
+        th[m] = p0 + v0 * tau + 0.5 * a0 * tau * tau
+    th[times >= knots[-1]] = pos
+    return times, th, knots
+
+
+def paper_step_scenario(cfg: Config, start: float = 0.01, t_end: float = 0.5,
+                        period: float = COMMAND_PERIOD) -> Scenario:
+    """The paper's 18-step move (trapezoidal rate: input.target_angle in input.move_time
+    with input.accel_time ramps, 0.1131 rad in 20 ms with 4 ms ramps by default)."""
+    inp = cfg.input
+    T, ta, A = inp.move_time, inp.accel_time, inp.target_angle
+    w = A / (T - ta)
+    segs = [(ta, w / ta), (T - 2 * ta, 0.0), (ta, -w / ta)]
+    times, th, knots = _piecewise_accel_profile(start, segs, period, t_end)
+    return Scenario('paper_18_step', times, th, knots[-1], ((knots[1], knots[2]),),
+                    f'18-step move {A:.6g} rad in {T * 1e3:g} ms ({ta * 1e3:g} ms ramps) '
+                    f'from t = {start * 1e3:g} ms')
+
+
+def radar_slew_scenario(cfg: Config, antenna_rate: float = 0.2,
+                        antenna_acceleration: float = 60.0, cruise: float = 0.15,
+                        start: float = 0.01, hold: float = 0.3,
+                        period: float = COMMAND_PERIOD) -> Scenario:
+    """Radar slew (the paper's introduction: a target turning sharply): start, track at
+    +antenna_rate, reverse at the acceleration limit to -antenna_rate, track, stop, hold.
+    Defaults: 0.2 rad/s (11.5 deg/s) with 60 rad/s^2 (reversal in 6.7 ms).  Angles are
+    worm angles."""
+    ratio = derive(cfg).ratio
+    w = antenna_rate * ratio
+    acc = antenna_acceleration * ratio
+    ramp = w / acc
+    segs = [(ramp, acc), (cruise, 0.0), (2 * ramp, -acc), (cruise, 0.0), (ramp, acc)]
+    t_total = start + 4 * ramp + 2 * cruise + hold
+    times, th, knots = _piecewise_accel_profile(start, segs, period, t_total)
+    return Scenario('radar_slew', times, th, knots[-1],
+                    ((knots[1], knots[2]), (knots[3], knots[4])),
+                    f'slew at +/-{antenna_rate:g} rad/s antenna rate, '
+                    f'{antenna_acceleration:g} rad/s^2 (reversal in {2e3 * ramp:.3g} ms), '
+                    f'{cruise * 1e3:g} ms tracking each way, stop, hold {hold * 1e3:g} ms')
+
+
+@dataclass
+class CompensationRun:
+    """A simulated scenario: plant response with the commanded theta1 = ref + delta."""
+
+    scenario: Scenario
+    delta: np.ndarray             # correction at the scenario's sample times
+    trajectory: Any               # simulation.Trajectory
+    error: np.ndarray             # theta4 - theta1_ref * l_w / r_g at the trajectory times
+    metrics: dict
+
+
+def run_scenario(plant: Config, scenario: Scenario, compensator: Config | None,
+                 record_every: int = 10) -> CompensationRun:
+    """Simulate ``plant`` (nonlinear, with friction) driven by the scenario's reference,
+    plus the feed-forward of a compensator designed on ``compensator`` (None: without
+    compensation).  The command is streamed at the scenario's sample times and joined by
+    straight lines, as the node does."""
+    from .profiles import SampledProfile
+    from .simulation import simulate
+    t, x = scenario.times, scenario.theta1_ref
+    delta = feedforward_series(compensator, t, x) if compensator is not None \
+        else np.zeros_like(x)
+    traj = simulate(plant, SampledProfile(t, x + delta), t_end=scenario.t_end,
+                    record_every=record_every, theta1_initial=float(x[0] + delta[0]))
+    ratio_out = traj.output_ratio
+    ref = np.interp(traj.t, t, x)
+    err = traj.theta[:, 2] - ref * ratio_out
+    mode_hz = float(modes(plant).frequencies_hz[0])
+    command_end = scenario.move_end
+    if compensator is not None:
+        moving = np.nonzero(np.abs(np.diff(x + delta)) > 0.0)[0]
+        if moving.size:
+            command_end = float(t[moving[-1] + 1])
+    return CompensationRun(scenario, delta, traj, err,
+                           move_metrics(traj.t, err, scenario, mode_hz, command_end))
+
+
+def _static_offset(t: np.ndarray, e: np.ndarray, freq_hz: float) -> float:
+    """Offset of e over the window by least squares on c + a cos wt + b sin wt (the ringing
+    antenna mode removed), robust to a partial period."""
+    w = 2 * math.pi * freq_hz
+    A = np.column_stack([np.ones_like(t), np.cos(w * t), np.sin(w * t)])
+    coef, *_ = np.linalg.lstsq(A, e, rcond=None)
+    return float(coef[0])
+
+
+def move_metrics(t: np.ndarray, e: np.ndarray, scenario: Scenario, mode_hz: float,
+                 command_end: float | None = None, static_window: float = 0.1) -> dict:
+    """Metrics of an output-error trace e = theta4 - theta1_ref l_w / r_g (rad, s).
+
+    ``move_end`` is the end of the reference move; ``command_end`` (default: the same) the
+    time after which the applied command (reference + correction) rests: a causal filter
+    keeps correcting for its lag span after the reference stopped.
+
+    - ``residual_peak``: max |e - static| after ``command_end`` (the residual oscillation);
+    - ``post_move_peak``: max |e - static| after ``move_end`` (includes the correction's own
+      transient; stricter);
+    - ``settling_time``: from ``move_end`` until |e| stays within 10 urad (inf: not settled,
+      i.e. still leaving the band during the run's last SETTLE_HOLD = 50 ms);
+    - ``static_error``: |offset| of e over the last ``static_window`` (the ringing at the
+      antenna mode fitted out by least squares);
+    - ``tracking_rms``: RMS of e while the reference moves at constant rate.
+    """
+    t_move = scenario.move_end
+    t_cmd = t_move if command_end is None else max(command_end, t_move)
+    last = t >= t[-1] - static_window
+    static = _static_offset(t[last], e[last], mode_hz)
+    dev = np.abs(e - static)
+    resid = float(np.max(dev[t >= t_cmd]))
+    post = float(np.max(dev[t >= t_move]))
+    after = t >= t_move
+    outside = np.nonzero(after & (np.abs(e) > SETTLE_TOLERANCE))[0]
+    if outside.size == 0:
+        settle = 0.0
+    elif t[-1] - t[outside[-1]] < SETTLE_HOLD:
+        settle = math.inf          # still leaving the band near the end of the run
+    else:
+        settle = float(t[outside[-1] + 1] - t_move)
+    mask = np.zeros(t.shape, bool)
+    for a, b in scenario.constant_rate:
+        mask |= (t >= a) & (t <= b)
+    rms = float(np.sqrt(np.mean(e[mask] ** 2))) if mask.any() else math.nan
+    return {'residual_peak': resid, 'post_move_peak': post, 'settling_time': settle,
+            'static_error': abs(static), 'tracking_rms': rms}
+
+
+#: Detuned plants for the robustness cases: +-20 % tooth stiffness, friction, flywheel.
+DETUNINGS = {
+    'tooth_stiffness': ('mesh.worm_tooth_stiffness_multiplier',
+                        'mesh.gear_tooth_stiffness_multiplier'),
+    'friction': ('friction.mu_kinetic', 'friction.mu_stribeck_drop',
+                 'friction.constant_coefficient'),
+    'flywheel_inertia': ('materials.flywheel_density',),
+}
+
+
+def detuned(cfg: Config, factors: dict) -> Config:
+    """The plant with parameter groups scaled: ``factors`` maps DETUNINGS keys to factors
+    (flywheel inertia scales with the flywheel density, J_4 = rho pi L R^4 / 2)."""
+    flat = cfg.to_flat_dict()
+    over = {}
+    for group, f in factors.items():
+        for key in DETUNINGS[group]:
+            over[key] = flat[key] * f
+    return cfg.replace(over)
+
+
+#: Errors below this (0.1 urad, 1 % of the settling band) are at the resolution of the
+#: simulation (Newton tolerance, the static-offset fit): both runs count as equal there.
+METRIC_FLOOR = 1e-7
+METRICS = ('residual_peak', 'post_move_peak', 'settling_time', 'static_error',
+           'tracking_rms')
+
+
+def improvement(metric: str, off: float, on: float) -> float:
+    """off / on (larger is better).  Settling times: inf/inf -> 1, inf/finite -> inf.
+    Angle metrics: nan when both are below METRIC_FLOOR (nothing to remove)."""
+    if metric == 'settling_time':
+        if math.isinf(off) and math.isinf(on):
+            return 1.0
+        if math.isinf(on):
+            return 0.0
+        if math.isinf(off) or on == 0.0:
+            return math.inf if off > 0.0 else 1.0
+        return off / on
+    if off < METRIC_FLOOR and on < METRIC_FLOOR:
+        return math.nan
+    return off / max(on, METRIC_FLOOR)
+
+
+def not_worse(metric: str, off: float, on: float, tolerance: float = 0.05) -> bool:
+    """True if the compensated value is at most ``tolerance`` worse than uncompensated (or
+    both are below the resolution floor)."""
+    if metric == 'settling_time':
+        return on <= off * (1.0 + tolerance) or (math.isinf(on) and math.isinf(off))
+    return on <= max(off * (1.0 + tolerance), METRIC_FLOOR)
+
+
+def detuning_cases() -> list[tuple[str, dict]]:
+    """The plants of the robustness study: nominal, each group +-20 %, and the two corners
+    that move the antenna mode most (soft teeth + heavy flywheel, stiff + light)."""
+    cases = [('nominal', {})]
+    for g in DETUNINGS:
+        for f in (0.8, 1.2):
+            cases.append((f'{g} {f - 1:+.0%}', {g: f}))
+    cases.append(('tooth -20% & flywheel +20%', {'tooth_stiffness': 0.8,
+                                                 'flywheel_inertia': 1.2}))
+    cases.append(('tooth +20% & flywheel -20%', {'tooth_stiffness': 1.2,
+                                                 'flywheel_inertia': 0.8}))
+    return cases

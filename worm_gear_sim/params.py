@@ -267,13 +267,15 @@ class CompensationSettings:
 
     enabled: bool = _f(True, 'Compute the feed-forward correction')
     quasi_static: bool = _f(True, 'Compensate compliance and friction wind-up')
-    shaper: str = _f('zvd', 'Input shaper: none | zv | zvd | ei', choices=('none', 'zv', 'zvd',
-                     'ei'))
+    shaper: str = _f('none', 'Input shaper in the reference filter: none | zv | zvd | ei '
+                     '(measured: none is best for tracking; zv/zvd/ei with lag_order 0 for '
+                     'robust point-to-point moves)', choices=('none', 'zv', 'zvd', 'ei'))
     preview_time: float = _f(0.0, 'Preview horizon of future command samples', 's', 0.0, 1.0)
-    model_inverse: bool = _f(True, 'Add the dynamic terms of the model inverse (gear and worm '
-                             'body inertia, 3rd/4th reference derivatives) to quasi_static')
-    smoothing_time: float = _f(0.006, 'Width of the B-spline smoothing of the reference (gives '
-                               'its derivatives causally)', 's', 0.0, 0.1, lo_open=True)
+    model_inverse: bool = _f(False, 'Also the 3rd/4th-derivative terms of the model inverse '
+                             '(gear and worm body inertia); needs a longer smoothing kernel')
+    smoothing_time: float = _f(0.0, 'Width of the B-spline that smooths the reference (gives '
+                               'its derivatives causally); 0: (degree+1) command periods '
+                               '1/node.publish_rate_hz', 's', 0.0, 0.1)
     lag_order: int = _f(2, 'Lead of the reference filter: it tracks polynomials of this '
                         'degree without lag (0: plain delay, 1: ramps, 2: parabolas)', '', 0, 2)
 
