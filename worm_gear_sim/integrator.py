@@ -9,38 +9,67 @@ follow from the Newmark relations
     v_{n+1} = v_n + dt ((1 - gamma) a_n + gamma a_{n+1})
 
 and Newton solves  R(u) = M a + C (v - r theta1') - Q(u, v, theta1) = 0  with the analytic
-Jacobian  M/(beta dt^2) + (C - dQ/dv) gamma/(beta dt) - dQ/du.  Convergence is tested on
-the residual scaled to displacement units (|R_i| / J_ii against atol + rtol |du_i| plus a
-round-off floor), with early exit.  When the residual grows the update is halved (damped
-Newton); when a step still fails it is repeated in 2, 4, ... 2^max_subdivision_level
-sub-steps (theta1 interpolated linearly), and each such event is counted.
+Jacobian  M/(beta dt^2) + (C - dQ/dv) gamma/(beta dt) - dQ/du.
+
+Convergence: the residual is measured as an acceleration error, |R_i| / J_ii <= atol +
+rtol |a_i| (rad/s^2) plus a round-off floor, so that the accepted position error per step
+shrinks like dt^2 and the method keeps its order at any dt.  At least one Newton solve is
+made every step.  Early exit: after the first solve the remaining residual is predicted
+from the contraction rho = |R_1| / |R_0| measured on the last verified step (as Radau
+carries its Newton rate); when rho |R_0| is far below tolerance and the step is smooth (the
+sliding speed stays outside 10 v_eps on one side, the mesh force keeps its sign, no tooth
+hand-over) the step is accepted without a second force evaluation.  Every 8th step, and
+every non-smooth step, is verified with a fresh residual.
+
+Robustness: when the residual grows the update is halved (damped Newton); an update that
+would carry the sliding speed across zero from outside the friction zone is shortened to
+land on zero; a step that still fails is repeated in 2, 4, ... 2^max_subdivision_level
+sub-steps (theta1 interpolated linearly), each such event counted.
 """
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from .model import (
     N_AUX,
     P_ATOL,
     P_BETA,
+    P_COSL,
+    P_COUT,
+    P_FRIC_MODEL,
     P_GAMMA,
     P_J4,
     P_JG,
     P_JW,
+    P_KG,
+    P_LW,
     P_MAXIT,
     P_MAXSUB,
+    P_MESH_LINEAR,
+    P_PHASE0,
+    P_RG,
     P_RIGID3,
     P_RTOL,
-    generalized_forces,
+    P_RW,
+    P_SINL,
+    P_VEPS,
+    P_ZG,
+    mesh_forces,
 )
 
-# stats vector layout
+# stats vector layout (int64, cumulative)
 S_STEPS, S_SOLVES, S_EVALS, S_SUBDIV_EVENTS, S_SUBSTEPS, S_MAX_SOLVES, S_FAILED = range(7)
-N_STATS = 7
+S_VERIFIED = 7
+N_STATS = 8
+
+# controller state (float64, carried between calls): contraction estimate, steps since verify
+C_RHO, C_SINCE = 0, 1
+N_CTL = 2
+VERIFY_EVERY = 8
+SMOOTH_ZONE = 10.0          # |v_s| > SMOOTH_ZONE * v_eps counts as clear of the stick zone
 
 STATUS_OK = 0
 STATUS_FAILED = 1          # Newton did not converge even at the finest subdivision
@@ -49,227 +78,254 @@ STATUS_NONFINITE = 2       # NaN/inf input or state
 _EPS = 2.220446049250313e-16
 
 
-@njit(cache=True)
-def _solve3(J, b, x):
-    """x = J^{-1} b for a 3x3 system (Gaussian elimination with partial pivoting)."""
-    A = J.copy()
-    y = b.copy()
-    for c in range(3):
-        piv = c
-        best = abs(A[c, c])
-        for r in range(c + 1, 3):
-            if abs(A[r, c]) > best:
-                best = abs(A[r, c])
-                piv = r
-        if best == 0.0:
-            return False
-        if piv != c:
-            for k in range(3):
-                tmp = A[c, k]
-                A[c, k] = A[piv, k]
-                A[piv, k] = tmp
-            tmp = y[c]
-            y[c] = y[piv]
-            y[piv] = tmp
-        for r in range(c + 1, 3):
-            f = A[r, c] / A[c, c]
-            for k in range(c, 3):
-                A[r, k] -= f * A[c, k]
-            y[r] -= f * y[c]
-    for r in range(2, -1, -1):
-        s = y[r]
-        for k in range(r + 1, 3):
-            s -= A[r, k] * x[k]
-        x[r] = s / A[r, r]
-    return True
+@njit(cache=True, error_model='numpy')
+def _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, b0, b1, b2):
+    """(ok, x) with J x = b for a 3x3 system by cofactors; ok False if singular."""
+    c00 = j11 * j22 - j12 * j21
+    c01 = j12 * j20 - j10 * j22
+    c02 = j10 * j21 - j11 * j20
+    det = j00 * c00 + j01 * c01 + j02 * c02
+    if det == 0.0 or not math.isfinite(det):
+        return False, 0.0, 0.0, 0.0
+    inv = 1.0 / det
+    c10 = j02 * j21 - j01 * j22
+    c11 = j00 * j22 - j02 * j20
+    c12 = j01 * j20 - j00 * j21
+    c20 = j01 * j12 - j02 * j11
+    c21 = j02 * j10 - j00 * j12
+    c22 = j00 * j11 - j01 * j10
+    return (True, (c00 * b0 + c10 * b1 + c20 * b2) * inv, (c01 * b0 + c11 * b1 + c21 * b2) * inv,
+            (c02 * b0 + c12 * b1 + c22 * b2) * inv)
 
 
-@njit(cache=True)
-def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, u, v, a, work, J, stats):
-    """One Newmark step from (u0, v0, a0) to (u, v, a). Returns True when converged."""
-    Q = work[0]
-    R = work[1]
-    delta = work[2]
-    u_prev = work[3]
-    scale = work[4]
-    aux = work[5]
-    dQdu = J[1]
-    dQdv = J[2]
-    Jm = J[0]
+@njit(cache=True, error_model='numpy')
+def _phase_cycle(p, th2, th3):
+    """Index of the mesh cycle (tooth hand-over count) at a position."""
+    if p[P_MESH_LINEAR] != 0.0:
+        return 0.0
+    return math.floor((0.5 * (th2 + p[P_ZG] * th3) + p[P_PHASE0]) / (2.0 * math.pi))
+
+
+@njit(cache=True, error_model='numpy')
+def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
+    """One Newmark step from (u0, v0, a0) (3-tuples).  Returns
+    (ok, u, v, a, rho, since, n_solves, n_evals, verified)."""
     beta, gamma = p[P_BETA], p[P_GAMMA]
     m0, m1, m2 = p[P_JW], p[P_JG], p[P_J4]
     r3 = p[P_RIGID3]
     rtol, atol = p[P_RTOL], p[P_ATOL]
+    Kg, cout = p[P_KG], p[P_COUT]
     maxit = int(p[P_MAXIT])
     c_a = 1.0 / (beta * dt * dt)
     c_v = gamma / (beta * dt)
-    for i in range(3):      # predictor: constant acceleration
-        u[i] = u0[i] + dt * v0[i] + 0.5 * dt * dt * a0[i]
+    k_vs2, k_vs3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
+    veps = p[P_VEPS]
+    lw, rg = p[P_LW], p[P_RG]
+    friction_on = p[P_FRIC_MODEL] != 0.0
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = C
+    # Newmark: a = c_a (u - ustar), v = vstar + gamma dt a
+    h2 = dt * dt * (0.5 - beta)
+    us0 = u0[0] + dt * v0[0] + h2 * a0[0]
+    us1 = u0[1] + dt * v0[1] + h2 * a0[1]
+    us2 = u0[2] + dt * v0[2] + h2 * a0[2]
+    vs0 = v0[0] + dt * (1.0 - gamma) * a0[0]
+    vs1 = v0[1] + dt * (1.0 - gamma) * a0[1]
+    vs2 = v0[2] + dt * (1.0 - gamma) * a0[2]
+    # predictor: constant acceleration
+    x0 = u0[0] + dt * v0[0] + 0.5 * dt * dt * a0[0]
+    x1 = u0[1] + dt * v0[1] + 0.5 * dt * dt * a0[1]
+    x2 = u0[2] + dt * v0[2] + 0.5 * dt * dt * a0[2]
+    vs_start = k_vs2 * v0[0] + k_vs3 * v0[1]
+    q_start = lw * u0[0] - rg * u0[1]
+    cycle_start = _phase_cycle(p, u0[0], u0[1])
     n_solves = 0
     n_evals = 0
     alpha = 1.0
     r_prev = 0.0
-    have_scale = False
+    r0 = 0.0
+    d0 = d1 = d2 = 0.0
+    p0 = p1 = p2 = 0.0
+    gdt = gamma * dt
     while True:
-        for i in range(3):
-            a[i] = (u[i] - u0[i] - dt * v0[i] - dt * dt * (0.5 - beta) * a0[i]) * c_a
-            v[i] = v0[i] + dt * ((1.0 - gamma) * a0[i] + gamma * a[i])
-        generalized_forces(p, u, v, th1, Q, dQdu, dQdv, aux)
+        a_0 = c_a * (x0 - us0)
+        a_1 = c_a * (x1 - us1)
+        a_2 = c_a * (x2 - us2)
+        w0 = vs0 + gdt * a_0
+        w1 = vs1 + gdt * a_1
+        w2 = vs2 + gdt * a_2
+        f = mesh_forces(p, x0, x1, x2, w0, w1, w2, th1)
         n_evals += 1
-        rel0 = v[0] - th1dot
-        rel1 = v[1] - r3 * th1dot
-        rel2 = v[2] - r3 * th1dot
-        R[0] = m0 * a[0] + C[0, 0] * rel0 + C[0, 1] * rel1 + C[0, 2] * rel2 - Q[0]
-        R[1] = m1 * a[1] + C[1, 0] * rel0 + C[1, 1] * rel1 + C[1, 2] * rel2 - Q[1]
-        R[2] = m2 * a[2] + C[2, 0] * rel0 + C[2, 1] * rel1 + C[2, 2] * rel2 - Q[2]
-        finite = True
-        for i in range(3):
-            if not math.isfinite(R[i]):
-                finite = False
-        if not finite:
+        rel0 = w0 - th1dot
+        rel1 = w1 - r3 * th1dot
+        rel2 = w2 - r3 * th1dot
+        R0 = m0 * a_0 + c00 * rel0 + c01 * rel1 + c02 * rel2 - f[0]
+        R1 = m1 * a_1 + c10 * rel0 + c11 * rel1 + c12 * rel2 - f[1]
+        R2 = m2 * a_2 + c20 * rel0 + c21 * rel1 + c22 * rel2 - f[2]
+        if not (math.isfinite(R0) and math.isfinite(R1) and math.isfinite(R2)):
             break
-        for i in range(3):
-            for k in range(3):
-                Jm[i, k] = (C[i, k] - dQdv[i, k]) * c_v - dQdu[i, k]
-        Jm[0, 0] += m0 * c_a
-        Jm[1, 1] += m1 * c_a
-        Jm[2, 2] += m2 * c_a
-        if not have_scale:
-            for i in range(3):
-                scale[i] = abs(Jm[i, i]) if Jm[i, i] != 0.0 else 1.0
-            have_scale = True
-        converged = True
-        r_norm = 0.0
-        for i in range(3):
-            err = abs(R[i]) / scale[i]
-            tol = atol + rtol * abs(u[i] - u0[i]) + 8.0 * _EPS * abs(u[i])
-            if err > tol:
-                converged = False
-            r_norm += (err / tol) ** 2
-        if converged:
-            stats[S_SOLVES] += n_solves
-            stats[S_EVALS] += n_evals
-            if n_solves > stats[S_MAX_SOLVES]:
-                stats[S_MAX_SOLVES] = n_solves
-            return True
+        # Jacobian M c_a + (C - dQ/dv) c_v - dQ/du
+        j00 = m0 * c_a + (c00 - f[7]) * c_v - f[3]
+        j01 = (c01 - f[8]) * c_v - f[4]
+        j02 = c02 * c_v
+        j10 = (c10 - f[9]) * c_v - f[5]
+        j11 = m1 * c_a + (c11 - f[10]) * c_v - f[6]
+        j12 = c12 * c_v - Kg
+        j20 = c20 * c_v
+        j21 = c21 * c_v - Kg
+        j22 = m2 * c_a + (c22 + cout) * c_v + Kg
+        # residual as acceleration error: |R_i| / M_ii against atol + rtol |a_i|, with a
+        # round-off floor of a few ulps of u_i seen through the Jacobian
+        t0 = m0 * (atol + rtol * abs(a_0)) + 8.0 * _EPS * abs(x0) * abs(j00)
+        t1 = m1 * (atol + rtol * abs(a_1)) + 8.0 * _EPS * abs(x1) * abs(j11)
+        t2 = m2 * (atol + rtol * abs(a_2)) + 8.0 * _EPS * abs(x2) * abs(j22)
+        r_norm = max(abs(R0) / t0, abs(R1) / t1, abs(R2) / t2)
+        if n_solves == 0:
+            r0 = r_norm
+        elif r_norm <= 1.0:
+            rho = (r_norm / r0 if r0 > 0.0 else 0.0) if n_solves == 1 else 1.0
+            return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), rho, 0.0,
+                    n_solves, n_evals, True)
         if n_solves > 0 and r_norm > r_prev and alpha > 1.0 / 64.0:
             alpha *= 0.5            # damped Newton: backtrack along the last update
-            for i in range(3):
-                u[i] = u_prev[i] + alpha * delta[i]
+            x0 = p0 + alpha * d0
+            x1 = p1 + alpha * d1
+            x2 = p2 + alpha * d2
             continue
         if n_solves >= maxit:
             break
-        for i in range(3):
-            R[i] = -R[i]
-        if not _solve3(Jm, R, delta):
+        ok, d0, d1, d2 = _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, -R0, -R1, -R2)
+        if not ok:
             break
-        for i in range(3):
-            u_prev[i] = u[i]
-            u[i] += delta[i]
+        # Sliding-reversal limiter (like SPICE's junction limiting): an update that carries
+        # the sliding speed from outside the friction zone across zero is shortened to land
+        # on zero, where tanh is steep and its linearisation accurate.
+        vs_old = k_vs2 * w0 + k_vs3 * w1
+        dvs = c_v * (k_vs2 * d0 + k_vs3 * d1)
+        if friction_on and abs(vs_old) > veps and vs_old * (vs_old + dvs) < 0.0:
+            fr = -vs_old / dvs
+            d0 *= fr
+            d1 *= fr
+            d2 *= fr
+        p0, p1, p2 = x0, x1, x2
+        x0 += d0
+        x1 += d1
+        x2 += d2
         r_prev = r_norm
         alpha = 1.0
         n_solves += 1
-    stats[S_SOLVES] += n_solves
-    stats[S_EVALS] += n_evals
-    return False
+        if n_solves == 1 and since < VERIFY_EVERY and rho * r0 <= 0.25:
+            # early exit without a second force evaluation if the step is smooth
+            a_0 = c_a * (x0 - us0)
+            a_1 = c_a * (x1 - us1)
+            a_2 = c_a * (x2 - us2)
+            w0 = vs0 + gdt * a_0
+            w1 = vs1 + gdt * a_1
+            w2 = vs2 + gdt * a_2
+            vs_end = k_vs2 * w0 + k_vs3 * w1
+            q_end = lw * x0 - rg * x1
+            clear_of_stick = (vs_start * vs_end > 0.0 and abs(vs_start) > SMOOTH_ZONE * veps
+                              and abs(vs_end) > SMOOTH_ZONE * veps)
+            if ((clear_of_stick or not friction_on) and q_start * q_end > 0.0
+                    and _phase_cycle(p, x0, x1) == cycle_start):
+                return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), rho, since + 1.0,
+                        n_solves, n_evals, False)
+    return (False, (x0, x1, x2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 1.0, since, n_solves,
+            n_evals, False)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, rec_a,
-            rec_aux, stats):
+            rec_aux, stats, ctl):
     """Advance len(theta1)-1 steps of size dt; theta1[k] is the command at the start of
     step k and theta1[k+1] at its end (theta1_dot likewise).  Updates u, v, a in place and
     only with fully converged steps.  Every ``record_stride`` steps (if > 0) the end state is
-    written to rec_* (row j after step (j+1)*stride).  Returns (steps done, status)."""
+    written to rec_* (row j after step (j+1)*stride).  ``ctl`` carries the Newton
+    controller state between calls.  Returns (steps done, status)."""
     n_steps = theta1.shape[0] - 1
-    u0 = u.copy()
-    v0 = v.copy()
-    a0 = a.copy()
-    un = np.empty(3)
-    vn = np.empty(3)
-    an = np.empty(3)
-    us = np.empty(3)
-    vs = np.empty(3)
-    as_ = np.empty(3)
-    work = np.zeros((6, N_AUX))
-    J = np.zeros((3, 3, 3))
-    dQdu = np.zeros((3, 3))
-    dQdv = np.zeros((3, 3))
-    Qtmp = np.zeros(3)
+    Ct = (C[0, 0], C[0, 1], C[0, 2], C[1, 0], C[1, 1], C[1, 2], C[2, 0], C[2, 1], C[2, 2])
     max_level = int(p[P_MAXSUB])
+    uu = (u[0], u[1], u[2])
+    vv = (v[0], v[1], v[2])
+    aa = (a[0], a[1], a[2])
+    rho, since = ctl[C_RHO], ctl[C_SINCE]
     for i in range(3):
-        if not (math.isfinite(u0[i]) and math.isfinite(v0[i]) and math.isfinite(a0[i])):
+        if not (math.isfinite(u[i]) and math.isfinite(v[i]) and math.isfinite(a[i])):
             return 0, STATUS_NONFINITE
+    n_solves = 0
+    n_evals = 0
+    n_verified = 0
+    max_solves = stats[S_MAX_SOLVES]
+    status = STATUS_OK
+    done = 0
     for k in range(n_steps):
         th_a, th_b = theta1[k], theta1[k + 1]
         td_a, td_b = theta1_dot[k], theta1_dot[k + 1]
         if not (math.isfinite(th_b) and math.isfinite(td_b)):
-            return k, STATUS_NONFINITE
-        ok = _newmark_step(p, C, u0, v0, a0, th_b, td_b, dt, un, vn, an, work, J, stats)
+            status = STATUS_NONFINITE
+            break
+        ok, un, vn, an, rho, since, ns, ne, ver = _newmark_step(
+            p, Ct, uu, vv, aa, th_b, td_b, dt, rho, since)
+        n_solves += ns
+        n_evals += ne
+        n_verified += ver
+        max_solves = max(max_solves, ns)
+        level = 1
+        while not ok and level <= max_level:
+            n_sub = 1 << level
+            stats[S_SUBDIV_EVENTS] += 1
+            h = dt / n_sub
+            us, vs, as_ = uu, vv, aa
+            ok = True
+            for j in range(n_sub):
+                f = (j + 1.0) / n_sub
+                ok, us, vs, as_, rho, since, ns, ne, ver = _newmark_step(
+                    p, Ct, us, vs, as_, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a),
+                    h, rho, since)
+                n_solves += ns
+                n_evals += ne
+                n_verified += ver
+                if not ok:
+                    break
+                stats[S_SUBSTEPS] += 1
+            un, vn, an = us, vs, as_
+            level += 1
         if not ok:
-            level = 1
-            while level <= max_level and not ok:
-                n_sub = 1 << level
-                stats[S_SUBDIV_EVENTS] += 1
-                for i in range(3):
-                    us[i] = u0[i]
-                    vs[i] = v0[i]
-                    as_[i] = a0[i]
-                ok = True
-                h = dt / n_sub
-                for j in range(n_sub):
-                    f = (j + 1.0) / n_sub
-                    th = th_a + f * (th_b - th_a)
-                    td = td_a + f * (td_b - td_a)
-                    if not _newmark_step(p, C, us, vs, as_, th, td, h, un, vn, an, work, J,
-                                         stats):
-                        ok = False
-                        break
-                    stats[S_SUBSTEPS] += 1
-                    for i in range(3):
-                        us[i] = un[i]
-                        vs[i] = vn[i]
-                        as_[i] = an[i]
-                level += 1
-            if not ok:
-                stats[S_FAILED] += 1
-                for i in range(3):
-                    u[i] = u0[i]
-                    v[i] = v0[i]
-                    a[i] = a0[i]
-                return k, STATUS_FAILED
-        for i in range(3):
-            u0[i] = un[i]
-            v0[i] = vn[i]
-            a0[i] = an[i]
-        stats[S_STEPS] += 1
-        if record_stride > 0 and (k + 1) % record_stride == 0:
-            j = (k + 1) // record_stride - 1
+            stats[S_FAILED] += 1
+            status = STATUS_FAILED
+            break
+        uu, vv, aa = un, vn, an
+        done += 1
+        if record_stride > 0 and done % record_stride == 0:
+            j = done // record_stride - 1
             for i in range(3):
-                rec_u[j, i] = un[i]
-                rec_v[j, i] = vn[i]
-                rec_a[j, i] = an[i]
-            generalized_forces(p, un, vn, th_b, Qtmp, dQdu, dQdv, rec_aux[j])
+                rec_u[j, i] = uu[i]
+                rec_v[j, i] = vv[i]
+                rec_a[j, i] = aa[i]
+            r = mesh_forces(p, uu[0], uu[1], uu[2], vv[0], vv[1], vv[2], th_b)
+            for i in range(N_AUX):
+                rec_aux[j, i] = r[11 + i]
     for i in range(3):
-        u[i] = u0[i]
-        v[i] = v0[i]
-        a[i] = a0[i]
-    return n_steps, STATUS_OK
+        u[i] = uu[i]
+        v[i] = vv[i]
+        a[i] = aa[i]
+    ctl[C_RHO] = rho
+    ctl[C_SINCE] = since
+    stats[S_STEPS] += done
+    stats[S_SOLVES] += n_solves
+    stats[S_EVALS] += n_evals
+    stats[S_VERIFIED] += n_verified
+    stats[S_MAX_SOLVES] = max_solves
+    return done, status
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def consistent_acceleration(p, C, u, v, theta1, theta1_dot, a):
     """a = M^{-1} (Q - C (v - r theta1')) at a given state (initial condition)."""
-    Q = np.zeros(3)
-    dQdu = np.zeros((3, 3))
-    dQdv = np.zeros((3, 3))
-    aux = np.zeros(N_AUX)
-    generalized_forces(p, u, v, theta1, Q, dQdu, dQdv, aux)
+    f = mesh_forces(p, u[0], u[1], u[2], v[0], v[1], v[2], theta1)
     r3 = p[P_RIGID3]
-    rel = np.array([v[0] - theta1_dot, v[1] - r3 * theta1_dot, v[2] - r3 * theta1_dot])
+    rel0 = v[0] - theta1_dot
+    rel1 = v[1] - r3 * theta1_dot
+    rel2 = v[2] - r3 * theta1_dot
     m = (p[P_JW], p[P_JG], p[P_J4])
     for i in range(3):
-        f = Q[i]
-        for k in range(3):
-            f -= C[i, k] * rel[k]
-        a[i] = f / m[i]
+        a[i] = (f[i] - C[i, 0] * rel0 - C[i, 1] * rel1 - C[i, 2] * rel2) / m[i]

@@ -57,7 +57,12 @@ P_FRIC_IN_COMPLIANCE = 31
 P_COUT, P_TLOAD = 32, 33
 P_BETA, P_GAMMA, P_RTOL, P_ATOL, P_MAXIT, P_MAXSUB = 34, 35, 36, 37, 38, 39
 P_RIGID3 = 40                                        # theta3/theta1 of the rigid motion
-N_PARAMS = 41
+P_INV_KGS, P_INV_KWS, P_INV_VEPS, P_LIN_COMPLIANCE = 41, 42, 43, 44   # precomputed
+N_PARAMS = 45
+
+# layout of the flat output of mesh_eval: Q (3), dQ/du (3x3 row-major), dQ/dv (3x3), aux
+O_Q, O_DQDU, O_DQDV, O_AUX = 0, 3, 12, 21
+N_OUT = 21 + 8
 
 FRICTION_OFF, FRICTION_CONSTANT, FRICTION_STRIBECK = 0, 1, 2
 
@@ -99,8 +104,11 @@ def pack_parameters(cfg: Config) -> np.ndarray:
         x0g = _calibrated_origin(gear_raw, mesh.gear_fit_b, mesh.gear_tooth_stiffness_linear)
     else:
         x0w = x0g = 0.0
-    p[P_WORM_SCALE] = worm_raw * mesh.worm_tooth_stiffness_multiplier
-    p[P_GEAR_SCALE] = gear_raw * mesh.gear_tooth_stiffness_multiplier
+    # second pair one axial pitch (360 deg) further on: e^{b(x+360)} = e^{bx} e^{360 b}
+    p[P_WORM_SCALE] = worm_raw * mesh.worm_tooth_stiffness_multiplier \
+        * (1.0 + math.exp(360.0 * mesh.worm_fit_b))
+    p[P_GEAR_SCALE] = gear_raw * mesh.gear_tooth_stiffness_multiplier \
+        * (1.0 + math.exp(360.0 * mesh.gear_fit_b))
     p[P_WORM_B], p[P_WORM_X0] = mesh.worm_fit_b, x0w
     p[P_GEAR_B], p[P_GEAR_X0] = mesh.gear_fit_b, x0g
     p[P_ZG], p[P_PHASE0] = d.gear_teeth, mesh.phase_offset
@@ -116,11 +124,14 @@ def pack_parameters(cfg: Config) -> np.ndarray:
     p[P_RTOL], p[P_ATOL] = integ.newton_rtol, integ.newton_atol
     p[P_MAXIT], p[P_MAXSUB] = integ.newton_max_iterations, integ.max_subdivision_level
     p[P_RIGID3] = d.l_w / g.gear_pitch_radius
+    p[P_INV_KGS], p[P_INV_KWS] = 1.0 / d.k_gs, 1.0 / d.k_ws
+    p[P_INV_VEPS] = 1.0 / fr.regularization_velocity
+    p[P_LIN_COMPLIANCE] = 1.0 / p[P_CWKW_LIN] + 1.0 / p[P_CGKG_LIN]
     return p
 
 
 # ---- Eqs. 16-17: tooth stiffness over the mesh cycle ----------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def tooth_stiffness(p, theta2, theta3):
     """Return (c_w k_w, c_g k_g, d(c_w k_w)/d(phase), d(c_g k_g)/d(phase)); phase in rad."""
     if p[P_MESH_LINEAR] != 0.0:
@@ -128,16 +139,14 @@ def tooth_stiffness(p, theta2, theta3):
     phase = 0.5 * (theta2 + p[P_ZG] * theta3) + p[P_PHASE0]
     s_deg = (phase - TWO_PI * math.floor(phase / TWO_PI)) * DEG_PER_RAD   # in [0, 360)
     bw, bg = p[P_WORM_B], p[P_GEAR_B]
-    ew = math.exp(bw * (p[P_WORM_X0] + s_deg))
-    eg = math.exp(bg * (p[P_GEAR_X0] + s_deg))
-    # second pair one axial pitch (360 deg) further: e^{b(x+360)} = e^{bx} e^{360 b}
-    cwkw = p[P_WORM_SCALE] * ew * (1.0 + math.exp(360.0 * bw))                    # Eq. 16
-    cgkg = p[P_GEAR_SCALE] * eg * (1.0 + math.exp(360.0 * bg))                    # Eq. 17
+    # Eq. 16 / 17: M e^a (e^{b x_i} + e^{b x_j}), x_j = x_i + 360; (1 + e^{360 b}) in SCALE
+    cwkw = p[P_WORM_SCALE] * math.exp(bw * (p[P_WORM_X0] + s_deg))
+    cgkg = p[P_GEAR_SCALE] * math.exp(bg * (p[P_GEAR_X0] + s_deg))
     return cwkw, cgkg, cwkw * bw * DEG_PER_RAD, cgkg * bg * DEG_PER_RAD
 
 
 # ---- Eq. 18: friction coefficient and its direction ---------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def friction_coefficient(p, v_s, q):
     """Return (mu_eff, d mu_eff / d v_s): signed coefficient entering Eqs. 1-2, 10, 12, 14."""
     model = p[P_FRIC_MODEL]
@@ -161,76 +170,97 @@ def friction_coefficient(p, v_s, q):
         sgn_v = 1.0 if v_s >= 0.0 else -1.0
         return mu, dmu * sgn_v
     sq = 1.0 if q >= 0.0 else -1.0       # flank in contact: friction ~ |W_n|
-    t = math.tanh(v_s / p[P_VEPS])
+    t = math.tanh(v_s * p[P_INV_VEPS])
     # d/dv [mu(|v|) tanh(v/eps)] = mu'(|v|) sgn(v) t + mu (1 - t^2)/eps ; sgn(v) t = |t|
-    d = dmu * abs(t) + mu * (1.0 - t * t) / p[P_VEPS]
+    d = dmu * abs(t) + mu * (1.0 - t * t) * p[P_INV_VEPS]
     return sq * mu * t, sq * d
 
 
 # ---- Eqs. 4-15: generalized forces with their analytic Jacobians ---------------------------
-@njit(cache=True)
-def generalized_forces(p, u, v, theta1, Q, dQdu, dQdv, aux):
-    """Fill Q (= M u'' without damping), dQ/du, dQ/dv and aux for state (u, v) at theta1."""
+@njit(cache=True, error_model='numpy')
+def mesh_forces(p, th2, th3, th4, w2, w3, w4, theta1):
+    """Generalized forces Q (= M u'' without structural damping) of Eqs. 11, 13 and 6, the
+    non-constant entries of their analytic Jacobians and the mesh quantities, as a tuple:
+
+    (Q2, Q3, Q4, dQ2/dth2, dQ2/dth3, dQ3/dth2, dQ3/dth3, dQ2/dw2, dQ2/dw3, dQ3/dw2, dQ3/dw3,
+     W_n, mu_eff, c_w k_w, c_g k_g, v_s, F_X, F_Y, q).
+
+    The constant entries are dQ3/dth4 = dQ4/dth3 = K_g, dQ4/dth4 = -K_g, dQ4/dw4 = -c_out.
+    Scalars in, scalars out: this is the hot path of the integrator."""
     lw, rw, rg = p[P_LW], p[P_RW], p[P_RG]
     sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
-    th2, th3, th4 = u[0], u[1], u[2]
     q = lw * th2 - rg * th3                                          # Eq. 8 right side
-    v_s = rw * cl * v[0] + rg * sl * v[1]                            # sliding speed
+    v_s = rw * cl * w2 + rg * sl * w3                                # sliding speed
     mu, dmu_dvs = friction_coefficient(p, v_s, q)
-    cwkw, cgkg, dcw, dcg = tooth_stiffness(p, th2, th3)
+    inv_kgs, inv_kws = p[P_INV_KGS], p[P_INV_KWS]
     A = cphi * sl + mu * cl                                          # F_X / W_n, Eq. 1
     B = cphi * cl - mu * sl                                          # F_Y / W_n, Eq. 2
     if p[P_FRIC_IN_COMPLIANCE] != 0.0:
-        Ac, Bc, dK_dmu = A, B, cl * sl / p[P_KGS] - sl * cl / p[P_KWS]
+        Ac, Bc, dK_dmu = A, B, cl * sl * (inv_kgs - inv_kws)
     else:
         Ac, Bc, dK_dmu = cphi * sl, cphi * cl, 0.0
-    kgws = 1.0 / cwkw + 1.0 / cgkg + Ac * sl / p[P_KGS] + Bc * cl / p[P_KWS]   # Eq. 10
-    Wn = q * cl / kgws                                               # Eq. 9
-    # derivatives of W_n
-    dWn_dq = cl / kgws
-    dWn_dK = -Wn / kgws
-    dK_dphase = -dcw / (cwkw * cwkw) - dcg / (cgkg * cgkg)
+    if p[P_MESH_LINEAR] != 0.0:
+        teeth, dK_dphase = p[P_LIN_COMPLIANCE], 0.0
+        cwkw, cgkg = p[P_CWKW_LIN], p[P_CGKG_LIN]
+    else:
+        cwkw, cgkg, dcw, dcg = tooth_stiffness(p, th2, th3)
+        icw, icg = 1.0 / cwkw, 1.0 / cgkg
+        teeth = icw + icg                                            # Eq. 7
+        dK_dphase = -dcw * icw * icw - dcg * icg * icg
+    kgws = teeth + Ac * sl * inv_kgs + Bc * cl * inv_kws             # Eq. 10
+    ikg = 1.0 / kgws
+    Wn = q * cl * ikg                                                # Eq. 9
+    dWn_dq = cl * ikg
+    dWn_dK = -Wn * ikg
     dWn_dth2 = dWn_dq * lw + dWn_dK * dK_dphase * 0.5
     dWn_dth3 = -dWn_dq * rg + dWn_dK * dK_dphase * 0.5 * p[P_ZG]
     dWn_dmu = dWn_dK * dK_dmu
-    # Eqs. 11, 13, 6
     Kw, Kg = p[P_KW], p[P_KG]
-    Q[0] = -rw * A * Wn - Kw * (th2 - theta1)
-    Q[1] = rg * B * Wn - Kg * (th3 - th4)
-    Q[2] = -Kg * (th4 - th3) - p[P_COUT] * v[2] - p[P_TLOAD]
-    dQdu[0, 0] = -rw * A * dWn_dth2 - Kw
-    dQdu[0, 1] = -rw * A * dWn_dth3
-    dQdu[0, 2] = 0.0
-    dQdu[1, 0] = rg * B * dWn_dth2
-    dQdu[1, 1] = rg * B * dWn_dth3 - Kg
-    dQdu[1, 2] = Kg
-    dQdu[2, 0] = 0.0
-    dQdu[2, 1] = Kg
-    dQdu[2, 2] = -Kg
+    Q2 = -rw * A * Wn - Kw * (th2 - theta1)                          # Eq. 11
+    Q3 = rg * B * Wn - Kg * (th3 - th4)                              # Eq. 13
+    Q4 = -Kg * (th4 - th3) - p[P_COUT] * w4 - p[P_TLOAD]             # Eq. 6 (+ load)
     dQ0_dmu = -rw * (cl * Wn + A * dWn_dmu)
     dQ1_dmu = rg * (-sl * Wn + B * dWn_dmu)
     dmu_dw2 = dmu_dvs * rw * cl
     dmu_dw3 = dmu_dvs * rg * sl
-    dQdv[0, 0] = dQ0_dmu * dmu_dw2
-    dQdv[0, 1] = dQ0_dmu * dmu_dw3
-    dQdv[0, 2] = 0.0
-    dQdv[1, 0] = dQ1_dmu * dmu_dw2
-    dQdv[1, 1] = dQ1_dmu * dmu_dw3
-    dQdv[1, 2] = 0.0
-    dQdv[2, 0] = 0.0
-    dQdv[2, 1] = 0.0
-    dQdv[2, 2] = -p[P_COUT]
-    aux[AUX_WN] = Wn
-    aux[AUX_MU] = mu
-    aux[AUX_CWKW] = cwkw
-    aux[AUX_CGKG] = cgkg
-    aux[AUX_VS] = v_s
-    aux[AUX_FX] = A * Wn
-    aux[AUX_FY] = B * Wn
-    aux[AUX_Q] = q
+    return (Q2, Q3, Q4,
+            -rw * A * dWn_dth2 - Kw, -rw * A * dWn_dth3,
+            rg * B * dWn_dth2, rg * B * dWn_dth3 - Kg,
+            dQ0_dmu * dmu_dw2, dQ0_dmu * dmu_dw3, dQ1_dmu * dmu_dw2, dQ1_dmu * dmu_dw3,
+            Wn, mu, cwkw, cgkg, v_s, A * Wn, B * Wn, q)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
+def mesh_eval(p, th2, th3, th4, w2, w3, w4, theta1, out):
+    """:func:`mesh_forces` written to a flat array (layout O_Q, O_DQDU, O_DQDV, O_AUX)."""
+    r = mesh_forces(p, th2, th3, th4, w2, w3, w4, theta1)
+    Kg = p[P_KG]
+    out[0], out[1], out[2] = r[0], r[1], r[2]
+    out[3], out[4], out[5] = r[3], r[4], 0.0
+    out[6], out[7], out[8] = r[5], r[6], Kg
+    out[9], out[10], out[11] = 0.0, Kg, -Kg
+    out[12], out[13], out[14] = r[7], r[8], 0.0
+    out[15], out[16], out[17] = r[9], r[10], 0.0
+    out[18], out[19], out[20] = 0.0, 0.0, -p[P_COUT]
+    for i in range(N_AUX):
+        out[O_AUX + i] = r[11 + i]
+
+
+@njit(cache=True, error_model='numpy')
+def generalized_forces(p, u, v, theta1, Q, dQdu, dQdv, aux):
+    """Array form of :func:`mesh_eval`: fill Q, dQ/du, dQ/dv (3x3) and aux (8)."""
+    out = np.empty(N_OUT)
+    mesh_eval(p, u[0], u[1], u[2], v[0], v[1], v[2], theta1, out)
+    for i in range(3):
+        Q[i] = out[O_Q + i]
+        for k in range(3):
+            dQdu[i, k] = out[O_DQDU + 3 * i + k]
+            dQdv[i, k] = out[O_DQDV + 3 * i + k]
+    for i in range(N_AUX):
+        aux[i] = out[O_AUX + i]
+
+
+@njit(cache=True, error_model='numpy')
 def mesh_stiffness_y(p, theta2, theta3):
     """Frictionless mesh stiffness along Y, k_Y = cos(phi) cos^2(lam) / KGWS0 [N/m]."""
     sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
@@ -239,7 +269,7 @@ def mesh_stiffness_y(p, theta2, theta3):
     return cphi * cl * cl / kgws0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def mechanical_energy(p, u, v, theta1):
     """Kinetic + shaft torsion + mesh energy 0.5 k_Y q^2 [J] (exact invariant of the
     frictionless linear model)."""

@@ -207,10 +207,10 @@ class Integrator:
     newmark_beta: float = _f(0.25, 'Newmark beta (1/4: average acceleration)', '', 0.0, 0.5,
                              lo_open=True)
     newmark_gamma: float = _f(0.5, 'Newmark gamma (1/2: no numerical damping)', '', 0.5, 1.0)
-    newton_rtol: float = _f(1e-10, 'Relative tolerance of the scaled Newton residual', '',
-                            0.0, 1e-2, lo_open=True)
-    newton_atol: float = _f(1e-14, 'Absolute tolerance (rad) of the scaled Newton residual',
-                            'rad', 0.0, 1e-3, lo_open=True)
+    newton_rtol: float = _f(1e-9, 'Newton tolerance on the residual as acceleration error, '
+                            'relative to |acceleration|', '', 0.0, 1e-2, lo_open=True)
+    newton_atol: float = _f(1e-7, 'Newton tolerance on the residual as acceleration error, '
+                            'absolute', 'rad/s^2', 0.0, 1e3, lo_open=True)
     newton_max_iterations: int = _f(12, 'Newton iterations before a step is subdivided', '',
                                     1, 200)
     max_subdivision_level: int = _f(10, 'A failing step is split in 2, 4, ... 2^level parts',

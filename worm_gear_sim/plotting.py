@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 
 __all__ = ['plot_trajectory', 'plot_experiment', 'plot_sweep', 'plot_modes', 'plot_traces']
 
-_DPI = 110
+_DPI = 100
 _STYLES = ('-o', '-s', '-^', '-D', '-v', '-x', '-*', '-P')
 
 

@@ -22,6 +22,7 @@ from .integrator import (
     S_STEPS,
     S_SUBDIV_EVENTS,
     S_SUBSTEPS,
+    S_VERIFIED,
     STATUS_NONFINITE,
     STATUS_OK,
     advance,
@@ -145,6 +146,7 @@ class Simulator:
         self.dt = config.integrator.time_step
         self.interpolation = interpolation or config.node.command_interpolation
         self._stats = np.zeros(N_STATS, dtype=np.int64)
+        self._ctl = np.array([1.0, 0.0])      # Newton controller: contraction, since verify
         self._buf_th = np.empty(0)
         self._buf_td = np.empty(0)
         self._empty2 = np.empty((0, 3))
@@ -167,6 +169,7 @@ class Simulator:
         self._cmd_t = self._t0
         self._cmd_value = float(theta1)
         consistent_acceleration(self.p, self.C, self._u, self._v, self._theta1, 0.0, self._a)
+        self._ctl[:] = (1.0, 0.0)
 
     def reconfigure(self, config: Config) -> None:
         """Swap in new (already validated) parameters, keeping time, state and command.
@@ -180,6 +183,7 @@ class Simulator:
         if not np.all(np.isfinite(a)):
             raise ValueError('the new parameters give a non-finite acceleration')
         self.config, self.p, self.C, self.derived, self._a = config, p, C, derive(config), a
+        self._ctl[:] = (1.0, 0.0)
 
     @property
     def t(self) -> float:
@@ -198,7 +202,7 @@ class Simulator:
                 'force_evaluations': int(s[S_EVALS]),
                 'subdivision_events': int(s[S_SUBDIV_EVENTS]),
                 'substeps': int(s[S_SUBSTEPS]), 'max_solves_per_step': int(s[S_MAX_SOLVES]),
-                'failed_steps': int(s[S_FAILED])}
+                'failed_steps': int(s[S_FAILED]), 'verified_steps': int(s[S_VERIFIED])}
 
     def forces(self) -> dict[str, float]:
         """Mesh quantities at the current state (W_n, mu, stiffnesses, F_X, F_Y, q)."""
@@ -271,7 +275,7 @@ class Simulator:
 
     def _run_kernel(self, th, td, stride, ru, rv, ra, raux) -> None:
         done, status = advance(self.p, self.C, self._u, self._v, self._a, th, td, self.dt,
-                               stride, ru, rv, ra, raux, self._stats)
+                               stride, ru, rv, ra, raux, self._stats, self._ctl)
         self._k += done
         if done > 0:
             self._theta1, self._theta1_dot = float(th[done]), float(td[done])

@@ -150,7 +150,7 @@ def paper_study(name: str, base: Config) -> Study:
                      note='flywheel length L5 = 0.03 m kept; J_4 grows as D^4')
     if name == 'module':
         cases = []
-        for scaling, series in (('geometry', 'similar geometry (r, lead, L ~ M; k ~ M)'),
+        for scaling, series in (('geometry', 'similar gear set (r_w r_g lead L2 L3 k ~ M)'),
                                 ('stiffness', 'tooth stiffness only (k ~ M)')):
             for m in MODULES:
                 cases.append(Case(name, series, m, f'M{m:g}', module_overrides(base, m, scaling)))

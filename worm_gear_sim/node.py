@@ -1,0 +1,526 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""ROS 2 node ``worm_gear_sim``: the worm-gear model running in real time beside a servo.
+
+A thin adapter around the core: every number it publishes comes from
+:class:`~worm_gear_sim.simulation.Simulator`, :func:`~worm_gear_sim.params.derive` and the
+feed-forward :class:`~worm_gear_sim.compensation.Compensator`; there is no physics here.
+
+Interface (SI units, rad; relative, remappable names):
+
+* subscribes ``worm_angle_command`` (std_msgs/Float64, theta1 [rad]); sensor-data QoS
+  (best effort, keep last 5) by default, overridable by ``qos_overrides.*`` parameters;
+* publishes ``joint_states`` (sensor_msgs/JointState: theta1..theta4, rates, shaft torques),
+  ``~/positioning_error`` (theta4 - theta1 l_w/r_g), ``~/worm_error`` (theta2 - theta1),
+  ``~/feedforward`` (correction to add to theta1) and ``/diagnostics``;
+* every model parameter is a declared ROS parameter (dotted names of
+  :meth:`Config.to_flat_dict`), validated at run time by :meth:`Config.replace`.
+
+Run ``worm_gear_sim_node --ros-args --params-file config/worm_gear_sim.yaml`` (or
+``python -m worm_gear_sim.node ...``); ``--executor single_threaded`` overrides the
+``node.executor`` parameter.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import math
+import sys
+import time
+from typing import Any
+
+import rclpy
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterException,
+)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.utilities import remove_ros_args
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from . import diagnostics as diag
+from .params import NODE_NAME, Config, ConfigError, config_from_mapping, load_config
+from .ros_params import (
+    coerce_parameter,
+    declare_config,
+    is_model_parameter,
+    parameter_type,
+    to_core_value,
+)
+from .simulation import SimulationError, Simulator
+
+try:  # issue 5 builds the compensator in parallel; the node must work (and say so) without it
+    from .compensation import Compensator
+    COMPENSATION_IMPORT_ERROR: str = ''
+except ImportError as _exc:  # pragma: no cover - depends on the checkout
+    Compensator = None  # type: ignore[assignment,misc]
+    COMPENSATION_IMPORT_ERROR = f'{type(_exc).__name__}: {_exc}'
+
+__all__ = ['WormGearSimNode', 'main', 'file_defaults', 'make_executor', 'COMMAND_TOPIC',
+           'JOINT_STATES_TOPIC', 'REJECT_REASONS']
+
+COMMAND_TOPIC = 'worm_angle_command'
+JOINT_STATES_TOPIC = 'joint_states'
+REJECT_REASONS = ('nan', 'inf', 'out_of_range', 'jump')
+LOG_THROTTLE_S = 2.0  # at most one log line per cause every 2 s (bursts of bad input)
+
+
+def file_defaults() -> Config:
+    """Declaration defaults: the package's YAML (source tree or installed share/), falling
+    back to the code defaults, which equal it (a test checks this)."""
+    try:
+        return load_config()
+    except ConfigError:
+        return Config()
+
+
+class WormGearSimNode(Node):
+    """Real-time worm-gear prediction; see the module docstring for the interface.
+
+    ``defaults`` sets the declaration defaults (``--params-file`` and ``parameter_overrides``
+    still win); other keyword arguments (``context``, ``parameter_overrides``, ``cli_args``,
+    ``namespace``) go to :class:`rclpy.node.Node`.  Raises :class:`ConfigError` when the
+    declared values do not form a valid configuration.
+    """
+
+    def __init__(self, node_name: str = NODE_NAME, *, defaults: Config | None = None,
+                 **kwargs: Any):
+        super().__init__(node_name, **kwargs)
+        values = declare_config(self, defaults if defaults is not None else file_defaults())
+        self._types = {name: parameter_type(v) for name, v in values.items()}
+        cfg = config_from_mapping(values, source='ROS parameters')
+        self.config: Config = cfg
+        self.sim = Simulator(cfg, theta1=0.0, t0=0.0)
+        self._warm_up()
+        self.ratio = self.sim.derived.output_per_input
+
+        # --- command input state -----------------------------------------------------------
+        self._cmd: float | None = None           # latest accepted command theta1_ref [rad]
+        self._cmd_fresh = False                  # a command arrived since the last tick
+        self._started = False
+        self._origin_ns = 0                      # clock reading at t = 0 of the simulator
+        self._time_base = ''                     # 'sim' or 'wall' (monotonic)
+        self._last_t = 0.0                       # relative time of the last tick [s]
+        self._last_mono_ns = 0
+        self._delta = 0.0                        # last good feed-forward correction [rad]
+        self._pending_config: Config | None = None
+
+        self.counters: dict[str, Any] = dict(
+            commands_received=0, commands_used=0, commands_superseded=0,
+            rejected_commands=0, **{f'rejected_{r}': 0 for r in REJECT_REASONS},
+            ticks=0, missed_ticks=0, overruns=0, dropped_time=0.0, clock_backwards=0,
+            simulation_errors=0, compensation_errors=0, rejected_parameter_sets=0,
+            accepted_parameter_sets=0, steps=0, max_steps_per_tick=0)
+        self.last_error = ''
+        self._window = self._new_window()
+
+        # --- feed-forward --------------------------------------------------------------
+        self.compensator = None
+        self.compensation_error = COMPENSATION_IMPORT_ERROR
+        self._make_compensator(cfg)
+
+        # --- ROS interfaces --------------------------------------------------------------
+        qos_state = QoSProfile(depth=10)
+        overrides = QoSOverridingOptions.with_default_policies()
+        self._pub_js = self.create_publisher(JointState, JOINT_STATES_TOPIC, qos_state,
+                                             qos_overriding_options=overrides)
+        self._pub_err = self.create_publisher(Float64, '~/positioning_error', qos_state)
+        self._pub_worm = self.create_publisher(Float64, '~/worm_error', qos_state)
+        self._pub_ff = self.create_publisher(Float64, '~/feedforward', qos_state)
+        self._pub_diag = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 1)
+        self._sub = self.create_subscription(
+            Float64, COMMAND_TOPIC, self._on_command, qos_profile_sensor_data,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies())
+
+        self._js = JointState()
+        self._js.name = list(cfg.node.joint_names)
+        self._f_err, self._f_worm, self._f_ff = Float64(), Float64(), Float64()
+        self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
+
+        self.add_pre_set_parameters_callback(self._pre_set)
+        self.add_on_set_parameters_callback(self._on_set)
+        self.add_post_set_parameters_callback(self._post_set)
+
+        self._timer = self.create_timer(1.0 / cfg.node.publish_rate_hz, self._on_tick)
+        self._diag_timer = self.create_timer(cfg.node.diagnostic_period, self.publish_diagnostics)
+        self.get_logger().info(
+            f'ready: dt = {self.sim.dt:g} s, {cfg.node.publish_rate_hz:g} Hz, ratio '
+            f'1:{1.0 / self.ratio:.6g}; waiting for {self.resolve_topic_name(COMMAND_TOPIC)}')
+        if self.compensator is None:
+            self.get_logger().error(
+                f'feed-forward unavailable ({self.compensation_error}); ~/feedforward is not '
+                'published and the prediction is uncompensated')
+
+    # ---- helpers -----------------------------------------------------------------------
+    def _warm_up(self) -> None:
+        """Run the compiled kernel once so the first tick pays no load/compile time."""
+        self.sim.advance_to(10 * self.sim.dt, 0.0)
+        self.sim.reset(0.0, 0.0)
+
+    @staticmethod
+    def _new_window() -> dict[str, Any]:
+        return dict(wall_ns=time.monotonic_ns(), busy_ns=0, sim_time=0.0, ticks=0, steps=0,
+                    overruns=0, errors=0)
+
+    def _make_compensator(self, cfg: Config) -> None:
+        if Compensator is None:
+            self.compensator = None
+            return
+        try:
+            self.compensator = Compensator(cfg)
+            self.compensation_error = ''
+        except Exception as exc:  # noqa: BLE001 - any failure: keep running uncompensated
+            self.compensator = None
+            self.compensation_error = f'{type(exc).__name__}: {exc}'
+            self.get_logger().error(f'compensator could not be built: {self.compensation_error}')
+
+    def _warn(self, text: str) -> None:
+        self.last_error = text
+        self.get_logger().warning(text, throttle_duration_sec=LOG_THROTTLE_S)
+
+    # ---- command input ---------------------------------------------------------------
+    def _on_command(self, msg: Float64) -> None:
+        """O(1): validate and keep the latest command; the physics runs only in the tick."""
+        c = self.counters
+        c['commands_received'] += 1
+        v = msg.data
+        reason = ''
+        if math.isnan(v):
+            reason = 'nan'
+        elif math.isinf(v):
+            reason = 'inf'
+        elif abs(v) > self.config.node.max_command_abs:
+            reason = 'out_of_range'
+        elif self._cmd is not None and abs(v - self._cmd) > self.config.node.max_command_jump:
+            reason = 'jump'
+        if reason:
+            c['rejected_commands'] += 1
+            c['rejected_' + reason] += 1
+            limit = {'out_of_range': f' (|theta1| > node.max_command_abs = '
+                                     f'{self.config.node.max_command_abs:g} rad)',
+                     'jump': f' (|change| > node.max_command_jump = '
+                             f'{self.config.node.max_command_jump:g} rad from {self._cmd!r})'
+                     }.get(reason, '')
+            self._warn(f'rejected worm_angle_command {v!r}: {reason}{limit}; '
+                       f'{c["rejected_commands"]} rejected so far')
+            return
+        if self._cmd_fresh:
+            c['commands_superseded'] += 1
+        self._cmd = v
+        self._cmd_fresh = True
+
+    # ---- the tick ---------------------------------------------------------------------
+    def _now(self) -> tuple[str, int, Any]:
+        """(time base, nanoseconds on that base, ROS stamp)."""
+        now = self.get_clock().now()
+        if self.get_clock().ros_time_is_active:
+            return 'sim', now.nanoseconds, now
+        return 'wall', time.monotonic_ns(), now
+
+    def _on_tick(self) -> None:
+        busy0 = time.perf_counter_ns()
+        base, ns, stamp = self._now()
+        if not self._started:
+            if self._cmd is None:
+                return
+            self._start(base, ns)
+        elif base != self._time_base:  # use_sim_time toggled: re-anchor without integrating
+            self._origin_ns = ns - int(round(self._last_t * 1e9))
+            self._time_base = base
+        t = (ns - self._origin_ns) * 1e-9
+        if t < self._last_t:
+            self.counters['clock_backwards'] += 1
+            self._warn(f'clock went backwards ({self._last_t:.9f} s -> {t:.9f} s since start); '
+                       'tick ignored, state kept')
+            return
+        self._count_missed(base)
+        ref = self._cmd
+        if self._cmd_fresh:
+            self.counters['commands_used'] += 1
+            self._cmd_fresh = False
+        delta = self._feedforward(t, ref)
+        drive = ref + delta if self.config.node.compensation_applied else ref
+        steps = self._advance(t, drive)
+        self._last_t = t
+        self._publish(stamp, ref, delta)
+        w = self._window
+        w['ticks'] += 1
+        w['steps'] += steps
+        w['busy_ns'] += time.perf_counter_ns() - busy0
+        c = self.counters
+        c['ticks'] += 1
+        c['steps'] += steps
+        if steps > c['max_steps_per_tick']:
+            c['max_steps_per_tick'] = steps
+
+    def _start(self, base: str, ns: int) -> None:
+        self._time_base = base
+        self._origin_ns = ns
+        self._last_t = 0.0
+        self.sim.reset(self._cmd, 0.0)
+        if self.compensator is not None:
+            try:
+                self.compensator.reset(self._cmd, 0.0)
+            except Exception as exc:  # noqa: BLE001
+                self._compensation_failed(exc)
+        self._started = True
+        self.get_logger().info(f'first command {self._cmd:.9g} rad: simulation started '
+                               f'({base} time)')
+
+    def _count_missed(self, base: str) -> None:
+        mono = time.monotonic_ns()
+        if base == 'wall' and self._last_mono_ns:
+            gap = mono - self._last_mono_ns
+            missed = int((gap + self._period_ns // 2) // self._period_ns) - 1
+            if missed > 0:
+                self.counters['missed_ticks'] += missed
+        self._last_mono_ns = mono
+
+    def _feedforward(self, t: float, ref: float) -> float:
+        if self.compensator is None:
+            return 0.0
+        try:
+            d = float(self.compensator.update(t, ref))
+        except Exception as exc:  # noqa: BLE001 - a compensator bug must not stop the node
+            self._compensation_failed(exc)
+            return self._delta
+        if not math.isfinite(d):
+            self._compensation_failed(ValueError(f'non-finite correction {d!r}'))
+            return self._delta
+        self._delta = d
+        return d
+
+    def _compensation_failed(self, exc: Exception) -> None:
+        self.counters['compensation_errors'] += 1
+        self._warn(f'feed-forward failed ({type(exc).__name__}: {exc}); keeping the last '
+                   f'correction {self._delta:.3g} rad')
+
+    def _advance(self, t: float, drive: float) -> int:
+        sim = self.sim
+        behind = t - sim.t
+        cap = self.config.node.max_catch_up
+        if behind > cap:
+            sim.resync(t - cap)
+            self.counters['overruns'] += 1
+            self.counters['dropped_time'] += behind - cap
+            self._window['overruns'] += 1
+            self._warn(f'{behind:.4g} s behind: integrated the last {cap:g} s '
+                       '(node.max_catch_up) and dropped the rest')
+        t_before = sim.t
+        try:
+            steps = sim.advance_to(t, drive)
+        except (SimulationError, ValueError) as exc:
+            self.counters['simulation_errors'] += 1
+            self._window['errors'] += 1
+            self._warn(f'simulation error: {exc}; keeping the last good state '
+                       f'(t = {sim.t:.6f} s) and continuing from t = {t:.6f} s')
+            steps = 0
+            sim.resync(t)
+        self._window['sim_time'] += sim.t - t_before
+        return steps
+
+    def _publish(self, stamp: Any, ref: float, delta: float) -> None:
+        st = self.sim.state
+        th, om = st.theta, st.omega
+        js = self._js
+        js.header.stamp = stamp.to_msg()
+        js.position = [st.theta1, float(th[0]), float(th[1]), float(th[2])]
+        js.velocity = [st.theta1_dot, float(om[0]), float(om[1]), float(om[2])]
+        js.effort = self.sim.joint_torques().tolist()
+        self._pub_js.publish(js)
+        # Uncompensated: the reference is the simulated command itself (exactly the batch
+        # Trajectory.output_error); compensated: the servo's reference theta1_ref.
+        reference = ref if self.config.node.compensation_applied else st.theta1
+        self._f_err.data = float(th[2]) - reference * self.ratio
+        self._pub_err.publish(self._f_err)
+        self._f_worm.data = float(th[0]) - st.theta1
+        self._pub_worm.publish(self._f_worm)
+        if self.compensator is not None:
+            self._f_ff.data = delta
+            self._pub_ff.publish(self._f_ff)
+
+    # ---- parameters ----------------------------------------------------------------------
+    def _evaluate(self, params: list[Parameter]) -> tuple[str, Config | None]:
+        """('', candidate) if the model parameters in ``params`` form a valid set, else
+        (reason, None).  Non-model parameters (qos_overrides, use_sim_time) are left to
+        rclpy."""
+        overrides = {}
+        for p in params:
+            if not is_model_parameter(p.name):
+                continue
+            if self.describe_parameter(p.name).read_only:
+                return f'{p.name} is read-only (structural); restart the node to change it', None
+            if p.type_.value != self._types[p.name]:
+                return (f'{p.name}: wrong type {p.type_.name}, expected '
+                        f'{Parameter.Type(self._types[p.name]).name}'), None
+            overrides[p.name] = to_core_value(p.value)
+        if not overrides:
+            return '', None
+        try:
+            candidate = self.config.replace(overrides)
+            trial = copy.copy(self.sim)     # shallow: reconfigure() only reads the state
+            trial.reconfigure(candidate)
+        except (ConfigError, ValueError) as exc:
+            return str(exc), None
+        return '', candidate
+
+    def _pre_set(self, params: list[Parameter]) -> list[Parameter]:
+        """Accept integers for doubles, and count/log every rejected set (descriptor checks
+        of rclpy run after this callback and do not report back)."""
+        params = [coerce_parameter(p, self._types[p.name]) if p.name in self._types else p
+                  for p in params]
+        reason, _ = self._evaluate(params)
+        if reason:
+            self.counters['rejected_parameter_sets'] += 1
+            self._warn(f'rejected parameter set: {reason}')
+        return params
+
+    def _on_set(self, params: list[Parameter]) -> SetParametersResult:
+        reason, candidate = self._evaluate(params)
+        if reason:
+            return SetParametersResult(successful=False, reason=reason)
+        self._pending_config = candidate
+        return SetParametersResult(successful=True)
+
+    def _post_set(self, params: list[Parameter]) -> None:
+        cfg, self._pending_config = self._pending_config, None
+        if cfg is None:
+            return
+        try:
+            self.sim.reconfigure(cfg)
+        except ValueError as exc:  # pragma: no cover - _evaluate ran the same call
+            self._warn(f'could not apply parameters: {exc}')
+            return
+        self.sim.interpolation = cfg.node.command_interpolation
+        self.ratio = self.sim.derived.output_per_input
+        old = self.config
+        self.config = cfg
+        self.counters['accepted_parameter_sets'] += 1
+        changed = {k for k, v in cfg.to_flat_dict().items() if old.to_flat_dict()[k] != v}
+        if Compensator is not None and any(not k.startswith(('node.', 'input.'))
+                                           for k in changed):
+            self._make_compensator(cfg)      # plant or compensation settings changed
+            if self.compensator is not None and self._started:
+                try:
+                    self.compensator.reset(self._cmd, self._last_t)
+                except Exception as exc:  # noqa: BLE001
+                    self._compensation_failed(exc)
+        names = ', '.join(p.name for p in params if is_model_parameter(p.name))
+        self.get_logger().info(f'parameters applied: {names}')
+
+    # ---- diagnostics -------------------------------------------------------------------
+    def diagnostic_statuses(self) -> list[diag.DiagnosticStatus]:
+        """The statuses of /diagnostics (resets the per-window figures)."""
+        w, self._window = self._window, self._new_window()
+        wall = max(1e-9, (self._window['wall_ns'] - w['wall_ns']) * 1e-9)
+        c = self.counters
+        st = self.sim.stats
+        name, hw = self.get_name(), 'worm_gear_sim'
+        if not self._started:
+            level, msg = diag.WARN, f'waiting for the first {COMMAND_TOPIC}'
+        elif w['errors']:
+            level, msg = diag.ERROR, f'{w["errors"]} simulation error(s): {self.last_error}'
+        elif w['overruns']:
+            level, msg = diag.WARN, f'{w["overruns"]} overrun(s): catch-up capped'
+        else:
+            level, msg = diag.OK, 'running'
+        sim_vals = {
+            'time_base': self._time_base or 'none', 'simulated_time_s': self.sim.t,
+            'real_time_factor': w['sim_time'] / wall,
+            'compute_load': w['busy_ns'] * 1e-9 / wall,
+            'steps_per_tick': w['steps'] / w['ticks'] if w['ticks'] else 0.0,
+            'max_steps_per_tick': c['max_steps_per_tick'], 'ticks': c['ticks'],
+            'missed_ticks': c['missed_ticks'], 'overruns': c['overruns'],
+            'dropped_time_s': c['dropped_time'], 'clock_backwards': c['clock_backwards'],
+            'newton_subdivisions': st['subdivision_events'], 'newton_substeps': st['substeps'],
+            'max_newton_solves_per_step': st['max_solves_per_step'],
+            'simulation_errors': c['simulation_errors'], 'last_error': self.last_error,
+        }
+        rejected = c['rejected_commands'] + c['rejected_parameter_sets']
+        in_level = diag.WARN if rejected else diag.OK
+        in_vals = {k: c[k] for k in (
+            'commands_received', 'commands_used', 'commands_superseded', 'rejected_commands',
+            *(f'rejected_{r}' for r in REJECT_REASONS), 'rejected_parameter_sets',
+            'accepted_parameter_sets')}
+        in_vals['last_command'] = 'none' if self._cmd is None else repr(self._cmd)
+        in_vals['last_error'] = self.last_error
+        ff_level = diag.OK if self.compensator is not None and not c['compensation_errors'] \
+            else diag.ERROR
+        ff_vals = {'available': self.compensator is not None,
+                   'applied_to_prediction': self.config.node.compensation_applied,
+                   'last_correction_rad': self._delta,
+                   'compensation_errors': c['compensation_errors'],
+                   'error': self.compensation_error}
+        return [
+            diag.status(name, 'simulation', level, msg, sim_vals, hw),
+            diag.status(name, 'inputs', in_level,
+                        f'{rejected} rejected input(s)' if rejected else 'ok', in_vals, hw),
+            diag.status(name, 'feedforward', ff_level,
+                        'ok' if ff_level == diag.OK else (self.compensation_error or
+                                                          'compensation errors'), ff_vals, hw),
+        ]
+
+    def publish_diagnostics(self) -> None:
+        self._pub_diag.publish(diag.array(self.get_clock().now().to_msg(),
+                                          self.diagnostic_statuses()))
+
+
+def make_executor(kind: str, context: Any = None) -> Any:
+    """'events' (rclpy.experimental.EventsExecutor) or 'single_threaded'."""
+    if kind == 'events':
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor(context=context)
+    if kind == 'single_threaded':
+        return SingleThreadedExecutor(context=context)
+    raise ValueError(f'unknown executor {kind!r} (events | single_threaded)')
+
+
+def _parse_args(argv: list[str]) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(
+        prog='worm_gear_sim_node',
+        description='Worm-gear drive model in real time (parameters: --ros-args '
+                    '--params-file config/worm_gear_sim.yaml).')
+    ap.add_argument('--executor', choices=('events', 'single_threaded'), default=None,
+                    help='override the node.executor parameter')
+    return ap.parse_args(argv)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``worm_gear_sim_node`` and ``python -m worm_gear_sim.node``."""
+    argv = sys.argv if args is None else args
+    opts = _parse_args(remove_ros_args(args=argv)[1:])
+    node = None
+    try:
+        with rclpy.init(args=argv):
+            try:
+                node = WormGearSimNode()
+            except (ConfigError, InvalidParameterTypeException, InvalidParameterValueException,
+                    ParameterException) as exc:
+                rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid parameters: {exc}')
+                return 1
+            kind = opts.executor or node.config.node.executor
+            executor = make_executor(kind)
+            executor.add_node(node)
+            node.get_logger().info(f'spinning with the {kind} executor')
+            executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: BLE001 - context already gone at shutdown
+                pass
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,123 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Config <-> ROS 2 parameters: descriptors from :meth:`Config.metadata`, values both ways.
+
+Every model parameter is declared under its dotted name (``mesh.stiffness_model``) with a
+``ParameterDescriptor`` built from the field metadata (description with unit and choices,
+``FloatingPointRange``/``IntegerRange`` where the core gives lo/hi, ``read_only``).  Values
+are converted back into a :class:`~worm_gear_sim.params.Config` by the core itself
+(:func:`~worm_gear_sim.params.config_from_mapping` / :meth:`Config.replace`), so the node
+validates exactly as the core and the CLI do.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+)
+from rclpy.parameter import Parameter
+
+from .params import Config
+
+__all__ = ['parameter_type', 'descriptor_for', 'declare_config', 'to_core_value',
+           'coerce_parameter', 'is_model_parameter', 'MODEL_PARAMETER_NAMES']
+
+#: Dotted names of all model parameters, in declaration order.
+MODEL_PARAMETER_NAMES: tuple[str, ...] = tuple(Config().to_flat_dict())
+_NAMES = frozenset(MODEL_PARAMETER_NAMES)
+
+
+def is_model_parameter(name: str) -> bool:
+    """True for the dotted names that come from :class:`Config` (not qos_overrides etc.)."""
+    return name in _NAMES
+
+
+def parameter_type(default: Any) -> int:
+    """ROS ParameterType of a Config default value."""
+    if isinstance(default, bool):
+        return ParameterType.PARAMETER_BOOL
+    if isinstance(default, int):
+        return ParameterType.PARAMETER_INTEGER
+    if isinstance(default, float):
+        return ParameterType.PARAMETER_DOUBLE
+    if isinstance(default, str):
+        return ParameterType.PARAMETER_STRING
+    if isinstance(default, (list, tuple)):
+        if default and all(isinstance(v, str) for v in default):
+            return ParameterType.PARAMETER_STRING_ARRAY
+        return ParameterType.PARAMETER_DOUBLE_ARRAY
+    raise TypeError(f'unsupported parameter default {default!r}')
+
+
+def _fmt(x: float) -> str:
+    return f'{x:g}'
+
+
+def descriptor_for(name: str, default: Any, meta: Mapping[str, Any]) -> ParameterDescriptor:
+    """ParameterDescriptor of one model parameter from its core metadata."""
+    ptype = parameter_type(default)
+    text = str(meta.get('description', ''))
+    unit = meta.get('unit') or ''
+    if unit:
+        text += f' [{unit}]'
+    constraints = []
+    lo, hi = meta.get('lo'), meta.get('hi')
+    if lo is not None or hi is not None:
+        left = ('(' if meta.get('lo_open') else '[') + (_fmt(lo) if lo is not None else '-inf')
+        right = (_fmt(hi) if hi is not None else 'inf') + ']'
+        constraints.append(f'range {left}, {right}')
+    if meta.get('choices'):
+        constraints.append('one of: ' + ', '.join(meta['choices']))
+    if meta.get('length'):
+        constraints.append(f'{meta["length"]} entries')
+    desc = ParameterDescriptor(
+        name=name, type=ptype, description=text,
+        additional_constraints='; '.join(constraints),
+        read_only=bool(meta.get('read_only', False)))
+    if lo is not None and hi is not None:
+        if ptype == ParameterType.PARAMETER_DOUBLE:
+            desc.floating_point_range = [FloatingPointRange(
+                from_value=float(lo), to_value=float(hi), step=0.0)]
+        elif ptype == ParameterType.PARAMETER_INTEGER:
+            desc.integer_range = [IntegerRange(
+                from_value=int(math.ceil(lo)), to_value=int(math.floor(hi)), step=0)]
+    return desc
+
+
+def declare_config(node: Any, defaults: Config) -> dict[str, Any]:
+    """Declare every model parameter on ``node`` (defaults from ``defaults``; values given
+    by ``--params-file`` or ``parameter_overrides`` win).  Returns dotted name -> value."""
+    meta = Config.metadata()
+    declared = node.declare_parameters('', [
+        (name, value, descriptor_for(name, value, meta[name]))
+        for name, value in defaults.to_flat_dict().items()])
+    return {p.name: to_core_value(p.value) for p in declared}
+
+
+def to_core_value(value: Any) -> Any:
+    """Parameter value (array.array, list, scalar) -> what :meth:`Config.replace` takes."""
+    if isinstance(value, (str, bytes, bool, int, float)) or value is None:
+        return value
+    if isinstance(value, Iterable):
+        return list(value)
+    return value
+
+
+def coerce_parameter(param: Parameter, declared_type: int) -> Parameter:
+    """Accept an integer (or integer array) for a double (array) parameter, as the YAML
+    loader of the core does; any other type is returned unchanged (rclpy rejects it)."""
+    if declared_type == ParameterType.PARAMETER_DOUBLE and \
+            param.type_ == Parameter.Type.INTEGER:
+        return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
+    if declared_type == ParameterType.PARAMETER_DOUBLE_ARRAY and \
+            param.type_ == Parameter.Type.INTEGER_ARRAY:
+        return Parameter(param.name, Parameter.Type.DOUBLE_ARRAY,
+                         [float(v) for v in param.value])
+    return param
