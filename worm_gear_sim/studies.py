@@ -473,6 +473,17 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
     return out
 
 
+# Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in its workers, which also switches off glibc's
+# dynamic mmap threshold: every ~1 MB record array of a case is then mmap'ed and unmapped
+# (8000 page faults, ~10 ms of system time per 0.5 s case, a third of the kernel time).
+# A fixed 16 MB mmap threshold keeps them in the heap.  Set the same variables on the
+# workers of a remote cluster (see docs/studies.md).
+WORKER_ENV = {
+    'distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_': 1 << 24,
+    'distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_': 1 << 28,
+}
+
+
 def warm_up() -> float:
     """Import the model and load its compiled (cached) kernels in this process; returns the
     seconds it took.  Run on every Dask worker before the cases so that the first case of each
@@ -507,9 +518,11 @@ class _dask_client:
                                       f'{exc}') from None
             self._own.append(cl)
             return cl
+        import dask
         n = self.workers or os.cpu_count() or 1
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+        with dask.config.set(WORKER_ENV):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
         self._own.append(cluster)
         cl = Client(cluster)
         self._own.insert(0, cl)
