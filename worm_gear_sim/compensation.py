@@ -88,6 +88,7 @@ __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_fil
 
 SHAPERS = ('none', 'zv', 'zvd', 'ei')
 NODES_PER_KNOT = 24      # quadrature nodes per B-spline knot interval
+MIN_DEGREE = 4           # >= 5-fold spectral zeros at the command rate (anti-aliasing)
 
 
 # ---- input shapers -------------------------------------------------------------------------
@@ -339,10 +340,10 @@ class Compensator:
         self.mode_damping_ratio = float(max(res.damping_ratios[k], 0.0))
         shaper = design_shaper(cs.shaper, self.mode_frequency_hz, self.mode_damping_ratio)
         # derivatives the inverse needs (r..r'' or r..r''''), plus the lead order: the
-        # B-spline degree is the lowest that keeps them bounded
+        # B-spline degree is the lowest that keeps them bounded (at least MIN_DEGREE)
         n_deriv = 5 if self.dynamic else (3 if self.quasi_static else 1)
         lag = int(cs.lag_order)
-        degree = max(n_deriv - 1 + lag, 1)
+        degree = max(n_deriv - 1 + lag, MIN_DEGREE)
         # knots one command period apart (by default): the kernel's spectrum then has
         # (degree+1)-fold zeros at the command rate and its harmonics, so the correction,
         # sampled at that rate and joined by straight lines, does not alias into the
