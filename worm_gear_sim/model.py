@@ -279,6 +279,15 @@ def mechanical_energy(p, u, v, theta1):
     return kin + shaft + 0.5 * mesh_stiffness_y(p, u[0], u[1]) * q * q
 
 
+@njit(cache=True, error_model='numpy')
+def energy_series(p, theta, omega, theta1):
+    """mechanical_energy along a trajectory (rows of theta, omega; theta1 per row)."""
+    out = np.empty(theta.shape[0])
+    for i in range(theta.shape[0]):
+        out[i] = mechanical_energy(p, theta[i], omega[i], theta1[i])
+    return out
+
+
 def mass_matrix(p: np.ndarray) -> np.ndarray:
     """Diagonal inertia matrix diag(J_w, J_g, J_4) of Eq. 15."""
     return np.diag([p[P_JW], p[P_JG], p[P_J4]])

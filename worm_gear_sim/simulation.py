@@ -40,6 +40,7 @@ from .model import (
     AUX_WN,
     N_AUX,
     P_RIGID3,
+    energy_series,
     generalized_forces,
     mechanical_energy,
     pack_parameters,
@@ -97,6 +98,12 @@ class Trajectory:
     def output_error(self) -> np.ndarray:
         """theta4 - theta1 l_w / r_g [rad]: antenna positioning error."""
         return self.theta[:, 2] - self.theta1 * self.output_ratio
+
+    def energy(self, config: Config) -> np.ndarray:
+        """Kinetic + shaft torsion + mesh energy 0.5 k_Y q^2 [J] at every row."""
+        p = pack_parameters(config)
+        return energy_series(p, np.ascontiguousarray(self.theta),
+                             np.ascontiguousarray(self.omega), np.ascontiguousarray(self.theta1))
 
     def columns(self) -> dict[str, np.ndarray]:
         a = self.aux

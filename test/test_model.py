@@ -1,0 +1,142 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The equations: Jacobian, symmetry, mesh stiffness mean, friction direction, modes."""
+
+import math
+
+import numpy as np
+import pytest
+
+from worm_gear_sim import Config, modes
+from worm_gear_sim.model import (
+    P_LW,
+    P_RG,
+    P_RW,
+    P_SINL,
+    forces,
+    linear_stiffness,
+    pack_parameters,
+    tooth_stiffness,
+)
+
+VARIANTS = {
+    'default': {},
+    'linear': {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'},
+    'paper_friction': {'friction.direction': 'paper'},
+    'no_compliance_friction': {'friction.in_compliance': False},
+    'paper_lead': {'geometry.lead_convention': 'paper', 'friction.model': 'constant'},
+    'load': {'load.output_torque': 3.0, 'load.output_viscous_coefficient': 0.5},
+}
+
+
+@pytest.mark.parametrize('name', sorted(VARIANTS))
+def test_analytic_jacobian_matches_finite_differences(name):
+    p = pack_parameters(Config().replace(VARIANTS[name]))
+    rng = np.random.default_rng(7)
+    for _ in range(25):
+        u = np.array([0.3, 0.3 / 56, 0.3 / 56]) * rng.uniform(-1, 1) \
+            + rng.normal(0, [2e-5, 2e-6, 2e-4])
+        v = rng.normal(0, [3.0, 0.05, 0.05])
+        if rng.random() < 0.3:       # near stick, inside the friction regularisation zone
+            v[0] = rng.normal(0, 2e-3)
+        th1 = u[0] + rng.normal(0, 1e-5)
+        Q, dQdu, dQdv, _ = forces(p, u, v, th1)
+        for j in range(3):
+            for which, jac, h in (('u', dQdu, 1e-9), ('v', dQdv, 1e-7)):
+                def q_at(step, which=which, j=j, u=u, v=v, th1=th1):
+                    uu, vv = u.copy(), v.copy()
+                    (uu if which == 'u' else vv)[j] += step
+                    return forces(p, uu, vv, th1)[0]
+                # 4th-order central difference
+                fd = (-q_at(2 * h) + 8 * q_at(h) - 8 * q_at(-h) + q_at(-2 * h)) / (12 * h)
+                # tolerance: relative, plus the round-off noise floor of the differences
+                noise = 100 * np.finfo(float).eps * np.abs(Q) / h
+                assert np.all(np.abs(jac[:, j] - fd) <= 1e-5 * np.abs(fd) + noise
+                              + 1e-7 * np.abs(jac).max()), \
+                    (name, which, j, jac[:, j], fd)
+
+
+def test_frictionless_mesh_is_conservative_only_with_consistent_lead():
+    cfg = Config().replace({'friction.model': 'off', 'mesh.stiffness_model': 'linear'})
+    u, v = np.array([0.1, 0.1 / 56 - 3e-6, 0.0018]), np.zeros(3)
+    _, K, _, _ = forces(pack_parameters(cfg), u, v, 0.1)
+    assert np.allclose(K, K.T, rtol=1e-12, atol=1e-9)         # symmetric: virtual work holds
+    table = cfg.replace({'geometry.lead_angle': math.radians(3 + 41 / 60)})
+    _, K2, _, _ = forces(pack_parameters(table), u, v, 0.1)
+    asym = abs(K2[0, 1] - K2[1, 0]) / abs(K2[0, 1])
+    assert asym == pytest.approx(1 - 55.06 / 56, abs=2e-3)    # torque ratio 55.06 vs 56
+
+
+def test_mean_tooth_stiffness_over_a_mesh_cycle():
+    p = pack_parameters(Config())
+    phases = np.linspace(0, 2 * math.pi, 20001)[:-1]
+    # mesh phase = (theta2 + z_g theta3) / 2: sweep theta2 over one worm revolution per 2 rad
+    k = np.array([tooth_stiffness(p, 2 * ph, 0.0)[:2] for ph in phases])
+    assert k[:, 0].mean() == pytest.approx(3.5e8, rel=0.01)
+    assert k[:, 1].mean() == pytest.approx(2.5e8, rel=0.01)
+    # the curves really vary over the cycle (Eqs. 16-17 are not constant)
+    assert k[:, 0].max() / k[:, 0].min() == pytest.approx(math.exp(360 * 0.000656069), rel=1e-3)
+    assert k[:, 1].min() < 2.5e8 < k[:, 1].max()
+
+
+def test_friction_coefficient_eq18_in_si():
+    p = pack_parameters(Config())
+    # mu from the friction force of a loaded, sliding mesh: mu_eff = W_f / W_n
+    for v_s, expected in ((1e-2, 0.0470713 + 0.1056549 * math.exp(-math.sqrt(1e-2 / 0.07454))),
+                          (1.0, 0.0470713 + 0.1056549 * math.exp(-math.sqrt(1.0 / 0.07454)))):
+        w2 = v_s / (p[P_RW] * math.cos(math.asin(p[P_SINL])))
+        u = np.array([1e-4, 0.0, 0.0])
+        _, _, _, aux = forces(p, u, np.array([w2, 0.0, 0.0]), 1e-4)
+        assert aux['mu'] == pytest.approx(expected * math.tanh(v_s / 1e-4), rel=1e-9)
+    assert 0.152 < 0.0470713 + 0.1056549 < 0.154          # mu(0) = 0.153, Eq. 18
+
+
+@pytest.mark.parametrize('name', ['default', 'linear', 'no_compliance_friction'])
+def test_friction_always_dissipates(name):
+    """Power of the mesh forces minus the conservative part = -W_f v_s <= 0."""
+    p = pack_parameters(Config().replace(VARIANTS[name]))
+    rng = np.random.default_rng(3)
+    lw, rg, rw = p[P_LW], p[P_RG], p[P_RW]
+    for _ in range(500):
+        u = np.array([0.0, 0.0, 0.0]) + rng.normal(0, [1e-5, 1e-6, 1e-6])
+        v = rng.normal(0, [1.0, 0.02, 0.02])
+        _, _, _, a = forces(p, u, v, u[0])
+        mesh_power = -a['F_X'] * rw * v[0] + a['F_Y'] * rg * v[1]
+        qdot = lw * v[0] - rg * v[1]
+        normal_power = -(a['W_n'] * math.cos(Config().geometry.pressure_angle)
+                         * math.cos(math.asin(p[P_SINL]))) * qdot
+        friction_power = mesh_power - normal_power
+        assert friction_power <= 1e-12 * (abs(mesh_power) + 1e-12)
+        assert friction_power == pytest.approx(-a['mu'] * a['W_n'] * a['v_s'], rel=1e-9,
+                                               abs=1e-15)
+
+
+def test_paper_direction_can_feed_energy():
+    """The paper's fixed sign does positive work when the sliding reverses."""
+    p = pack_parameters(Config().replace(VARIANTS['paper_friction']))
+    u = np.array([1e-4, 0.0, 0.0])
+    _, _, _, a = forces(p, u, np.array([-1.0, 0.0, 0.0]), 1e-4)
+    assert -a['mu'] * a['W_n'] * a['v_s'] > 0
+
+
+def test_modes_match_independent_reference():
+    """MODEL-NOTES: 94.5, 1561, 8588 Hz (frictionless, linear mesh, motor end held),
+    confirmed by an independent torsional FE package."""
+    cfg = Config().replace({'mesh.stiffness_model': 'linear', 'friction.model': 'off'})
+    m = modes(cfg)
+    assert m.undamped_hz == pytest.approx([94.5, 1561.0, 8588.0], rel=2e-3)
+    assert np.allclose(m.damping_ratios, 0, atol=1e-9)
+    # mode shapes: 1 is the flywheel on the gear shaft, 3 is the worm on its shaft
+    assert abs(m.shapes[2, 0]) == 1.0 and abs(m.shapes[0, 2]) == 1.0
+    K = linear_stiffness(pack_parameters(cfg))
+    assert np.allclose(K, K.T)
+    # shaft inertia lumped on the worm moves the top mode (MODEL-NOTES: to ~3.6 kHz)
+    m2 = modes(cfg.replace({'shafts.worm_shaft_inertia_fraction': 1 / 3}))
+    assert 3000 < m2.undamped_hz[2] < 4000
+
+
+def test_modal_damping_ratios_are_realised():
+    cfg = Config().replace({'mesh.stiffness_model': 'linear', 'friction.model': 'off',
+                            'damping.modal_damping_ratios': [0.02, 0.05, 0.1]})
+    m = modes(cfg)
+    assert m.damping_ratios == pytest.approx([0.02, 0.05, 0.1], rel=1e-6)

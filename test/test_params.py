@@ -1,0 +1,126 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Parameters: the YAML and the code agree, derived quantities, clear errors."""
+
+import math
+from pathlib import Path
+
+import pytest
+import yaml
+
+from worm_gear_sim.params import Config, ConfigError, config_from_mapping, derive, load_config
+
+REPO = Path(__file__).resolve().parents[1]
+YAML_PATH = REPO / 'config' / 'worm_gear_sim.yaml'
+
+
+def test_yaml_equals_code_defaults():
+    raw = yaml.safe_load(YAML_PATH.read_text())['worm_gear_sim']['ros__parameters']
+    flat = Config().to_flat_dict()
+    yaml_flat = {f'{s}.{k}': v for s, sec in raw.items() for k, v in sec.items()}
+    assert set(yaml_flat) == set(flat), set(yaml_flat) ^ set(flat)
+    for key, value in flat.items():
+        assert yaml_flat[key] == value, key
+        # ROS fixes types at declaration: a double must be written as a float in the YAML
+        assert type(yaml_flat[key]) is type(value), key
+    assert load_config(YAML_PATH) == Config()
+
+
+def test_derived_quantities_table1():
+    d = derive(Config())
+    # solid cylinders J = 1/2 rho pi L R^4, K = G pi R^4 / (2 L)
+    assert d.J_w == pytest.approx(0.5 * 7850 * math.pi * 0.015 * 0.0158 ** 4)
+    assert d.J_g == pytest.approx(0.5 * 8800 * math.pi * 0.02 * 0.056 ** 4)
+    assert d.J_4 == pytest.approx(0.5 * 7850 * math.pi * 0.03 * 0.12 ** 4)
+    assert d.K_w == pytest.approx(77e9 * math.pi * 0.01534 ** 4 / 0.4)
+    assert d.K_g == pytest.approx(77e9 * math.pi * 0.0175 ** 4 / 0.74)
+    k_l = 206e9 * math.pi * 0.01534 ** 2 / 0.2
+    assert d.k_ws == pytest.approx(k_l * 2e8 / (k_l + 2e8))
+    assert d.l_w == pytest.approx(0.001, rel=1e-7)              # lead per radian
+    assert d.ratio == pytest.approx(56.0, rel=1e-6)
+    assert math.degrees(d.lead_angle) == pytest.approx(3.6215, abs=1e-3)
+    assert d.lead_angle_consistent
+    paper = derive(Config().replace({'geometry.lead_convention': 'paper'}))
+    assert paper.l_w == pytest.approx(0.006283185)
+    assert paper.ratio == pytest.approx(8.9127, rel=1e-4)
+    table_angle = derive(Config().replace({'geometry.lead_angle': math.radians(3 + 41 / 60)}))
+    assert not table_angle.lead_angle_consistent
+
+
+def test_replace_is_validated_and_all_or_nothing():
+    cfg = Config()
+    new = cfg.replace({'mesh.stiffness_model': 'linear', 'friction.model': 'off'})
+    assert new.mesh.stiffness_model == 'linear' and cfg.mesh.stiffness_model == 'nonlinear'
+    with pytest.raises(ConfigError) as exc:
+        cfg.replace({'mesh.stiffness_model': 'linear', 'shafts.worm_shaft_radius': -1.0})
+    assert exc.value.key == 'shafts.worm_shaft_radius'
+    assert cfg.mesh.stiffness_model == 'nonlinear'
+
+
+@pytest.mark.parametrize('key, value, words', [
+    ('shafts.worm_bearing_axial_stiffness', -2e8, 'must be > 0'),
+    ('shafts.gear_bearing_axial_stiffness', 0.0, 'must be > 0'),
+    ('mesh.worm_tooth_stiffness_linear', float('nan'), 'finite'),
+    ('materials.youngs_modulus', float('inf'), 'finite'),
+    ('friction.model', 'coulomb', 'one of'),
+    ('integrator.newton_max_iterations', 2.5, 'integer'),
+    ('geometry.flywheel_enabled', 'yes', 'true or false'),
+    ('damping.modal_damping_ratios', [0.1, 0.1], '3 entries'),
+    ('node.joint_names', ['a', 'a', 'b', 'c'], 'unique'),
+    ('integrator.newmark_beta', 0.2, 'conditionally stable'),
+    ('input.accel_time', 0.015, 'move_time'),
+    ('geometry.worm_pitch_radius', 'big', 'number'),
+])
+def test_invalid_values_name_the_key(key, value, words):
+    with pytest.raises(ConfigError) as exc:
+        Config().replace({key: value})
+    assert exc.value.key == key
+    assert key in str(exc.value) and words in str(exc.value)
+
+
+def test_unknown_keys_suggest_the_right_one():
+    with pytest.raises(ConfigError) as exc:
+        config_from_mapping({'mesh': {'stiffnes_model': 'linear'}})
+    assert exc.value.key == 'mesh.stiffnes_model'
+    assert 'unknown parameter' in str(exc.value) and 'mesh.stiffness_model' in str(exc.value)
+    with pytest.raises(ConfigError, match='unknown section'):
+        config_from_mapping({'meshes': {'stiffness_model': 'linear'}})
+
+
+def test_file_errors(tmp_path):
+    with pytest.raises(ConfigError, match='not found'):
+        load_config(tmp_path / 'missing.yaml')
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('worm_gear_sim:\n  ros__parameters:\n    mesh: {stiffness_model: [\n')
+    with pytest.raises(ConfigError, match='broken YAML at line'):
+        load_config(broken)
+    wrong = tmp_path / 'wrong.yaml'
+    wrong.write_text('worm_gear_sim:\n  ros__parameters:\n    friction:\n'
+                     '      regularization_velocity: -1.0\n')
+    with pytest.raises(ConfigError) as exc:
+        load_config(wrong)
+    assert exc.value.key == 'friction.regularization_velocity'
+    no_block = tmp_path / 'noblock.yaml'
+    no_block.write_text('worm_gear_sim:\n  mesh: {}\n')
+    with pytest.raises(ConfigError, match='ros__parameters'):
+        load_config(no_block)
+
+
+def test_ros_layout_variants(tmp_path):
+    f = tmp_path / 'wild.yaml'
+    f.write_text('/**:\n  ros__parameters:\n    use_sim_time: true\n'
+                 '    mesh: {stiffness_model: linear}\n')
+    assert load_config(f).mesh.stiffness_model == 'linear'
+    f.write_text('/radar/worm_gear_sim:\n  ros__parameters:\n    friction: {model: "off"}\n')
+    assert load_config(f).friction.model == 'off'
+    f.write_text('geometry: {flywheel_enabled: false}\n')      # plain sections, offline use
+    assert load_config(f).geometry.flywheel_enabled is False
+    assert load_config(YAML_PATH, overrides={'load.output_torque': 2.0}).load.output_torque == 2
+
+
+def test_metadata_covers_every_parameter():
+    meta = Config.metadata()
+    assert set(meta) == set(Config().to_flat_dict())
+    for key, m in meta.items():
+        assert m['description'], key
+    assert meta['integrator.time_step']['read_only']
