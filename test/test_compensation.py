@@ -139,3 +139,44 @@ def test_design_rejects_bad_values():
         design_filter(design_shaper('none', 1.0), 0.001, degree=3, lag_order=2, n_deriv=3)
     with pytest.raises(ValueError):
         design_filter(design_shaper('none', 1.0), 0.001, n_deriv=6)
+
+
+def test_reconfigure_keeps_history_and_changes_design():
+    cfg = Config()
+    comp = Compensator(cfg)
+    comp.reset(0.0, 0.0)
+    for k in range(1, 11):
+        comp.update(k * 1e-3, 0.01 * k)
+    comp.reconfigure(cfg.replace({'compensation.preview_time': 0.002, **LOADED}))
+    assert 'preview 2 ms' in comp.describe()
+    d = comp.update(0.011, 0.11)
+    assert math.isfinite(d) and comp.reference == pytest.approx(0.09)   # t - 2 ms
+
+
+def test_metric_helpers():
+    from worm_gear_sim.compensation import METRIC_FLOOR, improvement, not_worse
+    assert improvement('settling_time', math.inf, 0.01) == math.inf
+    assert improvement('settling_time', math.inf, math.inf) == 1.0
+    assert improvement('settling_time', 0.01, math.inf) == 0.0
+    assert math.isnan(improvement('static_error', 1e-9, 2e-9))        # both at the floor
+    assert improvement('residual_peak', 1e-4, 1e-5) == pytest.approx(10.0)
+    assert improvement('residual_peak', 1e-4, 0.0) == pytest.approx(1e-4 / METRIC_FLOOR)
+    assert not_worse('tracking_rms', 1e-4, 1.04e-4)
+    assert not not_worse('tracking_rms', 1e-4, 1.06e-4)
+    assert not_worse('static_error', 1e-9, 5e-8)                       # below the floor
+    assert not not_worse('settling_time', 0.01, math.inf)
+
+
+def test_move_metrics_on_synthetic_traces():
+    from worm_gear_sim.compensation import Scenario, move_metrics
+    t = np.arange(0.0, 1.0, 1e-4)
+    scen = Scenario('s', t, np.zeros_like(t), 0.1, ((0.02, 0.08),))
+    ring = np.where(t > 0.1, 2e-5 * np.exp(-(t - 0.1) / 0.05) * np.sin(600 * t), 0.0)
+    e = 3e-6 + ring + np.where(t < 0.1, 1e-5, 0.0)
+    m = move_metrics(t, e, scen, 600 / (2 * math.pi))
+    assert m['static_error'] == pytest.approx(3e-6, rel=1e-3)
+    assert m['tracking_rms'] == pytest.approx(1.3e-5, rel=1e-6)
+    assert 0.0 < m['settling_time'] < 0.1
+    assert m['residual_peak'] == pytest.approx(np.abs(ring).max(), rel=1e-3)
+    undamped = 3e-6 + np.where(t > 0.1, 2e-5 * np.sin(600 * t), 0.0)
+    assert math.isinf(move_metrics(t, undamped, scen, 600 / (2 * math.pi))['settling_time'])
