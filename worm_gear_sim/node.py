@@ -42,6 +42,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
@@ -64,7 +65,8 @@ except ImportError as _exc:  # pragma: no cover - depends on the checkout
     Compensator = None  # type: ignore[assignment,misc]
     COMPENSATION_IMPORT_ERROR = f'{type(_exc).__name__}: {_exc}'
 
-__all__ = ['WormGearSimNode', 'main', 'file_defaults', 'make_executor', 'COMMAND_TOPIC',
+__all__ = ['WormGearSimNode', 'main', 'file_defaults', 'make_executor', 'spin_until_shutdown',
+           'COMMAND_TOPIC',
            'JOINT_STATES_TOPIC', 'REJECT_REASONS']
 
 COMMAND_TOPIC = 'worm_angle_command'
@@ -182,6 +184,23 @@ class WormGearSimNode(Node):
             self.compensation_error = f'{type(exc).__name__}: {exc}'
             self.get_logger().error(f'compensator could not be built: {self.compensation_error}')
 
+    def _redesign_compensator(self, cfg: Config) -> None:
+        """New plant or compensation settings: redesign, keeping the reference history when
+        the compensator can (``reconfigure``), else rebuild and restart it at the command."""
+        comp = self.compensator
+        if comp is not None and hasattr(comp, 'reconfigure'):
+            try:
+                comp.reconfigure(cfg)
+                return
+            except Exception as exc:  # noqa: BLE001 - fall back to a fresh compensator
+                self._compensation_failed(exc)
+        self._make_compensator(cfg)
+        if self.compensator is not None and self._started:
+            try:
+                self.compensator.reset(self._cmd, self._last_t)
+            except Exception as exc:  # noqa: BLE001
+                self._compensation_failed(exc)
+
     def _warn(self, text: str) -> None:
         self.last_error = text
         self.get_logger().warning(text, throttle_duration_sec=LOG_THROTTLE_S)
@@ -236,21 +255,22 @@ class WormGearSimNode(Node):
             self._origin_ns = ns - int(round(self._last_t * 1e9))
             self._time_base = base
         t = (ns - self._origin_ns) * 1e-9
-        if t < self._last_t:
-            self.counters['clock_backwards'] += 1
-            self._warn(f'clock went backwards ({self._last_t:.9f} s -> {t:.9f} s since start); '
-                       'tick ignored, state kept')
-            return
+        if t <= self._last_t and self.counters['ticks']:
+            if t < self._last_t:
+                self.counters['clock_backwards'] += 1
+                self._warn(f'clock went backwards ({self._last_t:.9f} s -> {t:.9f} s since '
+                           'start); tick ignored, state kept')
+            return                      # no time has passed: nothing new to publish
         self._count_missed(base)
         ref = self._cmd
         if self._cmd_fresh:
             self.counters['commands_used'] += 1
             self._cmd_fresh = False
-        delta = self._feedforward(t, ref)
-        drive = ref + delta if self.config.node.compensation_applied else ref
-        steps = self._advance(t, drive)
+        delta, ref_now = self._feedforward(t, ref)
+        applied = self.config.node.compensation_applied and self.compensator is not None
+        steps = self._advance(t, ref_now + delta if applied else ref)
         self._last_t = t
-        self._publish(stamp, ref, delta)
+        self._publish(stamp, ref_now if applied else None, delta)
         w = self._window
         w['ticks'] += 1
         w['steps'] += steps
@@ -284,19 +304,23 @@ class WormGearSimNode(Node):
                 self.counters['missed_ticks'] += missed
         self._last_mono_ns = mono
 
-    def _feedforward(self, t: float, ref: float) -> float:
-        if self.compensator is None:
-            return 0.0
+    def _feedforward(self, t: float, ref: float) -> tuple[float, float]:
+        """(delta, reference it applies to).  With compensation.preview_time P the servo
+        streams its reference P ahead and delta is for t - P (Compensator.reference)."""
+        comp = self.compensator
+        if comp is None:
+            return 0.0, ref
         try:
-            d = float(self.compensator.update(t, ref))
+            d = float(comp.update(t, ref))
+            ref_now = float(getattr(comp, 'reference', ref))
         except Exception as exc:  # noqa: BLE001 - a compensator bug must not stop the node
             self._compensation_failed(exc)
-            return self._delta
-        if not math.isfinite(d):
+            return self._delta, ref
+        if not (math.isfinite(d) and math.isfinite(ref_now)):
             self._compensation_failed(ValueError(f'non-finite correction {d!r}'))
-            return self._delta
+            return self._delta, ref
         self._delta = d
-        return d
+        return d, ref_now
 
     def _compensation_failed(self, exc: Exception) -> None:
         self.counters['compensation_errors'] += 1
@@ -327,7 +351,7 @@ class WormGearSimNode(Node):
         self._window['sim_time'] += sim.t - t_before
         return steps
 
-    def _publish(self, stamp: Any, ref: float, delta: float) -> None:
+    def _publish(self, stamp: Any, ref: float | None, delta: float) -> None:
         st = self.sim.state
         th, om = st.theta, st.omega
         js = self._js
@@ -338,7 +362,7 @@ class WormGearSimNode(Node):
         self._pub_js.publish(js)
         # Uncompensated: the reference is the simulated command itself (exactly the batch
         # Trajectory.output_error); compensated: the servo's reference theta1_ref.
-        reference = ref if self.config.node.compensation_applied else st.theta1
+        reference = st.theta1 if ref is None else ref
         self._f_err.data = float(th[2]) - reference * self.ratio
         self._pub_err.publish(self._f_err)
         self._f_worm.data = float(th[0]) - st.theta1
@@ -404,15 +428,11 @@ class WormGearSimNode(Node):
         old = self.config
         self.config = cfg
         self.counters['accepted_parameter_sets'] += 1
-        changed = {k for k, v in cfg.to_flat_dict().items() if old.to_flat_dict()[k] != v}
-        if Compensator is not None and any(not k.startswith(('node.', 'input.'))
-                                           for k in changed):
-            self._make_compensator(cfg)      # plant or compensation settings changed
-            if self.compensator is not None and self._started:
-                try:
-                    self.compensator.reset(self._cmd, self._last_t)
-                except Exception as exc:  # noqa: BLE001
-                    self._compensation_failed(exc)
+        before = old.to_flat_dict()
+        if Compensator is not None and any(
+                before[k] != v for k, v in cfg.to_flat_dict().items()
+                if not k.startswith('input.') and k != 'node.compensation_applied'):
+            self._redesign_compensator(cfg)
         names = ', '.join(p.name for p in params if is_model_parameter(p.name))
         self.get_logger().info(f'parameters applied: {names}')
 
@@ -483,6 +503,21 @@ def make_executor(kind: str, context: Any = None) -> Any:
     raise ValueError(f'unknown executor {kind!r} (events | single_threaded)')
 
 
+def spin_until_shutdown(executor: Any, context: Any = None, slice_s: float = 1.0) -> None:
+    """Spin until the context shuts down (Ctrl-C, SIGTERM, rclpy.shutdown).
+
+    The loop runs ``spin_until_future_complete`` on a future that never completes, with a
+    finite ``slice_s``: with ros-rclpy 9.1.2 from PyPI, ``EventsExecutor.spin()`` (an
+    unbounded deadline) busy-waits at 100 % CPU and never dispatches wall-clock timers, while
+    a bounded deadline works (0.1 core for an empty 1 kHz timer).  Each slice processes
+    every event until its deadline, so this is not a ``spin_once`` loop.
+    """
+    ctx = context if context is not None else rclpy.get_default_context()
+    never = Future()
+    while ctx.ok():
+        executor.spin_until_future_complete(never, timeout_sec=slice_s)
+
+
 def _parse_args(argv: list[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(
         prog='worm_gear_sim_node',
@@ -510,7 +545,7 @@ def main(args: list[str] | None = None) -> int:
             executor = make_executor(kind)
             executor.add_node(node)
             node.get_logger().info(f'spinning with the {kind} executor')
-            executor.spin()
+            spin_until_shutdown(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

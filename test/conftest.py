@@ -1,0 +1,173 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""ROS test set-up only: fixtures that tests request explicitly.
+
+Nothing here runs at import or touches the environment of tests that do not ask for these
+fixtures; rclpy is imported lazily, so non-ROS tests run without it.
+
+* ``ros_context``: one rclpy Context per test on ROS_DOMAIN_ID 42 with discovery OFF (the
+  node under test and its probes share the context's participant, nothing leaves it);
+* ``ros_harness``: factory of :class:`RosHarness` (node under test + probe node + a
+  SingleThreadedExecutor, bounded waits);
+* ``ros_subprocess_env``: environment for a child process on ROS_DOMAIN_ID 43, discovery
+  LOCALHOST.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+IN_PROCESS_DOMAIN_ID = 42
+SUBPROCESS_DOMAIN_ID = 43
+
+
+@pytest.fixture
+def ros_context(monkeypatch: pytest.MonkeyPatch):
+    """A fresh rclpy Context (domain 42, discovery OFF), shut down after the test."""
+    rclpy = pytest.importorskip('rclpy')
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'OFF')
+    monkeypatch.delenv('ROS_STATIC_PEERS', raising=False)
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx, domain_id=IN_PROCESS_DOMAIN_ID)
+    try:
+        yield ctx
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture
+def ros_subprocess_env() -> dict[str, str]:
+    """Environment for a node started as a child process (domain 43, localhost only)."""
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(SUBPROCESS_DOMAIN_ID)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env.pop('ROS_STATIC_PEERS', None)
+    env['PYTHONUNBUFFERED'] = '1'
+    return env
+
+
+class RosHarness:
+    """The node under test plus a probe node in one context, spun by one executor.
+
+    Every wait is bounded (``timeout``) and returns whether the condition held; tests
+    assert on that, never on elapsed time.
+    """
+
+    def __init__(self, ctx: Any, overrides: dict[str, Any] | None = None,
+                 sim_time: bool = True, cli_args: list[str] | None = None):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.parameter import Parameter
+        from rclpy.qos import QoSProfile
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64
+
+        from worm_gear_sim.diagnostics import DiagnosticArray
+        from worm_gear_sim.node import WormGearSimNode
+
+        params = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
+        if sim_time:
+            params.append(Parameter('use_sim_time', value=True))
+        self.ctx = ctx
+        self.node = WormGearSimNode(context=ctx, parameter_overrides=params,
+                                    cli_args=cli_args)
+        self.probe = rclpy.create_node('probe', context=ctx)
+        self.executor = SingleThreadedExecutor(context=ctx)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.probe)
+        self.Float64, self.Clock = Float64, Clock
+        self.cmd_pub = self.probe.create_publisher(Float64, 'worm_angle_command',
+                                                   QoSProfile(depth=100))
+        self.clock_pub = self.probe.create_publisher(Clock, '/clock', QoSProfile(depth=10))
+        self.joint_states: list[Any] = []
+        self.positioning_error: list[float] = []
+        self.worm_error: list[float] = []
+        self.feedforward: list[float] = []
+        self.diagnostics: list[Any] = []
+        p = self.probe
+        p.create_subscription(JointState, 'joint_states', self.joint_states.append, 1000)
+        p.create_subscription(Float64, '/worm_gear_sim/positioning_error',
+                              lambda m: self.positioning_error.append(m.data), 1000)
+        p.create_subscription(Float64, '/worm_gear_sim/worm_error',
+                              lambda m: self.worm_error.append(m.data), 1000)
+        p.create_subscription(Float64, '/worm_gear_sim/feedforward',
+                              lambda m: self.feedforward.append(m.data), 1000)
+        p.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
+        self.clock_ns = 0
+        assert self.spin_until(lambda: self.cmd_pub.get_subscription_count() > 0
+                               and self.node.count_publishers('/clock') > 0), \
+            'probe and node did not match'
+
+    # ---- waiting ----------------------------------------------------------------------
+    def spin_until(self, pred: Callable[[], bool], timeout: float = 5.0) -> bool:
+        deadline = time.monotonic() + timeout
+        while not pred():
+            if time.monotonic() > deadline:
+                return False
+            self.executor.spin_once(timeout_sec=0.01)
+        return True
+
+    def spin_for(self, duration: float) -> None:
+        deadline = time.monotonic() + duration
+        while time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.005)
+
+    # ---- driving ------------------------------------------------------------------------
+    def command(self, value: float, timeout: float = 5.0) -> bool:
+        """Publish one command and wait until the node has processed it."""
+        n = self.node.counters['commands_received']
+        self.cmd_pub.publish(self.Float64(data=float(value)))
+        return self.spin_until(lambda: self.node.counters['commands_received'] > n, timeout)
+
+    def set_clock(self, ns: int) -> None:
+        from builtin_interfaces.msg import Time
+        self.clock_ns = int(ns)
+        self.clock_pub.publish(self.Clock(clock=Time(sec=int(ns // 10**9),
+                                                     nanosec=int(ns % 10**9))))
+
+    def tick_to(self, ns: int, timeout: float = 5.0) -> bool:
+        """Advance /clock to ``ns`` and wait for the JointState stamped with it."""
+        self.set_clock(ns)
+
+        def stamped() -> bool:
+            if not self.joint_states:
+                return False
+            s = self.joint_states[-1].header.stamp
+            n = len(self.joint_states)
+            return s.sec * 10**9 + s.nanosec == ns and len(self.positioning_error) == n \
+                and len(self.worm_error) == n and \
+                (self.node.compensator is None or len(self.feedforward) == n)
+        return self.spin_until(stamped, timeout)
+
+    def wait_clock(self, ns: int, timeout: float = 5.0) -> bool:
+        """Publish /clock ``ns`` and wait until the node's clock reads it (no tick needed)."""
+        self.set_clock(ns)
+        return self.spin_until(
+            lambda: self.node.get_clock().now().nanoseconds == ns, timeout)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.probe.destroy_node()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def ros_harness(ros_context):
+    """Factory: ``ros_harness(overrides=..., sim_time=True)`` -> RosHarness (closed after)."""
+    made: list[RosHarness] = []
+
+    def make(overrides: dict[str, Any] | None = None, sim_time: bool = True,
+             cli_args: list[str] | None = None) -> RosHarness:
+        h = RosHarness(ros_context, overrides, sim_time, cli_args)
+        made.append(h)
+        return h
+
+    yield make
+    for h in made:
+        h.close()

@@ -1,0 +1,445 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The ROS 2 node in-process: one Context per test (domain 42, discovery OFF), the node
+under test and a probe node spun by one SingleThreadedExecutor, /clock driven by the
+test (use_sim_time) so that every tick is deterministic."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy')
+
+from rclpy.parameter import Parameter  # noqa: E402
+
+from worm_gear_sim import Config, SampledProfile, Simulator, load_config  # noqa: E402
+from worm_gear_sim.profiles import make_profile  # noqa: E402
+from worm_gear_sim.ros_params import MODEL_PARAMETER_NAMES  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'worm_gear_sim.yaml'
+T0_NS = 1_000_000_000          # first tick at 1 s of sim time
+TICK_NS = 1_000_000            # 1 kHz
+
+
+def js_pos(h) -> np.ndarray:
+    return np.array([list(m.position) for m in h.joint_states])
+
+
+def run_ticks(h, commands, t0_ns=T0_NS) -> list[int]:
+    """Lock-step: command k, then /clock t0 + k ms, then wait for its JointState."""
+    stamps = []
+    for k, c in enumerate(commands):
+        if c is not None:
+            assert h.command(c), f'command {k} not received'
+        ns = t0_ns + k * TICK_NS
+        assert h.tick_to(ns), f'no JointState at tick {k}'
+        stamps.append(ns)
+    return stamps
+
+
+def paper_move_samples(n_ticks: int, start: float = 0.002) -> np.ndarray:
+    """The paper's 18-step move (trapezoidal, 20 ms) sampled at the 1 kHz tick."""
+    cfg = Config().replace({'input.start_time': start})
+    return make_profile(cfg.input).theta1(np.arange(n_ticks) * 1e-3)
+
+
+def batch(cfg: Config, times: np.ndarray, values: np.ndarray, interpolation='linear'):
+    prof = SampledProfile(times, values, interpolation)
+    sim = Simulator(cfg, theta1=float(values[0]), t0=0.0, interpolation=interpolation)
+    return sim.run(prof, t_end=float(times[-1]), record_every=100)
+
+
+# --------------------------------------------------------------------------------------
+def test_end_to_end_matches_core_batch_simulation(ros_harness):
+    """The paper's 18-step move streamed over worm_angle_command with /clock: the node's
+    theta1..theta4, positioning and worm errors equal the core's batch run of the same
+    samples (same linear interpolation, same dt grid) to round-off."""
+    h = ros_harness()
+    n = 90
+    cmds = paper_move_samples(n)
+    stamps = run_ticks(h, cmds)
+    times = (np.array(stamps) - stamps[0]) * 1e-9      # exactly what the node computes
+    traj = batch(h.node.config, times, cmds)
+    assert traj.t.size == n
+    pos = js_pos(h)
+    assert pos.shape == (n, 4)
+    assert [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in h.joint_states] \
+        == stamps
+    tol = 1e-12
+    np.testing.assert_allclose(pos[:, 0], traj.theta1, rtol=0, atol=tol)
+    np.testing.assert_allclose(pos[:, 1], traj.theta2, rtol=0, atol=tol)
+    np.testing.assert_allclose(pos[:, 2], traj.theta3, rtol=0, atol=tol)
+    np.testing.assert_allclose(pos[:, 3], traj.theta4, rtol=0, atol=tol)
+    np.testing.assert_allclose(h.positioning_error, traj.output_error, rtol=0, atol=tol)
+    np.testing.assert_allclose(h.worm_error, traj.worm_error, rtol=0, atol=tol)
+    vel = np.array([list(m.velocity) for m in h.joint_states])
+    np.testing.assert_allclose(vel[:, 1:], traj.omega, rtol=0, atol=1e-9)
+    # the move really happened and the antenna rings (a non-trivial comparison)
+    assert pos[-1, 0] == pytest.approx(0.11309733552923255, abs=1e-12)
+    assert np.ptp(np.array(h.positioning_error)[40:]) > 1e-5
+    eff = np.array([list(m.effort) for m in h.joint_states])
+    assert eff.shape == (n, 4) and np.all(np.isfinite(eff)) and np.abs(eff[:, 3]).max() > 1.0
+    assert list(h.joint_states[0].name) == list(Config().node.joint_names)
+    assert h.node.counters['ticks'] == n and h.node.counters['steps'] == (n - 1) * 100
+
+
+def test_compensation_applied_drives_reference_plus_feedforward(ros_harness):
+    """~/feedforward is the Compensator's output for the streamed reference (not a
+    constant); with node.compensation_applied the simulator is driven with
+    theta1_ref + delta and ~/positioning_error is measured against theta1_ref l_w/r_g."""
+    from worm_gear_sim.compensation import Compensator
+    h = ros_harness({'node.compensation_applied': True})
+    n = 60
+    cmds = paper_move_samples(n)
+    stamps = run_ticks(h, cmds)
+    times = (np.array(stamps) - stamps[0]) * 1e-9
+    comp = Compensator(h.node.config)
+    comp.reset(float(cmds[0]), 0.0)
+    expected = np.array([comp.update(float(t), float(c)) for t, c in zip(times, cmds)])
+    ff = np.array(h.feedforward)
+    assert ff.shape == (n,)
+    np.testing.assert_allclose(ff, expected, rtol=0, atol=1e-15)
+    assert np.ptp(ff) > 1e-4            # it moves with the command: not a constant
+    drive = cmds + ff
+    traj = batch(h.node.config, times, drive)
+    pos = js_pos(h)
+    np.testing.assert_allclose(pos[:, 0], traj.theta1, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(pos[:, 3], traj.theta4, rtol=0, atol=1e-12)
+    ratio = h.node.sim.derived.output_per_input
+    np.testing.assert_allclose(h.positioning_error, traj.theta4 - cmds * ratio, rtol=0,
+                               atol=1e-12)
+
+
+def test_feedforward_follows_parameter_changes(ros_harness):
+    """A plant parameter change redesigns the compensator: the published correction at
+    rest under a load torque changes with the load."""
+    h = ros_harness()
+    run_ticks(h, [0.0, 0.0, 0.0])
+    ff0 = h.feedforward[-1]
+    res = h.node.set_parameters([Parameter('load.output_torque', value=50.0)])
+    assert res[0].successful, res[0].reason
+    run_ticks(h, [None] * 3, t0_ns=T0_NS + 3 * TICK_NS)
+    assert abs(h.feedforward[-1] - ff0) > 1e-6
+
+
+def test_declares_every_model_parameter_with_descriptor(ros_harness):
+    from rcl_interfaces.msg import ParameterType
+    h = ros_harness()
+    node = h.node
+    meta = Config.metadata()
+    flat = Config().to_flat_dict()
+    assert set(MODEL_PARAMETER_NAMES) == set(flat)
+    for name in flat:
+        assert node.has_parameter(name), name
+        d = node.describe_parameter(name)
+        m = meta[name]
+        assert m['description'].split()[0] in d.description, name
+        if m['unit']:
+            assert f'[{m["unit"]}]' in d.description, name
+        assert d.read_only == bool(m['read_only']), name
+        if m['lo'] is not None and m['hi'] is not None and d.type in (
+                ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_INTEGER):
+            rng = d.floating_point_range or d.integer_range
+            assert len(rng) == 1, name
+            assert (rng[0].from_value, rng[0].to_value) == pytest.approx((m['lo'], m['hi']))
+    types = {n: node.describe_parameter(n).type for n in flat}
+    assert types['geometry.flywheel_enabled'] == ParameterType.PARAMETER_BOOL
+    assert types['integrator.newton_max_iterations'] == ParameterType.PARAMETER_INTEGER
+    assert types['mesh.worm_fit_a'] == ParameterType.PARAMETER_DOUBLE
+    assert types['friction.model'] == ParameterType.PARAMETER_STRING
+    assert types['damping.modal_damping_ratios'] == ParameterType.PARAMETER_DOUBLE_ARRAY
+    assert types['node.joint_names'] == ParameterType.PARAMETER_STRING_ARRAY
+    assert 'one of: stribeck, constant, off' in \
+        node.describe_parameter('friction.model').additional_constraints
+    for ro in ('integrator.time_step', 'node.publish_rate_hz', 'node.joint_names',
+               'node.executor', 'node.diagnostic_period'):
+        assert node.describe_parameter(ro).read_only, ro
+
+
+def test_code_defaults_equal_the_yaml_file(ros_harness):
+    """Declared defaults (no params file) equal config/worm_gear_sim.yaml, and loading that
+    file with --params-file gives the same values."""
+    from worm_gear_sim.node import WormGearSimNode
+    file_values = load_config(CONFIG).to_flat_dict()
+    h = ros_harness(sim_time=False)
+    node_defaults = WormGearSimNode(context=h.ctx, node_name='defaults_only',
+                                    defaults=Config())
+    with_file = WormGearSimNode(context=h.ctx, node_name='worm_gear_sim',
+                                cli_args=['--ros-args', '--params-file', str(CONFIG)])
+    try:
+        for name, value in file_values.items():
+            assert Config().to_flat_dict()[name] == value, name
+            for node in (node_defaults, with_file):
+                got = node.get_parameter(name).value
+                got = list(got) if isinstance(value, list) else got
+                assert got == value, (node.get_name(), name)
+        assert with_file.config == load_config(CONFIG)
+    finally:
+        node_defaults.destroy_node()
+        with_file.destroy_node()
+
+
+# ---- parameters at run time -------------------------------------------------------------
+def test_parameter_set_accepted_and_applied(ros_harness):
+    h = ros_harness()
+    run_ticks(h, [0.0, 0.01])
+    state_before = h.node.sim.state
+    res = h.node.set_parameters([Parameter('friction.mu_kinetic', value=0.06),
+                                 Parameter('load.output_torque', value=2)])  # int -> double
+    assert all(r.successful for r in res), [r.reason for r in res]
+    assert h.node.config.friction.mu_kinetic == 0.06
+    assert h.node.sim.config.friction.mu_kinetic == 0.06
+    assert h.node.sim.config.load.output_torque == 2.0
+    assert h.node.get_parameter('load.output_torque').value == 2.0
+    after = h.node.sim.state                        # state kept through reconfigure
+    np.testing.assert_array_equal(after.theta, state_before.theta)
+    assert h.node.counters['accepted_parameter_sets'] == 2
+    # interpolation switches at run time too
+    assert h.node.set_parameters([Parameter('node.command_interpolation',
+                                            value='hold')])[0].successful
+    assert h.node.sim.interpolation == 'hold'
+    run_ticks(h, [0.02], t0_ns=T0_NS + 2 * TICK_NS)
+    assert h.node.counters['rejected_parameter_sets'] == 0
+
+
+@pytest.mark.parametrize('params, words', [
+    ([('geometry.module', 0.0)], ['geometry.module', '> 0']),               # core's open range
+    ([('geometry.module', 60.0)], ['geometry.module']),                      # descriptor range
+    ([('input.accel_time', 0.015)], ['accel_time', 'move_time']),            # cross-field
+    ([('friction.model', 'coulomb')], ['friction.model', 'stribeck']),       # choices
+    ([('damping.modal_damping_ratios', [0.1, 0.2])], ['3 entries']),         # length
+    ([('mesh.worm_fit_a', 'abc')], ['Wrong parameter type']),                # type (rclpy)
+    ([('friction.mu_kinetic', 0.05), ('integrator.newmark_beta', 0.1)],      # atomic
+     ['newmark_beta']),
+])
+def test_invalid_parameter_set_rejected_with_reason(ros_harness, params, words):
+    h = ros_harness()
+    run_ticks(h, [0.0, 0.01])
+    cfg_before = h.node.config
+    state_before = h.node.sim.state
+    res = h.node.set_parameters_atomically([Parameter(k, value=v) for k, v in params])
+    assert not res.successful
+    for w in words:
+        assert w in res.reason, res.reason
+    assert h.node.config is cfg_before and h.node.sim.config is cfg_before
+    for k, _ in params:                              # all or nothing
+        assert h.node.get_parameter(k).value == pytest.approx(cfg_before.to_flat_dict()[k]) \
+            if not isinstance(cfg_before.to_flat_dict()[k], (str, list)) else True
+    assert h.node.get_parameter('friction.mu_kinetic').value == \
+        cfg_before.friction.mu_kinetic
+    np.testing.assert_array_equal(h.node.sim.state.theta, state_before.theta)
+    assert h.node.counters['rejected_parameter_sets'] == 1
+    assert h.node.last_error.startswith('rejected parameter set')
+    assert params[-1][0] in h.node.last_error            # the log names the parameter
+    run_ticks(h, [0.02], t0_ns=T0_NS + 2 * TICK_NS)     # keeps running
+
+
+def test_read_only_parameters_rejected(ros_harness):
+    h = ros_harness()
+    for name, value in (('integrator.time_step', 2e-5), ('node.publish_rate_hz', 500.0),
+                        ('node.joint_names', ['a', 'b', 'c', 'd'])):
+        res = h.node.set_parameters([Parameter(name, value=value)])[0]
+        assert not res.successful and 'read-only' in res.reason, (name, res.reason)
+    assert h.node.sim.dt == 1e-5
+    assert h.node.counters['rejected_parameter_sets'] == 3
+
+
+def test_parameter_service_round_trip(ros_harness):
+    """Through the ROS parameter services, as `ros2 param set` would do."""
+    from rclpy.parameter_client import AsyncParameterClient
+    h = ros_harness()
+    client = AsyncParameterClient(h.probe, 'worm_gear_sim')
+    assert h.spin_until(lambda: client.services_are_ready())
+    fut = client.set_parameters([Parameter('friction.mu_kinetic', value=0.05),
+                                 Parameter('geometry.module', value=-1.0)])
+    assert h.spin_until(fut.done)
+    ok, bad = fut.result().results
+    assert ok.successful and h.node.config.friction.mu_kinetic == 0.05
+    assert not bad.successful and 'geometry.module' in bad.reason
+    fut = client.get_parameters(['mesh.stiffness_model'])
+    assert h.spin_until(fut.done)
+    assert fut.result().values[0].string_value == 'nonlinear'
+
+
+# ---- bad input --------------------------------------------------------------------------
+@pytest.mark.parametrize('bad, reason', [
+    (math.nan, 'nan'), (math.inf, 'inf'), (-math.inf, 'inf'),
+    (2.0e4, 'out_of_range'), (-2.0e4, 'out_of_range'), (0.01 + 1.5, 'jump'),
+])
+def test_bad_command_rejected_state_kept(ros_harness, bad, reason):
+    h = ros_harness()
+    run_ticks(h, [0.0, 0.01, 0.01])
+    before = h.node.sim.state
+    assert h.command(bad)
+    c = h.node.counters
+    assert c['rejected_commands'] == 1 and c[f'rejected_{reason}'] == 1
+    assert h.node.last_error.startswith('rejected worm_angle_command')
+    np.testing.assert_array_equal(h.node.sim.state.theta, before.theta)
+    # next tick holds the last good command; the node keeps accepting good ones
+    assert h.tick_to(T0_NS + 3 * TICK_NS)
+    assert h.joint_states[-1].position[0] == 0.01
+    assert np.all(np.isfinite(js_pos(h)))
+    run_ticks(h, [0.02], t0_ns=T0_NS + 4 * TICK_NS)
+    assert h.joint_states[-1].position[0] == pytest.approx(0.02, abs=1e-15)
+    diag = {s.name: s for s in h.node.diagnostic_statuses()}
+    vals = {kv.key: kv.value for kv in diag['worm_gear_sim: inputs'].values}
+    assert vals['rejected_commands'] == '1' and vals[f'rejected_{reason}'] == '1'
+
+
+def test_limits_follow_parameters(ros_harness):
+    h = ros_harness({'node.max_command_jump': 0.05, 'node.max_command_abs': 0.5})
+    run_ticks(h, [0.0])
+    assert h.command(0.06) and h.node.counters['rejected_jump'] == 1
+    assert h.command(0.04) and h.node.counters['rejected_commands'] == 1
+    assert h.node.set_parameters([Parameter('node.max_command_jump', value=1.0)])[0].successful
+    assert h.command(0.6) and h.node.counters['rejected_out_of_range'] == 1
+
+
+def test_command_burst_costs_one_tick_of_physics(ros_harness):
+    """10k commands between two ticks: only the latest is used, physics is one tick."""
+    h = ros_harness()
+    run_ticks(h, [0.0, 0.0])
+    steps = h.node.counters['steps']
+    received0 = h.node.counters['commands_received']
+    values = 1e-3 * np.sin(np.arange(10_000) * 1e-3)
+    for v in values:
+        h.cmd_pub.publish(h.Float64(data=float(v)))
+    last = float(values[-1])
+    assert h.spin_until(lambda: h.node._cmd == last, timeout=20.0)
+    received = h.node.counters['commands_received'] - received0
+    assert 1 <= received <= 10_000
+    assert h.tick_to(T0_NS + 2 * TICK_NS)
+    c = h.node.counters
+    assert c['steps'] - steps == 100                      # one tick at dt = 10 us
+    assert c['commands_used'] == 3 and c['commands_superseded'] == received - 1
+    assert h.joint_states[-1].position[0] == pytest.approx(last, abs=1e-15)
+
+
+def test_clock_going_backwards_is_ignored(ros_harness):
+    h = ros_harness()
+    run_ticks(h, [0.0, 0.01, 0.02, 0.03])
+    before = h.node.sim.state
+    n_js = len(h.joint_states)
+    assert h.wait_clock(T0_NS + 1 * TICK_NS)                # back by 2 ms
+    h.spin_for(0.05)
+    assert h.wait_clock(T0_NS + 2 * TICK_NS)                # timer fires, still behind
+    assert h.spin_until(lambda: h.node.counters['clock_backwards'] == 1)
+    assert h.wait_clock(T0_NS + 3 * TICK_NS)                # equal to the state time
+    h.spin_for(0.05)
+    assert len(h.joint_states) == n_js                      # nothing published
+    np.testing.assert_array_equal(h.node.sim.state.theta, before.theta)
+    assert h.node.sim.state.t == before.t
+    run_ticks(h, [0.04], t0_ns=T0_NS + 4 * TICK_NS)        # resumes where it was
+    assert h.node.sim.t == pytest.approx(0.004, abs=1e-12)
+    assert h.node.counters['steps'] == 400
+
+
+def test_simulation_error_keeps_last_good_state(ros_harness, monkeypatch):
+    from worm_gear_sim.simulation import SimulationError
+    h = ros_harness()
+    run_ticks(h, [0.0, 0.01])
+    good = h.node.sim.state
+    real = h.node.sim.advance_to
+
+    def failing(t, theta1=None):
+        raise SimulationError('integration stopped: injected failure')
+    monkeypatch.setattr(h.node.sim, 'advance_to', failing)
+    assert h.tick_to(T0_NS + 2 * TICK_NS)                   # still publishes
+    assert h.node.counters['simulation_errors'] == 1
+    assert 'injected failure' in h.node.last_error
+    np.testing.assert_array_equal(h.node.sim.state.theta, good.theta)
+    assert list(h.joint_states[-1].position)[1:] == list(good.theta)
+    statuses = {s.name: s for s in h.node.diagnostic_statuses()}
+    sim_status = statuses['worm_gear_sim: simulation']
+    assert sim_status.level == b'\x02' and 'injected failure' in sim_status.message
+    monkeypatch.setattr(h.node.sim, 'advance_to', real)
+    run_ticks(h, [0.02], t0_ns=T0_NS + 3 * TICK_NS)        # and recovers
+    assert h.node.sim.t == pytest.approx(0.003, abs=1e-12)
+
+
+# ---- wall time ------------------------------------------------------------------------
+def test_wall_time_catch_up_is_capped(ros_harness):
+    """Wall clock: a stalled executor leads to one capped catch-up (an overrun)."""
+    import time
+    h = ros_harness({'node.max_catch_up': 0.02}, sim_time=False)
+    assert h.command(0.0)
+    assert h.spin_until(lambda: h.node.counters['ticks'] >= 20)
+    assert h.node._time_base == 'wall'
+    t_before = h.node.sim.t
+    steps_before = h.node.counters['steps']
+    time.sleep(0.3)                                          # stall: no spinning
+    assert h.spin_until(lambda: h.node.counters['overruns'] >= 1)
+    c = h.node.counters
+    assert c['dropped_time'] >= 0.3 - 0.02 - 0.05
+    assert c['max_steps_per_tick'] <= 0.02 / 1e-5 + 1
+    # the stall was dropped, not integrated: the simulated clock jumps (resync) and the
+    # steps taken cover far less than the stalled time
+    assert h.node.sim.t - t_before >= 0.3
+    assert 0 < c['steps'] - steps_before < 0.3 / 1e-5 / 2
+
+
+# ---- diagnostics, QoS -------------------------------------------------------------------
+def test_diagnostics_follow_diagnostic_updater_conventions(ros_harness):
+    from diagnostic_msgs.msg import DiagnosticStatus
+    h = ros_harness()
+    run_ticks(h, [0.0, 0.01, 0.02])
+    h.command(math.nan)
+    n_msgs = len(h.diagnostics)          # the 1 s diagnostic timer fired at the first tick
+    w = dict(h.node._window)
+    h.node.publish_diagnostics()
+    assert h.spin_until(lambda: len(h.diagnostics) > n_msgs)
+    msg = h.diagnostics[-1]
+    names = [s.name for s in msg.status]
+    assert names == ['worm_gear_sim: simulation', 'worm_gear_sim: inputs',
+                     'worm_gear_sim: feedforward']
+    for s in msg.status:
+        assert s.hardware_id == 'worm_gear_sim'
+        assert isinstance(s.level, bytes) and s.level in (
+            DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR)
+        assert all(isinstance(kv.value, str) for kv in s.values)
+    sim = {kv.key: kv.value for kv in msg.status[0].values}
+    for key in ('real_time_factor', 'steps_per_tick', 'overruns', 'newton_subdivisions',
+                'last_error', 'missed_ticks', 'compute_load'):
+        assert key in sim, key
+    assert float(sim['steps_per_tick']) == pytest.approx(w['steps'] / w['ticks'])
+    assert float(sim['steps_per_tick']) == pytest.approx(100.0)
+    inputs = {kv.key: kv.value for kv in msg.status[1].values}
+    assert inputs['rejected_commands'] == '1' and msg.status[1].level == DiagnosticStatus.WARN
+    assert 'nan' in inputs['last_error']
+    stamp = msg.header.stamp
+    assert stamp.sec * 10**9 + stamp.nanosec == T0_NS + 2 * TICK_NS
+
+
+def test_command_qos_sensor_data_and_overridable(ros_harness):
+    from rclpy.qos import ReliabilityPolicy
+    h = ros_harness()
+    info = h.probe.get_subscriptions_info_by_topic('/worm_angle_command')
+    assert len(info) == 1
+    assert info[0].qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+    assert h.node.has_parameter('qos_overrides./worm_angle_command.subscription.reliability')
+    h.close()
+    h2 = ros_harness({}, cli_args=[
+        '--ros-args', '-p',
+        'qos_overrides./worm_angle_command.subscription.reliability:=reliable'])
+    info = h2.probe.get_subscriptions_info_by_topic('/worm_angle_command')
+    assert info[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
+    pubs = h2.probe.get_publishers_info_by_topic('/joint_states')
+    assert pubs[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
+
+
+def test_waits_for_first_command(ros_harness):
+    h = ros_harness()
+    h.set_clock(T0_NS)
+    h.spin_for(0.1)
+    assert h.joint_states == [] and h.node.counters['ticks'] == 0
+    statuses = h.node.diagnostic_statuses()
+    assert statuses[0].level == b'\x01' and 'waiting' in statuses[0].message
+    run_ticks(h, [0.3], t0_ns=T0_NS + TICK_NS)   # first command: starts at rest there
+    assert h.joint_states[0].position[0] == 0.3
+    assert h.joint_states[0].position[1] == pytest.approx(0.3, abs=1e-9)
