@@ -140,3 +140,13 @@ def test_modal_damping_ratios_are_realised():
                             'damping.modal_damping_ratios': [0.02, 0.05, 0.1]})
     m = modes(cfg)
     assert m.damping_ratios == pytest.approx([0.02, 0.05, 0.1], rel=1e-6)
+
+
+def test_overdamped_mode_keeps_the_table_aligned():
+    """Under load the friction at rest over-damps the worm mode: it is reported in its own
+    row (damped frequency 0, zeta > 1), the other rows keep their frequencies."""
+    m = modes(Config().replace({'load.output_torque': 5.0}))
+    assert m.undamped_hz == pytest.approx([94.5, 1555.0, 8588.0], rel=5e-3)
+    assert m.frequencies_hz[0] == pytest.approx(94.5, rel=5e-3)
+    assert m.frequencies_hz[1] == pytest.approx(1566.0, rel=5e-3)
+    assert m.frequencies_hz[2] == 0.0 and m.damping_ratios[2] > 1.0

@@ -83,20 +83,35 @@ def modes(cfg: Config, theta1: float = 0.0, sliding_rate: float = 0.0,
     shapes = shapes / np.max(np.abs(shapes), axis=0) * np.sign(shapes[np.argmax(
         np.abs(shapes), axis=0), np.arange(3)])
     # state-space eigenvalues for damped frequencies and damping ratios
+    damped, zeta = _damped_modes(M, K, C)
+    return ModalResult(frequencies_hz=damped, undamped_hz=undamped, damping_ratios=zeta,
+                       shapes=shapes, M=M, K=K, C=C, operating_point=u)
+
+
+def _damped_modes(M: np.ndarray, K: np.ndarray, C: np.ndarray):
+    """Damped frequency [Hz] and damping ratio of each mode, lowest natural frequency first.
+
+    The 6 state-space eigenvalues are grouped into modes: a complex-conjugate pair is an
+    under-damped mode (omega_n = |lambda|, zeta = -Re/|lambda|); the real eigenvalues,
+    sorted, are paired into over-damped modes (omega_n = sqrt(l1 l2), zeta =
+    -(l1 + l2) / (2 omega_n) >= 1, damped frequency 0)."""
     Minv = np.linalg.inv(M)
     A = np.block([[np.zeros((3, 3)), np.eye(3)], [-Minv @ K, -Minv @ C]])
     lam = np.linalg.eigvals(A)
-    lam = lam[lam.imag >= 0]
-    wn = np.abs(lam)
-    zeta = np.where(wn > 0, -lam.real / np.where(wn > 0, wn, 1.0), 0.0)
-    idx = np.argsort(wn)[:3]
-    damped = np.abs(lam.imag[idx]) / (2 * np.pi)
-    zeta = zeta[idx]
-    if len(idx) < 3:  # over-damped modes: pad so the table stays aligned
-        damped = np.pad(damped, (0, 3 - len(idx)))
-        zeta = np.pad(zeta, (0, 3 - len(idx)), constant_values=1.0)
-    return ModalResult(frequencies_hz=damped, undamped_hz=undamped, damping_ratios=zeta,
-                       shapes=shapes, M=M, K=K, C=C, operating_point=u)
+    scale = np.abs(lam).max() + 1.0
+    is_real = np.abs(lam.imag) <= 1e-9 * scale
+    modes_ = []
+    for z in lam[(~is_real) & (lam.imag > 0)]:
+        wn = abs(z)
+        modes_.append((wn, abs(z.imag) / (2 * np.pi), -z.real / wn))
+    reals = np.sort(lam[is_real].real)
+    for i in range(0, len(reals) - 1, 2):
+        l1, l2 = reals[i], reals[i + 1]
+        wn = np.sqrt(abs(l1 * l2))
+        modes_.append((wn, 0.0, -(l1 + l2) / (2 * wn) if wn > 0 else 1.0))
+    modes_.sort(key=lambda m: m[0])
+    modes_ = (modes_ + [(0.0, 0.0, 1.0)] * 3)[:3]
+    return (np.array([m[1] for m in modes_]), np.array([m[2] for m in modes_]))
 
 
 def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:

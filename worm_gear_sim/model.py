@@ -58,7 +58,8 @@ P_COUT, P_TLOAD = 32, 33
 P_BETA, P_GAMMA, P_RTOL, P_ATOL, P_MAXIT, P_MAXSUB = 34, 35, 36, 37, 38, 39
 P_RIGID3 = 40                                        # theta3/theta1 of the rigid motion
 P_INV_KGS, P_INV_KWS, P_INV_VEPS, P_LIN_COMPLIANCE = 41, 42, 43, 44   # precomputed
-N_PARAMS = 45
+P_INV_SQRT_VS = 45
+N_PARAMS = 46
 
 # layout of the flat output of mesh_eval: Q (3), dQ/du (3x3 row-major), dQ/dv (3x3), aux
 O_Q, O_DQDU, O_DQDV, O_AUX = 0, 3, 12, 21
@@ -126,6 +127,7 @@ def pack_parameters(cfg: Config) -> np.ndarray:
     p[P_RIGID3] = d.l_w / g.gear_pitch_radius
     p[P_INV_KGS], p[P_INV_KWS] = 1.0 / d.k_gs, 1.0 / d.k_ws
     p[P_INV_VEPS] = 1.0 / fr.regularization_velocity
+    p[P_INV_SQRT_VS] = 1.0 / math.sqrt(fr.stribeck_velocity)
     p[P_LIN_COMPLIANCE] = 1.0 / p[P_CWKW_LIN] + 1.0 / p[P_CGKG_LIN]
     return p
 
@@ -156,11 +158,12 @@ def friction_coefficient(p, v_s, q):
     if model == FRICTION_CONSTANT:
         mu, dmu = p[P_MU_CONST], 0.0
     else:
-        ex = math.exp(-math.sqrt(av / p[P_VS]))
+        sv = math.sqrt(av)
+        ex = math.exp(-sv * p[P_INV_SQRT_VS])
         mu = p[P_MU_K] + p[P_MU_DROP] * ex
         dmu = 0.0  # d mu / d|v|; singular at 0, handled below
         if av > 0.0:
-            dmu = -p[P_MU_DROP] * ex / (2.0 * math.sqrt(av * p[P_VS]))
+            dmu = -0.5 * p[P_MU_DROP] * p[P_INV_SQRT_VS] * ex / sv
     if p[P_FRIC_PAPER] != 0.0:
         # fixed sign as printed; derivative floored to stay finite at rest
         if model == FRICTION_STRIBECK:
@@ -170,9 +173,15 @@ def friction_coefficient(p, v_s, q):
         sgn_v = 1.0 if v_s >= 0.0 else -1.0
         return mu, dmu * sgn_v
     sq = 1.0 if q >= 0.0 else -1.0       # flank in contact: friction ~ |W_n|
-    t = math.tanh(v_s * p[P_INV_VEPS])
+    # tanh(x) = -expm1(-2|x|) / (2 + expm1(-2|x|)) sgn(x): one exponential, exact near 0
+    e = math.expm1(-2.0 * av * p[P_INV_VEPS])
+    t = -e / (2.0 + e)
+    if v_s < 0.0:
+        t = -t
     # d/dv [mu(|v|) tanh(v/eps)] = mu'(|v|) sgn(v) t + mu (1 - t^2)/eps ; sgn(v) t = |t|
-    d = dmu * abs(t) + mu * (1.0 - t * t) * p[P_INV_VEPS]
+    # 1 - t^2 = 4 e^{-2|x|} / (1 + e^{-2|x|})^2, written without cancellation
+    one_minus_t2 = 4.0 * (1.0 + e) / ((2.0 + e) * (2.0 + e))
+    d = dmu * abs(t) + mu * one_minus_t2 * p[P_INV_VEPS]
     return sq * mu * t, sq * d
 
 

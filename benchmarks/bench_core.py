@@ -1,0 +1,207 @@
+#!/usr/bin/env python3
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Benchmark of the compiled Newmark-Newton kernel (issue 2).
+
+Prints, in one run:
+  * ns/step of the kernel on the paper's 18-step move (0.5 s) at dt = 10 us and 25 us,
+    for the default nonlinear model and the linear model, and the real-time factor;
+  * mean Newton solves and force evaluations per step (what bounds the time);
+  * the cost of one force evaluation (the transcendental-heavy part) and of the Python
+    call of Simulator.advance_to (what the node pays per tick);
+  * the speed-up over scipy's Radau at equal accuracy of the antenna angle theta4.
+
+    python benchmarks/bench_core.py            # full run (~2-4 min)
+    python benchmarks/bench_core.py --quick    # skip the Radau comparison
+
+Timings are the minimum over repeats (other load on the machine only makes them slower).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
+
+from worm_gear_sim import Config, Simulator, make_profile, simulate  # noqa: E402
+from worm_gear_sim.integrator import N_STATS, S_EVALS, S_SOLVES, advance  # noqa: E402
+from worm_gear_sim.model import mesh_forces  # noqa: E402
+
+MODELS = {
+    'nonlinear (default)': {},
+    'linear, constant mu': {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'},
+    'linear, frictionless': {'mesh.stiffness_model': 'linear', 'friction.model': 'off'},
+}
+
+
+def kernel_ns_per_step(cfg: Config, t_end: float = 0.5, repeats: int = 7):
+    dt = cfg.integrator.time_step
+    prof = make_profile(cfg.input)
+    n = int(round(t_end / dt))
+    grid = np.arange(1, n + 1) * dt
+    th = np.concatenate(([0.0], prof.theta1(grid)))
+    td = np.concatenate(([0.0], prof.theta1_dot(grid)))
+    e3, ea = np.empty((0, 3)), np.empty((0, 8))
+    best = np.inf
+    for _ in range(repeats):
+        sim = Simulator(cfg)
+        st = np.zeros(N_STATS, dtype=np.int64)
+        ctl = np.array([1.0, 0.0])
+        t0 = time.perf_counter()
+        advance(sim.p, sim.C, sim._u, sim._v, sim._a, th, td, dt, 0, e3, e3, e3, ea, st, ctl)
+        best = min(best, time.perf_counter() - t0)
+    return best / n * 1e9, st[S_SOLVES] / n, st[S_EVALS] / n
+
+
+def force_eval_ns(cfg: Config, n: int = 200_000) -> float:
+    from numba import njit
+
+    @njit(cache=False)
+    def loop(p, n):
+        s = 0.0
+        for i in range(n):
+            f = mesh_forces(p, 0.1 + i * 1e-12, 0.0018, 0.0018, 1e-2 * (i % 7 - 3), 0.01, 0.0,
+                            0.1)
+            s += f[0] + f[3] + f[7]
+        return s
+    sim = Simulator(cfg)
+    loop(sim.p, 10)
+    best = np.inf
+    for _ in range(5):
+        t0 = time.perf_counter()
+        loop(sim.p, n)
+        best = min(best, time.perf_counter() - t0)
+    return best / n * 1e9
+
+
+def advance_to_call_us(cfg: Config, ticks: int = 2000) -> float:
+    """Wall time of one 1 kHz tick (100 steps at dt = 10 us) through Simulator.advance_to."""
+    sim = Simulator(cfg)
+    prof = make_profile(cfg.input)
+    t = np.arange(1, ticks + 1) * 1e-3
+    cmd = prof.theta1(t)
+    t0 = time.perf_counter()
+    for tk, c in zip(t, cmd):
+        sim.advance_to(tk, c)
+    return (time.perf_counter() - t0) / ticks * 1e6
+
+
+def radau_comparison(horizon: float = 0.05):
+    """Speed-up over Radau at equal theta4 accuracy (reference: Newmark at 50 ns, which the
+    test suite checks against Radau at rtol 1e-11)."""
+    from scipy.integrate import solve_ivp
+
+    from worm_gear_sim.model import P_J4, P_JG, P_JW, P_KG
+
+    cfg = Config()
+    sample = 1e-5
+    ref = simulate(cfg.replace({'integrator.time_step': 5e-8}), t_end=horizon,
+                   record_every=200)
+    t_s = ref.t
+    dt = 1e-5
+    t0 = time.perf_counter()
+    nm = simulate(cfg.replace({'integrator.time_step': dt}), t_end=horizon)
+    t_newmark = time.perf_counter() - t0
+    err_nm4 = np.abs(nm.theta4 - ref.theta4).max()
+    err_nm2 = np.abs(nm.theta2 - ref.theta2).max()
+    osc4 = np.abs(ref.output_error).max()
+    osc2 = np.abs(ref.worm_error).max()
+
+    sim = Simulator(cfg)
+    p = sim.p
+    M = np.array([p[P_JW], p[P_JG], p[P_J4]])
+    prof = make_profile(cfg.input)
+    kg = p[P_KG]
+
+    def rhs(t, y):
+        f = mesh_forces(p, y[0], y[1], y[2], y[3], y[4], y[5],
+                        float(prof.theta1(np.array([t]))[0]))
+        return np.array([y[3], y[4], y[5], f[0] / M[0], f[1] / M[1], f[2] / M[2]])
+
+    def jac(t, y):
+        f = mesh_forces(p, y[0], y[1], y[2], y[3], y[4], y[5],
+                        float(prof.theta1(np.array([t]))[0]))
+        J = np.zeros((6, 6))
+        J[0, 3] = J[1, 4] = J[2, 5] = 1.0
+        J[3:, :3] = np.array([[f[3], f[4], 0.0], [f[5], f[6], kg], [0.0, kg, -kg]]) / M[:, None]
+        J[3:, 3:] = np.array([[f[7], f[8], 0.0], [f[9], f[10], 0.0], [0, 0, 0]]) / M[:, None]
+        return J
+
+    breaks = [0.0, 0.004, 0.016, 0.02, horizon]
+    rows = []
+    for rtol in (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9):
+        atol = np.r_[np.full(3, rtol * 1e-3), np.full(3, rtol)]
+        y = np.zeros(6)
+        out = np.empty((len(t_s), 3))
+        t0 = time.perf_counter()
+        nfev = 0
+        for a, b in zip(breaks[:-1], breaks[1:]):
+            sel = (t_s >= a) & (t_s <= b)
+            sol = solve_ivp(rhs, (a, b), y, method='Radau', jac=jac, rtol=rtol, atol=atol,
+                            dense_output=True)
+            out[sel] = sol.sol(t_s[sel])[:3].T
+            y = sol.y[:, -1]
+            nfev += sol.nfev
+        t_radau = time.perf_counter() - t0
+        e4 = np.abs(out[:, 2] - ref.theta4).max()
+        e2 = np.abs(out[:, 0] - ref.theta2).max()
+        rows.append((rtol, t_radau, e4, e2, nfev))
+        if e4 <= err_nm4:
+            break
+    return dict(t_newmark=t_newmark, err_nm4=err_nm4, err_nm2=err_nm2, osc4=osc4, osc2=osc2,
+                rows=rows, horizon=horizon, sample=sample)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--quick', action='store_true', help='skip the Radau comparison')
+    args = ap.parse_args(argv)
+    print(f'# worm_gear_sim kernel benchmark  ({platform.processor() or platform.machine()}, '
+          f'{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}, python '
+          f'{platform.python_version()})')
+    print('# 18-step move (0.1131 rad trapezoidal in 20 ms) simulated for 0.5 s; min of 7 runs')
+    print(f'{"model":24s} {"dt [us]":>8s} {"ns/step":>9s} {"x real time":>12s} '
+          f'{"solves/step":>12s} {"evals/step":>11s}')
+    for name, over in MODELS.items():
+        for dt in (1e-5, 2.5e-5):
+            cfg = Config().replace(dict(over, **{'integrator.time_step': dt}))
+            ns, solves, evals = kernel_ns_per_step(cfg)
+            print(f'{name:24s} {dt * 1e6:8.0f} {ns:9.1f} {dt / (ns * 1e-9):12.1f} '
+                  f'{solves:12.3f} {evals:11.3f}')
+    print()
+    for name, over in MODELS.items():
+        print(f'one force evaluation (mesh_forces), {name}: '
+              f'{force_eval_ns(Config().replace(over)):.1f} ns')
+    print(f'Simulator.advance_to, one 1 kHz tick (100 steps, default model): '
+          f'{advance_to_call_us(Config()):.1f} us')
+    if args.quick:
+        return 0
+    print()
+    r = radau_comparison()
+    print(f'# equal-accuracy comparison with scipy Radau, default nonlinear model, '
+          f'{r["horizon"] * 1e3:.0f} ms horizon, errors against Newmark at 50 ns')
+    print(f'Newmark dt=10us: {r["t_newmark"] * 1e3:.2f} ms wall, theta4 error '
+          f'{r["err_nm4"]:.2e} rad ({r["err_nm4"] / r["osc4"]:.1e} of its oscillation '
+          f'amplitude), theta2 error {r["err_nm2"]:.2e} rad '
+          f'({r["err_nm2"] / r["osc2"]:.1e}: the 8.6 kHz worm mode is not resolved at 10 us)')
+    for rtol, t_r, e4, e2, nfev in r['rows']:
+        print(f'Radau rtol={rtol:.0e}: {t_r:8.2f} s wall, {nfev:7d} f-evals, theta4 error '
+              f'{e4:.2e}, theta2 error {e2:.2e}')
+    rtol, t_r, e4, _, _ = r['rows'][-1]
+    if e4 <= r['err_nm4']:
+        print(f'speed-up at equal theta4 accuracy: {t_r / r["t_newmark"]:.0f}x '
+              f'(target >= 1000x)')
+    else:
+        print(f'Radau did not reach the Newmark accuracy down to rtol {rtol:.0e}; speed-up '
+              f'at its best accuracy already {t_r / r["t_newmark"]:.0f}x')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
