@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from .model import (
@@ -329,3 +330,22 @@ def consistent_acceleration(p, C, u, v, theta1, theta1_dot, a):
     m = (p[P_JW], p[P_JG], p[P_J4])
     for i in range(3):
         a[i] = (f[i] - C[i, 0] * rel0 - C[i, 1] * rel1 - C[i, 2] * rel2) / m[i]
+
+
+@njit(cache=True, error_model='numpy')
+def advance_segment(p, C, u, v, a, theta1_now, theta1_dot_now, t0, k0, dt, n, cmd_t,
+                    cmd_value, slope, stats, ctl):
+    """Real-time stepping: n steps on the grid t0 + (k0 + j) dt with the command on the
+    segment theta1(t) = cmd_value + slope (t - cmd_t) (slope 0: held).  Same arithmetic as
+    SampledProfile's linear interpolation, so stepping and batch agree bit for bit."""
+    th = np.empty(n + 1)
+    td = np.empty(n + 1)
+    th[0] = theta1_now
+    td[0] = theta1_dot_now
+    for j in range(1, n + 1):
+        grid = t0 + float(k0 + j) * dt
+        th[j] = cmd_value + slope * (grid - cmd_t) if slope != 0.0 else cmd_value
+        td[j] = slope
+    empty3 = np.empty((0, 3))
+    return advance(p, C, u, v, a, th, td, dt, 0, empty3, empty3, empty3,
+                   np.empty((0, N_AUX)), stats, ctl)

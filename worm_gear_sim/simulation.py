@@ -26,6 +26,7 @@ from .integrator import (
     STATUS_NONFINITE,
     STATUS_OK,
     advance,
+    advance_segment,
     consistent_acceleration,
 )
 from .modal import damping_matrix, static_equilibrium
@@ -154,8 +155,6 @@ class Simulator:
         self.interpolation = interpolation or config.node.command_interpolation
         self._stats = np.zeros(N_STATS, dtype=np.int64)
         self._ctl = np.array([1.0, 0.0])      # Newton controller: contraction, since verify
-        self._buf_th = np.empty(0)
-        self._buf_td = np.empty(0)
         self._empty2 = np.empty((0, 3))
         self._empty_aux = np.empty((0, N_AUX))
         self.reset(theta1, t0)
@@ -233,13 +232,6 @@ class Simulator:
         return float(mechanical_energy(self.p, self._u, self._v, self._theta1))
 
     # ---- stepping --------------------------------------------------------------------------
-    def _command_at(self, times: np.ndarray, t_cmd: float, value: float):
-        """theta1 and rate at grid times inside the current command segment."""
-        if self.interpolation == 'hold' or t_cmd <= self._cmd_t:
-            return np.full(times.shape, value), np.zeros(times.shape)
-        slope = (value - self._cmd_value) / (t_cmd - self._cmd_t)
-        return self._cmd_value + slope * (times - self._cmd_t), np.full(times.shape, slope)
-
     def advance_to(self, t_target: float, theta1: float | None = None) -> int:
         """Integrate whole steps up to ``t_target`` with ``theta1`` as the command sample at
         ``t_target`` (None: hold the last command).  Returns the number of steps taken;
@@ -250,16 +242,17 @@ class Simulator:
             raise ValueError('advance_to: t_target and theta1 must be finite')
         n = int(math.floor((t_target - self.t) / self.dt + 1e-9))
         if n > 0:
-            if self._buf_th.size < n + 1:
-                self._buf_th = np.empty(n + 1)
-                self._buf_td = np.empty(n + 1)
-            th = self._buf_th[:n + 1]
-            td = self._buf_td[:n + 1]
-            grid = self._t0 + (self._k + np.arange(1, n + 1)) * self.dt
-            th[1:], td[1:] = self._command_at(grid, t_target, theta1)
-            th[0], td[0] = self._theta1, self._theta1_dot
-            self._run_kernel(th, td, 0, self._empty2, self._empty2, self._empty2,
-                             self._empty_aux)
+            if self.interpolation == 'hold' or t_target <= self._cmd_t:
+                slope = 0.0
+            else:
+                slope = (theta1 - self._cmd_value) / (t_target - self._cmd_t)
+            done, status = advance_segment(
+                self.p, self.C, self._u, self._v, self._a, self._theta1, self._theta1_dot,
+                self._t0, self._k, self.dt, n, self._cmd_t,
+                self._cmd_value if slope != 0.0 else float(theta1), slope, self._stats,
+                self._ctl)
+            self._after_kernel(done, status, self._segment_value(done, theta1, slope),
+                               slope)
         if t_target > self._cmd_t or n > 0:
             self._cmd_t = max(t_target, self._cmd_t)
             self._cmd_value = float(theta1)
@@ -280,12 +273,23 @@ class Simulator:
         self._t0 = float(t) - self._k * self.dt
         self._cmd_t = min(self._cmd_t, self.t)
 
+    def _segment_value(self, done: int, theta1: float, slope: float) -> float:
+        """theta1 at the last completed grid point of an advance_segment call."""
+        if slope == 0.0:
+            return float(theta1)
+        grid = self._t0 + float(self._k + done) * self.dt
+        return self._cmd_value + slope * (grid - self._cmd_t)
+
     def _run_kernel(self, th, td, stride, ru, rv, ra, raux) -> None:
         done, status = advance(self.p, self.C, self._u, self._v, self._a, th, td, self.dt,
                                stride, ru, rv, ra, raux, self._stats, self._ctl)
+        self._after_kernel(done, status, float(th[done]), float(td[done]))
+
+    def _after_kernel(self, done: int, status: int, theta1_last: float,
+                      theta1_dot_last: float) -> None:
         self._k += done
         if done > 0:
-            self._theta1, self._theta1_dot = float(th[done]), float(td[done])
+            self._theta1, self._theta1_dot = theta1_last, theta1_dot_last
         if status != STATUS_OK:
             what = 'non-finite state or command' if status == STATUS_NONFINITE else \
                 'Newton did not converge at the finest subdivision'
