@@ -45,7 +45,10 @@ def _summary(label: str, rows: list[dict], wall: float, workers: int,
           f'kernel {1e3 * overhead:5.1f} ms/case ({100 * overhead / kernel:4.1f} %), in-worker '
           f'CPU {1e3 * (case_cpu - kernel_cpu):4.1f} ms, client+scheduler CPU '
           f'{1e3 * main_cpu / n:4.1f} ms')
-    return {'rate': rate, 'kernel': kernel, 'overhead': overhead}
+    util = sum(r['case_cpu_s'] for r in rows) / (wall * workers)
+    print(f'{"":24s} worker CPU utilisation {100 * util:.0f} % (below ~90 %: the cores were '
+          'shared with other processes)')
+    return {'rate': rate, 'kernel': kernel, 'overhead': overhead, 'util': util}
 
 
 def main() -> int:
@@ -89,7 +92,8 @@ def main() -> int:
             print(f'{"":26s} amplitudes identical to the serial run: {same}')
     if 1 in res and 2 in res:
         print(f'scaling 2 workers / 1 worker: {res[2]["rate"] / res[1]["rate"]:.2f}x '
-              f'(target >= 1.8x)')
+              f'(target >= 1.8x); at equal utilisation '
+              f'{res[2]["rate"] / res[2]["util"] / (res[1]["rate"] / res[1]["util"]):.2f}x')
     print(_load())
     return 0
 

@@ -476,8 +476,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             env_csv, env_png = outdir / f'{st.name}_envelope.csv', \
                 outdir / f'{st.name}_envelope.png'
             rows_to_csv(env, ENVELOPE_COLUMNS, env_csv)
-            plot_sweep(env, env_png, f'{st.title}: worst case over {args.compare}',
-                       st.x_label, st.x_log, st.categorical)
+            key, _, vals = args.compare.partition('=')
+            plot_sweep(env, env_png, f'{st.title}: worst case over '
+                       f'{len(vals.split(","))} values of {key}', st.x_label, st.x_log,
+                       st.categorical)
             _say(args, f'worst case over {args.compare}:')
             _say(args, _fmt_table(env, [('series', 'series', ''), ('label', 'case', ''),
                                         ('amp2', 'amp theta2 [rad]', '.4e'),

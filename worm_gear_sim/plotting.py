@@ -133,8 +133,8 @@ def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | Path, title: str,
         vals = [r[key] for r in rows if isinstance(r[key], float) and math.isfinite(r[key])]
         if vals and min(vals) > 0 and max(vals) / min(vals) > 30:
             a.set_yscale('log')
-        else:
-            a.set_ylim(bottom=0.0)
+        elif vals:
+            a.set_ylim(0.0, 1.12 * max(vals) if max(vals) > 0 else 1.0)
         a.set_title(f'max |{label.split()[0]} - equilibrium| after the move', fontsize=9)
         a.set_ylabel(f'amplitude of {label} [rad]')
         a.set_xlabel(x_label)
