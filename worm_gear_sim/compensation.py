@@ -61,22 +61,19 @@ from .model import (
     P_COSL,
     P_COSPHI,
     P_COUT,
-    P_FRIC_IN_COMPLIANCE,
     P_J4,
     P_JG,
     P_JW,
     P_KG,
-    P_KGS,
     P_KW,
-    P_KWS,
     P_LW,
     P_RG,
     P_RW,
     P_SINL,
     P_TLOAD,
     friction_coefficient,
+    mesh_compliance,
     pack_parameters,
-    tooth_stiffness,
 )
 from .params import Config, derive
 
@@ -266,11 +263,10 @@ class _Inverse:
         p = pack_parameters(cfg)
         self.p = p
         self.Jw, self.Jg, self.J4 = p[P_JW], p[P_JG], p[P_J4]
-        self.Kw, self.Kg, self.kws, self.kgs = p[P_KW], p[P_KG], p[P_KWS], p[P_KGS]
+        self.Kw, self.Kg = p[P_KW], p[P_KG]
         self.lw, self.rw, self.rg = p[P_LW], p[P_RW], p[P_RG]
         self.sl, self.cl, self.cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
         self.cout, self.Tload = p[P_COUT], p[P_TLOAD]
-        self.fric_compl = p[P_FRIC_IN_COMPLIANCE] != 0.0
         self.ratio = self.rg / self.lw       # theta1 per theta4
 
     def theta1(self, y0: float, y1: float, y2: float, y3: float, y4: float,
@@ -292,12 +288,7 @@ class _Inverse:
         B = self.cphi * self.cl - mu * self.sl
         Wn = Tm / (self.rg * B)                               # Eq. 13 at the flat path
         th2_rigid = th3 * self.ratio
-        cwkw, cgkg, _, _ = tooth_stiffness(self.p, th2_rigid, th3)
-        if self.fric_compl:
-            Ac, Bc = A, B
-        else:
-            Ac, Bc = self.cphi * self.sl, self.cphi * self.cl
-        kgws = 1.0 / cwkw + 1.0 / cgkg + Ac * self.sl / self.kgs + Bc * self.cl / self.kws
+        kgws = mesh_compliance(self.p, th2_rigid, th3, mu)[0]   # Eq. 10, the model's own
         q = Wn * kgws / self.cl                               # Eq. 9
         th2 = (q + self.rg * th3) / self.lw                   # Eq. 8
         Tw = self.rw * A * Wn                                 # mesh torque on the worm

@@ -185,6 +185,30 @@ def friction_coefficient(p, v_s, q):
     return sq * mu * t, sq * d
 
 
+# ---- Eqs. 7 and 10: compliance of the mesh along the contact normal -----------------------
+@njit(cache=True, error_model='numpy')
+def mesh_compliance(p, th2, th3, mu):
+    """KGWS of Eq. 10 at a mesh position and signed friction coefficient mu:
+    (KGWS, dKGWS/dphase, dKGWS/dmu, c_w k_w, c_g k_g).  The friction terms are kept only
+    with ``friction.in_compliance``."""
+    sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
+    inv_kgs, inv_kws = p[P_INV_KGS], p[P_INV_KWS]
+    if p[P_FRIC_IN_COMPLIANCE] != 0.0:
+        Ac, Bc, dK_dmu = cphi * sl + mu * cl, cphi * cl - mu * sl, cl * sl * (inv_kgs - inv_kws)
+    else:
+        Ac, Bc, dK_dmu = cphi * sl, cphi * cl, 0.0
+    if p[P_MESH_LINEAR] != 0.0:
+        teeth, dK_dphase = p[P_LIN_COMPLIANCE], 0.0
+        cwkw, cgkg = p[P_CWKW_LIN], p[P_CGKG_LIN]
+    else:
+        cwkw, cgkg, dcw, dcg = tooth_stiffness(p, th2, th3)
+        icw, icg = 1.0 / cwkw, 1.0 / cgkg
+        teeth = icw + icg                                            # Eq. 7
+        dK_dphase = -dcw * icw * icw - dcg * icg * icg
+    kgws = teeth + Ac * sl * inv_kgs + Bc * cl * inv_kws             # Eq. 10
+    return kgws, dK_dphase, dK_dmu, cwkw, cgkg
+
+
 # ---- Eqs. 4-15: generalized forces with their analytic Jacobians ---------------------------
 @njit(cache=True, error_model='numpy')
 def mesh_forces(p, th2, th3, th4, w2, w3, w4, theta1):
@@ -201,22 +225,9 @@ def mesh_forces(p, th2, th3, th4, w2, w3, w4, theta1):
     q = lw * th2 - rg * th3                                          # Eq. 8 right side
     v_s = rw * cl * w2 + rg * sl * w3                                # sliding speed
     mu, dmu_dvs = friction_coefficient(p, v_s, q)
-    inv_kgs, inv_kws = p[P_INV_KGS], p[P_INV_KWS]
     A = cphi * sl + mu * cl                                          # F_X / W_n, Eq. 1
     B = cphi * cl - mu * sl                                          # F_Y / W_n, Eq. 2
-    if p[P_FRIC_IN_COMPLIANCE] != 0.0:
-        Ac, Bc, dK_dmu = A, B, cl * sl * (inv_kgs - inv_kws)
-    else:
-        Ac, Bc, dK_dmu = cphi * sl, cphi * cl, 0.0
-    if p[P_MESH_LINEAR] != 0.0:
-        teeth, dK_dphase = p[P_LIN_COMPLIANCE], 0.0
-        cwkw, cgkg = p[P_CWKW_LIN], p[P_CGKG_LIN]
-    else:
-        cwkw, cgkg, dcw, dcg = tooth_stiffness(p, th2, th3)
-        icw, icg = 1.0 / cwkw, 1.0 / cgkg
-        teeth = icw + icg                                            # Eq. 7
-        dK_dphase = -dcw * icw * icw - dcg * icg * icg
-    kgws = teeth + Ac * sl * inv_kgs + Bc * cl * inv_kws             # Eq. 10
+    kgws, dK_dphase, dK_dmu, cwkw, cgkg = mesh_compliance(p, th2, th3, mu)
     ikg = 1.0 / kgws
     Wn = q * cl * ikg                                                # Eq. 9
     dWn_dq = cl * ikg
