@@ -9,8 +9,8 @@ fixtures; rclpy is imported lazily, so non-ROS tests run without it.
   node under test and its probes share the context's participant, nothing leaves it);
 * ``ros_harness``: factory of :class:`RosHarness` (node under test + probe node + a
   SingleThreadedExecutor, bounded waits);
-* ``ros_subprocess_env``: environment for a child process on ROS_DOMAIN_ID 43, discovery
-  LOCALHOST.
+* ``ros_dds_context`` / ``ros_subprocess_env``: a Context and a child-process environment
+  on ROS_DOMAIN_ID 43 with discovery LOCALHOST (tests that start the node as a process).
 """
 
 from __future__ import annotations
@@ -34,6 +34,20 @@ def ros_context(monkeypatch: pytest.MonkeyPatch):
     monkeypatch.delenv('ROS_STATIC_PEERS', raising=False)
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=IN_PROCESS_DOMAIN_ID)
+    try:
+        yield ctx
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture
+def ros_dds_context(monkeypatch: pytest.MonkeyPatch):
+    """A Context that talks to child processes: domain 43, discovery LOCALHOST."""
+    rclpy = pytest.importorskip('rclpy')
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    monkeypatch.delenv('ROS_STATIC_PEERS', raising=False)
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx, domain_id=SUBPROCESS_DOMAIN_ID)
     try:
         yield ctx
     finally:

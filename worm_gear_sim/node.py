@@ -529,12 +529,15 @@ def _parse_args(argv: list[str]) -> argparse.Namespace:
 
 
 def main(args: list[str] | None = None) -> int:
-    """Entry point of ``worm_gear_sim_node`` and ``python -m worm_gear_sim.node``."""
+    """Entry point of ``worm_gear_sim_node`` and ``python -m worm_gear_sim.node``.
+
+    Returns 0 after Ctrl-C / SIGTERM (no traceback), 1 when the parameters are invalid.
+    """
     argv = sys.argv if args is None else args
     opts = _parse_args(remove_ros_args(args=argv)[1:])
-    node = None
     try:
         with rclpy.init(args=argv):
+            context = rclpy.get_default_context()
             try:
                 node = WormGearSimNode()
             except (ConfigError, InvalidParameterTypeException, InvalidParameterValueException,
@@ -545,16 +548,28 @@ def main(args: list[str] | None = None) -> int:
             executor = make_executor(kind)
             executor.add_node(node)
             node.get_logger().info(f'spinning with the {kind} executor')
-            spin_until_shutdown(executor)
+            try:
+                spin_until_shutdown(executor, context)
+            except (KeyboardInterrupt, ExternalShutdownException):
+                pass
+            except Exception:
+                if context.ok():
+                    raise
+                # The signal handler shut the context down while a callback was running
+                # (e.g. a publish on a context being torn down): a normal shutdown.
+            finally:
+                _quietly(executor.shutdown, 1.0)
+                _quietly(node.destroy_node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    finally:
-        if node is not None:
-            try:
-                node.destroy_node()
-            except Exception:  # noqa: BLE001 - context already gone at shutdown
-                pass
     return 0
+
+
+def _quietly(fn: Any, *args: Any) -> None:
+    try:
+        fn(*args)
+    except Exception:  # noqa: BLE001 - best effort at shutdown
+        pass
 
 
 if __name__ == '__main__':

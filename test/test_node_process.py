@@ -1,0 +1,148 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The node as a separate process (``python -m worm_gear_sim.node --ros-args --params-file
+config/worm_gear_sim.yaml``), talked to over DDS on this machine (domain 43, discovery
+LOCALHOST), stopped with SIGINT / SIGTERM: clean exit, code 0, no traceback."""
+
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip('rclpy')
+
+pytestmark = pytest.mark.ros
+
+ROOT = Path(__file__).resolve().parent.parent
+CONFIG = ROOT / 'config' / 'worm_gear_sim.yaml'
+START_TIMEOUT = 90.0      # first start may compile the numba kernel on a loaded machine
+
+
+class Probe:
+    """Command publisher + JointState / feedforward subscriber in the test process."""
+
+    def __init__(self, ctx):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64
+        self.Float64 = Float64
+        self.node = rclpy.create_node('process_probe', context=ctx)
+        self.executor = SingleThreadedExecutor(context=ctx)
+        self.executor.add_node(self.node)
+        self.pub = self.node.create_publisher(Float64, 'worm_angle_command', 10)
+        self.joint_states: list = []
+        self.feedforward: list[float] = []
+        self.node.create_subscription(JointState, 'joint_states', self.joint_states.append, 50)
+        self.node.create_subscription(Float64, '/worm_gear_sim/feedforward',
+                                      lambda m: self.feedforward.append(m.data), 50)
+
+    def stream_until(self, pred, proc, timeout: float, value=lambda t: 0.0) -> bool:
+        """Publish commands at ~200 Hz until ``pred()`` (or the process died / timeout)."""
+        t0 = time.monotonic()
+        while not pred():
+            if time.monotonic() - t0 > timeout or proc.poll() is not None:
+                return False
+            self.pub.publish(self.Float64(data=float(value(time.monotonic() - t0))))
+            self.executor.spin_once(timeout_sec=0.005)
+        return True
+
+    def spin_until(self, pred, timeout: float) -> bool:
+        t0 = time.monotonic()
+        while not pred():
+            if time.monotonic() - t0 > timeout:
+                return False
+            self.executor.spin_once(timeout_sec=0.01)
+        return True
+
+    def close(self):
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+def start(args: list[str], env: dict[str, str], tmp_path: Path) -> tuple:
+    out = open(tmp_path / 'stdout.txt', 'w+')
+    err = open(tmp_path / 'stderr.txt', 'w+')
+    proc = subprocess.Popen(args, cwd=ROOT, env=env, stdout=out, stderr=err)
+    return proc, out, err
+
+
+def stop(proc, sig: int, out, err, timeout: float = 30.0) -> tuple[int, str]:
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    try:
+        rc = proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+        rc = None
+    out.seek(0)
+    err.seek(0)
+    text = out.read() + err.read()
+    out.close()
+    err.close()
+    return rc, text
+
+
+def node_args(*extra: str) -> list[str]:
+    return [sys.executable, '-m', 'worm_gear_sim.node', *extra, '--ros-args',
+            '--params-file', str(CONFIG)]
+
+
+@pytest.mark.parametrize('sig, executor', [(signal.SIGINT, 'events'),
+                                            (signal.SIGTERM, 'single_threaded')])
+def test_process_talks_over_dds_and_exits_cleanly(ros_dds_context, ros_subprocess_env,
+                                                  tmp_path, sig, executor):
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    proc, out, err = start(node_args('--executor', executor), ros_subprocess_env, tmp_path)
+    probe = Probe(ros_dds_context)
+    try:
+        slew = lambda t: 0.2 * math.sin(2.0 * math.pi * t)  # noqa: E731
+        ok = probe.stream_until(lambda: len(probe.joint_states) >= 20, proc, START_TIMEOUT,
+                                slew)
+        if not ok:
+            rc, text = stop(proc, signal.SIGINT, out, err)
+            pytest.fail(f'no JointState from the node process (rc {rc}):\n{text}')
+        js = probe.joint_states[-1]
+        assert list(js.name) == ['worm_input_joint', 'worm_joint', 'worm_gear_joint',
+                                 'antenna_joint']
+        assert len(js.position) == len(js.velocity) == len(js.effort) == 4
+        assert all(math.isfinite(x) for x in js.position)
+        assert probe.feedforward, 'no ~/feedforward'
+        # a parameter set over DDS, as `ros2 param set` does
+        client = AsyncParameterClient(probe.node, 'worm_gear_sim')
+        assert probe.spin_until(client.services_are_ready, 30.0)
+        fut = client.set_parameters([Parameter('friction.mu_kinetic', value=0.05),
+                                     Parameter('integrator.time_step', value=2e-5)])
+        assert probe.spin_until(fut.done, 30.0)
+        good, read_only = fut.result().results
+        assert good.successful and not read_only.successful
+        assert 'read-only' in read_only.reason
+        n = len(probe.joint_states)
+        assert probe.stream_until(lambda: len(probe.joint_states) >= n + 10, proc, 30.0)
+    finally:
+        probe.close()
+        rc, text = stop(proc, sig, out, err)
+    assert rc == 0, text
+    assert 'Traceback' not in text, text
+    assert f'spinning with the {executor} executor' in text
+
+
+def test_process_rejects_invalid_parameter_file(ros_subprocess_env, tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(CONFIG.read_text().replace('model: stribeck ', 'model: coulomb  '))
+    assert 'model: coulomb' in bad.read_text()
+    proc = subprocess.run([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
+                           '--params-file', str(bad)], cwd=ROOT, env=ros_subprocess_env,
+                          capture_output=True, text=True, timeout=120)
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 1, text
+    assert 'friction.model' in text and 'coulomb' in text, text
+    assert 'Traceback' not in text, text
