@@ -192,13 +192,17 @@ class SampledProfile(Profile):
         if not p.is_file():
             raise ConfigError('input.csv_path', f'file not found: {p}')
         try:
-            data = np.genfromtxt(p, delimiter=',', comments='#', dtype=float)
+            data = np.genfromtxt(p, delimiter=',', comments='#', dtype=float, ndmin=2)
         except ValueError as exc:
             raise ConfigError('input.csv_path', f'{p}: not a numeric CSV ({exc})') from None
-        if data.ndim == 2 and np.all(np.isnan(data[0])):
+        if data.ndim == 2 and data.shape[0] > 0 and np.all(np.isnan(data[0])):
             data = data[1:]   # header row
         if data.ndim != 2 or data.shape[1] < 2 or data.shape[0] < 1:
             raise ConfigError('input.csv_path', f'{p}: need at least two columns t, theta1')
+        bad = np.argwhere(np.isnan(data[:, :2]))
+        if bad.size:
+            raise ConfigError('input.csv_path', f'{p}: non-numeric or missing value in data '
+                              f'row {bad[0][0] + 1}, column {bad[0][1] + 1}')
         return cls(data[:, 0], data[:, 1], interpolation, source=str(p))
 
     def describe(self):
