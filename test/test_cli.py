@@ -117,6 +117,22 @@ def test_sweep_paper_study_serial(tmp_path, capsys):
     assert params['input']['end_time'] == 0.03
 
 
+def test_sweep_on_an_existing_scheduler_equals_serial(tmp_path, capsys):
+    import logging
+
+    from distributed import LocalCluster
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=None, silence_logs=logging.ERROR) as cluster:
+        status, stdout, _ = run(capsys, 'sweep', 'flywheel', *SHORT, '--scheduler',
+                                cluster.scheduler_address, '--no-progress', '-o',
+                                tmp_path / 'dask')
+    assert status == 0 and 'Dask scheduler tcp://' in stdout
+    assert run(capsys, 'sweep', 'flywheel', *SHORT, '--serial', '--no-progress', '-o',
+               tmp_path / 'serial')[0] == 0
+    a = (tmp_path / 'dask' / 'flywheel.csv').read_bytes()
+    assert a == (tmp_path / 'serial' / 'flywheel.csv').read_bytes()   # same numbers
+
+
 def test_sweep_user_parameter_with_compare(tmp_path, capsys):
     status, stdout, _ = run(capsys, 'sweep', '--param', 'mesh.phase_offset', '--values',
                             '0,3', '--compare', 'input.move_time=0.02,0.025', '--name',

@@ -430,7 +430,11 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
     items = [(i, dict(c.overrides), t_end) for i, c in enumerate(cases)]
     results: list[dict[str, Any] | None] = [None] * len(cases)
     studies = list(dict.fromkeys(c.study for c in cases))
-    bar = _progress(len(cases), progress, studies[0] if len(studies) == 1 else 'sweep')
+    bar = None
+
+    def start_bar() -> None:   # after the engine is up: no bar before a connection error
+        nonlocal bar
+        bar = _progress(len(cases), progress, studies[0] if len(studies) == 1 else 'sweep')
 
     def done(r: dict[str, Any]) -> None:
         results[r['index']] = r
@@ -441,18 +445,22 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
 
     try:
         if serial:
+            start_bar()
             for i, ov, te in items:
                 done(_run_payload((i, base_map, ov, te)))
         else:
             with _dask_client(client, scheduler, workers) as cl:
                 from distributed import as_completed
-                n_workers = max(1, len(cl.run(warm_up)))
+                n_workers = len(cl.run(warm_up))
+                if n_workers == 0:
+                    raise ConnectionError('the Dask cluster has no workers')
                 size = chunk_size if chunk_size else \
                     max(1, min(16, math.ceil(len(items) / (16 * n_workers))))
                 chunks = [items[k:k + size] for k in range(0, len(items), size)]
                 base_future = cl.scatter(base_map, broadcast=True)
                 futures = [cl.submit(_run_chunk, base_future, ch, pure=False)
                            for ch in chunks]
+                start_bar()
                 try:
                     for fut in as_completed(futures):
                         for r in fut.result():
@@ -512,7 +520,7 @@ class _dask_client:
         from distributed import Client, LocalCluster
         if self.scheduler:
             try:
-                cl = Client(self.scheduler, timeout='10s')
+                cl = Client(self.scheduler, timeout='5s')
             except OSError as exc:
                 raise ConnectionError(f'cannot reach Dask scheduler {self.scheduler}: '
                                       f'{exc}') from None
