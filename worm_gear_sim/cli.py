@@ -186,7 +186,8 @@ def load_params_json(path: str | Path, doc: Mapping[str, Any] | None = None) -> 
             if not _close(value, fresh[key]):
                 raise ConfigError(f'derived.{key}', f'{value!r} does not match the value '
                                   f'derived from the parameters ({fresh[key]!r}); derived '
-                                  'quantities are outputs: edit the sections instead')
+                                  'quantities are outputs: edit the sections and delete the '
+                                  'derived block')
     return cfg
 
 
