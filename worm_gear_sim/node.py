@@ -96,6 +96,7 @@ class WormGearSimNode(Node):
     def __init__(self, node_name: str = NODE_NAME, *, defaults: Config | None = None,
                  **kwargs: Any):
         super().__init__(node_name, **kwargs)
+        self._clock = self.get_clock()
         values = declare_config(self, defaults if defaults is not None else file_defaults())
         self._types = {name: parameter_type(v) for name, v in values.items()}
         cfg = config_from_mapping(values, source='ROS parameters')
@@ -239,13 +240,14 @@ class WormGearSimNode(Node):
     # ---- the tick ---------------------------------------------------------------------
     def _now(self) -> tuple[str, int, Any]:
         """(time base, nanoseconds on that base, ROS stamp)."""
-        now = self.get_clock().now()
-        if self.get_clock().ros_time_is_active:
+        clock = self._clock
+        now = clock.now()
+        if clock.ros_time_is_active:
             return 'sim', now.nanoseconds, now
         return 'wall', time.monotonic_ns(), now
 
     def _on_tick(self) -> None:
-        busy0 = time.perf_counter_ns()
+        busy0 = time.thread_time_ns()
         base, ns, stamp = self._now()
         if not self._started:
             if self._cmd is None:
@@ -261,7 +263,8 @@ class WormGearSimNode(Node):
                 self._warn(f'clock went backwards ({self._last_t:.9f} s -> {t:.9f} s since '
                            'start); tick ignored, state kept')
             return                      # no time has passed: nothing new to publish
-        self._count_missed(base)
+        if base == 'wall':
+            self._count_missed(ns)
         ref = self._cmd
         if self._cmd_fresh:
             self.counters['commands_used'] += 1
@@ -274,7 +277,7 @@ class WormGearSimNode(Node):
         w = self._window
         w['ticks'] += 1
         w['steps'] += steps
-        w['busy_ns'] += time.perf_counter_ns() - busy0
+        w['busy_ns'] += time.thread_time_ns() - busy0
         c = self.counters
         c['ticks'] += 1
         c['steps'] += steps
@@ -295,9 +298,9 @@ class WormGearSimNode(Node):
         self.get_logger().info(f'first command {self._cmd:.9g} rad: simulation started '
                                f'({base} time)')
 
-    def _count_missed(self, base: str) -> None:
-        mono = time.monotonic_ns()
-        if base == 'wall' and self._last_mono_ns:
+    def _count_missed(self, mono: int) -> None:
+        """Wall time: periods lost between this tick and the previous one."""
+        if self._last_mono_ns:
             gap = mono - self._last_mono_ns
             missed = int((gap + self._period_ns // 2) // self._period_ns) - 1
             if missed > 0:
@@ -359,15 +362,18 @@ class WormGearSimNode(Node):
         js.position = [st.theta1, float(th[0]), float(th[1]), float(th[2])]
         js.velocity = [st.theta1_dot, float(om[0]), float(om[1]), float(om[2])]
         js.effort = self.sim.joint_torques().tolist()
-        self._pub_js.publish(js)
+        if self._pub_js.get_subscription_count():   # publishing to nobody still costs
+            self._pub_js.publish(js)
         # Uncompensated: the reference is the simulated command itself (exactly the batch
         # Trajectory.output_error); compensated: the servo's reference theta1_ref.
         reference = st.theta1 if ref is None else ref
-        self._f_err.data = float(th[2]) - reference * self.ratio
-        self._pub_err.publish(self._f_err)
-        self._f_worm.data = float(th[0]) - st.theta1
-        self._pub_worm.publish(self._f_worm)
-        if self.compensator is not None:
+        if self._pub_err.get_subscription_count():
+            self._f_err.data = float(th[2]) - reference * self.ratio
+            self._pub_err.publish(self._f_err)
+        if self._pub_worm.get_subscription_count():
+            self._f_worm.data = float(th[0]) - st.theta1
+            self._pub_worm.publish(self._f_worm)
+        if self.compensator is not None and self._pub_ff.get_subscription_count():
             self._f_ff.data = delta
             self._pub_ff.publish(self._f_ff)
 
@@ -489,7 +495,7 @@ class WormGearSimNode(Node):
         ]
 
     def publish_diagnostics(self) -> None:
-        self._pub_diag.publish(diag.array(self.get_clock().now().to_msg(),
+        self._pub_diag.publish(diag.array(self._clock.now().to_msg(),
                                           self.diagnostic_statuses()))
 
 

@@ -1,0 +1,307 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Real-time benchmark of the ROS 2 node across two processes.
+
+Starts ``python -m worm_gear_sim.node --ros-args --params-file config/worm_gear_sim.yaml``
+(1 kHz ticks, dt = 10 us: the defaults) as a child process; this process streams
+``worm_angle_command`` at 1 kHz (a radar slew: constant-rate triangle, +-0.5 rad of worm at
+0.5 rad/s, i.e. the antenna sweeping at ~9 mrad/s) and subscribes to ``joint_states`` and
+``/diagnostics``.  Measured over ``--duration`` seconds after a warm-up:
+
+* CPU of the node process (utime + stime from /proc/<pid>/stat) in cores;
+* missed ticks: JointState stamps more than 1.5 periods apart, counted as periods lost,
+  plus the node's own ``missed_ticks`` diagnostic (monotonic-clock gaps between ticks);
+* command -> JointState latency: from publishing command i to receiving the first
+  JointState whose theta1 shows it (both times on this process' monotonic clock).
+
+Targets (issue 3): <= 0.15 core, <= 0.1 % missed ticks over 60 s, latency p99 <= 1.5 ms.
+``--breakdown`` adds in-process per-tick costs (no DDS) to show what bounds the CPU figure.
+
+    python benchmarks/bench_node.py                    # 60 s
+    python benchmarks/bench_node.py --duration 20 --breakdown
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+TARGET_CPU, TARGET_MISSED, TARGET_P99_MS = 0.15, 0.001, 1.5
+
+
+def proc_cpu_seconds(pid: int) -> float:
+    """utime + stime of a process (all threads) in seconds."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def slew(t: float, rate: float = 0.5, amplitude: float = 0.5) -> float:
+    """Triangle: constant rate back and forth between +-amplitude [rad of worm]."""
+    period = 4.0 * amplitude / rate
+    x = (t % period) / period
+    return amplitude * (4.0 * x - 1.0 if x < 0.5 else 3.0 - 4.0 * x)
+
+
+def breakdown(n_ticks: int = 2000) -> dict[str, float]:
+    """Per-tick costs [us] of the pieces of a tick, in-process (no DDS transport)."""
+    import rclpy
+    from std_msgs.msg import Float64
+
+    from worm_gear_sim.node import WormGearSimNode
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'OFF'
+    ctx = rclpy.context.Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '44')))
+    node = WormGearSimNode(context=ctx)
+    out: dict[str, float] = {}
+    try:
+        msg = Float64()
+        sim, comp = node.sim, node.compensator
+        # whole tick callback at the slew, wall time, without the executor
+        t0 = time.monotonic()
+        for i in range(n_ticks + 200):
+            if i == 200:
+                busy0, k0 = node._window['busy_ns'], node._window['ticks']
+            msg.data = slew(time.monotonic() - t0)
+            node._on_command(msg)
+            node._on_tick()
+            while time.monotonic() - t0 < (i + 1) * 1e-3:
+                pass
+        out['tick callback (all below)'] = \
+            (node._window['busy_ns'] - busy0) / (node._window['ticks'] - k0) / 1e3
+        # physics alone: 1 ms of the same slew per call
+        from worm_gear_sim.simulation import Simulator
+        s = Simulator(node.config, theta1=slew(0.0))
+        t, a = 0.0, time.perf_counter()
+        for _ in range(n_ticks):
+            t += 1e-3
+            s.advance_to(t, slew(t))
+        out['  Simulator.advance_to (100 Newmark steps)'] = \
+            (time.perf_counter() - a) / n_ticks * 1e6
+        if comp is not None:
+            from worm_gear_sim.compensation import Compensator
+            c = Compensator(node.config)
+            c.reset(slew(0.0), 0.0)
+            t, a = 0.0, time.perf_counter()
+            for _ in range(n_ticks):
+                t += 1e-3
+                c.update(t, slew(t))
+            out['  Compensator.update'] = (time.perf_counter() - a) / n_ticks * 1e6
+
+        def per(f) -> float:
+            a = time.perf_counter()
+            for _ in range(n_ticks):
+                f()
+            return (time.perf_counter() - a) / n_ticks * 1e6
+        out['  state + joint_torques'] = per(lambda: (sim.state, sim.joint_torques()))
+        out['  4 publishes (JointState + 3 Float64)'] = per(lambda: (
+            node._pub_js.publish(node._js), node._pub_err.publish(node._f_err),
+            node._pub_worm.publish(node._f_worm), node._pub_ff.publish(node._f_ff)))
+        out['  clock.now()'] = per(lambda: node.get_clock().now())
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    return out
+
+
+def empty_timer_cost(kind: str, seconds: float = 5.0) -> float:
+    """CPU [core] of an empty 1 kHz timer with the given executor (the executor's floor)."""
+    code = f'''
+import time, rclpy
+from rclpy.node import Node
+from worm_gear_sim.node import make_executor
+rclpy.init(domain_id={int(os.environ.get('ROS_DOMAIN_ID', '44'))})
+n = Node('empty_timer'); n.create_timer(1e-3, lambda: None)
+ex = make_executor('{kind}'); ex.add_node(n)
+fut = rclpy.task.Future()
+ex.spin_until_future_complete(fut, timeout_sec=1.0)
+c0, w0 = time.process_time(), time.monotonic()
+while time.monotonic() - w0 < {seconds}:
+    ex.spin_until_future_complete(fut, timeout_sec=1.0)
+print((time.process_time() - c0) / (time.monotonic() - w0))
+'''
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         timeout=seconds + 60, cwd=ROOT)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--duration', type=float, default=60.0, help='measured seconds [60]')
+    ap.add_argument('--warmup', type=float, default=5.0, help='seconds before measuring [5]')
+    ap.add_argument('--executor', choices=('events', 'single_threaded'), default='events')
+    ap.add_argument('--command-rate', type=float, default=1000.0,
+                    help='worm_angle_command rate [Hz] (default 1000)')
+    ap.add_argument('--domain-id', type=int, default=44)
+    ap.add_argument('--breakdown', action='store_true',
+                    help='also measure the per-tick costs in-process')
+    args = ap.parse_args(argv)
+
+    os.environ['ROS_DOMAIN_ID'] = str(args.domain_id)
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64
+
+    load0 = os.getloadavg()
+    node_cmd = [sys.executable, '-m', 'worm_gear_sim.node', '--executor', args.executor,
+                '--ros-args', '--params-file', str(ROOT / 'config' / 'worm_gear_sim.yaml'),
+                '--log-level', 'warn']
+    proc = subprocess.Popen(node_cmd, cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    rclpy.init()
+    probe = rclpy.create_node('bench_probe')
+    ex = SingleThreadedExecutor()
+    ex.add_node(probe)
+    pub = probe.create_publisher(Float64, 'worm_angle_command', QoSProfile(depth=10))
+    sent: collections.deque = collections.deque(maxlen=64)      # (value, t_sent)
+    step = args.command_rate and 0.5 / args.command_rate        # rad between commands
+    lat: list[float] = []
+    stamps: list[int] = []
+    diag: dict[str, str] = {}
+    state = {'measuring': False, 'n_js': 0}
+
+    def on_js(msg: JointState) -> None:
+        t_rx = time.monotonic()
+        state['n_js'] += 1
+        if not state['measuring']:
+            return
+        stamps.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+        th1 = msg.position[0]
+        # newest command this JointState shows (newest first: the triangle repeats values
+        # around its apexes); older unmatched ones were superseded within a tick
+        for j in range(len(sent) - 1, -1, -1):
+            v, t_tx = sent[j]
+            if abs(th1 - v) < 0.05 * step:
+                lat.append(t_rx - t_tx)
+                for _ in range(j + 1):
+                    sent.popleft()
+                break
+
+    def on_diag(msg: DiagnosticArray) -> None:
+        for s in msg.status:
+            if s.name.endswith(': simulation'):
+                diag.update({kv.key: kv.value for kv in s.values})
+
+    probe.create_subscription(JointState, 'joint_states', on_js, QoSProfile(depth=100))
+    probe.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
+    # The probe runs on the EventsExecutor (bounded spin slices, as the node does): a 1 kHz
+    # timer publishes the commands and advances the phases, so the probe itself stays light.
+    from worm_gear_sim.node import make_executor
+    ex.shutdown()
+    ex = make_executor('events')
+    ex.add_node(probe)
+    done = rclpy.task.Future()
+    t_start = time.monotonic()
+    run = {'phase': 'wait', 'cpu0': 0.0, 'wall0': 0.0, 'cpu1': 0.0, 'wall1': 0.0,
+           'diag0': {}, 'error': ''}
+
+    def on_timer() -> None:
+        now = time.monotonic()
+        if proc.poll() is not None:
+            run['error'] = 'node process exited'
+            done.set_result(True)
+            return
+        ph = run['phase']
+        if ph == 'wait' and state['n_js'] > 0:
+            run['phase'], run['t_warm'] = 'warm', now
+        elif ph == 'warm' and now - run['t_warm'] >= args.warmup:
+            run['phase'], state['measuring'] = 'measure', True
+            run['cpu0'], run['wall0'] = proc_cpu_seconds(proc.pid), now
+            run['diag0'] = dict(diag)
+        elif ph == 'measure' and now - run['wall0'] >= args.duration:
+            run['cpu1'], run['wall1'] = proc_cpu_seconds(proc.pid), now
+            state['measuring'] = False
+            done.set_result(True)
+            return
+        elif ph == 'wait' and now - t_start > 120.0:
+            run['error'] = 'no JointState from the node within 120 s'
+            done.set_result(True)
+            return
+        v = slew(now - t_start)
+        pub.publish(Float64(data=v))
+        sent.append((v, time.monotonic()))
+
+    probe.create_timer(1.0 / args.command_rate, on_timer)
+    try:
+        while not done.done():
+            ex.spin_until_future_complete(done, timeout_sec=1.0)
+        if run['error']:
+            print(run['error'], file=sys.stderr)
+            return 2
+        t_end = time.monotonic() + 1.5               # the last diagnostics (1 s period)
+        while time.monotonic() < t_end:
+            ex.spin_until_future_complete(rclpy.task.Future(), timeout_sec=0.2)
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        try:
+            rc = proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            rc = proc.wait()
+        ex.shutdown()
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    cpu0, wall0, cpu1, wall1 = run['cpu0'], run['wall0'], run['cpu1'], run['wall1']
+    diag0 = run['diag0']
+
+    wall = wall1 - wall0
+    cores = (cpu1 - cpu0) / wall
+    n_expected = round(wall * 1000.0)
+    lost = 0
+    for a, b in zip(stamps, stamps[1:]):
+        gap = (b - a) / 1e6
+        if gap > 1.5:
+            lost += int(round(gap)) - 1
+    missed_rx = lost / max(1, n_expected)
+    node_missed = int(diag.get('missed_ticks', 0)) - int(diag0.get('missed_ticks', 0))
+    node_ticks = int(diag.get('ticks', 0)) - int(diag0.get('ticks', 0))
+    lat_ms = sorted(x * 1e3 for x in lat)
+
+    def pct(p: float) -> float:
+        return lat_ms[min(len(lat_ms) - 1, int(p / 100.0 * len(lat_ms)))] if lat_ms else \
+            math.nan
+    load1 = os.getloadavg()
+    print(f'worm_gear_sim node benchmark: {wall:.1f} s measured, executor {args.executor}, '
+          f'1 kHz ticks, dt = 10 us, commands at {args.command_rate:g} Hz (slew 0.5 rad/s)')
+    print(f'machine: {os.cpu_count()} cores shared with other work; load average '
+          f'{load0[0]:.2f} before, {load1[0]:.2f} after (1 min)')
+    ok = lambda good: 'ok' if good else 'MISSED'  # noqa: E731
+    print(f'  CPU of the node process      {cores:6.3f} core        target <= {TARGET_CPU}'
+          f'  {ok(cores <= TARGET_CPU)}')
+    print(f'  missed ticks (JointState)    {100 * missed_rx:6.3f} % ({lost} of {n_expected})'
+          f'  target <= {100 * TARGET_MISSED:g} %  {ok(missed_rx <= TARGET_MISSED)}')
+    if node_ticks:
+        total = node_ticks + node_missed
+        print(f'  missed ticks (node, mono)    {100 * node_missed / total:6.3f}'
+              f' % ({node_missed} of {total})')
+    print(f'  latency command->JointState  p50 {pct(50):.3f} ms  p99 {pct(99):.3f} ms  '
+          f'max {lat_ms[-1] if lat_ms else math.nan:.3f} ms  ({len(lat_ms)} samples)'
+          f'  target p99 <= {TARGET_P99_MS} ms  {ok(pct(99) <= TARGET_P99_MS)}')
+    for key in ('compute_load', 'steps_per_tick', 'real_time_factor', 'overruns'):
+        if key in diag:
+            print(f'  node diagnostics: {key} = {diag[key]} (last 1 s window)')
+    print(f'  node exit code after SIGINT: {rc}')
+    if args.breakdown:
+        print('per-tick costs in-process (us):')
+        for k, v in breakdown().items():
+            print(f'  {k:44s} {v:8.1f}')
+        for kind in ('events', 'single_threaded'):
+            print(f'  empty 1 kHz timer, {kind:16s} executor: '
+                  f'{empty_timer_cost(kind):.3f} core')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
