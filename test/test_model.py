@@ -79,6 +79,16 @@ def test_mean_tooth_stiffness_over_a_mesh_cycle():
     assert k[:, 1].min() < 2.5e8 < k[:, 1].max()
 
 
+def test_tooth_stiffness_scales_with_module():
+    """M multiplies Eqs. 16-17; the calibration refers to the paper's M2."""
+    phases = np.linspace(0, 2 * math.pi, 2001)[:-1]
+    for module in (1.0, 2.0, 5.0):
+        p = pack_parameters(Config().replace({'geometry.module': module}))
+        k = np.array([tooth_stiffness(p, 2 * ph, 0.0)[:2] for ph in phases])
+        assert k[:, 0].mean() == pytest.approx(3.5e8 * module / 2, rel=0.01)
+        assert k[:, 1].mean() == pytest.approx(2.5e8 * module / 2, rel=0.01)
+
+
 def test_friction_coefficient_eq18_in_si():
     p = pack_parameters(Config())
     # mu from the friction force of a loaded, sliding mesh: mu_eff = W_f / W_n

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from worm_gear_sim import studies as S
+from worm_gear_sim.model import P_CGKG_LIN, pack_parameters
 from worm_gear_sim.params import Config, ConfigError, derive
 
 SHORT = 0.03     # s: the move ends at 0.02 s, 10 ms of ringing is enough for the checks
@@ -27,15 +28,16 @@ def test_module_overrides_geometry_keeps_ratio_and_lead_angle(base):
         assert d.lead_angle == pytest.approx(d2.lead_angle, rel=1e-12)
         assert cfg.geometry.gear_pitch_radius == pytest.approx(0.056 * m / 2)
         assert cfg.geometry.lead == pytest.approx(math.pi * m * 1e-3, rel=1e-7)   # pi M
-        assert cfg.mesh.gear_tooth_stiffness_multiplier == pytest.approx(m / 2)
+        assert cfg.geometry.module == m
+        p, p2 = pack_parameters(cfg), pack_parameters(base)       # tooth stiffness ~ M
+        assert p[P_CGKG_LIN] == pytest.approx(p2[P_CGKG_LIN] * m / 2)
         assert d.J_g == pytest.approx(d2.J_g * (m / 2) ** 5, rel=1e-12)
         assert d.K_w == d2.K_w and d.J_4 == d2.J_4          # shafts, flywheel unchanged
 
 
 def test_module_overrides_stiffness_only_and_identity_at_m2(base):
     ov = S.module_overrides(base, 4.0, 'stiffness')
-    assert set(ov) == {'geometry.module', 'mesh.worm_tooth_stiffness_multiplier',
-                       'mesh.gear_tooth_stiffness_multiplier'}
+    assert set(ov) == {'geometry.module'}
     assert base.replace(S.module_overrides(base, 2.0, 'geometry')) == base
     with pytest.raises(ValueError):
         S.module_overrides(base, 2.0, 'volume')

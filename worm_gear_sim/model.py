@@ -72,6 +72,7 @@ AUX_WN, AUX_MU, AUX_CWKW, AUX_CGKG, AUX_VS, AUX_FX, AUX_FY, AUX_Q = range(8)
 N_AUX = 8
 
 DEG_PER_RAD = 180.0 / math.pi
+MODULE_OF_FIT = 2.0     # Eqs. 16-17 and the linear tooth stiffnesses are the paper's M2
 TWO_PI = 2.0 * math.pi
 
 
@@ -96,13 +97,20 @@ def pack_parameters(cfg: Config) -> np.ndarray:
     p[P_SINL], p[P_COSL] = math.sin(d.lead_angle), math.cos(d.lead_angle)
     p[P_COSPHI] = math.cos(g.pressure_angle)
     p[P_MESH_LINEAR] = 1.0 if mesh.stiffness_model == 'linear' else 0.0
-    p[P_CWKW_LIN] = mesh.worm_tooth_stiffness_linear * mesh.worm_tooth_stiffness_multiplier
-    p[P_CGKG_LIN] = mesh.gear_tooth_stiffness_linear * mesh.gear_tooth_stiffness_multiplier
+    # Tooth stiffness scales with the module M (the M factor of Eqs. 16-17); the linear
+    # values and the calibration of the contact-position origin refer to the paper's M2.
+    m_scale = g.module / MODULE_OF_FIT
+    p[P_CWKW_LIN] = mesh.worm_tooth_stiffness_linear * mesh.worm_tooth_stiffness_multiplier \
+        * m_scale
+    p[P_CGKG_LIN] = mesh.gear_tooth_stiffness_linear * mesh.gear_tooth_stiffness_multiplier \
+        * m_scale
     worm_raw = g.module * math.exp(mesh.worm_fit_a)          # Eq. 16: M e^{a_w}
     gear_raw = g.module * math.exp(mesh.gear_fit_a)          # Eq. 17: M e^{a_g}
     if mesh.calibrate_to_linear_mean:
-        x0w = _calibrated_origin(worm_raw, mesh.worm_fit_b, mesh.worm_tooth_stiffness_linear)
-        x0g = _calibrated_origin(gear_raw, mesh.gear_fit_b, mesh.gear_tooth_stiffness_linear)
+        fit_w = MODULE_OF_FIT * math.exp(mesh.worm_fit_a)
+        fit_g = MODULE_OF_FIT * math.exp(mesh.gear_fit_a)
+        x0w = _calibrated_origin(fit_w, mesh.worm_fit_b, mesh.worm_tooth_stiffness_linear)
+        x0g = _calibrated_origin(fit_g, mesh.gear_fit_b, mesh.gear_tooth_stiffness_linear)
     else:
         x0w = x0g = 0.0
     # second pair one axial pitch (360 deg) further on: e^{b(x+360)} = e^{bx} e^{360 b}

@@ -59,8 +59,9 @@ def _f(default: Any, description: str, unit: str = '', lo: float | None = None,
 class Geometry:
     """Worm-gear set geometry (Table 1, module M2). R in Table 1 is a radius."""
 
-    module: float = _f(2.0, 'Gear module M in mm (multiplies Eqs. 16-17)', 'mm', 0.0, 50.0,
-                       lo_open=True)
+    module: float = _f(2.0, 'Gear module M in mm: tooth stiffness scales with M (the M of '
+                       'Eqs. 16-17; the linear values are given at M = 2). Geometry is set '
+                       'separately', 'mm', 0.0, 50.0, lo_open=True)
     worm_pitch_radius: float = _f(0.0158, 'Worm pitch radius r_w = R2', 'm', 0.0, 1.0,
                                   lo_open=True)
     worm_length: float = _f(0.015, 'Worm body length L2 (inertia J_w)', 'm', 0.0, 2.0,

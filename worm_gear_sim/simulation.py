@@ -125,8 +125,7 @@ class Trajectory:
         units = {'t': 's', 'normal_force': 'N', 'force_x': 'N', 'force_y': 'N',
                  'mu': '1', 'sliding_velocity': 'm/s', 'worm_tooth_stiffness': 'N/m',
                  'gear_tooth_stiffness': 'N/m', 'mesh_deflection': 'm'}
-        names = [f'{k}[{units.get(k, "rad" if k.startswith(("theta", "worm_e", "output")) else ("rad/s" if k.startswith(("omega", "theta1_dot")) else "rad/s^2"))}]'  # noqa: E501
-                 for k in cols]
+        names = [f'{k}[{_csv_unit(k, units)}]' for k in cols]
         data = np.column_stack(list(cols.values()))
         comment = f'# worm_gear_sim; profile: {self.profile}\n'
         if header_comment:
@@ -135,6 +134,16 @@ class Trajectory:
             fh.write(comment)
             fh.write(','.join(names) + '\n')
             np.savetxt(fh, data, delimiter=',', fmt='%.12g')
+
+
+def _csv_unit(name: str, units: dict[str, str]) -> str:
+    if name in units:
+        return units[name]
+    if name == 'theta1_dot' or name.startswith('omega'):
+        return 'rad/s'
+    if name.startswith('alpha'):
+        return 'rad/s^2'
+    return 'rad'
 
 
 class Simulator:

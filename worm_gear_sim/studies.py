@@ -88,12 +88,11 @@ def module_overrides(base: Config, module: float, scaling: str = 'geometry') -> 
     ``scaling='geometry'``: a geometrically similar worm set.  The worm and gear pitch radii,
     the lead (pi M per revolution) and the worm/gear body lengths scale with M/2, so the
     ratio (1:56), the lead angle and the pressure angle are unchanged; the tooth stiffnesses
-    scale with M (the M factor of Eqs. 16-17, applied as the tooth-stiffness multipliers
-    M/2 because the mesh calibration to the paper's M2 mean values absorbs ``geometry.module``);
+    scale with M (``geometry.module``, the M factor of Eqs. 16-17);
     inertias J_w, J_g grow as M^5 (solid cylinders).  Shafts, bearings and flywheel are
     unchanged (they are the radar's, not the gear set's).
 
-    ``scaling='stiffness'``: only the tooth stiffnesses scale with M/2 (the reading of the
+    ``scaling='stiffness'``: only the tooth stiffnesses scale with M (the reading of the
     paper's Sec. 4.2: "when the modulus of gear is larger ... the rigidity of the teeth is
     larger"); geometry and inertias stay at M2.
     """
@@ -103,11 +102,8 @@ def module_overrides(base: Config, module: float, scaling: str = 'geometry') -> 
         raise ValueError(f'module must be > 0, got {module!r}')
     f = module / _M_REF
     flat = base.to_flat_dict()
-    out: dict[str, Any] = {
-        'geometry.module': float(module),
-        'mesh.worm_tooth_stiffness_multiplier': flat['mesh.worm_tooth_stiffness_multiplier'] * f,
-        'mesh.gear_tooth_stiffness_multiplier': flat['mesh.gear_tooth_stiffness_multiplier'] * f,
-    }
+    # tooth stiffness scales with geometry.module itself (the M of Eqs. 16-17)
+    out: dict[str, Any] = {'geometry.module': float(module)}
     if scaling == 'geometry':
         for key in _MODULE_SCALED:
             out[key] = flat[key] * f
