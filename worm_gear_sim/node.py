@@ -152,8 +152,10 @@ class WormGearSimNode(Node):
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
 
-        self._timer = self.create_timer(1.0 / cfg.node.publish_rate_hz, self._on_tick)
-        self._diag_timer = self.create_timer(cfg.node.diagnostic_period, self.publish_diagnostics)
+        self._timer = self.create_timer(1.0 / cfg.node.publish_rate_hz,
+                                        self._guard(self._on_tick))
+        self._diag_timer = self.create_timer(cfg.node.diagnostic_period,
+                                             self._guard(self.publish_diagnostics))
         self.get_logger().info(
             f'ready: dt = {self.sim.dt:g} s, {cfg.node.publish_rate_hz:g} Hz, ratio '
             f'1:{1.0 / self.ratio:.6g}; waiting for {self.resolve_topic_name(COMMAND_TOPIC)}')
@@ -163,6 +165,19 @@ class WormGearSimNode(Node):
                 'published and the prediction is uncompensated')
 
     # ---- helpers -----------------------------------------------------------------------
+    def _guard(self, callback: Any) -> Any:
+        """Timer callback that ends quietly when Ctrl-C / SIGTERM shut the context down
+        while it runs (a publish on a dying context raises); other errors propagate."""
+        context = self.context
+
+        def guarded() -> None:
+            try:
+                callback()
+            except Exception:
+                if context.ok():
+                    raise
+        return guarded
+
     def _warm_up(self) -> None:
         """Run the compiled kernel once so the first tick pays no load/compile time."""
         self.sim.advance_to(10 * self.sim.dt, 0.0)

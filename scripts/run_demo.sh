@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+#
+# Set up (first run) and run the worm_gear_sim ROS 2 node with a demo command stream,
+# showing the predicted antenna positioning error live in the terminal.
+#
+#   scripts/run_demo.sh [DURATION_S] [paper|slew]
+#
+# Environment: DEMO_DURATION (default 20 s), DEMO_PATTERN (paper | slew, default paper),
+# DEMO_COMPENSATED=1 (the node predicts with ~/feedforward applied), VENV (default .venv), ROS_DOMAIN_ID (default: yours, or 0),
+# ROS_AUTOMATIC_DISCOVERY_RANGE (default LOCALHOST: nothing leaves this machine).
+# Needs python3 (3.11 or newer with venv); the ROS 2 PyPI wheels come from requirements.txt.
+set -euo pipefail
+
+cd "$(dirname "$0")/.."
+DURATION="${1:-${DEMO_DURATION:-20}}"
+PATTERN="${2:-${DEMO_PATTERN:-paper}}"
+VENV="${VENV:-.venv}"
+
+if [ ! -x "$VENV/bin/python" ]; then
+    echo "[demo] creating $VENV"
+    python3 -m venv "$VENV"
+fi
+PY="$VENV/bin/python"
+STAMP="$VENV/.worm_gear_sim_demo_setup"
+if [ ! -f "$STAMP" ] || [ requirements.txt -nt "$STAMP" ] || [ setup.py -nt "$STAMP" ]; then
+    echo "[demo] installing requirements into $VENV (first run: a few minutes)"
+    "$PY" -m pip install -r requirements.txt
+    # Editable install: installs no data_files; the node finds config/ in the source tree
+    # (worm_gear_sim.params.default_config_path()).
+    "$PY" -m pip install -e .
+    touch "$STAMP"
+fi
+
+export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
+CONFIG="$("$PY" -c 'from worm_gear_sim.params import default_config_path; print(default_config_path())')"
+
+NODE_ARGS=(--ros-args --params-file "$CONFIG" --log-level warn)
+if [ "${DEMO_COMPENSATED:-0}" = "1" ]; then
+    NODE_ARGS+=(-p node.compensation_applied:=true)
+fi
+"$PY" -m worm_gear_sim.node "${NODE_ARGS[@]}" &
+NODE_PID=$!
+echo "[demo] node (pid $NODE_PID): $PY -m worm_gear_sim.node ${NODE_ARGS[*]}"
+stop_node() {
+    if kill -0 "$NODE_PID" 2>/dev/null; then
+        kill -TERM "$NODE_PID" 2>/dev/null || true   # background jobs of a script ignore SIGINT
+        wait "$NODE_PID" 2>/dev/null
+        return $?
+    fi
+    wait "$NODE_PID" 2>/dev/null
+}
+trap 'stop_node || true' INT TERM
+
+set +e
+"$PY" -m worm_gear_sim.demo_commander --duration "$DURATION" --pattern "$PATTERN"
+DEMO_RC=$?
+stop_node
+NODE_RC=$?
+set -e
+trap - INT TERM
+echo "[demo] demo exit code $DEMO_RC, node exit code $NODE_RC"
+if [ "$DEMO_RC" -ne 0 ]; then exit "$DEMO_RC"; fi
+exit "$NODE_RC"
