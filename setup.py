@@ -36,6 +36,7 @@ setup(
     entry_points={
         'console_scripts': [
             'worm_gear_sim_node = worm_gear_sim.node:main',
+            'worm_gear_sim_demo = worm_gear_sim.demo_commander:main',
             'worm-gear-sim = worm_gear_sim.cli:main',
         ],
     },

@@ -82,6 +82,8 @@ def test_colcon_install_layout_resolves_like_ros2_run(colcon_install, monkeypatc
     share = Path(ament.get_package_share_directory(PKG))
     exe = prefix / 'lib' / PKG / EXE
     assert exe.is_file() and os.access(exe, os.X_OK)
+    demo = prefix / 'lib' / PKG / 'worm_gear_sim_demo'
+    assert demo.is_file() and os.access(demo, os.X_OK)
     assert (share / 'package.xml').read_text() == (ROOT / 'package.xml').read_text()
     installed_cfg = share / 'config' / 'worm_gear_sim.yaml'
     assert installed_cfg.is_file()

@@ -60,7 +60,7 @@ def command_pattern(name: str, cfg: Config, move_period: float = 0.5,
             return np.where(k % 2 == 0, x, inp.target_angle - x)   # forward, back, ...
         return theta1
     if name == 'slew':
-        amp = 0.5 * slew_rate * slew_period
+        amp = slew_rate * slew_period      # one leg: slew_period at slew_rate
 
         def theta1(t):
             x = (np.asarray(t, float) / (2.0 * slew_period)) % 1.0
@@ -73,13 +73,14 @@ class DemoCommander(Node):
     """Streams the pattern and keeps the latest predictions for the display."""
 
     def __init__(self, pattern: str = 'paper', rate: float = 1000.0,
-                 node_under_test: str = 'worm_gear_sim', **kwargs: Any):
+                 node_under_test: str = 'worm_gear_sim', move_period: float = 0.5,
+                 slew_rate: float = 2.0, slew_period: float = 2.0, **kwargs: Any):
         super().__init__('demo_commander', **kwargs)
         self.cfg = Config()
         self.ratio = derive(self.cfg).output_per_input
-        self.theta1 = command_pattern(pattern, self.cfg)
+        self.theta1 = command_pattern(pattern, self.cfg, move_period, slew_rate, slew_period)
         self.pattern = pattern
-        self.segment_period = 0.5 if pattern == 'paper' else 2.0
+        self.segment_period = move_period if pattern == 'paper' else slew_period
         self.segment = -1
         self.pub = self.create_publisher(Float64, 'worm_angle_command', QoSProfile(depth=10))
         ns = node_under_test
@@ -157,6 +158,12 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     ap.add_argument('--duration', type=float, default=20.0,
                     help='seconds of streaming after the node answers [20]')
     ap.add_argument('--rate', type=float, default=1000.0, help='command rate [Hz] (1000)')
+    ap.add_argument('--move-period', type=float, default=0.5,
+                    help='paper: seconds between moves [0.5]')
+    ap.add_argument('--slew-rate', type=float, default=2.0,
+                    help='slew: worm rate [rad/s] (2.0: antenna ~2 deg/s)')
+    ap.add_argument('--slew-period', type=float, default=2.0,
+                    help='slew: seconds between reversals [2.0]')
     ap.add_argument('--startup-timeout', type=float, default=120.0,
                     help='seconds to wait for the node (first start compiles numba) [120]')
     ap.add_argument('--node-name', default='worm_gear_sim')
@@ -171,7 +178,8 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
     from .node import make_executor
     try:
         with rclpy.init(args=argv):
-            node = DemoCommander(opts.pattern, opts.rate, opts.node_name)
+            node = DemoCommander(opts.pattern, opts.rate, opts.node_name, opts.move_period,
+                                 opts.slew_rate, opts.slew_period)
             ex = make_executor('events')
             ex.add_node(node)
             never = Future()
