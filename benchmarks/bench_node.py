@@ -111,25 +111,83 @@ def breakdown(n_ticks: int = 2000) -> dict[str, float]:
     return out
 
 
-def empty_timer_cost(kind: str, seconds: float = 5.0) -> float:
-    """CPU [core] of an empty 1 kHz timer with the given executor (the executor's floor)."""
+def empty_timer_cost(kind: str, seconds: float = 10.0) -> tuple[float, float, float]:
+    """An empty 1 kHz timer alone in a process with the given executor: (CPU [core],
+    missed ticks [%], remote JointState publish [us of CPU per message]).  The platform's
+    floor for the node's figures."""
     code = f'''
 import time, rclpy
 from rclpy.node import Node
 from worm_gear_sim.node import make_executor
-rclpy.init(domain_id={int(os.environ.get('ROS_DOMAIN_ID', '44'))})
-n = Node('empty_timer'); n.create_timer(1e-3, lambda: None)
+rclpy.init(domain_id={int(os.environ.get('ROS_DOMAIN_ID', '44')) + 1})
+n = Node('empty_timer'); ts = []
+n.create_timer(1e-3, lambda: ts.append(time.monotonic_ns()))
 ex = make_executor('{kind}'); ex.add_node(n)
 fut = rclpy.task.Future()
 ex.spin_until_future_complete(fut, timeout_sec=1.0)
+ts.clear()
 c0, w0 = time.process_time(), time.monotonic()
 while time.monotonic() - w0 < {seconds}:
     ex.spin_until_future_complete(fut, timeout_sec=1.0)
-print((time.process_time() - c0) / (time.monotonic() - w0))
+cpu = (time.process_time() - c0) / (time.monotonic() - w0)
+lost = 0
+for a, b in zip(ts, ts[1:]):
+    g = (b - a) / 1e6
+    if g > 1.5:
+        lost += round(g) - 1
+print(cpu, 100.0 * lost / (len(ts) + lost))
 '''
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                          timeout=seconds + 60, cwd=ROOT)
-    return float(out.stdout.strip().splitlines()[-1])
+    cpu, missed = (float(x) for x in out.stdout.split()[-2:])
+    return cpu, missed
+
+
+def publish_cost(n: int = 2000) -> float:
+    """CPU [us] per JointState published to a subscriber in another process (the
+    DDS/rclpy floor of one output topic at 1 kHz on this machine)."""
+    dom = int(os.environ.get('ROS_DOMAIN_ID', '44')) + 2
+    sub = subprocess.Popen([sys.executable, '-c', f'''
+import time, rclpy
+from sensor_msgs.msg import JointState
+rclpy.init(domain_id={dom})
+n = rclpy.create_node('pub_cost_sub')
+n.create_subscription(JointState, 'pub_cost', lambda m: None, 10)
+t0 = time.monotonic()
+try:
+    while time.monotonic() - t0 < 60:
+        rclpy.spin_once(n, timeout_sec=0.1)
+except Exception:
+    pass
+'''], cwd=ROOT)
+    code = f'''
+import time, rclpy
+from sensor_msgs.msg import JointState
+rclpy.init(domain_id={dom})
+n = rclpy.create_node('pub_cost_pub')
+p = n.create_publisher(JointState, 'pub_cost', 10)
+js = JointState(name=['a', 'b', 'c', 'd'], position=[0.1] * 4, velocity=[0.2] * 4,
+                effort=[0.3] * 4)
+t0 = time.monotonic()
+while p.get_subscription_count() == 0 and time.monotonic() - t0 < 30:
+    time.sleep(0.05)
+time.sleep(0.5)
+c0 = time.process_time()
+for _ in range({n}):
+    p.publish(js)
+    time.sleep(0.001)
+c1 = time.process_time()
+for _ in range({n}):
+    time.sleep(0.001)
+print(((c1 - c0) - (time.process_time() - c1)) / {n} * 1e6)
+'''
+    try:
+        out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                             timeout=120, cwd=ROOT)
+    finally:
+        sub.terminate()
+        sub.wait()
+    return float(out.stdout.split()[-1])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -297,9 +355,13 @@ def main(argv: list[str] | None = None) -> int:
         print('per-tick costs in-process (us):')
         for k, v in breakdown().items():
             print(f'  {k:44s} {v:8.1f}')
+        print('platform floor (separate processes, same machine):')
         for kind in ('events', 'single_threaded'):
-            print(f'  empty 1 kHz timer, {kind:16s} executor: '
-                  f'{empty_timer_cost(kind):.3f} core')
+            cpu, missed = empty_timer_cost(kind)
+            print(f'  empty 1 kHz timer, {kind:16s} executor: {cpu:.3f} core, '
+                  f'{missed:.3f} % missed ticks')
+        print(f'  one JointState published to another process: {publish_cost():.0f} us CPU '
+              '(publisher side, per message)')
     return 0
 
 

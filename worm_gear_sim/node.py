@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import argparse
 import copy
+import gc
+import inspect
 import math
 import sys
 import time
@@ -114,6 +116,7 @@ class WormGearSimNode(Node):
         self._last_t = 0.0                       # relative time of the last tick [s]
         self._last_mono_ns = 0
         self._delta = 0.0                        # last good feed-forward correction [rad]
+        self._comp_idle = False                  # compensator paused (no consumer)
         self._pending_config: Config | None = None
 
         self.counters: dict[str, Any] = dict(
@@ -176,6 +179,9 @@ class WormGearSimNode(Node):
             except Exception:
                 if context.ok():
                     raise
+        # The EventsExecutor calls inspect.signature() on every timer callback (to decide on
+        # passing TimerInfo); a ready-made signature makes that O(1) (~20 us a tick less).
+        guarded.__signature__ = inspect.Signature()  # type: ignore[attr-defined]
         return guarded
 
     def _warm_up(self) -> None:
@@ -328,7 +334,13 @@ class WormGearSimNode(Node):
         comp = self.compensator
         if comp is None:
             return 0.0, ref
+        if not (self.config.node.compensation_applied or self._pub_ff.get_subscription_count()):
+            self._comp_idle = True       # nobody uses it: save its cost (tens of us a tick)
+            return self._delta, ref
         try:
+            if self._comp_idle:          # consumers are back: restart from the reference
+                comp.reset(ref, self._last_t)
+                self._comp_idle = False
             d = float(comp.update(t, ref))
             ref_now = float(getattr(comp, 'reference', ref))
         except Exception as exc:  # noqa: BLE001 - a compensator bug must not stop the node
@@ -496,6 +508,7 @@ class WormGearSimNode(Node):
         ff_level = diag.OK if self.compensator is not None and not c['compensation_errors'] \
             else diag.ERROR
         ff_vals = {'available': self.compensator is not None,
+                   'computed': self.compensator is not None and not self._comp_idle,
                    'applied_to_prediction': self.config.node.compensation_applied,
                    'last_correction_rad': self._delta,
                    'compensation_errors': c['compensation_errors'],
@@ -567,6 +580,11 @@ def main(args: list[str] | None = None) -> int:
                 return 1
             kind = opts.executor or node.config.node.executor
             executor = make_executor(kind)
+            # Move everything allocated so far (numba, scipy, rclpy: a large heap) out of
+            # the cyclic GC's reach: full collections of it took milliseconds and showed
+            # up as missed ticks.
+            gc.collect()
+            gc.freeze()
             executor.add_node(node)
             node.get_logger().info(f'spinning with the {kind} executor')
             try:
