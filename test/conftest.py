@@ -110,8 +110,8 @@ class RosHarness:
                               lambda m: self.positioning_error.append(m.data), 1000)
         p.create_subscription(Float64, '/worm_gear_sim/worm_error',
                               lambda m: self.worm_error.append(m.data), 1000)
-        p.create_subscription(Float64, '/worm_gear_sim/feedforward',
-                              lambda m: self.feedforward.append(m.data), 1000)
+        self.ff_sub = p.create_subscription(Float64, '/worm_gear_sim/feedforward',
+                                            lambda m: self.feedforward.append(m.data), 1000)
         p.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
         self.clock_ns = 0
         assert self.spin_until(lambda: self.cmd_pub.get_subscription_count() > 0
@@ -156,7 +156,8 @@ class RosHarness:
             n = len(self.joint_states)
             return s.sec * 10**9 + s.nanosec == ns and len(self.positioning_error) == n \
                 and len(self.worm_error) == n and \
-                (self.node.compensator is None or len(self.feedforward) == n)
+                (self.node.compensator is None or self.ff_sub is None or
+                 len(self.feedforward) == n)
         return self.spin_until(stamped, timeout)
 
     def wait_clock(self, ns: int, timeout: float = 5.0) -> bool:

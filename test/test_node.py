@@ -443,3 +443,30 @@ def test_waits_for_first_command(ros_harness):
     run_ticks(h, [0.3], t0_ns=T0_NS + TICK_NS)   # first command: starts at rest there
     assert h.joint_states[0].position[0] == 0.3
     assert h.joint_states[0].position[1] == pytest.approx(0.3, abs=1e-9)
+
+
+def test_compensator_paused_without_consumers(ros_harness):
+    """Nothing subscribes to ~/feedforward and the prediction does not apply it: the
+    compensator is not run; a new subscriber restarts it from the current reference."""
+    from std_msgs.msg import Float64
+    h = ros_harness()
+    run_ticks(h, [0.0, 0.01])
+    assert h.node.compensator is not None and not h.node._comp_idle
+    h.probe.destroy_subscription(h.ff_sub)
+    h.ff_sub = None
+    assert h.spin_until(lambda: h.node._pub_ff.get_subscription_count() == 0)
+    n_ff = len(h.feedforward)
+    called = []
+    real_update = h.node.compensator.update
+    h.node.compensator.update = lambda t, r: called.append(t) or real_update(t, r)
+    run_ticks(h, [0.02, 0.03], t0_ns=T0_NS + 2 * TICK_NS)
+    assert h.node._comp_idle and called == [] and len(h.feedforward) == n_ff
+    vals = {kv.key: kv.value for kv in h.node.diagnostic_statuses()[2].values}
+    assert vals['computed'] == 'False'
+    got: list[float] = []
+    h.probe.create_subscription(Float64, '/worm_gear_sim/feedforward',
+                                lambda m: got.append(m.data), 10)
+    assert h.spin_until(lambda: h.node._pub_ff.get_subscription_count() == 1)
+    run_ticks(h, [0.04], t0_ns=T0_NS + 4 * TICK_NS)
+    assert h.spin_until(lambda: len(got) == 1)
+    assert not h.node._comp_idle and called == [pytest.approx(0.004)]
