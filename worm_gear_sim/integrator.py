@@ -108,6 +108,15 @@ def _phase_cycle(p, th2, th3):
 
 
 @njit(cache=True, error_model='numpy')
+def _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2, c_a, gdt):
+    """Newmark relations: a = (u - u*) / (beta dt^2), v = v* + gamma dt a."""
+    a0 = c_a * (x0 - us0)
+    a1 = c_a * (x1 - us1)
+    a2 = c_a * (x2 - us2)
+    return a0, a1, a2, vs0 + gdt * a0, vs1 + gdt * a1, vs2 + gdt * a2
+
+
+@njit(cache=True, error_model='numpy')
 def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     """One Newmark step from (u0, v0, a0) (3-tuples).  Returns
     (ok, u, v, a, rho, since, n_solves, n_evals, verified)."""
@@ -148,12 +157,8 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     p0 = p1 = p2 = 0.0
     gdt = gamma * dt
     while True:
-        a_0 = c_a * (x0 - us0)
-        a_1 = c_a * (x1 - us1)
-        a_2 = c_a * (x2 - us2)
-        w0 = vs0 + gdt * a_0
-        w1 = vs1 + gdt * a_1
-        w2 = vs2 + gdt * a_2
+        a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
+                                                 c_a, gdt)
         f = mesh_forces(p, x0, x1, x2, w0, w1, w2, th1)
         n_evals += 1
         rel0 = w0 - th1dot
@@ -216,12 +221,8 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
         n_solves += 1
         if n_solves == 1 and since < VERIFY_EVERY and rho * r0 <= 0.25:
             # early exit without a second force evaluation if the step is smooth
-            a_0 = c_a * (x0 - us0)
-            a_1 = c_a * (x1 - us1)
-            a_2 = c_a * (x2 - us2)
-            w0 = vs0 + gdt * a_0
-            w1 = vs1 + gdt * a_1
-            w2 = vs2 + gdt * a_2
+            a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
+                                                     c_a, gdt)
             vs_end = k_vs2 * w0 + k_vs3 * w1
             q_end = lw * x0 - rg * x1
             clear_of_stick = (vs_start * vs_end > 0.0 and abs(vs_start) > SMOOTH_ZONE * veps
