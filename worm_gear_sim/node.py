@@ -191,8 +191,8 @@ class WormGearSimNode(Node):
 
     @staticmethod
     def _new_window() -> dict[str, Any]:
-        return dict(wall_ns=time.monotonic_ns(), busy_ns=0, sim_time=0.0, ticks=0, steps=0,
-                    overruns=0, errors=0)
+        return dict(wall_ns=time.monotonic_ns(), busy_ns=0, max_busy_ns=0, sim_time=0.0,
+                    ticks=0, steps=0, overruns=0, errors=0)
 
     def _make_compensator(self, cfg: Config) -> None:
         if Compensator is None:
@@ -298,7 +298,10 @@ class WormGearSimNode(Node):
         w = self._window
         w['ticks'] += 1
         w['steps'] += steps
-        w['busy_ns'] += time.thread_time_ns() - busy0
+        busy = time.thread_time_ns() - busy0
+        w['busy_ns'] += busy
+        if busy > w['max_busy_ns']:
+            w['max_busy_ns'] = busy
         c = self.counters
         c['ticks'] += 1
         c['steps'] += steps
@@ -489,6 +492,7 @@ class WormGearSimNode(Node):
             'time_base': self._time_base or 'none', 'simulated_time_s': self.sim.t,
             'real_time_factor': w['sim_time'] / wall,
             'compute_load': w['busy_ns'] * 1e-9 / wall,
+            'max_tick_cpu_ms': w['max_busy_ns'] * 1e-6,
             'steps_per_tick': w['steps'] / w['ticks'] if w['ticks'] else 0.0,
             'max_steps_per_tick': c['max_steps_per_tick'], 'ticks': c['ticks'],
             'missed_ticks': c['missed_ticks'], 'overruns': c['overruns'],
