@@ -18,20 +18,8 @@ DURATION="${1:-${DEMO_DURATION:-20}}"
 PATTERN="${2:-${DEMO_PATTERN:-paper}}"
 VENV="${VENV:-.venv}"
 
-if [ ! -x "$VENV/bin/python" ]; then
-    echo "[demo] creating $VENV"
-    python3 -m venv "$VENV"
-fi
+VENV="$VENV" scripts/setup_env.sh      # creates the venv and installs everything (first run)
 PY="$VENV/bin/python"
-STAMP="$VENV/.worm_gear_sim_demo_setup"
-if [ ! -f "$STAMP" ] || [ requirements.txt -nt "$STAMP" ] || [ setup.py -nt "$STAMP" ]; then
-    echo "[demo] installing requirements into $VENV (first run: a few minutes)"
-    "$PY" -m pip install -r requirements.txt
-    # Editable install: installs no data_files; the node finds config/ in the source tree
-    # (worm_gear_sim.params.default_config_path()).
-    "$PY" -m pip install -e .
-    touch "$STAMP"
-fi
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 CONFIG="$("$PY" -c 'from worm_gear_sim.params import default_config_path; print(default_config_path())')"

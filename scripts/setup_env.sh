@@ -1,28 +1,31 @@
 #!/usr/bin/env bash
-# Create (or refresh) the project venv in .venv with everything a plain machine needs:
+# Create (or refresh) the project venv ($VENV, default .venv) with everything a plain machine needs:
 # numeric stack, ROS 2 Kilted PyPI wheels (rclpy + messages + Fast DDS), test tools, and
 # this package in editable mode. Idempotent: re-installs only when requirements.txt,
 # setup.py or package.xml changed since the last successful run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
-if [ ! -x .venv/bin/python ]; then
-    echo "[setup] creating .venv with $($PY --version)"
-    "$PY" -m venv .venv
+VENV=${VENV:-.venv}
+if [ ! -x "$VENV/bin/python" ]; then
+    echo "[setup] creating $VENV with $($PY --version)"
+    "$PY" -m venv "$VENV"
 fi
-stamp=.venv/.worm_gear_sim_installed
+stamp="$VENV/.worm_gear_sim_installed"
 if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ setup.py -nt "$stamp" ] \
         || [ package.xml -nt "$stamp" ]; then
-    echo "[setup] installing requirements (PyPI: numpy, scipy, numba, ROS 2 wheels, ...)"
-    .venv/bin/python -m pip install --quiet --upgrade pip 'setuptools>=61,<80' wheel
-    .venv/bin/python -m pip install --quiet -r requirements.txt
-    .venv/bin/python -m pip install --quiet --no-deps --no-build-isolation -e .
+    echo "[setup] installing requirements into $VENV (PyPI: numpy, scipy, numba, ROS 2 wheels;"\
+         "first run: about a minute)"
+    "$VENV/bin/python" -m pip install --quiet --upgrade pip 'setuptools>=61,<80' wheel
+    "$VENV/bin/python" -m pip install --quiet -r requirements.txt
+    # Editable install: no data_files; the package finds config/ in the source tree.
+    "$VENV/bin/python" -m pip install --quiet --no-deps --no-build-isolation -e .
     touch "$stamp"
 fi
 # The PyPI ROS wheels re-exec Python once to set LD_LIBRARY_PATH; check that rclpy works.
-if ! .venv/bin/python -c "import rclpy, std_msgs.msg, sensor_msgs.msg, diagnostic_msgs.msg" \
+if ! "$VENV/bin/python" -c "import rclpy, std_msgs.msg, sensor_msgs.msg, diagnostic_msgs.msg" \
         >/dev/null 2>&1; then
-    echo "[setup] ERROR: rclpy or the ROS message packages do not import in .venv" >&2
-    .venv/bin/python -c "import rclpy" >&2 || true
+    echo "[setup] ERROR: rclpy or the ROS message packages do not import in $VENV" >&2
+    "$VENV/bin/python" -c "import rclpy" >&2 || true
     exit 1
 fi
