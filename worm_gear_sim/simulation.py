@@ -164,8 +164,6 @@ class Simulator:
         self.interpolation = interpolation or config.node.command_interpolation
         self._stats = np.zeros(N_STATS, dtype=np.int64)
         self._ctl = np.array([1.0, 0.0])      # Newton controller: contraction, since verify
-        self._empty2 = np.empty((0, 3))
-        self._empty_aux = np.empty((0, N_AUX))
         self.reset(theta1, t0)
 
     # ---- state ---------------------------------------------------------------------------
@@ -266,16 +264,6 @@ class Simulator:
             self._cmd_t = max(t_target, self._cmd_t)
             self._cmd_value = float(theta1)
         return max(n, 0)
-
-    def advance_steps(self, theta1: np.ndarray, theta1_dot: np.ndarray | None = None) -> None:
-        """Integrate len(theta1) steps with the given end-of-step commands."""
-        theta1 = np.asarray(theta1, float)
-        td = np.zeros_like(theta1) if theta1_dot is None else np.asarray(theta1_dot, float)
-        th = np.concatenate(([self._theta1], theta1))
-        tdd = np.concatenate(([self._theta1_dot], td))
-        self._run_kernel(th, tdd, 0, self._empty2, self._empty2, self._empty2, self._empty_aux)
-        self._cmd_t, self._cmd_value = self.t, float(theta1[-1]) if theta1.size else \
-            self._cmd_value
 
     def resync(self, t: float) -> None:
         """Jump the simulated clock to ``t`` without integrating (dropped catch-up time)."""
