@@ -24,6 +24,7 @@ Run ``worm_gear_sim_node --ros-args --params-file config/worm_gear_sim.yaml`` (o
 from __future__ import annotations
 
 import argparse
+import collections
 import copy
 import gc
 import inspect
@@ -67,14 +68,87 @@ except ImportError as _exc:  # pragma: no cover - depends on the checkout
     Compensator = None  # type: ignore[assignment,misc]
     COMPENSATION_IMPORT_ERROR = f'{type(_exc).__name__}: {_exc}'
 
-__all__ = ['WormGearSimNode', 'main', 'file_defaults', 'make_executor', 'spin_until_shutdown',
-           'COMMAND_TOPIC',
-           'JOINT_STATES_TOPIC', 'REJECT_REASONS']
+__all__ = ['WormGearSimNode', 'CommandQueue', 'main', 'file_defaults', 'make_executor',
+           'spin_until_shutdown', 'COMMAND_TOPIC', 'JOINT_STATES_TOPIC', 'REJECT_REASONS',
+           'COMMAND_QUEUE_LENGTH', 'STALE_PERIODS']
 
 COMMAND_TOPIC = 'worm_angle_command'
 JOINT_STATES_TOPIC = 'joint_states'
 REJECT_REASONS = ('nan', 'inf', 'out_of_range', 'jump')
 LOG_THROTTLE_S = 2.0  # at most one log line per cause every 2 s (bursts of bad input)
+COMMAND_QUEUE_LENGTH = 16  # accepted commands kept between two ticks (the oldest dropped)
+STALE_PERIODS = 3.0  # no command for this many tick periods: the reference is taken as resting
+STALE_MAX_INTERVAL = 0.05  # s: sample intervals longer than this are pauses, not a rate
+HOLD_EPS = 0.5e-9  # s: 'hold' steps just after the sample time (stamps are whole ns)
+
+
+class CommandQueue:
+    """Accepted commands with their reception stamps, waiting for the next tick.
+
+    ``push`` is O(1); at most ``maxlen`` samples are kept (on overflow the OLDEST is
+    dropped and counted in :attr:`dropped`).  :meth:`take` turns them into the samples of
+    one tick: times (ns on the node's time base) strictly increasing in (last tick, tick].
+    """
+
+    def __init__(self, maxlen: int = COMMAND_QUEUE_LENGTH) -> None:
+        self._q: collections.deque = collections.deque(maxlen=maxlen)
+        self.dropped = 0          # lost to overflow
+        self.merged = 0           # stamp not after the previous sample: value replaced it
+        self.restamped = 0        # stamp not after the previous tick: placed later
+
+    def __len__(self) -> int:
+        return len(self._q)
+
+    def push(self, base: str, ns: int, value: float) -> None:
+        if len(self._q) == self._q.maxlen:
+            self.dropped += 1
+        self._q.append((base, ns, value))
+
+    def clear(self) -> int:
+        """Forget the queued samples; returns how many there were."""
+        n = len(self._q)
+        self._q.clear()
+        return n
+
+    def take(self, base: str, last_ns: int, tick_ns: int) -> list[tuple[int, float]]:
+        """Empty the queue into the samples of the tick at ``tick_ns`` (previous tick at
+        ``last_ns``): ``[(ns, value)]`` in reception order with strictly increasing times.
+
+        * a stamp later than the tick is taken at the tick;
+        * a stamp not after the previous sample's is merged with it (same time, newest
+          value): never a zero or negative time step;
+        * a stamp not after the previous tick (with ``use_sim_time``: received after that
+          tick, before /clock moved on; or a stamp on another time base) cannot act in
+          the past: the sample takes the next time the node knows, that of the next sample
+          (which supersedes it) or, if none follows, the tick.
+        """
+        out: list[tuple[int, float]] = []
+        late: float | None = None
+        for b, ns, v in self._q:
+            if b != base:
+                ns = last_ns
+            elif ns > tick_ns:
+                ns = tick_ns
+            if out:
+                if ns <= out[-1][0]:
+                    out[-1] = (out[-1][0], v)
+                    self.merged += 1
+                else:
+                    out.append((ns, v))
+            elif ns <= last_ns:
+                self.restamped += 1
+                if late is not None:
+                    self.merged += 1
+                late = v
+            else:
+                if late is not None:
+                    self.merged += 1
+                    late = None
+                out.append((ns, v))
+        if late is not None:
+            out.append((tick_ns, late))
+        self._q.clear()
+        return out
 
 
 def file_defaults() -> Config:
@@ -109,18 +183,27 @@ class WormGearSimNode(Node):
 
         # --- command input state -----------------------------------------------------------
         self._cmd: float | None = None           # latest accepted command theta1_ref [rad]
-        self._cmd_fresh = False                  # a command arrived since the last tick
+        self._queue = CommandQueue()             # accepted commands with reception stamps
         self._started = False
         self._origin_ns = 0                      # clock reading at t = 0 of the simulator
         self._time_base = ''                     # 'sim' or 'wall' (monotonic)
         self._last_t = 0.0                       # relative time of the last tick [s]
+        self._last_ns = 0                        # clock reading of the last tick
         self._last_mono_ns = 0
+        self._ref = 0.0                          # last reference sample fed [rad]
+        self._ref_now = 0.0                      # reference the last correction applies to
+        self._held = 0.0                         # command the simulator holds [rad]
+        self._sample_t = 0.0                     # time of the last reference sample [s]
+        self._sample_dt = 0.0                    # interval between the last two samples [s]
+        self._comp_t = 0.0                       # time of the compensator's last sample [s]
+        self._comp_dirty = False                 # redesigned: re-evaluate without a sample
         self._delta = 0.0                        # last good feed-forward correction [rad]
         self._comp_idle = False                  # compensator paused (no consumer)
         self._pending_config: Config | None = None
 
         self.counters: dict[str, Any] = dict(
-            commands_received=0, commands_used=0, commands_superseded=0,
+            commands_received=0, commands_used=0, commands_superseded=0, commands_dropped=0,
+            commands_merged=0, commands_restamped=0, max_commands_per_tick=0,
             rejected_commands=0, **{f'rejected_{r}': 0 for r in REJECT_REASONS},
             ticks=0, missed_ticks=0, overruns=0, dropped_time=0.0, clock_backwards=0,
             simulation_errors=0, compensation_errors=0, rejected_parameter_sets=0,
@@ -213,13 +296,16 @@ class WormGearSimNode(Node):
         if comp is not None and hasattr(comp, 'reconfigure'):
             try:
                 comp.reconfigure(cfg)
+                self._comp_dirty = True
                 return
             except Exception as exc:  # noqa: BLE001 - fall back to a fresh compensator
                 self._compensation_failed(exc)
         self._make_compensator(cfg)
+        self._comp_dirty = True
         if self.compensator is not None and self._started:
             try:
-                self.compensator.reset(self._cmd, self._last_t)
+                self.compensator.reset(self._ref, self._last_t)
+                self._comp_t = self._last_t
             except Exception as exc:  # noqa: BLE001
                 self._compensation_failed(exc)
 
@@ -229,7 +315,8 @@ class WormGearSimNode(Node):
 
     # ---- command input ---------------------------------------------------------------
     def _on_command(self, msg: Float64) -> None:
-        """O(1): validate and keep the latest command; the physics runs only in the tick."""
+        """O(1): validate, stamp with the node clock and queue the command (a sample of
+        theta1_ref at its reception time); the physics runs only in the tick."""
         c = self.counters
         c['commands_received'] += 1
         v = msg.data
@@ -253,10 +340,12 @@ class WormGearSimNode(Node):
             self._warn(f'rejected worm_angle_command {v!r}: {reason}{limit}; '
                        f'{c["rejected_commands"]} rejected so far')
             return
-        if self._cmd_fresh:
-            c['commands_superseded'] += 1
         self._cmd = v
-        self._cmd_fresh = True
+        clock = self._clock
+        if clock.ros_time_is_active:
+            self._queue.push('sim', clock.now().nanoseconds, v)
+        else:
+            self._queue.push('wall', time.monotonic_ns(), v)
 
     # ---- the tick ---------------------------------------------------------------------
     def _now(self) -> tuple[str, int, Any]:
@@ -273,10 +362,13 @@ class WormGearSimNode(Node):
         if not self._started:
             if self._cmd is None:
                 return
-            self._start(base, ns)
-        elif base != self._time_base:  # use_sim_time toggled: re-anchor without integrating
-            self._origin_ns = ns - int(round(self._last_t * 1e9))
-            self._time_base = base
+            samples = self._start(base, ns)
+        else:
+            samples = None
+            if base != self._time_base:  # use_sim_time toggled: re-anchor, integrate nothing
+                self._origin_ns = ns - int(round(self._last_t * 1e9))
+                self._last_ns = ns
+                self._time_base = base
         t = (ns - self._origin_ns) * 1e-9
         if t <= self._last_t and self.counters['ticks']:
             if t < self._last_t:
@@ -286,15 +378,15 @@ class WormGearSimNode(Node):
             return                      # no time has passed: nothing new to publish
         if base == 'wall':
             self._count_missed(ns)
-        ref = self._cmd
-        if self._cmd_fresh:
-            self.counters['commands_used'] += 1
-            self._cmd_fresh = False
-        delta, ref_now = self._feedforward(t, ref)
-        applied = self.config.node.compensation_applied and self.compensator is not None
-        steps = self._advance(t, ref_now + delta if applied else ref)
+        c = self.counters
+        if samples is None:
+            samples = self._take_samples(base, ns)
+        drives = self._feedforward(t, samples)
+        steps = self._advance(t, drives)
         self._last_t = t
-        self._publish(stamp, ref_now if applied else None, delta)
+        self._last_ns = ns
+        applied = self.config.node.compensation_applied and self.compensator is not None
+        self._publish(stamp, self._ref_now if applied else None, self._delta)
         w = self._window
         w['ticks'] += 1
         w['steps'] += steps
@@ -302,17 +394,39 @@ class WormGearSimNode(Node):
         w['busy_ns'] += busy
         if busy > w['max_busy_ns']:
             w['max_busy_ns'] = busy
-        c = self.counters
         c['ticks'] += 1
         c['steps'] += steps
         if steps > c['max_steps_per_tick']:
             c['max_steps_per_tick'] = steps
 
-    def _start(self, base: str, ns: int) -> None:
+    def _take_samples(self, base: str, ns: int) -> list[tuple[int, float]]:
+        """This tick's command samples (see :meth:`CommandQueue.take`), counted."""
+        q, c = self._queue, self.counters
+        samples = q.take(base, self._last_ns, ns)
+        c['commands_used'] += len(samples)
+        if len(samples) > c['max_commands_per_tick']:
+            c['max_commands_per_tick'] = len(samples)
+        c['commands_dropped'], c['commands_merged'] = q.dropped, q.merged
+        c['commands_restamped'] = q.restamped
+        c['commands_superseded'] = q.dropped + q.merged
+        return samples
+
+    def _start(self, base: str, ns: int) -> list[tuple[int, float]]:
+        """First tick: start at rest at the latest command, which is the sample at t = 0
+        (earlier queued commands are superseded by it)."""
         self._time_base = base
         self._origin_ns = ns
         self._last_t = 0.0
+        self._last_ns = ns
+        q = self._queue
+        q.merged += max(q.clear() - 1, 0)
+        self.counters['commands_used'] += 1
+        self.counters['commands_superseded'] = q.dropped + q.merged
+        self.counters['commands_merged'] = q.merged
         self.sim.reset(self._cmd, 0.0)
+        self._ref = self._ref_now = self._held = self._cmd
+        self._sample_t = self._comp_t = 0.0
+        self._sample_dt = 0.0
         if self.compensator is not None:
             try:
                 self.compensator.reset(self._cmd, 0.0)
@@ -321,6 +435,7 @@ class WormGearSimNode(Node):
         self._started = True
         self.get_logger().info(f'first command {self._cmd:.9g} rad: simulation started '
                                f'({base} time)')
+        return [(ns, self._cmd)]
 
     def _count_missed(self, mono: int) -> None:
         """Wall time: periods lost between this tick and the previous one."""
@@ -331,55 +446,114 @@ class WormGearSimNode(Node):
                 self.counters['missed_ticks'] += missed
         self._last_mono_ns = mono
 
-    def _feedforward(self, t: float, ref: float) -> tuple[float, float]:
-        """(delta, reference it applies to).  With compensation.preview_time P the servo
-        streams its reference P ahead and delta is for t - P (Compensator.reference)."""
+    def _feedforward(self, t: float, samples: list[tuple[int, float]]
+                     ) -> list[tuple[float, float]]:
+        """Feed the samples, in time order, to the compensator; returns the simulator's
+        command samples [(t_i, theta1_i)]: theta1_ref, or theta1_ref + delta when
+        ``node.compensation_applied``.
+
+        With ``compensation.preview_time`` P the servo streams its reference P ahead:
+        delta is for t_i - P and so is the reference it is added to
+        (``Compensator.reference``).  The compensator sees the samples only (joined by
+        straight lines), not the simulator's hold up to the tick.  Without a new sample it
+        is updated only when redesigned (re-evaluated at its last sample) or when the
+        stream has stopped (no sample for STALE_PERIODS tick periods, or for twice the last
+        sample interval if that is longer): the reference then rests, a sample at the
+        tick."""
+        origin = self._origin_ns
         comp = self.compensator
-        if comp is None:
-            return 0.0, ref
-        if not (self.config.node.compensation_applied or self._pub_ff.get_subscription_count()):
+        applied = self.config.node.compensation_applied and comp is not None
+        if comp is not None and not (applied or self._pub_ff.get_subscription_count()):
             self._comp_idle = True       # nobody uses it: save its cost (tens of us a tick)
-            return self._delta, ref
-        try:
-            if self._comp_idle:          # consumers are back: restart from the reference
-                comp.reset(ref, self._last_t)
+            comp = None
+        ok = comp is not None
+        if ok and self._comp_idle:       # consumers are back: restart from the reference
+            try:
+                comp.reset(self._ref, self._last_t)
+                self._comp_t = self._last_t
                 self._comp_idle = False
+            except Exception as exc:  # noqa: BLE001
+                self._compensation_failed(exc)
+                ok = False
+        drives = []
+        for ns, v in samples:
+            ti = (ns - origin) * 1e-9
+            if ti > self._sample_t:
+                self._sample_dt = ti - self._sample_t
+            self._sample_t = ti
+            self._ref = self._ref_now = v
+            if ok:
+                ok = self._update_compensator(comp, ti, v)
+            drives.append((ti, self._ref_now + self._delta if applied else v))
+        if not samples and ok:
+            stale = max(STALE_PERIODS * self._period_ns * 1e-9,
+                        2.0 * min(self._sample_dt, STALE_MAX_INTERVAL))
+            if t - self._comp_t > stale:             # the stream stopped: reference rests
+                t_eval = t
+            elif self._comp_dirty:                   # redesigned: same sample, new design
+                t_eval = self._comp_t
+            else:
+                return drives
+            if self._update_compensator(comp, t_eval, self._ref) and applied:
+                drives.append((t, self._ref_now + self._delta))
+        return drives
+
+    def _update_compensator(self, comp: Any, t: float, ref: float) -> bool:
+        """One Compensator.update; on failure keep the last good correction."""
+        try:
             d = float(comp.update(t, ref))
-            ref_now = float(getattr(comp, 'reference', ref))
+            r = float(getattr(comp, 'reference', ref))
+            if not (math.isfinite(d) and math.isfinite(r)):
+                raise ValueError(f'non-finite correction {d!r}')
         except Exception as exc:  # noqa: BLE001 - a compensator bug must not stop the node
             self._compensation_failed(exc)
-            return self._delta, ref
-        if not (math.isfinite(d) and math.isfinite(ref_now)):
-            self._compensation_failed(ValueError(f'non-finite correction {d!r}'))
-            return self._delta, ref
-        self._delta = d
-        return d, ref_now
+            return False
+        self._comp_t = t
+        self._comp_dirty = False
+        self._delta, self._ref_now = d, r
+        return True
 
     def _compensation_failed(self, exc: Exception) -> None:
         self.counters['compensation_errors'] += 1
         self._warn(f'feed-forward failed ({type(exc).__name__}: {exc}); keeping the last '
                    f'correction {self._delta:.3g} rad')
 
-    def _advance(self, t: float, drive: float) -> int:
+    def _advance(self, t: float, drives: list[tuple[float, float]]) -> int:
+        """Integrate up to the tick time ``t`` through the command samples ``drives``
+        [(t_i, theta1_i)], then hold the last command up to ``t``.  ``linear``: theta1
+        moves linearly from the previous sample (or the hold point at the previous tick)
+        to each sample; ``hold``: theta1 steps to each sample at its time (the first dt
+        grid point at or after it)."""
         sim = self.sim
         behind = t - sim.t
         cap = self.config.node.max_catch_up
         if behind > cap:
-            sim.resync(t - cap)
+            sim.resync(t - cap)   # samples before t - cap are only registered, not integrated
             self.counters['overruns'] += 1
             self.counters['dropped_time'] += behind - cap
             self._window['overruns'] += 1
             self._warn(f'{behind:.4g} s behind: integrated the last {cap:g} s '
                        '(node.max_catch_up) and dropped the rest')
         t_before = sim.t
+        held = self._held
+        if drives:
+            self._held = drives[-1][1]
+        steps = 0
         try:
-            steps = sim.advance_to(t, drive)
+            if sim.interpolation == 'hold':
+                for ti, di in drives:
+                    steps += sim.advance_to(ti - HOLD_EPS, held)
+                    held = di
+            else:
+                for ti, di in drives:
+                    steps += sim.advance_to(ti, di)
+                    held = di
+            steps += sim.advance_to(t, held)
         except (SimulationError, ValueError) as exc:
             self.counters['simulation_errors'] += 1
             self._window['errors'] += 1
             self._warn(f'simulation error: {exc}; keeping the last good state '
                        f'(t = {sim.t:.6f} s) and continuing from t = {t:.6f} s')
-            steps = 0
             sim.resync(t)
         self._window['sim_time'] += sim.t - t_before
         return steps
@@ -504,7 +678,9 @@ class WormGearSimNode(Node):
         rejected = c['rejected_commands'] + c['rejected_parameter_sets']
         in_level = diag.WARN if rejected else diag.OK
         in_vals = {k: c[k] for k in (
-            'commands_received', 'commands_used', 'commands_superseded', 'rejected_commands',
+            'commands_received', 'commands_used', 'commands_superseded', 'commands_dropped',
+            'commands_merged', 'commands_restamped', 'max_commands_per_tick',
+            'rejected_commands',
             *(f'rejected_{r}' for r in REJECT_REASONS), 'rejected_parameter_sets',
             'accepted_parameter_sets')}
         in_vals['last_command'] = 'none' if self._cmd is None else repr(self._cmd)
