@@ -470,3 +470,128 @@ def test_compensator_paused_without_consumers(ros_harness):
     run_ticks(h, [0.04], t0_ns=T0_NS + 4 * TICK_NS)
     assert h.spin_until(lambda: len(got) == 1)
     assert not h.node._comp_idle and called == [pytest.approx(0.004)]
+
+
+# ---- command timing: samples at their reception time ------------------------------------
+RAMP_RATE = 2.0                                  # rad/s of worm
+RAMP_LOAD = {'load.output_torque': 5.0, 'load.output_viscous_coefficient': 2.0}
+
+
+def unaligned_stream(n_ticks: int) -> np.ndarray:
+    """Reception times [ns after the first tick] of a 1 kHz stream 0.4005 ms after the
+    ticks, with jitter: sample j early into the previous tick (2 there, 0 in its own) or
+    late into the next (0 in its own, 2 there), as an unlocked servo produces."""
+    offsets = np.full(n_ticks - 1, 400_500)
+    offsets[[8, 9, 20, 31, 32]] = -49_500        # 2 in one tick, then 0
+    offsets[[14, 26, 27, 38]] = 1_050_500        # 0 in one tick, then 2
+    return np.arange(n_ticks - 1) * TICK_NS + offsets
+
+
+def stream_ticks(h, recv_ns: np.ndarray, values: np.ndarray, n_ticks: int) -> None:
+    """Start at rest at values' ramp origin (0.0), then replay the stream against the
+    ticks in time order (each command at its /clock time)."""
+    run_ticks(h, [0.0])
+    events = [(int(ns), 'cmd', float(v)) for ns, v in zip(recv_ns, values)]
+    events += [(k * TICK_NS, 'tick', 0.0) for k in range(1, n_ticks)]
+    for ns, kind, v in sorted(events):
+        if kind == 'tick':
+            assert h.tick_to(T0_NS + ns), f'no JointState at {ns} ns'
+        else:
+            assert h.wait_clock(T0_NS + ns) and h.command(v)
+
+
+def tick_samples(recv_ns: np.ndarray, values: np.ndarray, n_ticks: int):
+    """Per tick: the samples (t [s], value) the node feeds (those received since the
+    previous tick); tick 0 is the start at rest."""
+    out = [[(0.0, 0.0)]]
+    for k in range(1, n_ticks):
+        m = (recv_ns > (k - 1) * TICK_NS) & (recv_ns <= k * TICK_NS)
+        out.append([(ns * 1e-9, float(v)) for ns, v in zip(recv_ns[m], values[m])])
+    return out
+
+
+def published_feedforward(cfg: Config, ticks, per_sample: dict | None = None) -> np.ndarray:
+    """The correction published at each tick (that of its last sample); ``per_sample``
+    receives the correction of every sample time."""
+    from worm_gear_sim.compensation import Compensator
+    comp = Compensator(cfg)
+    comp.reset(0.0, 0.0)
+    out, d = [], 0.0
+    for samples in ticks:
+        for t, v in samples:
+            d = comp.update(t, v)
+            if per_sample is not None:
+                per_sample[t] = d
+        out.append(d)
+    return np.array(out)
+
+
+@pytest.mark.parametrize('interpolation, applied', [('linear', False), ('hold', False),
+                                                    ('linear', True)])
+def test_unaligned_commands_are_samples_at_their_reception_time(ros_harness, interpolation,
+                                                                applied):
+    """A constant-rate ramp streamed at 1 kHz, 0.4 ms after the ticks and with jitter (2
+    commands in one tick, 0 in the next): each command is a sample at its /clock time.
+    ~/feedforward equals a Compensator fed the same samples and stays smooth (its deviation
+    from phase-locked samples is < 1 % of what tick-time sampling gave); the simulator
+    equals a batch run of the same samples plus a hold up to each tick."""
+    h = ros_harness({**RAMP_LOAD, 'node.command_interpolation': interpolation,
+                     'node.compensation_applied': applied})
+    cfg = h.node.config
+    n = 45
+    recv = unaligned_stream(n)
+    values = RAMP_RATE * recv * 1e-9               # the ramp at the sample times
+    ticks = tick_samples(recv, values, n)
+    counts = [len(s) for s in ticks[1:]]
+    assert counts.count(0) == 6 and counts.count(2) == 6    # the jitter really happened
+    stream_ticks(h, recv, values, n)
+    c = h.node.counters
+    assert c['ticks'] == n and c['commands_used'] == n and c['commands_merged'] == 0
+    assert c['commands_restamped'] == 0 and c['max_commands_per_tick'] == 2
+
+    # ~/feedforward: the compensator saw exactly these samples, at these times
+    ff = np.array(h.feedforward)
+    delta: dict[float, float] = {}
+    expected = published_feedforward(cfg, ticks, delta)
+    np.testing.assert_allclose(ff, expected, rtol=0, atol=1e-15)
+    t_tick = np.arange(n) * TICK_NS * 1e-9         # as the node computes tick times
+    regular = published_feedforward(cfg, [[(0.0, 0.0)]] + [[(t, RAMP_RATE * t)]
+                                                           for t in t_tick[1:]])
+    latest, old = 0.0, []                          # the node before: sample at the tick
+    for k, samples in enumerate(ticks):
+        latest = samples[-1][1] if samples else latest
+        old.append([(t_tick[k], latest)])
+    old_ff = published_feedforward(cfg, old)
+    from worm_gear_sim.compensation import Compensator
+    steady = t_tick > 2 * Compensator(cfg).filter.lag_span + 2e-3
+    rms = lambda x: float(np.sqrt(np.mean(x[steady] ** 2)))  # noqa: E731
+    assert rms(old_ff - regular) > 1e-3                      # the old spikes: mrad
+    assert rms(ff - regular) < 0.01 * rms(old_ff - regular)
+    steady_value = float(np.mean(regular[steady]))
+    assert abs(steady_value) > 1e-5                          # a real correction
+    assert np.max(np.abs(np.diff(ff[steady]))) < 1e-3 * abs(steady_value)
+
+    # the simulator: samples (plus the correction if applied), hold to each tick
+    times, drive, ref_at_tick = [0.0], [0.0], [0.0]
+    for k, samples in enumerate(ticks[1:], start=1):
+        for t, v in samples:
+            times.append(t)
+            drive.append(v + (delta[t] if applied else 0.0))
+        ref_at_tick.append(samples[-1][1] if samples else ref_at_tick[-1])
+        if times[-1] < t_tick[k]:
+            times.append(t_tick[k])
+            drive.append(drive[-1])
+    traj = batch(cfg, np.array(times), np.array(drive), interpolation)
+    assert traj.t.size == n
+    np.testing.assert_allclose(traj.t, t_tick, rtol=0, atol=1e-12)
+    pos = js_pos(h)
+    for j, name in enumerate(('theta1', 'theta2', 'theta3', 'theta4')):
+        np.testing.assert_allclose(pos[:, j], getattr(traj, name), rtol=0, atol=1e-12,
+                                   err_msg=name)
+    vel = np.array([list(m.velocity) for m in h.joint_states])
+    np.testing.assert_allclose(vel[:, 1:], traj.omega, rtol=0, atol=1e-9)
+    reference = np.array(ref_at_tick) if applied else traj.theta1
+    np.testing.assert_allclose(h.positioning_error,
+                               traj.theta4 - reference * traj.output_ratio, rtol=0,
+                               atol=1e-12)
+    assert np.ptp(pos[:, 3]) > 1e-3                          # it moved

@@ -70,7 +70,7 @@ except ImportError as _exc:  # pragma: no cover - depends on the checkout
 
 __all__ = ['WormGearSimNode', 'CommandQueue', 'main', 'file_defaults', 'make_executor',
            'spin_until_shutdown', 'COMMAND_TOPIC', 'JOINT_STATES_TOPIC', 'REJECT_REASONS',
-           'COMMAND_QUEUE_LENGTH', 'STALE_PERIODS']
+           'COMMAND_QUEUE_LENGTH', 'STALE_PERIODS', 'StreamClock']
 
 COMMAND_TOPIC = 'worm_angle_command'
 JOINT_STATES_TOPIC = 'joint_states'
@@ -80,6 +80,58 @@ COMMAND_QUEUE_LENGTH = 16  # accepted commands kept between two ticks (the oldes
 STALE_PERIODS = 3.0  # no command for this many tick periods: the reference is taken as resting
 STALE_MAX_INTERVAL = 0.05  # s: sample intervals longer than this are pauses, not a rate
 HOLD_EPS = 0.5e-9  # s: 'hold' steps just after the sample time (stamps are whole ns)
+STREAM_GAIN = 0.02  # steady alpha of the stream clock (a memory of about 50 samples)
+STREAM_WINDOW = 0.5  # stamps further than this many periods from the prediction re-lock
+
+
+class StreamClock:
+    """The time grid of a steady command stream, recovered from its reception stamps.
+
+    A servo computes its commands on a regular grid; they reach the node's callback after
+    a varying delay (DDS and executor latency: p10 ~100 us, p90 ~280 us on the
+    development VM), which would reach the feed-forward as time jitter of the samples.  An
+    alpha-beta tracker follows the grid's phase and period: least-squares gains while it
+    acquires (exact for the first two stamps), then ``gain`` (critically damped).  A stamp
+    further than ``window`` periods from the prediction (first command, pause, burst, rate
+    change) is taken as it is and restarts the acquisition, with its interval as the
+    period guess when that is shorter than ``max_period_ns``.  While tracking, the
+    output is strictly increasing and lags the grid by the mean delay (a constant).
+    """
+
+    def __init__(self, period_ns: float, gain: float = STREAM_GAIN,
+                 window: float = STREAM_WINDOW, max_period_ns: float = 5e7) -> None:
+        if not (0.0 < gain <= 1.0 and 0.0 < window and period_ns > 0.0):
+            raise ValueError('StreamClock: need period_ns > 0, 0 < gain <= 1, window > 0')
+        self.gain, self.window = float(gain), float(window)
+        self.beta = gain * gain / (2.0 - gain)
+        self.period0, self.max_period = float(period_ns), float(max_period_ns)
+        self.relocks = 0
+        self.reset()
+
+    def reset(self) -> None:
+        self.period = self.period0            # estimated stream period [ns]
+        self._t: float | None = None          # last output [ns]
+        self._raw: int | None = None          # last reception stamp [ns]
+        self._k = 0                           # stamps since the last (re)lock
+
+    def __call__(self, ns: int) -> int:
+        """The sample time [ns] for a command received at ``ns``."""
+        prev, self._raw = self._raw, ns
+        if self._t is not None:
+            pred = self._t + self.period
+            e = ns - pred
+            if abs(e) <= self.window * self.period:
+                self._k += 1
+                k = self._k
+                self._t = pred + max(2.0 * (2 * k - 1) / (k * (k + 1)), self.gain) * e
+                self.period += max(6.0 / (k * (k + 1)), self.beta) * e
+                return int(round(self._t))
+            self.relocks += 1
+        if prev is not None and 0 < ns - prev <= self.max_period:
+            self.period = float(ns - prev)
+        self._t = float(ns)
+        self._k = 1
+        return ns
 
 
 class CommandQueue:
@@ -110,32 +162,39 @@ class CommandQueue:
         self._q.clear()
         return n
 
-    def take(self, base: str, last_ns: int, tick_ns: int) -> list[tuple[int, float]]:
-        """Empty the queue into the samples of the tick at ``tick_ns`` (previous tick at
-        ``last_ns``): ``[(ns, value)]`` in reception order with strictly increasing times.
+    def take(self, base: str, last_ns: int, tick_ns: int, restamp: bool = True
+             ) -> list[tuple[int, float]]:
+        """The samples of the tick at ``tick_ns`` (previous tick at ``last_ns``):
+        ``[(ns, value)]`` in reception order with strictly increasing times.
 
-        * a stamp later than the tick is taken at the tick;
+        * a stamp after the tick stays queued for a later tick, and so does every sample
+          received after it;
         * a stamp not after the previous sample's is merged with it (same time, newest
           value): never a zero or negative time step;
-        * a stamp not after the previous tick (with ``use_sim_time``: received after that
-          tick, before /clock moved on; or a stamp on another time base) cannot act in
-          the past: the sample takes the next time the node knows, that of the next sample
-          (which supersedes it) or, if none follows, the tick.
+        * ``restamp`` (``use_sim_time``): a stamp not after the previous tick (received
+          after that tick but before /clock moved on, or a stamp on another time base)
+          cannot act in the past: the sample takes the next time the node knows, that of
+          the next sample (which supersedes it) or, if none follows, the tick.  Without
+          ``restamp`` such a stamp is kept (smoothed stream times; the caller clamps what
+          the simulator has already integrated).
         """
         out: list[tuple[int, float]] = []
         late: float | None = None
-        for b, ns, v in self._q:
+        q = self._q
+        while q:
+            b, ns, v = q[0]
             if b != base:
                 ns = last_ns
             elif ns > tick_ns:
-                ns = tick_ns
+                break
+            q.popleft()
             if out:
                 if ns <= out[-1][0]:
                     out[-1] = (out[-1][0], v)
                     self.merged += 1
                 else:
                     out.append((ns, v))
-            elif ns <= last_ns:
+            elif restamp and ns <= last_ns:
                 self.restamped += 1
                 if late is not None:
                     self.merged += 1
@@ -147,7 +206,6 @@ class CommandQueue:
                 out.append((ns, v))
         if late is not None:
             out.append((tick_ns, late))
-        self._q.clear()
         return out
 
 
@@ -173,6 +231,7 @@ class WormGearSimNode(Node):
                  **kwargs: Any):
         super().__init__(node_name, **kwargs)
         self._clock = self.get_clock()
+        self._monotonic_ns = time.monotonic_ns    # the wall time base (tests replace it)
         values = declare_config(self, defaults if defaults is not None else file_defaults())
         self._types = {name: parameter_type(v) for name, v in values.items()}
         cfg = config_from_mapping(values, source='ROS parameters')
@@ -184,6 +243,7 @@ class WormGearSimNode(Node):
         # --- command input state -----------------------------------------------------------
         self._cmd: float | None = None           # latest accepted command theta1_ref [rad]
         self._queue = CommandQueue()             # accepted commands with reception stamps
+        self._stream = StreamClock(1e9 / cfg.node.publish_rate_hz)   # wall-clock stamps
         self._started = False
         self._origin_ns = 0                      # clock reading at t = 0 of the simulator
         self._time_base = ''                     # 'sim' or 'wall' (monotonic)
@@ -345,7 +405,10 @@ class WormGearSimNode(Node):
         if clock.ros_time_is_active:
             self._queue.push('sim', clock.now().nanoseconds, v)
         else:
-            self._queue.push('wall', time.monotonic_ns(), v)
+            ns = self._monotonic_ns()
+            if self.config.node.command_timing == 'stream':
+                ns = self._stream(ns)
+            self._queue.push('wall', ns, v)
 
     # ---- the tick ---------------------------------------------------------------------
     def _now(self) -> tuple[str, int, Any]:
@@ -354,7 +417,7 @@ class WormGearSimNode(Node):
         now = clock.now()
         if clock.ros_time_is_active:
             return 'sim', now.nanoseconds, now
-        return 'wall', time.monotonic_ns(), now
+        return 'wall', self._monotonic_ns(), now
 
     def _on_tick(self) -> None:
         busy0 = time.thread_time_ns()
@@ -402,7 +465,7 @@ class WormGearSimNode(Node):
     def _take_samples(self, base: str, ns: int) -> list[tuple[int, float]]:
         """This tick's command samples (see :meth:`CommandQueue.take`), counted."""
         q, c = self._queue, self.counters
-        samples = q.take(base, self._last_ns, ns)
+        samples = q.take(base, self._last_ns, ns, restamp=base == 'sim')
         c['commands_used'] += len(samples)
         if len(samples) > c['max_commands_per_tick']:
             c['max_commands_per_tick'] = len(samples)
@@ -475,16 +538,23 @@ class WormGearSimNode(Node):
             except Exception as exc:  # noqa: BLE001
                 self._compensation_failed(exc)
                 ok = False
-        drives = []
+        drives: list[tuple[float, float]] = []
+        after_ns = self._last_ns + 1 if self.counters['ticks'] else origin
         for ns, v in samples:
             ti = (ns - origin) * 1e-9
             if ti > self._sample_t:
                 self._sample_dt = ti - self._sample_t
             self._sample_t = ti
             self._ref = self._ref_now = v
-            if ok:
-                ok = self._update_compensator(comp, ti, v)
-            drives.append((ti, self._ref_now + self._delta if applied else v))
+            if ok:   # a smoothed stream time may precede the compensator's last sample
+                ok = self._update_compensator(comp, max(ti, self._comp_t), v)
+            drive = self._ref_now + self._delta if applied else v
+            # ... or the previous tick, up to which the simulator has already integrated
+            ts = ti if ns >= after_ns else (after_ns - origin) * 1e-9
+            if drives and ts <= drives[-1][0]:
+                drives[-1] = (drives[-1][0], drive)
+            else:
+                drives.append((ts, drive))
         if not samples and ok:
             stale = max(STALE_PERIODS * self._period_ns * 1e-9,
                         2.0 * min(self._sample_dt, STALE_MAX_INTERVAL))
@@ -634,6 +704,8 @@ class WormGearSimNode(Node):
             self._warn(f'could not apply parameters: {exc}')
             return
         self.sim.interpolation = cfg.node.command_interpolation
+        if cfg.node.command_timing != self.config.node.command_timing:
+            self._stream.reset()
         self.ratio = self.sim.derived.output_per_input
         old = self.config
         self.config = cfg
@@ -641,7 +713,8 @@ class WormGearSimNode(Node):
         before = old.to_flat_dict()
         if Compensator is not None and any(
                 before[k] != v for k, v in cfg.to_flat_dict().items()
-                if not k.startswith('input.') and k != 'node.compensation_applied'):
+                if not k.startswith('input.') and k not in ('node.compensation_applied',
+                                                             'node.command_timing')):
             self._redesign_compensator(cfg)
         names = ', '.join(p.name for p in params if is_model_parameter(p.name))
         self.get_logger().info(f'parameters applied: {names}')
@@ -683,6 +756,9 @@ class WormGearSimNode(Node):
             'rejected_commands',
             *(f'rejected_{r}' for r in REJECT_REASONS), 'rejected_parameter_sets',
             'accepted_parameter_sets')}
+        in_vals['command_timing'] = self.config.node.command_timing
+        in_vals['stream_period_ms'] = self._stream.period * 1e-6
+        in_vals['stream_relocks'] = self._stream.relocks
         in_vals['last_command'] = 'none' if self._cmd is None else repr(self._cmd)
         in_vals['last_error'] = self.last_error
         ff_level = diag.OK if self.compensator is not None and not c['compensation_errors'] \

@@ -256,8 +256,14 @@ class NodeSettings:
     max_catch_up: float = _f(0.05, 'Largest simulated time integrated in one tick; the rest '
                              'is dropped and counted as an overrun', 's', 0.0, 10.0,
                              lo_open=True)
-    command_interpolation: str = _f('linear', 'How theta1 moves between commands inside a '
-                                    'tick: linear or hold', choices=('linear', 'hold'))
+    command_interpolation: str = _f('linear', 'How theta1 moves between command samples: '
+                                    'linear, or hold (steps at the sample time)',
+                                    choices=('linear', 'hold'))
+    command_timing: str = _f('stream', 'Time of a command sample on the wall clock: stream '
+                             '(reception time smoothed onto the steady rate of the stream: no '
+                             'executor latency jitter) or reception (raw reception time); with '
+                             'use_sim_time always the /clock reading at reception',
+                             choices=('stream', 'reception'))
     compensation_applied: bool = _f(False, 'Predict the drive as if ~/feedforward were added '
                                     'to the command')
     diagnostic_period: float = _f(1.0, 'Period of /diagnostics', 's', 0.01, 60.0,
