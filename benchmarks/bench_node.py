@@ -16,9 +16,17 @@ Starts ``python -m worm_gear_sim.node --ros-args --params-file config/worm_gear_
 
 Targets (issue 3): <= 0.15 core, <= 0.1 % missed ticks over 60 s, latency p99 <= 1.5 ms.
 ``--breakdown`` adds in-process per-tick costs (no DDS) to show what bounds the CPU figure.
+``--feedforward`` subscribes to ``~/feedforward`` (so the node computes it) and reports its
+noise: each command is the slew at its publish time (the probe's 1 kHz timer, not
+phase-locked to the node's); the correction of a constant-rate slew is 0 with the default
+drive (no load), so whatever ``~/feedforward`` shows on the constant-rate stretches (60 ms
+from each reversal on) is noise from the command timing; ``--command-timing`` and
+``--slew-rate`` set the case.
 
     python benchmarks/bench_node.py                    # 60 s
     python benchmarks/bench_node.py --duration 20 --breakdown
+    python benchmarks/bench_node.py --duration 30 --feedforward --slew-rate 2 \
+        --command-timing reception
 """
 
 from __future__ import annotations
@@ -32,6 +40,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_CPU, TARGET_MISSED, TARGET_P99_MS = 0.15, 0.001, 1.5
@@ -200,6 +210,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--domain-id', type=int, default=44)
     ap.add_argument('--breakdown', action='store_true',
                     help='also measure the per-tick costs in-process')
+    ap.add_argument('--feedforward', action='store_true',
+                    help='subscribe to ~/feedforward and report its noise')
+    ap.add_argument('--command-timing', choices=('reception', 'stream', 'tick'), default=None,
+                    help='node.command_timing of the node (default: the params file)')
+    ap.add_argument('--slew-rate', type=float, default=0.5,
+                    help='worm slew rate [rad/s] (0.5; amplitude 0.5 rad)')
+    ap.add_argument('--servo-grid', action='store_true',
+                    help='command k is the slew at k periods (a servo on its own steady '
+                         'grid), not at its publish time')
     args = ap.parse_args(argv)
 
     os.environ['ROS_DOMAIN_ID'] = str(args.domain_id)
@@ -215,6 +234,8 @@ def main(argv: list[str] | None = None) -> int:
     node_cmd = [sys.executable, '-m', 'worm_gear_sim.node', '--executor', args.executor,
                 '--ros-args', '--params-file', str(ROOT / 'config' / 'worm_gear_sim.yaml'),
                 '--log-level', 'warn']
+    if args.command_timing:
+        node_cmd += ['-p', f'node.command_timing:={args.command_timing}']
     proc = subprocess.Popen(node_cmd, cwd=ROOT, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True)
     rclpy.init()
@@ -223,10 +244,12 @@ def main(argv: list[str] | None = None) -> int:
     ex.add_node(probe)
     pub = probe.create_publisher(Float64, 'worm_angle_command', QoSProfile(depth=10))
     sent: collections.deque = collections.deque(maxlen=64)      # (value, t_sent)
-    step = args.command_rate and 0.5 / args.command_rate        # rad between commands
+    step = args.command_rate and args.slew_rate / args.command_rate  # rad between commands
+    ff: list[tuple[float, float]] = []                          # (t_rx, correction)
     lat: list[float] = []
     stamps: list[int] = []
     diag: dict[str, str] = {}
+    inputs: dict[str, str] = {}
     state = {'measuring': False, 'n_js': 0}
 
     def on_js(msg: JointState) -> None:
@@ -250,8 +273,15 @@ def main(argv: list[str] | None = None) -> int:
         for s in msg.status:
             if s.name.endswith(': simulation'):
                 diag.update({kv.key: kv.value for kv in s.values})
+            elif s.name.endswith(': inputs'):
+                inputs.update({kv.key: kv.value for kv in s.values})
 
     probe.create_subscription(JointState, 'joint_states', on_js, QoSProfile(depth=100))
+    if args.feedforward:
+        probe.create_subscription(
+            Float64, '/worm_gear_sim/feedforward',
+            lambda m: state['measuring'] and ff.append((time.monotonic(), m.data)),
+            QoSProfile(depth=100))
     probe.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     # The probe runs on the EventsExecutor (bounded spin slices, as the node does): a 1 kHz
     # timer publishes the commands and advances the phases, so the probe itself stays light.
@@ -262,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
     done = rclpy.task.Future()
     t_start = time.monotonic()
     run = {'phase': 'wait', 'cpu0': 0.0, 'wall0': 0.0, 'cpu1': 0.0, 'wall1': 0.0,
-           'diag0': {}, 'error': ''}
+           'diag0': {}, 'error': '', 'k': 0}
 
     def on_timer() -> None:
         now = time.monotonic()
@@ -286,7 +316,13 @@ def main(argv: list[str] | None = None) -> int:
             run['error'] = 'no JointState from the node within 120 s'
             done.set_result(True)
             return
-        v = slew(now - t_start)
+        if args.servo_grid:   # one slot per callback; re-synchronised after lost ones
+            run['k'] += 1
+            if abs(run['k'] / args.command_rate - (now - t_start)) > 0.005:
+                run['k'] = round((now - t_start) * args.command_rate)
+            v = slew(run['k'] / args.command_rate, args.slew_rate)
+        else:
+            v = slew(now - t_start, args.slew_rate)
         pub.publish(Float64(data=v))
         sent.append((v, time.monotonic()))
 
@@ -332,7 +368,8 @@ def main(argv: list[str] | None = None) -> int:
             math.nan
     load1 = os.getloadavg()
     print(f'worm_gear_sim node benchmark: {wall:.1f} s measured, executor {args.executor}, '
-          f'1 kHz ticks, dt = 10 us, commands at {args.command_rate:g} Hz (slew 0.5 rad/s)')
+          f'1 kHz ticks, dt = 10 us, commands at {args.command_rate:g} Hz (slew '
+          f'{args.slew_rate:g} rad/s)')
     print(f'machine: {os.cpu_count()} cores shared with other work; load average '
           f'{load0[0]:.2f} before, {load1[0]:.2f} after (1 min)')
     ok = lambda good: 'ok' if good else 'MISSED'  # noqa: E731
@@ -351,6 +388,20 @@ def main(argv: list[str] | None = None) -> int:
         if key in diag:
             print(f'  node diagnostics: {key} = {diag[key]} (last 1 s window)')
     print(f'  node exit code after SIGINT: {rc}')
+    if args.feedforward:
+        half = 2.0 * 0.5 / args.slew_rate                  # s between reversals
+        t = np.array([a - t_start for a, _ in ff])
+        d = np.array([b for _, b in ff])
+        steady = np.abs((t + 0.5 * half) % half - 0.5 * half) > 0.06
+        noise = d[steady]
+        print(f'  ~/feedforward on the constant-rate stretches (ideal 0), node.command_timing '
+              f'{args.command_timing or "from the params file"}: RMS '
+              f'{1e6 * np.sqrt(np.mean(noise ** 2)) if noise.size else math.nan:.1f} urad, '
+              f'p99 |.| {1e6 * np.percentile(np.abs(noise), 99) if noise.size else math.nan:.1f}'
+              f' urad ({noise.size} of {d.size} messages)')
+        print('  node diagnostics: ' + ', '.join(f'{k} = {inputs.get(k)}' for k in (
+            'stream_period_ms', 'stream_relocks', 'stream_outliers', 'commands_merged',
+            'max_commands_per_tick')))
     if args.breakdown:
         print('per-tick costs in-process (us):')
         for k, v in breakdown().items():

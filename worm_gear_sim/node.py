@@ -16,6 +16,11 @@ Interface (SI units, rad; relative, remappable names):
 * every model parameter is a declared ROS parameter (dotted names of
   :meth:`Config.to_flat_dict`), validated at run time by :meth:`Config.replace`.
 
+Each accepted command is a sample of the reference at its reception time (the /clock
+reading with ``use_sim_time``; on the wall clock as ``node.command_timing`` says); each tick
+feeds the samples received since the previous one, in time order, to the compensator and
+the simulator, and holds the last one up to the tick (docs/node.md, "Timing").
+
 Run ``worm_gear_sim_node --ros-args --params-file config/worm_gear_sim.yaml`` (or
 ``python -m worm_gear_sim.node ...``); ``--executor single_threaded`` overrides the
 ``node.executor`` parameter.
@@ -81,7 +86,8 @@ STALE_PERIODS = 3.5  # no command for this many tick periods: the reference is t
 STALE_MAX_INTERVAL = 0.05  # s: sample intervals longer than this are pauses, not a rate
 HOLD_EPS = 0.5e-9  # s: 'hold' steps just after the sample time (stamps are whole ns)
 STREAM_GAIN = 0.02  # steady alpha of the stream clock (a memory of about 50 samples)
-STREAM_WINDOW = 0.5  # stamps further than this many periods from the prediction re-lock
+STREAM_WINDOW = 0.35  # periods: a stamp further from its grid slot is an outlier
+STREAM_OUTLIER_RATE = 0.3  # re-lock when the outlier rate (1/8 smoothing) exceeds this
 
 
 class StreamClock:
@@ -90,22 +96,35 @@ class StreamClock:
     A servo computes its commands on a regular grid; they reach the node's callback after
     a varying delay (DDS and executor latency: p10 ~100 us, p90 ~280 us on the
     development VM), which would reach the feed-forward as time jitter of the samples.  An
-    alpha-beta tracker follows the grid's phase and period: least-squares gains while it
-    acquires (exact for the first two stamps), then ``gain`` (critically damped).  A stamp
-    further than ``window`` periods from the prediction (first command, pause, burst, rate
-    change) is taken as it is and restarts the acquisition, with its interval as the
-    period guess when that is shorter than ``max_period_ns``.  While tracking, the
-    output is strictly increasing and lags the grid by the mean delay (a constant).
+    alpha-beta tracker follows the grid's phase and period: each stamp is assigned the
+    nearest grid slot after the previous sample (missed commands skip slots) and its
+    deviation from the slot corrects phase and period, with least-squares gains while it
+    acquires (exact for the first two stamps), then ``gain`` (critically damped).  A
+    stamp further than ``window`` periods from its slot is an outlier and does not
+    correct the tracker: a late one (a delayed callback) is placed on its slot, an early
+    one (commands that queued up behind a stall, or a faster stream) on the previous
+    sample's time, so that it replaces that sample's value (CommandQueue and Compensator
+    merge equal times).  An outlier rate above ``max_outlier_rate`` (exponentially
+    smoothed over ~8 stamps: three outliers in a row, or a new rate or phase) or a pause
+    longer than ``max_period_ns`` re-lock: the stamp is taken as it is,
+    with its interval as the period guess (if shorter than ``max_period_ns``).  The output
+    never decreases while tracking and lags the grid by the mean delay (a constant); a
+    stream at an integer fraction of the rate keeps the period (it skips slots).
     """
 
     def __init__(self, period_ns: float, gain: float = STREAM_GAIN,
-                 window: float = STREAM_WINDOW, max_period_ns: float = 5e7) -> None:
-        if not (0.0 < gain <= 1.0 and 0.0 < window and period_ns > 0.0):
-            raise ValueError('StreamClock: need period_ns > 0, 0 < gain <= 1, window > 0')
+                 window: float = STREAM_WINDOW, max_outlier_rate: float = STREAM_OUTLIER_RATE,
+                 max_period_ns: float = 5e7) -> None:
+        if not (0.0 < gain <= 1.0 and 0.0 < window < 0.5 and period_ns > 0.0
+                and 0.0 < max_outlier_rate < 1.0):
+            raise ValueError('StreamClock: need period_ns > 0, 0 < gain <= 1, '
+                             '0 < window < 0.5, 0 < max_outlier_rate < 1')
         self.gain, self.window = float(gain), float(window)
+        self.max_outlier_rate = float(max_outlier_rate)
         self.beta = gain * gain / (2.0 - gain)
         self.period0, self.max_period = float(period_ns), float(max_period_ns)
         self.relocks = 0
+        self.outliers = 0                     # outliers placed on their slot, in all
         self.reset()
 
     def reset(self) -> None:
@@ -113,24 +132,38 @@ class StreamClock:
         self._t: float | None = None          # last output [ns]
         self._raw: int | None = None          # last reception stamp [ns]
         self._k = 0                           # stamps since the last (re)lock
+        self._rate = 0.0                      # smoothed outlier rate
 
     def __call__(self, ns: int) -> int:
         """The sample time [ns] for a command received at ``ns``."""
         prev, self._raw = self._raw, ns
-        if self._t is not None:
-            pred = self._t + self.period
+        t = self._t
+        if t is not None and ns - t <= self.max_period:
+            m = max(1, round((ns - t) / self.period))        # grid slots since the last
+            pred = t + m * self.period
             e = ns - pred
             if abs(e) <= self.window * self.period:
+                self._rate *= 0.875
                 self._k += 1
                 k = self._k
                 self._t = pred + max(2.0 * (2 * k - 1) / (k * (k + 1)), self.gain) * e
-                self.period += max(6.0 / (k * (k + 1)), self.beta) * e
+                self.period += max(6.0 / (k * (k + 1)), self.beta) * e / m
                 return int(round(self._t))
+            self._rate += 0.125 * (1.0 - self._rate)
+            if self._rate <= self.max_outlier_rate:
+                self.outliers += 1
+                if e > 0.0:               # late (a delayed callback): on its slot
+                    self._t = pred
+                # early (a stalled stream catching up, a faster one): on the previous
+                # sample's time, whose value it replaces (CommandQueue / Compensator merge)
+                return int(round(self._t))
+        if t is not None:
             self.relocks += 1
         if prev is not None and 0 < ns - prev <= self.max_period:
             self.period = float(ns - prev)
         self._t = float(ns)
         self._k = 1
+        self._rate = 0.0
         return ns
 
 
@@ -375,8 +408,9 @@ class WormGearSimNode(Node):
 
     # ---- command input ---------------------------------------------------------------
     def _on_command(self, msg: Float64) -> None:
-        """O(1): validate, stamp with the node clock and queue the command (a sample of
-        theta1_ref at its reception time); the physics runs only in the tick."""
+        """O(1): validate, stamp and queue the command (a sample of theta1_ref at its
+        reception time: the /clock reading with use_sim_time, else the monotonic clock as
+        node.command_timing says); the physics runs only in the tick."""
         c = self.counters
         c['commands_received'] += 1
         v = msg.data
@@ -405,10 +439,13 @@ class WormGearSimNode(Node):
         if clock.ros_time_is_active:
             self._queue.push('sim', clock.now().nanoseconds, v)
         else:
-            ns = self._monotonic_ns()
-            if self.config.node.command_timing == 'stream':
-                ns = self._stream(ns)
-            self._queue.push('wall', ns, v)
+            timing = self.config.node.command_timing
+            if timing == 'reception':
+                self._queue.push('wall', self._monotonic_ns(), v)
+            elif timing == 'stream':
+                self._queue.push('wall', self._stream(self._monotonic_ns()), v)
+            else:               # 'tick': no time of its own, restamped to the next tick
+                self._queue.push('wall', self._last_ns, v)
 
     # ---- the tick ---------------------------------------------------------------------
     def _now(self) -> tuple[str, int, Any]:
@@ -465,7 +502,8 @@ class WormGearSimNode(Node):
     def _take_samples(self, base: str, ns: int) -> list[tuple[int, float]]:
         """This tick's command samples (see :meth:`CommandQueue.take`), counted."""
         q, c = self._queue, self.counters
-        samples = q.take(base, self._last_ns, ns, restamp=base == 'sim')
+        samples = q.take(base, self._last_ns, ns,
+                         restamp=base == 'sim' or self.config.node.command_timing == 'tick')
         c['commands_used'] += len(samples)
         if len(samples) > c['max_commands_per_tick']:
             c['max_commands_per_tick'] = len(samples)
@@ -759,6 +797,7 @@ class WormGearSimNode(Node):
         in_vals['command_timing'] = self.config.node.command_timing
         in_vals['stream_period_ms'] = self._stream.period * 1e-6
         in_vals['stream_relocks'] = self._stream.relocks
+        in_vals['stream_outliers'] = self._stream.outliers
         in_vals['last_command'] = 'none' if self._cmd is None else repr(self._cmd)
         in_vals['last_error'] = self.last_error
         ff_level = diag.OK if self.compensator is not None and not c['compensation_errors'] \

@@ -259,11 +259,12 @@ class NodeSettings:
     command_interpolation: str = _f('linear', 'How theta1 moves between command samples: '
                                     'linear, or hold (steps at the sample time)',
                                     choices=('linear', 'hold'))
-    command_timing: str = _f('stream', 'Time of a command sample on the wall clock: stream '
-                             '(reception time smoothed onto the steady rate of the stream: no '
-                             'executor latency jitter) or reception (raw reception time); with '
-                             'use_sim_time always the /clock reading at reception',
-                             choices=('stream', 'reception'))
+    command_timing: str = _f('tick', 'Time of a command sample on the wall clock: tick (the '
+                             'tick that reads it; the newest command since the previous tick), '
+                             'reception (its reception time) or stream (reception times '
+                             'smoothed onto the steady rate of the stream); with use_sim_time '
+                             'always the /clock reading at reception',
+                             choices=('tick', 'reception', 'stream'))
     compensation_applied: bool = _f(False, 'Predict the drive as if ~/feedforward were added '
                                     'to the command')
     diagnostic_period: float = _f(1.0, 'Period of /diagnostics', 's', 0.01, 60.0,
