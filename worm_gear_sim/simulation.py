@@ -256,10 +256,10 @@ class Simulator:
             done, status = advance_segment(
                 self.p, self.C, self._u, self._v, self._a, self._theta1, self._theta1_dot,
                 self._t0, self._k, self.dt, n, self._cmd_t,
-                self._cmd_value if slope != 0.0 else float(theta1), slope, self._stats,
-                self._ctl)
-            self._after_kernel(done, status, self._segment_value(done, theta1, slope),
-                               slope)
+                self._cmd_value if slope != 0.0 else float(theta1), slope, t_target,
+                float(theta1), self._stats, self._ctl)
+            self._after_kernel(done, status,
+                               self._segment_value(done, theta1, slope, t_target), slope)
         if t_target > self._cmd_t or n > 0:
             self._cmd_t = max(t_target, self._cmd_t)
             self._cmd_value = float(theta1)
@@ -270,11 +270,12 @@ class Simulator:
         self._t0 = float(t) - self._k * self.dt
         self._cmd_t = min(self._cmd_t, self.t)
 
-    def _segment_value(self, done: int, theta1: float, slope: float) -> float:
+    def _segment_value(self, done: int, theta1: float, slope: float,
+                       t_target: float) -> float:
         """theta1 at the last completed grid point of an advance_segment call."""
-        if slope == 0.0:
-            return float(theta1)
         grid = self._t0 + float(self._k + done) * self.dt
+        if slope == 0.0 or grid >= t_target:
+            return float(theta1)
         return self._cmd_value + slope * (grid - self._cmd_t)
 
     def _run_kernel(self, th, td, stride, ru, rv, ra, raux) -> None:
