@@ -7,7 +7,7 @@ phase-locked to the node's 1 kHz tick, and each command reaches the node's callb
 a delay (DDS + executor latency) uniform in [0, J].  When the delay carries commands across
 a tick, some ticks get 0 commands and the next 2.  The reference is a constant-rate worm
 ramp from rest at t = 0.  Each way of turning the stream into samples runs through the
-node's own code (:class:`worm_gear_sim.node.CommandQueue`, :class:`StreamClock`) and a
+node's own code (:class:`worm_gear_sim.ros.node.CommandQueue`, :class:`StreamClock`) and a
 :class:`Compensator` of the default configuration:
 
 * ``regular``: samples exactly at the ticks (a phase-locked servo): the reference;
@@ -45,7 +45,7 @@ import numpy as np
 
 from worm_gear_sim import Config, SampledProfile, simulate
 from worm_gear_sim.compensation import Compensator
-from worm_gear_sim.node import CommandQueue, StreamClock
+from worm_gear_sim.ros.node import CommandQueue, StreamClock
 
 TICK_NS = 1_000_000
 Ticks = list[list[tuple[int, float]]]

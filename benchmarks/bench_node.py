@@ -65,7 +65,7 @@ def breakdown(n_ticks: int = 2000) -> dict[str, float]:
     import rclpy
     from std_msgs.msg import Float64
 
-    from worm_gear_sim.node import WormGearSimNode
+    from worm_gear_sim.ros.node import WormGearSimNode
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'OFF'
     ctx = rclpy.context.Context()
     rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '44')))
@@ -128,7 +128,7 @@ def empty_timer_cost(kind: str, seconds: float = 10.0) -> tuple[float, float, fl
     code = f'''
 import time, rclpy
 from rclpy.node import Node
-from worm_gear_sim.node import make_executor
+from worm_gear_sim.ros.node import make_executor
 rclpy.init(domain_id={int(os.environ.get('ROS_DOMAIN_ID', '44')) + 1})
 n = Node('empty_timer'); ts = []
 n.create_timer(1e-3, lambda: ts.append(time.monotonic_ns()))
@@ -285,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
     probe.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     # The probe runs on the EventsExecutor (bounded spin slices, as the node does): a 1 kHz
     # timer publishes the commands and advances the phases, so the probe itself stays light.
-    from worm_gear_sim.node import make_executor
+    from worm_gear_sim.ros.node import make_executor
     ex.shutdown()
     ex = make_executor('events')
     ex.add_node(probe)

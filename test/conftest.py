@@ -5,12 +5,12 @@
 Nothing here runs at import or touches the environment of tests that do not ask for these
 fixtures; rclpy is imported lazily, so non-ROS tests run without it.
 
-* ``ros_context``: one rclpy Context per test on ROS_DOMAIN_ID 42 with discovery OFF (the
+* ``ros_context``: one rclpy Context per test on $ROS_DOMAIN_ID (42 if unset), discovery OFF (the
   node under test and its probes share the context's participant, nothing leaves it);
 * ``ros_harness``: factory of :class:`RosHarness` (node under test + probe node + a
   SingleThreadedExecutor, bounded waits);
 * ``ros_dds_context`` / ``ros_subprocess_env``: a Context and a child-process environment
-  on ROS_DOMAIN_ID 43 with discovery LOCALHOST (tests that start the node as a process).
+  on the next domain with discovery LOCALHOST (tests that start the node as a process).
 """
 
 from __future__ import annotations
@@ -22,13 +22,15 @@ from typing import Any
 
 import pytest
 
-IN_PROCESS_DOMAIN_ID = 42
-SUBPROCESS_DOMAIN_ID = 43
+# The user's ROS_DOMAIN_ID (default 42) for in-process tests, the next one for child processes:
+# concurrent test sessions on one machine stay apart when each sets its own domain.
+IN_PROCESS_DOMAIN_ID = int(os.environ.get('ROS_DOMAIN_ID', '42') or 42)
+SUBPROCESS_DOMAIN_ID = IN_PROCESS_DOMAIN_ID + 1
 
 
 @pytest.fixture
 def ros_context(monkeypatch: pytest.MonkeyPatch):
-    """A fresh rclpy Context (domain 42, discovery OFF), shut down after the test."""
+    """A fresh rclpy Context (IN_PROCESS_DOMAIN_ID, discovery OFF), shut down after the test."""
     rclpy = pytest.importorskip('rclpy')
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'OFF')
     monkeypatch.delenv('ROS_STATIC_PEERS', raising=False)
@@ -42,7 +44,7 @@ def ros_context(monkeypatch: pytest.MonkeyPatch):
 
 @pytest.fixture
 def ros_dds_context(monkeypatch: pytest.MonkeyPatch):
-    """A Context that talks to child processes: domain 43, discovery LOCALHOST."""
+    """A Context that talks to child processes: SUBPROCESS_DOMAIN_ID, discovery LOCALHOST."""
     rclpy = pytest.importorskip('rclpy')
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     monkeypatch.delenv('ROS_STATIC_PEERS', raising=False)
@@ -56,7 +58,7 @@ def ros_dds_context(monkeypatch: pytest.MonkeyPatch):
 
 @pytest.fixture
 def ros_subprocess_env() -> dict[str, str]:
-    """Environment for a node started as a child process (domain 43, localhost only)."""
+    """Environment for a node started as a child process (SUBPROCESS_DOMAIN_ID, localhost only)."""
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(SUBPROCESS_DOMAIN_ID)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -82,8 +84,8 @@ class RosHarness:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64
 
-        from worm_gear_sim.diagnostics import DiagnosticArray
-        from worm_gear_sim.node import WormGearSimNode
+        from worm_gear_sim.ros.diagnostics import DiagnosticArray
+        from worm_gear_sim.ros.node import WormGearSimNode
 
         params = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
         if sim_time:

@@ -18,7 +18,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 
 from worm_gear_sim import Config, SampledProfile, Simulator, load_config  # noqa: E402
 from worm_gear_sim.profiles import make_profile  # noqa: E402
-from worm_gear_sim.ros_params import MODEL_PARAMETER_NAMES  # noqa: E402
+from worm_gear_sim.ros.params_bridge import MODEL_PARAMETER_NAMES  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -165,7 +165,7 @@ def test_declares_every_model_parameter_with_descriptor(ros_harness):
 def test_code_defaults_equal_the_yaml_file(ros_harness):
     """Declared defaults (no params file) equal config/worm_gear_sim.yaml, and loading that
     file with --params-file gives the same values."""
-    from worm_gear_sim.node import WormGearSimNode
+    from worm_gear_sim.ros.node import WormGearSimNode
     file_values = load_config(CONFIG).to_flat_dict()
     h = ros_harness(sim_time=False)
     node_defaults = WormGearSimNode(context=h.ctx, node_name='defaults_only',
@@ -601,7 +601,7 @@ def test_command_queue_rules():
     """CommandQueue.take: overflow drops the oldest; stamps not after the previous sample
     merge (newest value); with restamp (sim time) stamps not after the previous tick take
     the next known time; stamps after the tick wait; another time base is restamped."""
-    from worm_gear_sim.node import CommandQueue
+    from worm_gear_sim.ros.node import CommandQueue
     q = CommandQueue(maxlen=4)
     for i in range(6):
         q.push('sim', 100 + i, float(i))
@@ -635,7 +635,7 @@ def test_stream_clock_recovers_a_steady_grid():
     stream clock's sample spacing jitters 20x less than the reception stamps'; late
     callbacks are put on their slot; a 500 Hz stream skips slots; a pause, a 400 Hz
     stream and a burst re-lock it."""
-    from worm_gear_sim.node import StreamClock
+    from worm_gear_sim.ros.node import StreamClock
     for bad in (dict(period_ns=0.0), dict(period_ns=1e6, gain=0.0),
                 dict(period_ns=1e6, window=0.5), dict(period_ns=1e6, max_outlier_rate=1.0)):
         with pytest.raises(ValueError):
@@ -698,7 +698,7 @@ def test_feedforward_rests_when_the_stream_stops(ros_harness):
     reference is taken as resting (a sample at each tick) and ~/feedforward settles at the
     rest correction, as a Compensator fed the held reference gives."""
     from worm_gear_sim.compensation import Compensator
-    from worm_gear_sim.node import STALE_PERIODS
+    from worm_gear_sim.ros.node import STALE_PERIODS
     h = ros_harness(RAMP_LOAD)
     n_move, n = 20, 40
     ramp = RAMP_RATE * np.arange(n_move) * 1e-3

@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_demo_patterns():
     pytest.importorskip('rclpy')
     from worm_gear_sim import Config
-    from worm_gear_sim.demo_commander import command_pattern
+    from worm_gear_sim.ros.demo_commander import command_pattern
     cfg = Config()
     paper = command_pattern('paper', cfg)
     target = cfg.input.target_angle

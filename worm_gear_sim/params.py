@@ -240,7 +240,7 @@ class InputProfile:
 
 @dataclass(frozen=True)
 class NodeSettings:
-    """ROS node settings (read by worm_gear_sim.node; pure data, no rclpy here)."""
+    """ROS node settings (read by worm_gear_sim.ros.node; pure data, no rclpy here)."""
 
     publish_rate_hz: float = _f(1000.0, 'Tick (publish) rate', 'Hz', 1.0, 20000.0,
                                 read_only=True)

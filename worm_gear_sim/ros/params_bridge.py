@@ -24,7 +24,7 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
-from .params import Config
+from ..params import Config
 
 __all__ = ['parameter_type', 'descriptor_for', 'declare_config', 'to_core_value',
            'coerce_parameter', 'is_model_parameter', 'MODEL_PARAMETER_NAMES']
