@@ -16,9 +16,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 DURATION="${1:-${DEMO_DURATION:-20}}"
 PATTERN="${2:-${DEMO_PATTERN:-paper}}"
-VENV="${VENV:-.venv}"
-
-VENV="$VENV" scripts/setup_env.sh      # creates the venv and installs everything (first run)
+# shellcheck source=scripts/ros_distro.sh
+. scripts/ros_distro.sh                # ROS_DISTRO=kilted (.venv, default) | jazzy (.venv-jazzy)
+scripts/setup_env.sh                   # creates the venv and installs everything (first run)
 PY="$VENV/bin/python"
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"

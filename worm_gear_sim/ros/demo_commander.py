@@ -176,43 +176,47 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
     out = out or sys.stdout
     tty = out.isatty()
     from .node import make_executor
+    # rclpy.init() as a context manager exists only from Kilted (rclpy 9) on: on Jazzy
+    # (rclpy 7.1) it returns None, so init, then try_shutdown in a finally.
+    rclpy.init(args=argv)
     try:
-        with rclpy.init(args=argv):
-            node = DemoCommander(opts.pattern, opts.rate, opts.node_name, opts.move_period,
-                                 opts.slew_rate, opts.slew_period)
-            ex = make_executor('events')
-            ex.add_node(node)
-            never = Future()
-            t_start = time.monotonic()
-            last_print = 0.0
-            print(f'demo: {opts.pattern} pattern at {opts.rate:g} Hz on '
-                  f'{node.resolve_topic_name("worm_angle_command")}; antenna error = theta4 - '
-                  f'theta1 l_w/r_g (ratio 1:{1 / node.ratio:.4g})', file=out, flush=True)
-            while True:
-                ex.spin_until_future_complete(never, timeout_sec=0.1)
-                now = time.monotonic()
-                if node.t0 is None and now - t_start > opts.startup_timeout:
-                    print(f'\nno joint_states within {opts.startup_timeout:g} s: is the node '
-                          'running (same ROS_DOMAIN_ID)?', file=out, flush=True)
-                    return 1
-                if node.t0 is not None and node.elapsed() >= opts.duration:
-                    break
-                if tty and now - last_print >= 0.1:
-                    out.write('\r' + node.status_line() + '\x1b[K')
-                    out.flush()
-                    last_print = now
-                elif not tty and now - last_print >= 1.0:
-                    print(node.status_line(), file=out, flush=True)
-                    last_print = now
-            if tty:
-                out.write('\n')
-            print(f'demo done: {node.sent} commands sent, {node.n_js} joint_states received, '
-                  f'largest antenna error {node.peak_all * 1e6:.2f} urad', file=out,
-                  flush=True)
-            ex.shutdown(1.0)
-            node.destroy_node()
+        node = DemoCommander(opts.pattern, opts.rate, opts.node_name, opts.move_period,
+                             opts.slew_rate, opts.slew_period)
+        ex = make_executor('events')
+        ex.add_node(node)
+        never = Future()
+        t_start = time.monotonic()
+        last_print = 0.0
+        print(f'demo: {opts.pattern} pattern at {opts.rate:g} Hz on '
+              f'{node.resolve_topic_name("worm_angle_command")}; antenna error = theta4 - '
+              f'theta1 l_w/r_g (ratio 1:{1 / node.ratio:.4g})', file=out, flush=True)
+        while True:
+            ex.spin_until_future_complete(never, timeout_sec=0.1)
+            now = time.monotonic()
+            if node.t0 is None and now - t_start > opts.startup_timeout:
+                print(f'\nno joint_states within {opts.startup_timeout:g} s: is the node '
+                      'running (same ROS_DOMAIN_ID)?', file=out, flush=True)
+                return 1
+            if node.t0 is not None and node.elapsed() >= opts.duration:
+                break
+            if tty and now - last_print >= 0.1:
+                out.write('\r' + node.status_line() + '\x1b[K')
+                out.flush()
+                last_print = now
+            elif not tty and now - last_print >= 1.0:
+                print(node.status_line(), file=out, flush=True)
+                last_print = now
+        if tty:
+            out.write('\n')
+        print(f'demo done: {node.sent} commands sent, {node.n_js} joint_states received, '
+              f'largest antenna error {node.peak_all * 1e6:.2f} urad', file=out,
+              flush=True)
+        ex.shutdown(1.0)
+        node.destroy_node()
     except (KeyboardInterrupt, ExternalShutdownException):
         print('', file=out)
+    finally:
+        rclpy.try_shutdown()
     return 0
 
 
