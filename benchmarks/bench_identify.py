@@ -19,6 +19,7 @@ theta1 l_w/r_g), the wall time and the verdict.  Absolute times depend on the ma
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 import os
 import sys
@@ -29,7 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from worm_gear_sim import load_config, modes  # noqa: E402
+from worm_gear_sim import derive, load_config, modes  # noqa: E402
 from worm_gear_sim.identification import (  # noqa: E402
     STRATEGIES,
     FitOptions,
@@ -76,12 +77,12 @@ def drives(base):
     }
 
 
-def records(truth, seed: int) -> tuple[Record, Record, Record]:
+def records(truth, seed: int, duration: float = DURATION) -> tuple[Record, Record, Record]:
     kw = dict(sample_rate=RATE, outputs=('theta4',), noise_rad=NOISE,
               resolution_rad=RESOLUTION)
-    train = record_from_model(truth, TRAIN, DURATION, seed=seed, name='train', **kw)
-    hold = record_from_model(truth, HOLD, DURATION, seed=seed + 1, name='held-out', **kw)
-    clean = record_from_model(truth, HOLD, DURATION, sample_rate=RATE, name='held-out clean')
+    train = record_from_model(truth, TRAIN, duration, seed=seed, name='train', **kw)
+    hold = record_from_model(truth, HOLD, duration, seed=seed + 1, name='held-out', **kw)
+    clean = record_from_model(truth, HOLD, duration, sample_rate=RATE, name='held-out clean')
     return train, hold, clean
 
 
@@ -100,12 +101,15 @@ def compare(args) -> None:
     print(f'{"drive":<38} {"strategy":<18} {"hold %":>7} {"vs truth %":>10} {"train %":>8} '
           f'{"time s":>7}  verdict')
     summary: dict[str, list[float]] = {s: [] for s in names}
-    for dname, (truth, _variant) in drives(base).items():
-        train, hold, clean = records(truth, seed=7)
+    times: dict[str, list[float]] = {s: [] for s in names}
+    ratio = derive(base).output_per_input
+    for (dname, (truth, _variant)), duration in itertools.product(drives(base).items(),
+                                                                  args.durations):
+        train, hold, clean = records(truth, seed=7, duration=duration)
         f_true = modes(truth).undamped_hz[0]
         h0, c0 = held_out(base, hold, clean)
-        print(f'{dname + f" ({f_true:.1f} Hz)":<38} {"(default config)":<18} {h0:>7.1f} '
-              f'{c0:>10.1f}')
+        print(f'{dname + f" {f_true:.1f} Hz, {duration:g} s":<38} {"(default config)":<18} '
+              f'{h0:>7.1f} {c0:>10.1f}')
         for s in names:
             opt = FitOptions(strategy=s, serial=args.serial, workers=args.workers)
             t0 = time.perf_counter()
@@ -113,13 +117,17 @@ def compare(args) -> None:
             wall = time.perf_counter() - t0
             h, c = held_out(res.config, hold, clean)
             tr = 100 * res.rms_after['theta4'] / (0.5 * np.ptp(
-                train.measured['theta4'] - train.theta1 / 56.0))
-            verdict = 'trustworthy' if res.trustworthy else 'NOT trustworthy'
+                train.measured['theta4'] - train.theta1 * ratio))
+            verdict = 'trustworthy' if res.trustworthy else \
+                f'NOT trustworthy: {res.problems[0][:60]}'
             summary[s].append(h)
+            times[s].append(wall)
             print(f'{"":<38} {s:<18} {h:>7.2f} {c:>10.2f} {tr:>8.2f} {wall:>7.1f}  {verdict}')
-    print('\nstrategy            drives with held-out theta4 error <= 3 %   worst %')
+    print('\nstrategy            cases with held-out theta4 error <= 3 %   worst %   '
+          'median time s')
     for s, v in summary.items():
-        print(f'{s:<20} {sum(x <= 3.0 for x in v)}/{len(v):<36} {max(v):.2f}')
+        print(f'{s:<20} {sum(x <= 3.0 for x in v)}/{len(v):<35} {max(v):>7.2f}   '
+              f'{float(np.median(times[s])):.1f}')
 
 
 def timing(args) -> None:
@@ -151,6 +159,8 @@ def main() -> None:
     ap.add_argument('--strategies', nargs='*', help=f'subset of {", ".join(STRATEGIES)}')
     ap.add_argument('--serial', action='store_true', help='no Dask in --compare')
     ap.add_argument('--workers', type=int, default=None)
+    ap.add_argument('--durations', type=float, nargs='*', default=[0.15, 0.5],
+                    help='record lengths [s] in --compare')
     ap.add_argument('--config', help='base YAML (default: the package config)')
     args = ap.parse_args()
     if args.compare:

@@ -21,7 +21,6 @@ from worm_gear_sim.identification import (
     IdentificationError,
     Problem,
     Record,
-    ResidualMonitor,
     check_record,
     fit_parameters,
     identify,
@@ -220,33 +219,3 @@ def test_record_that_does_not_move_relative_to_the_command(base):
                  measured={'theta4': np.zeros(100)})
     with pytest.raises(IdentificationError, match='follows the command exactly'):
         identify(base, [rec], [KG])
-
-
-# ---- live model check --------------------------------------------------------------------------
-def test_residual_monitor_windowed_rms_and_levels():
-    mon = ResidualMonitor(('worm_joint', 'antenna_joint'), window=0.01, warn_threshold=1e-4)
-    assert mon.level(0.0) == 'STALE'
-    rng = np.random.default_rng(0)
-    t = np.arange(100) * 1e-3
-    resid = rng.normal(0, 5e-5, (100, 2))
-    resid[:, 0] += 3e-4 * (t > 0.05)          # the worm residual jumps after 50 ms
-    for ti, r in zip(t, resid):
-        out = mon.update(ti, r + 1.0, np.ones(2))
-        assert np.allclose(out, r)
-        win = resid[(t > ti - 0.01) & (t <= ti)]
-        assert np.allclose(mon.rms(), np.sqrt(np.mean(win ** 2, axis=0)), rtol=1e-9)
-        expect = 'WARN' if np.sqrt(np.mean(win ** 2, axis=0)).max() > 1e-4 else 'OK'
-        assert mon.level() == expect
-    assert mon.level() == 'WARN' and mon.samples == 100
-    assert mon.level(0.099 + 0.02) == 'STALE'      # nothing within the last window
-    # NaN for an unmeasured joint: ignored for that joint
-    mon2 = ResidualMonitor(('a', 'b'), 1.0, 1.0)
-    mon2.update(0.0, [0.5, np.nan], [0.0, 0.0])
-    r = mon2.rms()
-    assert r[0] == pytest.approx(0.5) and np.isnan(r[1]) and mon2.level() == 'OK'
-    for bad in ((math.nan, [0, 0], [0, 0]), (-1.0, [0, 0], [0, 0]), (2.0, [0], [0])):
-        with pytest.raises(ValueError):
-            mon2.update(*bad)
-    assert mon2.rejected == 3 and mon2.samples == 1
-    with pytest.raises(ValueError):
-        ResidualMonitor(('a',), 0.0, 1.0)

@@ -1,6 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Fit model parameters to measured records (issue 9); the live model check's core.
+"""Fit model parameters to measured records (issue 9); the live model check is in
+:mod:`worm_gear_sim.model_check`.
 
 Pure core (no rclpy, no plotting).  A *record* is one measured run of the drive: sample times
 ``t`` [s], the commanded worm angle ``theta1`` [rad] at those times and at least one measured
@@ -37,7 +38,6 @@ from __future__ import annotations
 import math
 import re
 import time
-from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,7 +57,7 @@ __all__ = [
     'OUTPUTS', 'FITTABLE_SECTIONS', 'IdentificationError', 'Record', 'FitParameter',
     'fit_parameters', 'apply_values', 'check_record', 'predict', 'Problem', 'FitOptions',
     'FitResult', 'identify', 'validate', 'prediction_errors', 'measured_frequencies',
-    'frequency_start', 'ResidualMonitor', 'STRATEGIES', 'record_from_model',
+    'frequency_start', 'STRATEGIES', 'record_from_model',
     'jacobian',
 ]
 
@@ -507,7 +507,7 @@ class FitOptions:
     growing_windows: bool | None = None
     n_starts: int | None = None
     seed: int = 0
-    max_nfev: int = 60
+    max_nfev: int = 100
     diff_step: float = 1e-6
     workers: int | None = None
     scheduler: str | None = None
@@ -536,7 +536,7 @@ def _local_fit(problem: Problem, x0: np.ndarray, windows: Sequence[float | None]
     for w in windows:
         res = least_squares(problem.residuals, x, bounds=(lo, hi), args=(w,),
                             diff_step=diff_step, max_nfev=max_nfev, x_scale=1.0,
-                            xtol=1e-10, ftol=1e-10, gtol=1e-10)
+                            xtol=1e-8, ftol=1e-8, gtol=1e-8)
         x = res.x
         stages.append({'window_s': w, 'cost': float(res.cost), 'nfev': int(res.nfev),
                        'status': int(res.status)})
@@ -593,7 +593,8 @@ def _starts(problem: Problem, x_first: list[np.ndarray], n_starts: int, seed: in
         from scipy.stats import qmc
         box_lo = np.array([p.box[0] for p in problem.params])
         box_hi = np.array([p.box[1] for p in problem.params])
-        u = qmc.Sobol(problem.n, scramble=True, seed=seed).random(max(2, n_more))[:n_more]
+        m = max(1, math.ceil(math.log2(n_more)))
+        u = qmc.Sobol(problem.n, scramble=True, seed=seed).random_base2(m)[:n_more]
         starts += list(box_lo + u * (box_hi - box_lo))
     return starts
 
@@ -778,16 +779,24 @@ def identify(base: Config, records: Sequence[Any], keys: Sequence[str], *,
         elif math.isfinite(si) and not p.log and Z95 * si * p.scale > max(abs(v), p.scale):
             warnings.append(f'{p.key}: 95 % interval {clo:.3g} .. {chi:.3g} is wider than the '
                             'value: poorly determined')
-    # other starts that fit as well but elsewhere: the optimum is not unique
+    # Another start that fits statistically as well (cost within the 95 % confidence region,
+    # 0.5 s^2 chi2(0.95, n)) but lies far outside the linearised region (Mahalanobis distance
+    # > 2 sqrt(chi2)): a second minimum, the optimum is not unique.
+    from scipy.stats import chi2
+    c95 = float(chi2.ppf(0.95, n))
+    JtJ = J.T @ J
     for rr in results:
         if rr is best or not math.isfinite(rr['cost']):
             continue
-        if rr['cost'] <= best['cost'] * 1.01 + 1e-300:
-            dx = np.abs(np.asarray(rr['x']) - x) / np.maximum(std, 1e-12)
-            if np.any(dx > 3 * Z95):
-                problems.append(f'start {rr["index"] + 1} reaches the same cost at other '
-                                'values: the optimum is not unique')
-                break
+        dx = np.asarray(rr['x']) - x
+        if rr['cost'] - best['cost'] <= 0.5 * s2 * c95 and \
+                float(dx @ JtJ @ dx) / s2 > 4.0 * c95:
+            far = [f'{p.key} = {p.from_x(float(xi)):.4g}' for p, xi, d, si in
+                   zip(params, rr['x'], dx, std) if abs(d) > 2 * Z95 * max(si, 1e-300)]
+            warnings.append(f'start {rr["index"] + 1} fits as well with '
+                            f'{", ".join(far) or "other values"}: the data do not fix '
+                            'these values (both fit the records equally well)')
+            break
     return FitResult(
         keys=[p.key for p in params], units=[p.unit for p in params],
         base_values=[p.base for p in params], values=values, ci95=ci,
@@ -880,74 +889,3 @@ def prediction_errors(cfg: Config, records: Sequence[Any]) -> list[dict[str, Any
 def validate(cfg: Config, records: Sequence[Any]) -> list[dict[str, Any]]:
     """Alias of :func:`prediction_errors` (the ``--validate`` report)."""
     return prediction_errors(cfg, records)
-
-
-# ---- live model check --------------------------------------------------------------------------
-class ResidualMonitor:
-    """Per-joint residual measured - predicted and its RMS over a sliding time window.
-
-    ``update(t, measured, predicted)`` takes arrays of the monitored joints (NaN entries are
-    ignored for that joint) and returns the residuals; :meth:`rms` gives the windowed RMS per
-    joint and :meth:`level` 'OK' / 'WARN' (any joint's RMS above ``warn_threshold``) /
-    'STALE' (no sample within the window)."""
-
-    def __init__(self, joints: Sequence[str], window: float, warn_threshold: float):
-        if not (window > 0 and math.isfinite(window)):
-            raise ValueError(f'window must be > 0 s, got {window!r}')
-        if not (warn_threshold > 0 and math.isfinite(warn_threshold)):
-            raise ValueError(f'warn_threshold must be > 0 rad, got {warn_threshold!r}')
-        self.joints = tuple(joints)
-        self.window = float(window)
-        self.warn_threshold = float(warn_threshold)
-        self._t: deque[float] = deque()
-        self._sq: deque[np.ndarray] = deque()
-        self._sum = np.zeros(len(self.joints))
-        self._cnt = np.zeros(len(self.joints))
-        self.samples = 0
-        self.rejected = 0
-        self.last_t = -math.inf
-
-    def update(self, t: float, measured: Sequence[float], predicted: Sequence[float]
-               ) -> np.ndarray:
-        m = np.asarray(measured, float)
-        p = np.asarray(predicted, float)
-        if m.shape != (len(self.joints),) or p.shape != m.shape or not math.isfinite(t) \
-                or t < self.last_t:
-            self.rejected += 1
-            raise ValueError('residual sample: need one finite time (not going back) and one '
-                             f'value per joint ({len(self.joints)})')
-        r = m - p
-        ok = np.isfinite(r)
-        sq = np.where(ok, r * r, 0.0)
-        self._t.append(float(t))
-        self._sq.append(np.stack([sq, ok.astype(float)]))
-        self._sum += sq
-        self._cnt += ok
-        self.samples += 1
-        self.last_t = float(t)
-        self._expire(t)
-        return r
-
-    def _expire(self, now: float) -> None:
-        while self._t and self._t[0] <= now - self.window:
-            self._t.popleft()
-            sq, ok = self._sq.popleft()
-            self._sum -= sq
-            self._cnt -= ok
-        if not self._t:
-            self._sum[:] = 0.0
-            self._cnt[:] = 0.0
-
-    def rms(self, now: float | None = None) -> np.ndarray:
-        """Windowed RMS per joint [rad] (NaN for a joint without samples in the window)."""
-        if now is not None:
-            self._expire(now)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            return np.where(self._cnt > 0, np.sqrt(np.maximum(self._sum, 0.0)
-                                                   / np.maximum(self._cnt, 1)), np.nan)
-
-    def level(self, now: float | None = None) -> str:
-        r = self.rms(now)
-        if not np.any(np.isfinite(r)):
-            return 'STALE'
-        return 'WARN' if np.nanmax(r) > self.warn_threshold else 'OK'
