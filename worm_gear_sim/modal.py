@@ -38,6 +38,11 @@ def static_equilibrium(p: np.ndarray, theta1: float, u_guess=None, tol: float = 
     return u
 
 
+#: Damping ratios below this are the round-off of the state-space eigenvalues (an undamped
+#: model gives +-1e-16): printed as 0.
+ZETA_RESOLUTION = 1e-12
+
+
 @dataclass(frozen=True)
 class ModalResult:
     """Linearised modes at an operating point, lowest first."""
@@ -55,8 +60,10 @@ class ModalResult:
         lines = ['mode  f [Hz]      f_undamped [Hz]  zeta        shape (theta2, theta3, theta4)']
         for i in range(len(self.undamped_hz)):
             s = ', '.join(f'{x:+.4f}' for x in self.shapes[:, i])
+            z = self.damping_ratios[i]
+            z = 0.0 if abs(z) < ZETA_RESOLUTION else z     # eigen-solver round-off: 0
             lines.append(f'{i + 1:<5d} {self.frequencies_hz[i]:<11.4f} '
-                         f'{self.undamped_hz[i]:<16.4f} {self.damping_ratios[i]:<11.3e} ({s})')
+                         f'{self.undamped_hz[i]:<16.4f} {z:<11.3e} ({s})')
         return '\n'.join(lines)
 
 
