@@ -29,6 +29,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
     ],
     # Only setuptools here, as in the ROS template: pkg_resources-style wrappers check these
     # at `ros2 run`, and apt-installed numpy/scipy carry no pip metadata.  The PyPI ROS wheels
@@ -40,7 +41,8 @@ setup(
         # pip install .[ros] (Kilted, rclpy 9.x) or .[ros-jazzy] (Jazzy LTS, rclpy 7.1.x)
         'ros': ros_wheels('kilted'),
         'ros-jazzy': ros_wheels('jazzy'),
-        'test': ['pytest', 'ruff', 'colcon-core', 'colcon-ros', 'colcon-python-setup-py'],
+        'test': ['pytest', 'ruff', 'colcon-core', 'colcon-ros', 'colcon-python-setup-py',
+                 'colcon-package-selection'],
     },
     zip_safe=True,
     maintainer='worm_gear_sim developers',
