@@ -160,3 +160,59 @@ def test_overdamped_mode_keeps_the_table_aligned():
     assert m.frequencies_hz[0] == pytest.approx(94.5, rel=5e-3)
     assert m.frequencies_hz[1] == pytest.approx(1566.0, rel=5e-3)
     assert m.frequencies_hz[2] == 0.0 and m.damping_ratios[2] > 1.0
+
+
+def _rigid_end_frequencies(cfg: Config) -> np.ndarray:
+    """Independent 2-DOF reference for the drive without flywheel: the massless gear shaft
+    ends free (assumption 8), so it carries no torque; worm on K_w, gear on the mesh only.
+    Written from the parameters (Eqs. 7-10 frictionless), not from modal.py."""
+    from worm_gear_sim.params import derive
+    d = derive(cfg)
+    g, m = cfg.geometry, cfg.mesh
+    sl, cl, cphi = math.sin(d.lead_angle), math.cos(d.lead_angle), math.cos(g.pressure_angle)
+    kgws = (1 / m.worm_tooth_stiffness_linear + 1 / m.gear_tooth_stiffness_linear
+            + cphi * sl * sl / d.k_gs + cphi * cl * cl / d.k_ws)
+    kY = cphi * cl * cl / kgws
+    lw, rg = d.l_w, g.gear_pitch_radius
+    K = np.array([[d.K_w + lw * lw * kY, -lw * rg * kY], [-lw * rg * kY, rg * rg * kY]])
+    Minv_sqrt = np.diag([d.J_w ** -0.5, d.J_g ** -0.5])
+    return np.sqrt(np.linalg.eigvalsh(Minv_sqrt @ K @ Minv_sqrt)) / (2 * math.pi)
+
+
+@pytest.mark.parametrize('mesh_model', ['linear', 'nonlinear'])
+def test_no_flywheel_is_the_rigid_free_end(mesh_model):
+    """flywheel_enabled false = assumption 8: no extra degree of freedom (no 2.43 kHz mode of
+    a lumped shaft-end inertia), the gear mode at the rigid-end value (1466 Hz)."""
+    cfg = Config().replace({'geometry.flywheel_enabled': False,
+                            'mesh.stiffness_model': mesh_model, 'friction.model': 'off'})
+    ref = _rigid_end_frequencies(cfg)
+    assert ref[0] == pytest.approx(1466, rel=1e-3)
+    m = modes(cfg)
+    assert len(m.undamped_hz) == 2                          # no spurious third mode
+    assert m.undamped_hz == pytest.approx(ref, rel=2e-3)
+    # theta4 follows theta3 in the shapes (rigid end)
+    assert np.allclose(m.shapes[2], m.shapes[1], atol=1e-12)
+
+
+def test_no_flywheel_end_inertia_is_explicit():
+    """A documented end inertia brings the third degree of freedom back on request."""
+    cfg = Config().replace({'geometry.flywheel_enabled': False, 'mesh.stiffness_model': 'linear',
+                            'friction.model': 'off'})
+    assert len(modes(cfg.replace({'geometry.shaft_end_inertia': 1e-4})).undamped_hz) == 3
+    # the end inertia only counts without the flywheel
+    a = modes(Config().replace({'geometry.shaft_end_inertia': 1e-4})).undamped_hz
+    assert a == pytest.approx(modes(Config()).undamped_hz, rel=1e-12)
+
+
+def test_no_flywheel_theta4_follows_theta3_under_load():
+    """Without flywheel theta4 is the free shaft end: theta4 = theta3 - T_load/K_g at every
+    step of a move (the massless shaft transmits the load torque, no dynamics of its own)."""
+    from worm_gear_sim import simulate
+    from worm_gear_sim.params import derive
+    for T in (0.0, 2.0):
+        cfg = Config().replace({'geometry.flywheel_enabled': False, 'load.output_torque': T})
+        tr = simulate(cfg, t_end=0.03)
+        K_g = derive(cfg).K_g
+        assert np.all(np.isfinite(tr.theta)) and tr.stats['failed_steps'] == 0
+        assert np.abs(tr.theta4 - (tr.theta3 - T / K_g)).max() <= 1e-12 * np.abs(
+            tr.theta3).max() + 1e-15

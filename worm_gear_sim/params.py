@@ -80,8 +80,13 @@ class Geometry:
                            'rad', 0.0, 0.8)
     pressure_angle: float = _f(0.30543261909900765, 'Normal pressure angle phi_n (17deg30min)',
                                'rad', 0.0, 0.8, lo_open=True)
-    flywheel_enabled: bool = _f(True, 'Flywheel J_4 on the gear shaft; false leaves the '
-                                'gear-shaft end inertia only')
+    flywheel_enabled: bool = _f(True, 'Flywheel J_4 on the gear shaft; false: the massless '
+                                'gear shaft ends free (assumption 8), theta4 = theta3 - '
+                                'T_load/K_g, plus shaft_end_inertia if set')
+    shaft_end_inertia: float = _f(0.0, 'Inertia on the free end of the gear shaft when '
+                                  'flywheel_enabled is false (a coupling, an encoder); 0 keeps '
+                                  'the paper\'s massless shaft: no extra degree of freedom',
+                                  'kg*m^2', 0.0, 1e3)
     flywheel_radius: float = _f(0.12, 'Flywheel radius R5', 'm', 0.0, 5.0, lo_open=True)
     flywheel_length: float = _f(0.03, 'Flywheel length L5', 'm', 0.0, 5.0, lo_open=True)
 
@@ -457,6 +462,11 @@ def validate(cfg: Config) -> None:
     if cfg.integrator.time_step * cfg.node.publish_rate_hz > 1.0 + 1e-9:
         raise ConfigError('integrator.time_step', 'must not exceed the node tick period '
                           f'1/publish_rate_hz = {1.0 / cfg.node.publish_rate_hz:g} s')
+    if cfg.node.max_catch_up * cfg.node.publish_rate_hz < 1.0 - 1e-9:
+        # below one tick period the physics falls behind every tick and never catches up
+        raise ConfigError('node.max_catch_up', f'{cfg.node.max_catch_up:g} s must be at least '
+                          f'the tick period 1/publish_rate_hz = '
+                          f'{1.0 / cfg.node.publish_rate_hz:g} s')
 
 
 def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>') -> Config:
@@ -599,9 +609,10 @@ def derive(cfg: Config) -> Derived:
     if g.flywheel_enabled:
         J_4 += cyl(m.flywheel_density, g.flywheel_length, g.flywheel_radius)
     else:
-        # Without a flywheel the gear-shaft end keeps a third of the shaft's own inertia, so
-        # that theta4 stays a dynamic degree of freedom (documented in the README).
-        J_4 += J_gs / 3.0
+        # Without a flywheel the massless gear shaft (assumption 8) ends free: J_4 = 0 makes
+        # theta4 an algebraic variable (K_g (theta4 - theta3) = -T_load - c_out theta4'), not a
+        # mode.  An explicit end inertia can be set.
+        J_4 += g.shaft_end_inertia
     K_w = m.worm_shaft_shear_modulus * math.pi * s.worm_shaft_radius ** 4 \
         / (2.0 * s.worm_shaft_length)
     K_g = m.gear_shaft_shear_modulus * math.pi * s.gear_shaft_radius ** 4 \
