@@ -471,6 +471,11 @@ def validate(cfg: Config) -> None:
     if cfg.integrator.time_step * cfg.node.publish_rate_hz > 1.0 + 1e-9:
         raise ConfigError('integrator.time_step', 'must not exceed the node tick period '
                           f'1/publish_rate_hz = {1.0 / cfg.node.publish_rate_hz:g} s')
+    if cfg.node.max_catch_up * cfg.node.publish_rate_hz < 1.0 - 1e-9:
+        # below one tick period the physics falls behind every tick and never catches up
+        raise ConfigError('node.max_catch_up', f'{cfg.node.max_catch_up:g} s must be at least '
+                          f'the tick period 1/publish_rate_hz = '
+                          f'{1.0 / cfg.node.publish_rate_hz:g} s')
 
 
 def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>') -> Config:
