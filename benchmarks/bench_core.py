@@ -52,7 +52,7 @@ def kernel_ns_per_step(cfg: Config, t_end: float = 0.5, repeats: int = 7):
     for _ in range(repeats):
         sim = Simulator(cfg)
         st = np.zeros(N_STATS, dtype=np.int64)
-        ctl = np.array([1.0, 0.0])
+        ctl = sim._ctl.copy()
         t0 = time.perf_counter()
         advance(sim.p, sim.C, sim._u, sim._v, sim._a, th, td, dt, 0, e3, e3, e3, ea, st, ctl)
         best = min(best, time.perf_counter() - t0)

@@ -174,9 +174,11 @@ class Friction:
 
     model: str = _f('stribeck', 'stribeck: Eq. 18; constant: constant_coefficient; off',
                     choices=('stribeck', 'constant', 'off'))
-    direction: str = _f('regularized', 'regularized: opposes sliding, sgn ~ tanh(v/v_eps); '
-                        'paper: fixed sign as printed in Eqs. 1-2 (cannot dissipate)',
-                        choices=('regularized', 'paper'))
+    direction: str = _f('set_valued', 'set_valued: W_f in mu |W_n| Sgn(v_s), exact stick '
+                        '(|W_f| <= mu(0) |W_n|) and slip opposing sliding, solved in each '
+                        'Newton step; regularized: sgn(v_s) ~ tanh(v_s/v_eps), sticks by '
+                        'viscous creep; paper: fixed sign as printed in Eqs. 1-2 (cannot '
+                        'dissipate)', choices=('set_valued', 'regularized', 'paper'))
     mu_kinetic: float = _f(0.0470713, 'mu at high sliding speed (Eq. 18 constant term)', '',
                            0.0, 2.0)
     mu_stribeck_drop: float = _f(0.1056549, 'mu(0) - mu_kinetic (Eq. 18 exponential term)', '',
@@ -186,8 +188,11 @@ class Friction:
                                   0.0, 1e3, lo_open=True)
     constant_coefficient: float = _f(0.145, 'mu of the constant model (paper linear case)', '',
                                      0.0, 2.0)
-    regularization_velocity: float = _f(1e-4, 'v_eps of tanh(v_s/v_eps)', 'm/s', 0.0, 1.0,
-                                        lo_open=True)
+    regularization_velocity: float = _f(1e-4, 'v_eps of tanh(v_s/v_eps) (direction: '
+                                        'regularized only)', 'm/s', 0.0, 1.0, lo_open=True)
+    cusp_velocity: float = _f(1e-7, 'v_c rounding the cusp of Eq. 18 at zero sliding speed '
+                              'in the set-valued law: sqrt(v) -> v/sqrt(v + v_c) (mu(0) and '
+                              'mu at v >> v_c unchanged)', 'm/s', 0.0, 1e-2, lo_open=True)
     in_compliance: bool = _f(False, 'Keep the friction terms of KGWS (Eq. 10, as printed): '
                              'friction loads the shaft bearings axially. Off by default: with '
                              'them the mesh stores energy at each sliding reversal (up to '

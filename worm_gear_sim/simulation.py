@@ -14,6 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from .integrator import (
+    C_MODE,
+    C_MU,
+    C_RHO,
+    C_SINCE,
+    N_CTL,
     N_STATS,
     S_EVALS,
     S_FAILED,
@@ -28,6 +33,10 @@ from .integrator import (
     advance,
     advance_segment,
     consistent_acceleration,
+    record_aux,
+)
+from .integrator import (
+    sliding_speed as record_aux_speed,
 )
 from .modal import damping_matrix, static_equilibrium
 from .model import (
@@ -40,16 +49,18 @@ from .model import (
     AUX_VS,
     AUX_WN,
     N_AUX,
+    P_FRIC_SET_VALUED,
     P_RIGID3,
     energy_series,
     generalized_forces,
     mechanical_energy,
+    mesh_forces_mu,
     pack_parameters,
 )
 from .params import Config, derive
 from .profiles import Profile, make_profile
 
-__all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate']
+__all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate', 'ring_down']
 
 
 class SimulationError(RuntimeError):
@@ -163,7 +174,8 @@ class Simulator:
         self.dt = config.integrator.time_step
         self.interpolation = interpolation or config.node.command_interpolation
         self._stats = np.zeros(N_STATS, dtype=np.int64)
-        self._ctl = np.array([1.0, 0.0])      # Newton controller: contraction, since verify
+        # Newton controller: contraction, steps since verify; friction mode and mu_eff
+        self._ctl = np.zeros(N_CTL)
         self.reset(theta1, t0)
 
     # ---- state ---------------------------------------------------------------------------
@@ -182,7 +194,9 @@ class Simulator:
         self._cmd_t = self._t0
         self._cmd_value = float(theta1)
         consistent_acceleration(self.p, self.C, self._u, self._v, self._theta1, 0.0, self._a)
-        self._ctl[:] = (1.0, 0.0)
+        self._ctl[:] = 0.0
+        self._ctl[C_RHO] = 1.0
+        self._ctl[C_MODE] = self._slip_mode()
 
     def reconfigure(self, config: Config) -> None:
         """Swap in new (already validated) parameters, keeping time, state and command.
@@ -196,7 +210,13 @@ class Simulator:
         if not np.all(np.isfinite(a)):
             raise ValueError('the new parameters give a non-finite acceleration')
         self.config, self.p, self.C, self.derived, self._a = config, p, C, derive(config), a
-        self._ctl[:] = (1.0, 0.0)
+        self._ctl[C_RHO], self._ctl[C_SINCE] = 1.0, 0.0
+
+    def _slip_mode(self) -> float:
+        """Friction mode of the set-valued law at the current state: sign of the sliding
+        speed, 0 (stuck) at rest."""
+        v_s = record_aux_speed(self.p, self._v)
+        return float(np.sign(v_s))
 
     @property
     def t(self) -> float:
@@ -218,10 +238,16 @@ class Simulator:
                 'failed_steps': int(s[S_FAILED]), 'verified_steps': int(s[S_VERIFIED])}
 
     def forces(self) -> dict[str, float]:
-        """Mesh quantities at the current state (W_n, mu, stiffnesses, F_X, F_Y, q)."""
+        """Mesh quantities at the current state (W_n, mu, stiffnesses, F_X, F_Y, q); with
+        the set-valued friction law mu is the coefficient of the last step (in stick the
+        multiplier that holds the contact)."""
         Q, aux = np.zeros(3), np.zeros(N_AUX)
         generalized_forces(self.p, self._u, self._v, self._theta1, Q, np.zeros((3, 3)),
                            np.zeros((3, 3)), aux)
+        if self.p[P_FRIC_SET_VALUED] != 0.0:
+            record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux)
+            r = mesh_forces_mu(self.p, *self._u, self._v[2], self._theta1, self._ctl[C_MU])
+            Q = np.array(r[:3])
         names = ('W_n', 'mu', 'cwkw', 'cgkg', 'v_s', 'F_X', 'F_Y', 'q')
         return dict(zip(names, aux.tolist())) | {'Q2': Q[0], 'Q3': Q[1], 'Q4': Q[2]}
 
@@ -310,8 +336,7 @@ class Simulator:
         aux_rec = np.empty((n_rec + 1, N_AUX))
         t_rec[0], th_rec[0], td_rec[0] = self.t, self._theta1, self._theta1_dot
         u_rec[0], v_rec[0], a_rec[0] = self._u, self._v, self._a
-        generalized_forces(self.p, self._u, self._v, self._theta1, np.zeros(3),
-                           np.zeros((3, 3)), np.zeros((3, 3)), aux_rec[0])
+        record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux_rec[0])
         row = 1
         done_total = 0
         while done_total < n_total:
@@ -343,3 +368,17 @@ def simulate(config: Config, profile: Profile | None = None, t_end: float | None
         theta1_initial
     sim = Simulator(config, theta1=th0)
     return sim.run(profile, t_end, record_every)
+
+
+def ring_down(traj: Trajectory, t_move: float, theta4_eq: float, horizon: float = 0.5,
+              window: float = 0.1) -> float:
+    """Fraction of the antenna's oscillation lost over ``horizon`` after the move ends at
+    ``t_move``: 1 - max|theta4 - eq| over the last ``window`` / max over the first
+    ``window`` of [t_move, t_move + horizon]."""
+    t = traj.t
+    d4 = np.abs(traj.theta4 - theta4_eq)
+    first = (t >= t_move - 1e-12) & (t < t_move + window)
+    last = (t > t_move + horizon - window) & (t <= t_move + horizon + 1e-12)
+    if not first.any() or not last.any() or t[-1] < t_move + horizon - 1e-9:
+        raise ValueError(f'the run must cover the move end ({t_move:g} s) plus {horizon:g} s')
+    return 1.0 - float(d4[last].max() / d4[first].max())
