@@ -65,7 +65,8 @@ Gaps, pauses and the stale stream
     the offline twin.
 
 Resync policy (jumps and restarts)
-    A rejected ``jump`` or ``out_of_order`` sample is kept as a candidate.  When
+    A rejected ``jump`` sample, or an ``out_of_order`` one more than 100 ms older than the
+    last sample (a late packet is not a restart), is kept as a candidate.  When
     ``confirm_samples`` (3) candidates in a row agree with each other (stamps increasing
     by at most 50 ms, values within ``node.max_command_jump``), the new level or timeline
     is real (a servo that really moved 3 rad; a servo whose stamps restarted): the pipeline
@@ -124,6 +125,7 @@ STALE_PERIODS = 3.5          # tick periods without a sample: the reference rest
 STALE_MAX_INTERVAL = 0.05    # s: sample intervals longer than this are pauses, not a rate
 CONFIRM_SAMPLES = 3          # agreeing candidates that confirm a jump or a new timeline
 CHAIN_MAX_GAP_NS = 50_000_000  # candidates further apart do not confirm each other
+RESTART_MIN_BACK_NS = 100_000_000  # a stamp this much older may start a new timeline
 CLOCK_TOLERANCE_NS = 1_000_000  # now_ns may step back this much without a restart
 HOLD_EPS = 0.5e-9            # s: 'hold' steps just after the sample time (stamps are whole ns)
 
@@ -464,7 +466,9 @@ class RealtimePredictor:
             elif self._started and abs(x - self._last_real_x) > self._max_jump:
                 reason = Reject.JUMP
         if reason is not None:
-            if reason in (Reject.JUMP, Reject.OUT_OF_ORDER) and self._candidate(stamp_ns, x):
+            restart = reason is Reject.OUT_OF_ORDER and \
+                self._last_ns - stamp_ns > RESTART_MIN_BACK_NS    # not a late packet
+            if (reason is Reject.JUMP or restart) and self._candidate(stamp_ns, x):
                 self._resync(out)          # confirmed: this sample is accepted
             else:
                 self._reject(out, reason)

@@ -303,7 +303,7 @@ class Simulator:
                 float(theta1), self._stats, self._ctl)
             self._after_kernel(done, status,
                                self._segment_value(done, theta1, slope, t_target), slope)
-        if t_target >= self._cmd_t or n > 0:   # an equal time replaces the sample
+        if t_target > self._cmd_t or n > 0:
             self._cmd_t = max(t_target, self._cmd_t)
             self._cmd_value = float(theta1)
         return max(n, 0)
