@@ -175,6 +175,10 @@ def _finite_vector(name: str, x, limit: float, unit: str) -> np.ndarray:
     return arr
 
 
+#: advance_to integrates long spans in chunks of this many steps (1 MB of command samples).
+ADVANCE_CHUNK = 1 << 16
+
+
 class Simulator:
     """Stateful Newmark integrator of the worm-gear drive on a fixed grid t0 + k dt.
 
@@ -182,6 +186,10 @@ class Simulator:
     command is a sample at that time and theta1 is interpolated from the previous sample
     (``interpolation='linear'``) or applied at once (``'hold'``).  Batch: :meth:`run`.
     """
+
+    #: Default step limit of one :meth:`advance_to` call (1e8 steps: 1000 s at 10 us,
+    #: roughly half a minute of computation).
+    max_advance_steps: int = 10 ** 8
 
     def __init__(self, config: Config, theta1: float = 0.0, t0: float = 0.0,
                  interpolation: str | None = None, *, check: bool = True):
@@ -282,30 +290,48 @@ class Simulator:
         return float(mechanical_energy(self.p, self._u, self._v, self._theta1))
 
     # ---- stepping --------------------------------------------------------------------------
-    def advance_to(self, t_target: float, theta1: float | None = None) -> int:
+    def advance_to(self, t_target: float, theta1: float | None = None, *,
+                   max_steps: int | None = None) -> int:
         """Integrate whole steps up to ``t_target`` with ``theta1`` as the command sample at
         ``t_target`` (None: hold the last command).  Returns the number of steps taken;
-        raises SimulationError (state unchanged past the last good step) on failure."""
+        raises SimulationError (state unchanged past the last good step) on failure.
+
+        Raises ValueError before integrating when ``t_target`` or ``theta1`` is not a finite
+        number, |theta1| > ANGLE_LIMIT, or the span needs more than ``max_steps`` steps
+        (default :attr:`max_advance_steps`, about a minute of computation): long offline runs
+        belong to :meth:`run` / :meth:`iter_run`.  Memory is bounded (the span is integrated
+        in chunks of ``ADVANCE_CHUNK`` steps)."""
         if theta1 is None:
             theta1 = self._cmd_value
-        if not (math.isfinite(t_target) and math.isfinite(theta1)):
-            raise ValueError('advance_to: t_target and theta1 must be finite')
+        t_target = _finite_scalar('advance_to: t_target', t_target, TIME_LIMIT, 's')
+        theta1 = _finite_scalar('advance_to: theta1', theta1, ANGLE_LIMIT, 'rad')
         n = int(math.floor((t_target - self.t) / self.dt + 1e-9))
+        limit = self.max_advance_steps if max_steps is None else int(max_steps)
+        if n > limit:
+            raise ValueError(
+                f'advance_to({t_target:g}): {n:.3g} steps of {self.dt:g} s from t = '
+                f'{self.t:g} s exceed max_steps = {limit:.3g} (~{limit * 3e-7:.0f} s of '
+                'computation); advance in smaller spans, pass max_steps=..., or use '
+                'Simulator.run / iter_run for long offline runs')
         if n > 0:
             if self.interpolation == 'hold' or t_target <= self._cmd_t:
                 slope = 0.0
             else:
                 slope = (theta1 - self._cmd_value) / (t_target - self._cmd_t)
-            done, status = advance_segment(
-                self.p, self.C, self._u, self._v, self._a, self._theta1, self._theta1_dot,
-                self._t0, self._k, self.dt, n, self._cmd_t,
-                self._cmd_value if slope != 0.0 else float(theta1), slope, t_target,
-                float(theta1), self._stats, self._ctl)
-            self._after_kernel(done, status,
-                               self._segment_value(done, theta1, slope, t_target), slope)
+            left = n
+            while left > 0:
+                m = min(left, ADVANCE_CHUNK)
+                done, status = advance_segment(
+                    self.p, self.C, self._u, self._v, self._a, self._theta1,
+                    self._theta1_dot, self._t0, self._k, self.dt, m, self._cmd_t,
+                    self._cmd_value if slope != 0.0 else theta1, slope, t_target,
+                    theta1, self._stats, self._ctl)
+                self._after_kernel(done, status,
+                                   self._segment_value(done, theta1, slope, t_target), slope)
+                left -= m
         if t_target > self._cmd_t or n > 0:
             self._cmd_t = max(t_target, self._cmd_t)
-            self._cmd_value = float(theta1)
+            self._cmd_value = theta1
         return max(n, 0)
 
     def resync(self, t: float) -> None:

@@ -16,13 +16,15 @@ written as rules on the derived quantities, each naming the parameters that set 
    worm, r_g^2 k_Y and K_g on the gear) and one is below ``SPRING_RATIO_MIN`` of the other, it
    is lost in the sum in double precision: the stiffness matrix is singular (LinAlgError) or
    the equilibrium is meaningless.  Checked at both ends of the mesh cycle.
-3. **The time step must resolve every mode**: omega_max dt <= pi (at least two steps per
-   period of the highest linearised mode).  Beyond it the implicit step still exists, but
-   Newton fails at the first transient (a 4e-10 m worm: omega dt = 3200).
+3. **The modes** must be computable and finite.
 4. **A trial**: static equilibrium at theta1 = 0 (finite, within ``ANGLE_LIMIT``), the modes,
    and ``TRIAL_TIME`` of integration through a small command ramp must be computable and
    finite.  Anything still failing becomes a :class:`ConfigError` naming the keys that were
-   changed (the cause is in them), never a raw numpy error.
+   changed (the cause is in them), never a raw numpy error.  When the trial fails and the
+   highest mode is not resolved by the time step (omega dt > pi: a 4e-10 m worm gives
+   omega dt = 3300), the error says so and names the inertia of that mode.  Unresolved
+   modes alone are allowed: the average-acceleration step is unconditionally stable, and
+   the paper's shear-modulus study runs at omega dt = 5.4.
 
 Cost: see :func:`check_usable` (measured in ``benchmarks/bench_soak.py --usable``); it is pure,
 allocation-light and thread-safe, so the node's parameter bridge can run it off the real-time
@@ -31,7 +33,6 @@ path.
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Iterable, Sequence
 
@@ -78,21 +79,25 @@ def check_usable(cfg: Config, changed: Iterable[str] | None = None) -> None:
 
     ``changed``: the dotted keys just set (``Config.replace``); they are named first, and
     alone when a failure has no rule of its own.  Without it, the keys that differ from the
-    defaults are named.  Results are cached per Config (Configs are immutable)."""
-    _check_cached(cfg, tuple(changed) if changed is not None else None)
-
-
-@functools.lru_cache(maxsize=256)
-def _check_cached(cfg: Config, changed: tuple[str, ...] | None) -> None:
-    if changed is None:
-        changed = _differs_from_defaults(cfg)
+    defaults are named.  A usable Config is remembered (Configs are immutable), so checking
+    it again is a dictionary look-up."""
+    if cfg in _USABLE:
+        return
+    keys = tuple(changed) if changed is not None else _differs_from_defaults(cfg)
     try:
-        _check(cfg, changed)
+        _check(cfg, keys)
     except ConfigError:
         raise
     except (ArithmeticError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
-        raise _blame(cfg, changed, (), f'not computable ({type(exc).__name__}: {exc})') \
+        raise _blame(cfg, keys, (), f'not computable ({type(exc).__name__}: {exc})') \
             from None
+    if len(_USABLE) >= _CACHE_SIZE:
+        _USABLE.pop(next(iter(_USABLE)), None)
+    _USABLE[cfg] = True
+
+
+_CACHE_SIZE = 512
+_USABLE: dict[Config, bool] = {}
 
 
 def _differs_from_defaults(cfg: Config) -> tuple[str, ...]:
@@ -163,52 +168,49 @@ def _check(cfg: Config, changed: Sequence[str]) -> None:
                 why += f' (a factor e^(360 |b|) = {math.exp(min(700.0, 360 * abs(p[b_idx]))):.3g})'
             raise _blame(cfg, changed, _TEETH[side], why + ': it must stay finite and > 0')
 
-    # Rule 2: the spring chain holds every body, at both ends of the cycle
+    # Rule 2: the spring chain holds every body, at both ends of the cycle.  Seen from the
+    # motor, each body is held by the springs between it and the motor (in series); if that
+    # holding stiffness is lost next to the spring leading further out, the pivot of the
+    # stiffness matrix at the next body cancels to 0: singular.
     Kw, Kg, lw, rg = p[P_KW], p[P_KG], p[P_LW], p[P_RG]
+    variation = '' if linear else (
+        'over a mesh cycle the tooth stiffnesses of Eqs. 16-17 vary by e^(360 |b|) = '
+        f'{math.exp(min(700.0, 360 * abs(p[P_WORM_B]))):.3g} (worm), '
+        f'{math.exp(min(700.0, 360 * abs(p[P_GEAR_B]))):.3g} (gear); at its weakest ')
+    mesh_keys = _TEETH['worm'] + _TEETH['gear'][:4] + _MESH
     for th2, th3 in states:
         kY = mesh_stiffness_y(p, th2, th3)
-        mesh_keys = _TEETH['worm'] + _TEETH['gear'][:4] + _MESH
-        pairs = (('worm', 'worm shaft K_w', Kw, _WORM_SHAFT, 'mesh l_w^2 k_Y', lw * lw * kY,
-                  mesh_keys),
-                 ('gear', 'mesh r_g^2 k_Y', rg * rg * kY, mesh_keys, 'gear shaft K_g', Kg,
-                  _GEAR_SHAFT))
-        for body, name_a, ka, keys_a, name_b, kb, keys_b in pairs:
-            if not (math.isfinite(ka) and math.isfinite(kb) and ka > 0 and kb > 0):
-                bad_keys = keys_a if not (math.isfinite(ka) and ka > 0) else keys_b
-                raise _blame(cfg, changed, bad_keys, f'the stiffnesses on the {body} are not '
-                             f'finite and positive ({name_a} = {ka:.3g}, {name_b} = {kb:.3g} '
-                             'N m/rad)')
-            small, big = (ka, kb) if ka < kb else (kb, ka)
-            if small < SPRING_RATIO_MIN * big:
-                weak_name, weak_keys = (name_a, keys_a) if ka < kb else (name_b, keys_b)
-                strong_name = name_b if ka < kb else name_a
-                raise _blame(cfg, changed, weak_keys, f'{weak_name} = {small:.3g} N m/rad is '
-                             f'below {SPRING_RATIO_MIN:g} of {strong_name} = {big:.3g} on the '
-                             f'{body}: it is lost in double precision, the drive is not held '
-                             '(singular stiffness matrix)')
+        springs = {'worm shaft K_w': (Kw, _WORM_SHAFT), 'mesh l_w^2 k_Y': (lw * lw * kY,
+                                                                             mesh_keys),
+                   'gear shaft K_g': (Kg * (lw / rg) ** 2, _GEAR_SHAFT)}  # at the worm
+        for name, (k, keys) in springs.items():
+            if not (math.isfinite(k) and k > 0.0):
+                raise _blame(cfg, changed, keys, f'the {name} stiffness is {k:.3g} N m/rad '
+                             '(seen at the worm): it must be finite and > 0')
+        held, inner = Kw, 'worm shaft K_w'
+        for outer in ('mesh l_w^2 k_Y', 'gear shaft K_g'):
+            k_out = springs[outer][0]
+            if held < SPRING_RATIO_MIN * k_out:
+                why = variation if 'mesh' in inner else ''
+                raise _blame(cfg, changed, springs[inner][1], why +
+                             f'the {inner} = {springs[inner][0]:.3g} N m/rad (seen at the '
+                             f'worm) is below {SPRING_RATIO_MIN:g} of the {outer} = '
+                             f'{k_out:.3g} beyond it: in double precision the drive is no '
+                             'longer held (singular stiffness matrix)')
+            held = 1.0 / (1.0 / held + 1.0 / k_out)      # in series, now out to `outer`
+            if k_out < springs[inner][0]:
+                inner = outer                               # the weakest spring so far
 
-    # Rule 3: the time step resolves every mode
+    # Rule 3: the modes are computable (the diagnosis of a failing trial uses them)
     from .modal import modes
     m = modes(cfg, include_damping=False)
     if not np.all(np.isfinite(m.undamped_hz)):
         raise _blame(cfg, changed, (), 'the linearised natural frequencies are not finite')
-    dt = cfg.integrator.time_step
-    i = int(np.argmax(m.undamped_hz))
-    wdt = 2.0 * math.pi * float(m.undamped_hz[i]) * dt
-    if wdt > OMEGA_DT_MAX:
-        body = int(np.argmax(np.abs(m.shapes[:, i])))
-        names = ('worm', 'gear', 'antenna')
-        raise _blame(cfg, changed, ('integrator.time_step',) + _INERTIA[body],
-                     f'the highest mode ({m.undamped_hz[i]:.4g} Hz, mostly the '
-                     f'{names[body]}) is not resolved by integrator.time_step = {dt:g} s: '
-                     f'omega dt = {wdt:.3g} > pi (two steps per period); reduce the time '
-                     f'step below {OMEGA_DT_MAX / (2 * math.pi * m.undamped_hz[i]):.3g} s '
-                     f'or check the {names[body]} inertia')
 
     # Rule 4: trial (equilibrium finite and in range, a short ramp integrates)
     from .simulation import SimulationError, Simulator
     try:
-        sim = Simulator(cfg, theta1=0.0, _checked=True)
+        sim = Simulator(cfg, theta1=0.0, check=False)
         u0 = sim.state.theta
         if not (np.all(np.isfinite(u0)) and np.all(np.abs(u0) <= ANGLE_LIMIT)):
             raise _blame(cfg, changed, ('load.output_torque',), f'the static equilibrium '
@@ -220,5 +222,24 @@ def _check(cfg: Config, changed: Sequence[str]) -> None:
         if not (np.all(np.isfinite(s.theta)) and np.all(np.isfinite(s.omega))):
             raise SimulationError('non-finite state')
     except SimulationError as exc:
-        raise _blame(cfg, changed, (), f'a {TRIAL_TIME * 1e3:g} ms trial move of '
-                     f'{TRIAL_ANGLE:g} rad fails: {exc}') from None
+        raise _trial_failure(cfg, changed, m, str(exc)) from None
+
+
+def _trial_failure(cfg: Config, changed: Sequence[str], m, what: str) -> ConfigError:
+    """The trial move failed: name the unresolved mode if there is one (the usual cause:
+    a tiny inertia or a huge stiffness puts a mode far above the step's Nyquist limit, where
+    the implicit step exists but Newton cannot follow the nonlinear mesh), else the keys."""
+    why = f'a {TRIAL_TIME * 1e3:g} ms trial move of {TRIAL_ANGLE:g} rad fails ({what})'
+    dt = cfg.integrator.time_step
+    i = int(np.argmax(m.undamped_hz))
+    wdt = 2.0 * math.pi * float(m.undamped_hz[i]) * dt
+    if wdt > OMEGA_DT_MAX:
+        body = int(np.argmax(np.abs(m.shapes[:, i])))
+        names = ('worm', 'gear', 'antenna')
+        return _blame(cfg, changed, ('integrator.time_step',) + _INERTIA[body],
+                      f'{why}: the highest mode ({m.undamped_hz[i]:.4g} Hz, mostly the '
+                      f'{names[body]}) is not resolved by integrator.time_step = {dt:g} s '
+                      f'(omega dt = {wdt:.3g} > pi); reduce the time step below '
+                      f'{OMEGA_DT_MAX / (2 * math.pi * m.undamped_hz[i]):.3g} s or check '
+                      f'the {names[body]} inertia')
+    return _blame(cfg, changed, (), why)
