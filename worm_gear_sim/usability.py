@@ -144,14 +144,14 @@ def _check(cfg: Config, changed: Sequence[str]) -> None:
                      'e^(360 |b|) over a mesh cycle; this b makes it overflow (the '
                      'paper: |b| < 0.001 1/deg, a factor 1.3)') from None
 
-    # Rule 1: tooth stiffness over the cycle, at both ends (Eqs. 16-17 are monotonic in s)
+    # Rule 1: tooth stiffness over the cycle.  Eqs. 16-17 are exponentials of the contact
+    # position x(s); x takes its extremes at mesh phase 0 and 180 deg (cosine mapping) or 0
+    # and 360 deg (sawtooth): evaluate there.
     two_pi = 2.0 * math.pi
-    ends = (0.0, two_pi * (1.0 - 1e-12))   # mesh phase 0 and just before 360 deg
     states = []
-    for phase in ends:
+    for phase in (0.0, 0.5 * two_pi, two_pi * (1.0 - 1e-12)):
         # theta2 = 2 (phase - phase_offset) with theta3 = 0 gives that mesh phase
-        th2 = 2.0 * (phase - cfg.mesh.phase_offset)
-        states.append((th2, 0.0))
+        states.append((2.0 * (phase - cfg.mesh.phase_offset), 0.0))
     linear = p[P_MESH_LINEAR] != 0.0
     for side, lin_idx, b_idx in (('worm', P_CWKW_LIN, P_WORM_B), ('gear', P_CGKG_LIN,
                                                                    P_GEAR_B)):
