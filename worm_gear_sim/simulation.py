@@ -46,7 +46,7 @@ from .model import (
     mechanical_energy,
     pack_parameters,
 )
-from .params import Config, derive
+from .params import ANGLE_LIMIT, Config, check_usable, derive
 from .profiles import Profile, make_profile
 
 __all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate']
@@ -146,6 +146,39 @@ def _csv_unit(name: str, units: dict[str, str]) -> str:
     return 'rad'
 
 
+#: Largest |rate| [rad/s] of an initial state (the worm at ~1e7 rpm).
+RATE_LIMIT = 1e6
+#: Largest |time| [s] (3e4 years): t0 + k dt keeps 1e-9 s of resolution up to ~1e7 s.
+TIME_LIMIT = 1e12
+
+
+def _finite_scalar(name: str, x: float, limit: float, unit: str) -> float:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be a number, got {x!r}') from None
+    if not math.isfinite(x) or abs(x) > limit:
+        raise ValueError(f'{name} = {x!r} {unit}: must be finite and within +-{limit:g} {unit}')
+    return x
+
+
+def _finite_vector(name: str, x, limit: float, unit: str) -> np.ndarray:
+    try:
+        arr = np.array(x, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be 3 numbers (theta2, theta3, theta4), got {x!r}') \
+            from None
+    if arr.shape != (3,):
+        raise ValueError(f'{name} must be 3 numbers (theta2, theta3, theta4), got {x!r}')
+    if not (np.all(np.isfinite(arr)) and np.all(np.abs(arr) <= limit)):
+        raise ValueError(f'{name} = {arr}: must be finite and within +-{limit:g} {unit}')
+    return arr
+
+
+#: advance_to integrates long spans in chunks of this many steps (1 MB of command samples).
+ADVANCE_CHUNK = 1 << 16
+
+
 class Simulator:
     """Stateful Newmark integrator of the worm-gear drive on a fixed grid t0 + k dt.
 
@@ -154,8 +187,14 @@ class Simulator:
     (``interpolation='linear'``) or applied at once (``'hold'``).  Batch: :meth:`run`.
     """
 
+    #: Default step limit of one :meth:`advance_to` call (1e8 steps: 1000 s at 10 us,
+    #: roughly half a minute of computation).
+    max_advance_steps: int = 10 ** 8
+
     def __init__(self, config: Config, theta1: float = 0.0, t0: float = 0.0,
-                 interpolation: str | None = None):
+                 interpolation: str | None = None, *, check: bool = True):
+        if check:   # ConfigError naming the keys unless the set can be simulated
+            check_usable(config)
         self.config = config
         self.p = pack_parameters(config)
         self.C = damping_matrix(config, self.p)
@@ -168,20 +207,31 @@ class Simulator:
 
     # ---- state ---------------------------------------------------------------------------
     def reset(self, theta1: float = 0.0, t0: float = 0.0, theta=None, omega=None) -> None:
-        """Start at time t0 with command theta1; by default at rest in static equilibrium."""
-        if not (math.isfinite(theta1) and math.isfinite(t0)):
-            raise ValueError('reset: theta1 and t0 must be finite')
-        self._t0 = float(t0)
+        """Start at time t0 with command theta1; by default at rest in static equilibrium.
+        Raises ValueError (state unchanged) for a non-finite or out-of-range input: angles
+        beyond ANGLE_LIMIT, rates beyond RATE_LIMIT, or a state whose acceleration is not
+        finite."""
+        theta1 = _finite_scalar('reset: theta1', theta1, ANGLE_LIMIT, 'rad')
+        t0 = _finite_scalar('reset: t0', t0, TIME_LIMIT, 's')
+        if theta is None:
+            u = static_equilibrium(self.p, theta1)
+        else:
+            u = _finite_vector('reset: theta', theta, ANGLE_LIMIT, 'rad')
+        v = np.zeros(3) if omega is None else _finite_vector('reset: omega', omega,
+                                                             RATE_LIMIT, 'rad/s')
+        a = np.zeros(3)
+        consistent_acceleration(self.p, self.C, u, v, theta1, 0.0, a)
+        if not (np.all(np.isfinite(u)) and np.all(np.abs(u) <= ANGLE_LIMIT)
+                and np.all(np.isfinite(a))):
+            raise ValueError(f'reset: the state at theta1 = {theta1:g} rad is not finite '
+                             f'(theta = {u}, acceleration = {a})')
+        self._t0 = t0
         self._k = 0
-        self._u = static_equilibrium(self.p, theta1) if theta is None else \
-            np.array(theta, float)
-        self._v = np.zeros(3) if omega is None else np.array(omega, float)
-        self._a = np.zeros(3)
-        self._theta1 = float(theta1)
+        self._u, self._v, self._a = u, v, a
+        self._theta1 = theta1
         self._theta1_dot = 0.0
         self._cmd_t = self._t0
-        self._cmd_value = float(theta1)
-        consistent_acceleration(self.p, self.C, self._u, self._v, self._theta1, 0.0, self._a)
+        self._cmd_value = theta1
         self._ctl[:] = (1.0, 0.0)
 
     def reconfigure(self, config: Config) -> None:
@@ -189,6 +239,7 @@ class Simulator:
         The time step cannot change (it is read-only in the node)."""
         if config.integrator.time_step != self.dt:
             raise ValueError('integrator.time_step cannot change on a running simulator')
+        check_usable(config)
         p = pack_parameters(config)
         C = damping_matrix(config, p)
         a = np.zeros(3)
@@ -239,30 +290,48 @@ class Simulator:
         return float(mechanical_energy(self.p, self._u, self._v, self._theta1))
 
     # ---- stepping --------------------------------------------------------------------------
-    def advance_to(self, t_target: float, theta1: float | None = None) -> int:
+    def advance_to(self, t_target: float, theta1: float | None = None, *,
+                   max_steps: int | None = None) -> int:
         """Integrate whole steps up to ``t_target`` with ``theta1`` as the command sample at
         ``t_target`` (None: hold the last command).  Returns the number of steps taken;
-        raises SimulationError (state unchanged past the last good step) on failure."""
+        raises SimulationError (state unchanged past the last good step) on failure.
+
+        Raises ValueError before integrating when ``t_target`` or ``theta1`` is not a finite
+        number, |theta1| > ANGLE_LIMIT, or the span needs more than ``max_steps`` steps
+        (default :attr:`max_advance_steps`, about a minute of computation): long offline runs
+        belong to :meth:`run` / :meth:`iter_run`.  Memory is bounded (the span is integrated
+        in chunks of ``ADVANCE_CHUNK`` steps)."""
         if theta1 is None:
             theta1 = self._cmd_value
-        if not (math.isfinite(t_target) and math.isfinite(theta1)):
-            raise ValueError('advance_to: t_target and theta1 must be finite')
+        t_target = _finite_scalar('advance_to: t_target', t_target, TIME_LIMIT, 's')
+        theta1 = _finite_scalar('advance_to: theta1', theta1, ANGLE_LIMIT, 'rad')
         n = int(math.floor((t_target - self.t) / self.dt + 1e-9))
+        limit = self.max_advance_steps if max_steps is None else int(max_steps)
+        if n > limit:
+            raise ValueError(
+                f'advance_to({t_target:g}): {n:.3g} steps of {self.dt:g} s from t = '
+                f'{self.t:g} s exceed max_steps = {limit:.3g} (~{limit * 3e-7:.0f} s of '
+                'computation); advance in smaller spans, pass max_steps=..., or use '
+                'Simulator.run / iter_run for long offline runs')
         if n > 0:
             if self.interpolation == 'hold' or t_target <= self._cmd_t:
                 slope = 0.0
             else:
                 slope = (theta1 - self._cmd_value) / (t_target - self._cmd_t)
-            done, status = advance_segment(
-                self.p, self.C, self._u, self._v, self._a, self._theta1, self._theta1_dot,
-                self._t0, self._k, self.dt, n, self._cmd_t,
-                self._cmd_value if slope != 0.0 else float(theta1), slope, t_target,
-                float(theta1), self._stats, self._ctl)
-            self._after_kernel(done, status,
-                               self._segment_value(done, theta1, slope, t_target), slope)
+            left = n
+            while left > 0:
+                m = min(left, ADVANCE_CHUNK)
+                done, status = advance_segment(
+                    self.p, self.C, self._u, self._v, self._a, self._theta1,
+                    self._theta1_dot, self._t0, self._k, self.dt, m, self._cmd_t,
+                    self._cmd_value if slope != 0.0 else theta1, slope, t_target,
+                    theta1, self._stats, self._ctl)
+                self._after_kernel(done, status,
+                                   self._segment_value(done, theta1, slope, t_target), slope)
+                left -= m
         if t_target > self._cmd_t or n > 0:
             self._cmd_t = max(t_target, self._cmd_t)
-            self._cmd_value = float(theta1)
+            self._cmd_value = theta1
         return max(n, 0)
 
     def resync(self, t: float) -> None:
