@@ -7,8 +7,9 @@ Two interfaces to the node (``--interface``):
 
 * ``stamped``: behaves like a tracking servo.  Each reference sample is a
   ``sensor_msgs/JointState`` on ``worm_angle_reference`` whose ``header.stamp`` is the
-  instant it applies (samples on an exact ``--rate`` grid, streamed ``--preview`` seconds
-  ahead: by default the node's ``compensation.preview_time``), ``name[0]`` the worm input
+  instant it applies (samples on an exact ``--rate`` grid, streamed ahead by the node's
+  ``compensation.preview_time`` (``--preview``) plus ``--lead``, so that each correction
+  arrives before its instant), ``name[0]`` the worm input
   joint, ``position[0]`` theta1_ref [rad].  It consumes the node's
   ``~/compensated_command`` (theta1_ref + delta for the same stamp: what a servo would
   command) and its ``joint_states``, stamped with the instant they predict, from which the
@@ -255,7 +256,7 @@ class DemoCommander(Node):
     def __init__(self, pattern: str = 'paper', rate: float = 1000.0,
                  node_under_test: str = 'worm_gear_sim', move_period: float = 0.5,
                  slew_rate: float = 2.0, slew_period: float = 2.0,
-                 interface: str = 'stamped', preview: float = 0.0,
+                 interface: str = 'stamped', preview: float = 0.0, lead: float = 0.0,
                  config: Config | None = None, **kwargs: Any):
         super().__init__('demo_commander', **kwargs)
         if interface not in ('stamped', 'float64'):
@@ -266,7 +267,8 @@ class DemoCommander(Node):
         self.segments = pattern_segments(pattern, self.cfg, move_period, slew_period)
         self.tracker = MoveTracker(self.segments, float(modes(self.cfg).frequencies_hz[0]))
         self.pattern, self.interface, self.rate = pattern, interface, rate
-        self.preview = preview              # s: how far ahead the stream runs
+        self.preview = preview              # s: the node's preview: stream this far ahead
+        self.lead = lead                    # s: ... plus this, so corrections come in time
         self.node_preview: float | None = None   # the node's compensation.preview_time
         self.period_ns = int(round(1e9 / rate))
         self.target = node_under_test
@@ -279,7 +281,7 @@ class DemoCommander(Node):
         self.error = math.nan
         self.t_error = 0.0
         self.peak_all = 0.0
-        self.latency_ns: list[int] = []     # compensated command received - its stamp
+        self.latency_ns: list[int] = []     # stamp - reception of compensated commands
         self.delta = math.nan
         self.diag: dict[str, str] = {}
         self.last_move: MoveSummary | None = None
@@ -311,7 +313,10 @@ class DemoCommander(Node):
         if self.interface == 'float64':
             v = float(self.theta1(self.elapsed()))
             self.pub.publish(Float64(data=v))
-            self.sent += 1
+            if self.t0_ns is None:
+                self.held += 1                  # the first sample, until the node answers
+            else:
+                self.sent += 1
             return
         if self.t0_ns is None:
             # Until the node answers, hold the first sample (it starts the simulation
@@ -321,8 +326,8 @@ class DemoCommander(Node):
                 self._last_hold = now
                 self.held += 1
             return
-        # every grid sample whose instant is at most `preview` ahead, in stamp order
-        horizon = now + int(self.preview * 1e9)
+        # every grid sample whose instant is at most preview + lead ahead, in stamp order
+        horizon = now + int((self.preview + self.lead) * 1e9)
         n = 0
         while n < MAX_BURST:
             stamp = self.t0_ns + self.k_next * self.period_ns
@@ -385,7 +390,7 @@ class DemoCommander(Node):
         if stamp < self.t0_ns:
             return
         self.n_cc += 1
-        self.latency_ns.append(now - stamp)
+        self.latency_ns.append(stamp - now)       # > 0: arrived before its instant
         self.delta = msg.position[0] - float(self.theta1((stamp - self.t0_ns) * 1e-9))
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
@@ -433,6 +438,10 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     ap.add_argument('--preview', type=float, default=None,
                     help='stamped: stream this many seconds ahead [default: the node\'s '
                          'compensation.preview_time]')
+    ap.add_argument('--lead', type=float, default=0.02,
+                    help='stamped: stream this much further ahead, so that each correction '
+                         'arrives before its instant and a late timer of this process does '
+                         'not stall the stream [0.02 s]')
     ap.add_argument('--move-period', type=float, default=0.5,
                     help='paper: seconds between moves [0.5]')
     ap.add_argument('--slew-rate', type=float, default=2.0,
@@ -453,6 +462,8 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         ap.error('--rate, --duration, --move-period and --slew-period must be > 0')
     if opts.preview is not None and not 0.0 <= opts.preview <= 1.0:
         ap.error('--preview must be within [0, 1] s')
+    if not 0.0 <= opts.lead <= 0.5:
+        ap.error('--lead must be within [0, 0.5] s')
     return opts
 
 
@@ -462,16 +473,18 @@ def _summary(node: DemoCommander, opts: argparse.Namespace, compensated: bool | 
         print(fit(line), file=out, flush=True)
     moves = node.tracker.moves
     say(f'demo done: {node.elapsed():.1f} s of {opts.pattern} moves, {node.interface} '
-        f'references at {opts.rate:g} Hz' + (f', preview {node.preview * 1e3:g} ms'
-                                               if node.interface == 'stamped' else ''))
+        f'references at {opts.rate:g} Hz' + (f', {(node.preview + node.lead) * 1e3:g} ms '
+                                               'ahead' if node.interface == 'stamped' else ''))
     if node.interface == 'stamped':
         share = 100.0 * node.n_cc / node.sent if node.sent else 0.0
         say(f'  references sent {node.sent}, compensated commands received {node.n_cc} '
             f'({share:.2f} %), joint_states {node.n_js}')
         if node.latency_ns:
-            lat = np.asarray(node.latency_ns) * 1e-6
-            say(f'  compensated command received {np.percentile(lat, 50):+.2f} ms (p50), '
-                f'{np.percentile(lat, 99):+.2f} ms (p99) after its instant')
+            ahead = np.asarray(node.latency_ns) * 1e-6
+            med, worst = np.percentile(ahead, 50), np.percentile(ahead, 1)
+            word = lambda x: f'{abs(x):.2f} ms ' + ('before' if x >= 0 else 'after')  # noqa
+            say(f'  compensated commands arrived {word(med)} their instant (median), '
+                f'{word(worst)} (1 %)')
     else:
         say(f'  commands sent {node.sent}, joint_states {node.n_js}, positioning errors '
             f'{node.n_err}')
@@ -528,7 +541,7 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
     try:
         node = DemoCommander(opts.pattern, opts.rate, opts.node_name, opts.move_period,
                              opts.slew_rate, opts.slew_period, opts.interface,
-                             opts.preview or 0.0, cfg)
+                             opts.preview or 0.0, opts.lead, cfg)
         ex = make_executor('events')
         ex.add_node(node)
         never = Future()
@@ -562,7 +575,8 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
                     state = {True: 'applied to the prediction', False: 'not applied',
                              None: 'unknown'}[compensated]
                     print(fit(f'      node {opts.node_name}: feed-forward {state}'
-                              + (f', preview {node.preview * 1e3:g} ms'
+                              + (f'; stream {node.preview * 1e3:g} ms (preview) + '
+                                 f'{node.lead * 1e3:g} ms ahead'
                                  if opts.interface == 'stamped' else '')), file=out,
                           flush=True)
             if node.started() and node.elapsed() >= opts.duration:
