@@ -16,8 +16,8 @@ from worm_gear_sim import load_config
 from worm_gear_sim.cli import main
 from worm_gear_sim.profiles import TrapezoidalProfile
 from worm_gear_sim.realtime import RealtimePredictor
-from worm_gear_sim.records import read_bag, write_streams
 from worm_gear_sim.records import prediction_streams as streams_of
+from worm_gear_sim.records import read_bag, read_csv, write_streams
 from worm_gear_sim.replay import compare_with_recorded, replay
 
 TS = get_typestore(Stores.ROS2_KILTED)
@@ -95,7 +95,8 @@ def test_bag_replays_to_the_live_prediction(tmp_path, capsys, storage):
     status = main(['simulate', '--bag', str(bag), '-o', str(out), '--no-plot'])
     stdout = capsys.readouterr().out
     assert status == 0, stdout
-    assert 'max |replay - recorded joint_states|' in stdout
+    line = next(ln for ln in stdout.splitlines() if 'max |replay - recorded /joint_states|' in ln)
+    assert float(line.split('= ')[1].split()[0]) <= 1e-9 and 'over 80 equal stamps' in line
     # the prediction bag: stamped on the recording's clock, equal to the live node
     pred = read_bag(tmp_path / 'replay_bag', command_topic='/worm_gear_sim/feedforward',
                     joint_states_topic='joint_states', require_measured=True)
@@ -108,9 +109,10 @@ def test_bag_replays_to_the_live_prediction(tmp_path, capsys, storage):
     # the antenna really moved and rang: the comparison is not between zeros
     assert np.ptp(live_pos[:, 3]) > 1e-3
     # the CSV beside it: same prediction, t relative to the first stamp
-    data = np.genfromtxt(out, delimiter=',', comments='#', skip_header=3)
-    np.testing.assert_allclose(data[:, 0], (live_ns - EPOCH) * 1e-9, atol=1e-9)
-    assert np.max(np.abs(data[:, 4] - live_pos[:, 3])) <= 1e-9
+    csv = read_csv(out)                       # the reader takes the writer's header
+    np.testing.assert_allclose(csv.t, (live_ns - EPOCH) * 1e-9, rtol=0, atol=1e-12)
+    assert np.max(np.abs(csv.measured['theta4'] - live_pos[:, 3])) <= 1e-9
+    assert f't0_ns: {EPOCH}' in out.read_text()
     assert (tmp_path / 'replay_feedforward.csv').is_file()
 
 

@@ -379,7 +379,8 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     ``worm_angle_command``), of type std_msgs/Float64 (stamp = the bag's receive time) or
     sensor_msgs/JointState (the stamped reference: stamp = header.stamp, theta1 =
     the position of ``joint_names[0]``, or position[0] without names).  Measured:
-    ``joint_states_topic`` (default: ``measured_joint_states``, else ``joint_states``),
+    ``joint_states_topic`` (default: ``measured_joint_states``, else ``joint_states``; ''
+    reads none),
     sensor_msgs/JointState; theta2..theta4 by ``joint_names[1:4]`` (default
     ``node.joint_names``), stamps from header.stamp (the receive time if every stamp is 0).
     With measurements, ``t`` is their stamps and ``theta1`` the command interpolated there
@@ -406,9 +407,10 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
         if topics[cmd_topic] not in (FLOAT64, JOINT_STATE):
             raise RecordError(f'{where}: command topic {cmd_topic} is {topics[cmd_topic]}; '
                               f'expected {FLOAT64} or {JOINT_STATE} (the stamped reference)')
-        meas_topic = _resolve_topic(topics, joint_states_topic, DEFAULT_MEASURED_TOPICS,
-                                    'measured JointState', '--joint-states-topic', where,
-                                    require_measured)
+        meas_topic = None if joint_states_topic == '' and not require_measured else \
+            _resolve_topic(topics, joint_states_topic, DEFAULT_MEASURED_TOPICS,
+                           'measured JointState', '--joint-states-topic', where,
+                           require_measured)
         if meas_topic is not None and topics[meas_topic] != JOINT_STATE:
             raise RecordError(f'{where}: measured topic {meas_topic} is {topics[meas_topic]}; '
                               f'expected {JOINT_STATE}')

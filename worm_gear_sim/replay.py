@@ -94,7 +94,7 @@ class Replay:
             if corr and self.info.get('input') == 'stamped' else None,
             stamped=stamped, namespace=namespace, storage=storage, overwrite=overwrite)
 
-    def write_csv(self, path: str | Path, header_comment: str = '', digits: int = 10
+    def write_csv(self, path: str | Path, header_comment: str = '', digits: int = 12
                   ) -> list[Path]:
         """Predictions as CSV (t [s] relative to t0_ns with 9 decimals, others ``digits``
         significant digits) and, with corrections, ``<stem>_feedforward.csv`` (t,
