@@ -230,40 +230,6 @@ COUNTER_NAMES = (
     'stream_outliers')
 
 
-class _StreamingCompensator(Compensator):
-    """The Compensator with its streaming split in three: add a sample, evaluate at any
-    time covered by the history, trim what no evaluation needs any more."""
-
-    def add_sample(self, t: float, x: float) -> None:
-        ht, hx = self._hist_t, self._hist_x
-        if t < ht[-1]:
-            raise ValueError(f'add_sample: time went backwards ({t!r} < {ht[-1]!r})')
-        if t == ht[-1]:
-            hx[-1] = x
-        else:
-            ht.append(t)
-            hx.append(x)
-
-    def evaluate(self, te: float) -> float:
-        return self._evaluate(te)
-
-    def trim(self, te_min: float) -> None:
-        """Drop samples no evaluation at te >= te_min needs (one before the window kept)."""
-        ht, hx = self._hist_t, self._hist_x
-        t_old = te_min - float(self._tau[-1])
-        n = 0
-        while len(ht) - n > 2 and ht[n + 1] <= t_old:
-            n += 1
-        if n:
-            del ht[:n]
-            del hx[:n]
-
-    def adopt(self, other: Compensator) -> None:
-        """Take over the reference history and outputs of ``other`` (a reconfiguration)."""
-        self._hist_t, self._hist_x = list(other._hist_t), list(other._hist_x)
-        self._last_delta, self._reference = other._last_delta, other._reference
-
-
 class RealtimePredictor:
     """The real-time pipeline: samples in, corrections and predictions out (module doc).
 
@@ -300,7 +266,7 @@ class RealtimePredictor:
         self.confirm_samples = int(confirm_samples)
         self.compensation_error = ''
         self.last_error = ''
-        self._comp: _StreamingCompensator | None = None
+        self._comp: Compensator | None = None
         self.sim: Simulator | None = Simulator(config, 0.0, 0.0) if simulate else None
         if self.sim is not None:                      # compile / load the kernel now
             self.sim.advance_to(10 * self.sim.dt, 0.0)
@@ -319,7 +285,7 @@ class RealtimePredictor:
         if not self.compensate:
             return Prepared(config, None)
         try:
-            return Prepared(config, _StreamingCompensator(config))
+            return Prepared(config, Compensator(config))
         except Exception as exc:  # noqa: BLE001 - run uncompensated, say why
             return Prepared(config, None, f'{type(exc).__name__}: {exc}')
 
@@ -332,12 +298,12 @@ class RealtimePredictor:
         self._gap0_ns = int(round(STALE_PERIODS * self._period_ns))
         comp = prepared.compensator
         if comp is not None and self._comp is not None:
-            comp.adopt(self._comp)
+            comp.copy_history(self._comp)
         self._comp = comp
         self.compensation_error = prepared.error
         self.preview_ns = int(round(config.compensation.preview_time * 1e9))
         self._lead_ns = self.max_stamp_lead_ns + self.preview_ns
-        span = 0.0 if comp is None else float(comp._tau[-1]) + comp.preview
+        span = 0.0 if comp is None else comp.filter.lag_span + comp.preview
         self._rest_count = int(math.ceil(span * 1e9 / self._period_ns)) + 2
         self._max_jump = node.max_command_jump
         self._max_abs = node.max_command_abs
@@ -427,6 +393,11 @@ class RealtimePredictor:
     def pending(self) -> int:
         """Samples whose correction waits for the preview."""
         return len(self._pending)
+
+    @property
+    def queued_commands(self) -> int:
+        """Float64 commands waiting for a tick."""
+        return len(self._queue)
 
     @property
     def compensator(self) -> Compensator | None:
@@ -859,14 +830,9 @@ class RealtimePredictor:
             self._release(None, out, predict=False)
 
     def _prediction(self, ns: int, held: bool) -> Prediction:
-        sim = self.sim
-        st = sim.state
-        u, v = st.theta, st.omega
-        th1 = st.theta1
+        pos, vel, eff = self.sim.joint_state()
+        th1, th2, th4 = pos[0], pos[1], pos[3]
         ref = self._held_ref if self.apply_compensation else th1
         self.counters['predictions'] += 1
-        th2, th3, th4 = float(u[0]), float(u[1]), float(u[2])
-        return Prediction(ns, th1, st.theta1_dot, (th2, th3, th4),
-                          (float(v[0]), float(v[1]), float(v[2])),
-                          tuple(sim.joint_torques().tolist()), ref,
+        return Prediction(ns, th1, vel[0], pos[1:], vel[1:], eff, ref,
                           th4 - ref * self._ratio, th2 - th1, held)
