@@ -34,10 +34,11 @@ Design (computed from the NOMINAL model at construction / :meth:`Compensator.rec
    the y''' / y'''' terms (gear- and worm-body inertia, drag rate); they need a degree-6
    kernel and measure worse at a 1 kHz command rate, so they are off by default.
 
-``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one ``np.interp`` of the history
-at ~120 quadrature nodes, a small matrix-vector product and ~60 float operations (about
-40 us in CPython).  Structural damping (``damping.*``) is not in the inverse (zero by
-default; it only makes the drive ring less).
+``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one compiled kernel
+(:func:`compensation_kernel`: an interpolation walk over the history at ~120 quadrature
+nodes, the weights and the model inverse :func:`inverse_theta1`), about 2 us with the
+Python call (``benchmarks/bench_realtime.py``).  Structural damping (``damping.*``) is
+not in the inverse (zero by default; it only makes the drive ring less).
 
 Why no input shaper by default (see docs/compensation.md for the measurements): a
 lag-free filter (needed for constant-rate tracking) that contains a shaper one antenna
