@@ -38,6 +38,11 @@ def slew(n: int, rng: np.random.Generator, jitter_ns: int = 200_000, rate: float
     return st, x
 
 
+def kinds(out) -> list[str]:
+    """Event kinds of an Output, without the informational 'started'."""
+    return [e.kind for e in out.events if e.kind != 'started']
+
+
 def direct_twin(cfg: Config, st: np.ndarray, x: np.ndarray) -> np.ndarray:
     """The plain streaming Compensator (P = 0): update at each sample, relative seconds."""
     comp = Compensator(cfg)
@@ -263,7 +268,7 @@ def test_a_real_jump_is_confirmed_and_resynchronised():
         ns += MS
         outs.append(p.push(ns, 3.0))
     assert [o.rejected for o in outs[:2]] == [Reject.JUMP] * 2
-    assert outs[2].accepted and [e.kind for e in outs[2].events] == ['resync']
+    assert outs[2].accepted and kinds(outs[2]) == ['resync']
     assert [c.stamp_ns for c in outs[2].corrections] == [ns - 4 * MS, ns - 3 * MS,
                                                           ns - 2 * MS]
     assert p.counters['resyncs'] == 1 and p.counters['rejected_jump'] == 3
@@ -280,7 +285,7 @@ def test_clock_restart_reinitialises():
     for k in range(20):
         assert p.push(t + k * MS, 0.01 * k, now_ns=t + k * MS).accepted
     o = p.push(5 * MS, 0.2, now_ns=5 * MS)
-    assert o.accepted and [e.kind for e in o.events] == ['clock_restart']
+    assert o.accepted and kinds(o) == ['clock_restart']
     assert p.base_ns == 5 * MS and p.counters['clock_restarts'] == 1
     for k in range(6, 30):
         o = p.push(k * MS, 0.2, now_ns=k * MS)
@@ -314,12 +319,12 @@ def test_pause_hold_and_resume_keep_the_offline_answer():
         if i == 150:
             for now in range(int(st[149]) + MS, int(s) - MS, 10 * MS):
                 o = p.hold(now)
-                events += [e.kind for e in o.events]
+                events += kinds(o)
                 got.update({c.stamp_ns: c.delta for c in o.corrections})
                 held += o.predictions
                 assert o.stale == (now - st[149] > p.stale_after_ns + p.stale_margin_ns)
         o = p.push(int(s), v, now_ns=int(s) - 2 * MS)
-        events += [e.kind for e in o.events]
+        events += kinds(o)
         got.update({c.stamp_ns: c.delta for c in o.corrections})
     assert events == ['stream_stale', 'stream_resumed']
     assert held and all(q.held for q in held) and p.counters['stale_events'] == 1
@@ -366,7 +371,7 @@ def test_float64_path_ticks():
     ref = [comp.update(max(k * 1e-3 - 0.4e-3, 0.0), 2.0 * k * 1e-3) for k in range(199)]
     np.testing.assert_allclose(deltas, ref, rtol=0, atol=1e-12)
     o = p.tick(int(ticks[-1]) + 10 * MS)
-    assert o.stale and [e.kind for e in o.events] == ['stream_stale']
+    assert o.stale and kinds(o) == ['stream_stale']
     assert p.counters['commands_used'] == 199
 
 
@@ -481,18 +486,18 @@ def test_float64_jump_resync_and_sim_clock_restart():
     assert p.push_command(t + 5 * MS, 0.0).accepted
     outs = [p.push_command(t + 6 * MS + j, 3.0) for j in range(3)]
     assert [o.rejected for o in outs] == [Reject.JUMP, Reject.JUMP, None]
-    assert [e.kind for e in outs[2].events] == ['resync'] and p.counters['resyncs'] == 1
+    assert kinds(outs[2]) == ['resync'] and p.counters['resyncs'] == 1
     q = p.tick(t + 7 * MS).predictions[-1]
     assert q.theta1 == 3.0 and q.stamp_ns == t + 7 * MS
     p.push_command(2 * MS, 3.0)
     o = p.tick(3 * MS)                                  # /clock restarted
-    assert [e.kind for e in o.events] == ['clock_restart']
+    assert kinds(o) == ['clock_restart']
     assert o.predictions[-1].stamp_ns == 3 * MS and p.counters['clock_restarts'] == 1
     for k in range(4, 10):
         p.push_command(k * MS - 500, 3.0 + 1e-3 * k)
         assert p.tick(k * MS).predictions[-1].stamp_ns == k * MS
     o = p.push(10 * MS, 3.01, now_ns=10 * MS)
-    assert o.accepted and [e.kind for e in o.events] == ['input_changed']
+    assert o.accepted and kinds(o) == ['input_changed']
     assert p.counters['rejected_jump'] == 3
 
 
@@ -521,3 +526,16 @@ def test_float64_wall_timings_give_increasing_samples(timing):
     assert c['commands_used'] + c['commands_merged'] - c['merged_samples'] + \
         p.queued_commands == i + 1
     assert c['commands_used'] > (300 if timing == 'tick' else 390)
+
+
+def test_without_compensation_and_disabled_compensator():
+    """compensate=False: predictions only; compensation.enabled false: corrections of 0;
+    the first accepted sample reports 'started' (info)."""
+    p = RealtimePredictor(Config(), compensate=False)
+    o = p.push(EPOCH, 0.2)
+    assert [(e.kind, e.level) for e in o.events] == [('started', 'info')]
+    o = p.push(EPOCH + MS, 0.21)
+    assert not o.corrections and o.predictions[0].theta1 == 0.21 and p.compensator is None
+    p = RealtimePredictor(Config().replace({'compensation.enabled': False, **LOADED}))
+    outs = [p.push(EPOCH + k * MS, 0.01 * k) for k in range(10)]
+    assert all(o.corrections[0].delta == 0.0 for o in outs)

@@ -127,6 +127,7 @@ CONFIRM_SAMPLES = 3          # agreeing candidates that confirm a jump or a new 
 CHAIN_MAX_GAP_NS = 50_000_000  # candidates further apart do not confirm each other
 RESTART_MIN_BACK_NS = 100_000_000  # a stamp this much older may start a new timeline
 CLOCK_TOLERANCE_NS = 1_000_000  # now_ns may step back this much without a restart
+INFO_EVENTS = ('started', 'stream_resumed')
 HOLD_EPS = 0.5e-9            # s: 'hold' steps just after the sample time (stamps are whole ns)
 
 
@@ -188,12 +189,13 @@ class Prediction:
 
 @dataclass(frozen=True, slots=True)
 class Event:
-    """Something the node should log once as a warning.  ``kind``: resync,
-    clock_restart, stream_stale, stream_resumed, overrun, simulation_error,
-    compensation_error, input_changed."""
+    """Something the node should log once.  ``kind``: started, stream_resumed (``level``
+    'info'); resync, clock_restart, stream_stale, overrun, simulation_error,
+    compensation_error, input_changed ('warn').  The counters say how often."""
 
     kind: str
     message: str
+    level: str = 'warn'
 
 
 @dataclass(slots=True)
@@ -642,8 +644,9 @@ class RealtimePredictor:
         self._stream.reset()
 
     def _event(self, out: Output, kind: str, message: str) -> None:
-        out.events.append(Event(kind, message))
-        if kind not in ('stream_resumed',):
+        level = 'info' if kind in INFO_EVENTS else 'warn'
+        out.events.append(Event(kind, message, level))
+        if level == 'warn':
             self.last_error = message
 
     # ---- internals: the sample path ----------------------------------------------------
@@ -652,6 +655,8 @@ class RealtimePredictor:
         c = self.counters
         if not self._started:
             self._start(ns, x, predict)
+            self._event(out, 'started', f'first reference sample {x:.9g} rad: simulation '
+                        'started at rest')
         elif ns - self._last_real_ns > self._gap_ns:     # a pause: the reference rested
             self._insert_rest(ns, out, predict)
         if self._stale:
