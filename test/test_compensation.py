@@ -44,8 +44,10 @@ def test_no_load_at_rest_gives_no_correction():
 
 def test_constant_rate_correction_matches_steady_quasi_static():
     """At constant rate the filter has settled: the correction is the steady wind-up under
-    load, drag and friction (it varies only slightly with the mesh phase)."""
-    cfg = Config().replace(LOADED)
+    load, drag and friction (it varies only slightly with the mesh phase: at phase 0 the
+    cosine contact mapping is at a stiffness extreme, where the mesh stiffness is
+    stationary)."""
+    cfg = Config().replace(dict(LOADED, **{'mesh.phase_offset': 0.0}))
     ts = np.arange(0.0, 0.05, 1e-3)
     x = 5.0 * ts
     d = feedforward_series(cfg, ts, x)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import select
 import signal
 import subprocess
 import sys
@@ -135,16 +136,28 @@ def _stop_node(proc: subprocess.Popen, log) -> tuple[int, str]:
     return rc, text
 
 
-def _demo(env: dict[str, str], *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, '-m', 'worm_gear_sim.demo_commander', *args],
-                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=240)
+def _demo(node: subprocess.Popen, env: dict[str, str], *args: str,
+          timeout: float = 240.0) -> subprocess.CompletedProcess:
+    """Run the demo to its end; stop it at once if the node dies first (bounded)."""
+    demo = subprocess.Popen([sys.executable, '-m', 'worm_gear_sim.demo_commander', *args],
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + timeout
+    while demo.poll() is None and node.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.2)
+    if demo.poll() is None:
+        demo.kill()
+    out, err = demo.communicate(timeout=30)
+    if node.poll() is not None and demo.returncode != 0:
+        err += f'\n[the node exited with {node.returncode} before the demo ended]'
+    return subprocess.CompletedProcess(demo.args, demo.returncode, out, err)
 
 
 @pytest.mark.ros
 def test_demo_float64_one_line_per_move(ros_subprocess_env, tmp_path):
     node, log = _start_node(ros_subprocess_env, tmp_path / 'node.log')
     try:
-        demo = _demo(ros_subprocess_env, '--interface', 'float64', '--duration', '2')
+        demo = _demo(node, ros_subprocess_env, '--interface', 'float64', '--duration', '2')
     finally:
         node_rc, node_text = _stop_node(node, log)
     out = demo.stdout + demo.stderr
@@ -178,7 +191,9 @@ def test_demo_on_a_terminal_is_one_updating_line(ros_subprocess_env, tmp_path):
                                 stdin=subprocess.DEVNULL)
         os.close(slave)
         deadline = time.monotonic() + 240
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and node.poll() is None:
+            if not select.select([master], [], [], 0.2)[0]:
+                continue
             try:
                 data = os.read(master, 65536)
             except OSError:                         # EIO: the demo closed the terminal
@@ -186,6 +201,8 @@ def test_demo_on_a_terminal_is_one_updating_line(ros_subprocess_env, tmp_path):
             if not data:
                 break
             chunks.append(data)
+        if demo.poll() is None:
+            demo.kill()                             # the node died: stop now
         rc = demo.wait(timeout=30)
     finally:
         os.close(master)
@@ -203,3 +220,4 @@ def test_demo_on_a_terminal_is_one_updating_line(ros_subprocess_env, tmp_path):
     assert 'demo done' in summary and len(head.splitlines()) == 2, text
     assert all(len(ln) <= LINE_WIDTH for ln in head.splitlines() + summary.splitlines())
     assert node_rc == 0, node_text
+

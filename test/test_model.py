@@ -26,6 +26,7 @@ VARIANTS = {
     'no_compliance_friction': {'friction.in_compliance': False},
     'paper_lead': {'geometry.lead_convention': 'paper', 'friction.model': 'constant'},
     'load': {'load.output_torque': 3.0, 'load.output_viscous_coefficient': 0.5},
+    'sawtooth_mapping': {'mesh.contact_mapping': 'sawtooth'},
 }
 
 
@@ -216,3 +217,39 @@ def test_no_flywheel_theta4_follows_theta3_under_load():
         assert np.all(np.isfinite(tr.theta)) and tr.stats['failed_steps'] == 0
         assert np.abs(tr.theta4 - (tr.theta3 - T / K_g)).max() <= 1e-12 * np.abs(
             tr.theta3).max() + 1e-15
+
+
+@pytest.mark.parametrize('mapping, jump_w, jump_g', [('cosine', 0.0, 0.0),
+                                                     ('sawtooth', 0.266, -0.183)])
+def test_tooth_hand_over(mapping, jump_w, jump_g):
+    """The sawtooth contact mapping jumps by e^{360 b} - 1 at each hand-over (27 % worm,
+    18 % gear); the default cosine mapping is continuous (steps between neighbouring
+    phases shrink with the spacing) and spans the same fitted range."""
+    p = pack_parameters(Config().replace({'mesh.contact_mapping': mapping,
+                                          'mesh.phase_offset': 0.0}))
+    n = 100000
+    ph = np.linspace(0, 4 * math.pi, 2 * n + 1)          # two cycles, theta2 = 2 phase
+    k = np.array([tooth_stiffness(p, 2 * x, 0.0)[:2] for x in ph])
+    rel = np.diff(k, axis=0) / k[:-1]
+    big = np.abs(rel).max(axis=0)
+    if jump_w == 0.0:
+        assert np.all(big < 20 * 2 * math.pi / n * 0.24)   # smooth: |dk/k| <= 0.24 per rad
+    else:
+        i = np.argmax(np.abs(rel[:, 0]))
+        assert rel[i, 0] == pytest.approx(math.exp(-360 * 0.000656069) - 1, rel=1e-3)
+        assert rel[i, 1] == pytest.approx(math.exp(360 * 0.00055956) - 1, rel=1e-3)
+        assert abs(math.exp(360 * 0.000656069) - 1 - jump_w) < 2e-3
+        assert abs(math.exp(-360 * 0.00055956) - 1 - jump_g) < 2e-3
+    assert k[:, 0].max() / k[:, 0].min() == pytest.approx(math.exp(360 * 0.000656069),
+                                                          rel=1e-3)
+
+
+def test_default_phase_starts_at_the_mean_mesh_stiffness():
+    """At theta = 0 the default phase offset puts the mesh stiffness k_Y (teeth in series
+    with the bearings, what the dynamics see) at its cycle mean."""
+    from worm_gear_sim.model import mesh_stiffness_y
+    p = pack_parameters(Config())
+    ph = np.linspace(0, 2 * math.pi, 20001)[:-1]
+    kY = np.array([mesh_stiffness_y(p, 2 * x, 0.0) for x in ph])
+    assert mesh_stiffness_y(p, 0.0, 0.0) == pytest.approx(kY.mean(), rel=1e-5)
+    assert kY.max() / kY.min() > 1.005                      # it does vary over the cycle

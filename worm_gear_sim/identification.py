@@ -11,8 +11,10 @@ the samples (:class:`~worm_gear_sim.profiles.SampledProfile`), exactly as ``simu
 
 The fit (:func:`identify`) minimises, with ``scipy.optimize.least_squares``, the residuals
 (predicted - measured) of every measured output of every record, each output divided by its
-*scale* (the RMS of the measured angle minus the rigid kinematic motion theta1 * u_rigid, pooled
-over the records), so that theta2 (~0.1 rad) and theta4 (~1e-3 rad) weigh alike.  Parameters
+noise level (estimated from 4th differences of the measured angle, pooled over the records;
+at least 1e-3 of its *scale*, the RMS of the measured angle minus the rigid kinematic motion
+theta1 * u_rigid), so that theta2 (~0.1 rad) and theta4 (~1e-3 rad) weigh by their
+information.  Parameters
 are fitted in normalised coordinates x: ``log(value / base)`` for positive quantities,
 ``(value - base) / scale`` otherwise; bounds come from the parameter metadata.
 
@@ -175,7 +177,7 @@ class FitParameter:
 
     def from_x(self, x: float) -> float:
         if self.log:
-            return self.base * math.exp(x)
+            return self.base * math.exp(min(x, 700.0))   # an interval may be unbounded
         return self.base + x * self.scale
 
     @property
@@ -353,13 +355,25 @@ class Problem:
                 raise IdentificationError(f'{o}: the measured angle follows the command '
                                           'exactly; nothing to fit')
             self.scale[o] = s
+        # white-noise level of each output from 4th differences (a 100 Hz mode sampled at
+        # 10 kHz contributes (2 pi f dt)^4 = 2e-5 of its amplitude): var(d4 x) = 70 sigma^2
+        self.noise: dict[str, float] = {}
+        for o in self.outputs:
+            d4 = np.concatenate([np.diff(r['measured'][o], 4) for r in self.records
+                                 if o in r['measured']])
+            self.noise[o] = float(np.sqrt(np.mean(d4 ** 2) / 70.0)) if d4.size else 0.0
+        # residual weights: 1 / noise level (maximum likelihood for white Gaussian noise; a
+        # noisy output such as a worm encoder that hardly sees the mesh wind-up cannot drown
+        # the antenna's), at most 1000 / scale for noise-free data
+        self.sigma = {o: max(self.noise[o], 1e-3 * self.scale[o]) for o in self.outputs}
         period = self.dominant_period()
         self.period = period
         self.n_evals = 0
 
     def dominant_period(self) -> float:
         """Period [s] of the lowest measured oscillation (for time windows)."""
-        freqs = [f for f, _, _ in measured_frequencies(self.base, self.records)]
+        freqs = [f for f, _, _, fs in measured_frequencies(self.base, self.records)
+                 if f < 0.4 * fs]
         if freqs:
             return 1.0 / min(freqs)
         return 1.0 / float(modes(self.base).frequencies_hz[0] or 1.0)
@@ -402,9 +416,9 @@ class Problem:
                     continue
                 meas = r['measured'][o][:n]
                 if pred is None:   # failed run: a large, smooth penalty
-                    parts.append(np.full(n, 10.0))
+                    parts.append(np.full(n, 10.0 * self.scale[o] / self.sigma[o]))
                 else:
-                    parts.append((pred[o][:n] - meas) / self.scale[o])
+                    parts.append((pred[o][:n] - meas) / self.sigma[o])
         return np.concatenate(parts)
 
     def cost(self, x: np.ndarray, window: float | None = None) -> float:
@@ -422,10 +436,12 @@ def _as_arrays(rec: Any, i: int) -> dict[str, Any]:
 
 
 # ---- frequency start ---------------------------------------------------------------------------
-def measured_frequencies(base: Config, records: Sequence[Any]) -> list[tuple[float, str, float]]:
-    """(frequency [Hz], output, amplitude [rad]) of the dominant oscillation of each measured
-    output of each record: FFT of the measured angle minus the rigid motion after the command
-    stops (after it starts if the rest is shorter than 16 samples), resampled uniformly."""
+def measured_frequencies(base: Config, records: Sequence[Any]
+                         ) -> list[tuple[float, str, float, float]]:
+    """(frequency [Hz], output, amplitude [rad], sample rate [Hz]) of the dominant
+    oscillation of each measured output of each record: FFT of the measured angle minus the
+    rigid motion after the command stops (after it starts if the rest is shorter than 16
+    samples), resampled uniformly."""
     rigid = _rigid(base)
     out = []
     for r in records:
@@ -446,7 +462,8 @@ def measured_frequencies(base: Config, records: Sequence[Any]) -> list[tuple[flo
             yu = np.interp(tu, ts, ys)
             f = dominant_frequency(tu, yu, f_min=2.0 / max(ts[-1] - ts[0], 1e-9))
             if math.isfinite(f) and f > 0:
-                out.append((f, o, 0.5 * float(np.ptp(ys))))
+                fs = (ts.size - 1) / (ts[-1] - ts[0])
+                out.append((f, o, 0.5 * float(np.ptp(ys)), float(fs)))
     return out
 
 
@@ -458,11 +475,20 @@ def frequency_start(problem: Problem, x0: np.ndarray | None = None,
     meas = measured_frequencies(problem.base, problem.records)
     base_f = np.asarray(modes(problem.config(x0)).undamped_hz, float)
     targets: dict[int, list[float]] = {}
-    for f, _, _ in meas:   # nearest model mode in log-frequency
+    skipped = []
+    for f, o, _, fs in meas:   # nearest model mode in log-frequency
         k = int(np.argmin(np.abs(np.log(base_f / f))))
+        # A mode above Nyquist shows up aliased: a peak near such an alias is ambiguous; so is
+        # a match to a mode the sampling cannot resolve or more than a factor 2 away.
+        aliases = [abs(fm - round(fm / fs) * fs) for fm in base_f if fm > 0.5 * fs]
+        if base_f[k] > 0.4 * fs or not (0.5 < f / base_f[k] < 2.0) or \
+                any(abs(f - a) < 0.15 * a for a in aliases):
+            skipped.append((round(f, 4), o))
+            continue
         targets.setdefault(k, []).append(f)
-    info: dict[str, Any] = {'measured_hz': sorted({round(f, 4) for f, _, _ in meas}),
-                            'model_hz_before': base_f.tolist()}
+    info: dict[str, Any] = {'measured_hz': sorted({round(f, 4) for f, _, _, _ in meas}),
+                            'model_hz_before': base_f.tolist(),
+                            'skipped_peaks': skipped}
     if not targets:
         info['note'] = 'no measured oscillation found'
         return x0, info
@@ -616,6 +642,7 @@ class FitResult:
     rms_before: dict[str, float]          # [rad], pooled over the records
     rms_after: dict[str, float]
     scale: dict[str, float]               # [rad] residual scale per output
+    noise: dict[str, float]               # [rad] white-noise estimate per output
     per_record: list[dict[str, Any]]
     cost: float
     converged: bool
@@ -639,6 +666,7 @@ class FitResult:
                                                  self.std_x)],
             'correlation': self.correlation, 'rms_before_rad': self.rms_before,
             'rms_after_rad': self.rms_after, 'residual_scale_rad': self.scale,
+            'noise_estimate_rad': self.noise,
             'records': self.per_record, 'cost': self.cost, 'converged': self.converged,
             'trustworthy': self.trustworthy, 'problems': self.problems,
             'warnings': self.warnings, 'strategy': self.strategy, 'starts': self.starts,
@@ -655,7 +683,8 @@ class FitResult:
             s = self.scale[o]
             lines.append(f'  {o}: {self.rms_before[o]:.4g} -> {self.rms_after[o]:.4g} '
                          f'({100 * self.rms_before[o] / s:.1f} % -> '
-                         f'{100 * self.rms_after[o] / s:.2f} %)')
+                         f'{100 * self.rms_after[o] / s:.2f} %; noise level '
+                         f'{self.noise[o]:.3g})')
         if len(self.keys) > 1:
             lines.append('correlation:')
             for k, row in zip(self.keys, self.correlation):
@@ -753,9 +782,10 @@ def identify(base: Config, records: Sequence[Any], keys: Sequence[str], *,
         rel = rms_after[o] / problem.scale[o]
         if not math.isfinite(rel):
             problems.append(f'the fitted model cannot be simulated on every record ({o})')
-        elif rel > 0.25:
+        elif rel > 0.25 and rms_after[o] > 3.0 * problem.noise[o]:
             problems.append(f'{o}: residual RMS {100 * rel:.0f} % of the measured motion '
-                            '(> 25 %): the model does not match the records')
+                            f'(> 25 %) and {rms_after[o] / max(problem.noise[o], 1e-300):.1f}'
+                            ' x the noise level: the model does not match the records')
         elif rms_after[o] > rms_before[o] * 1.0001:
             warnings.append(f'{o}: residual RMS grew ({rms_before[o]:.3g} -> '
                             f'{rms_after[o]:.3g} rad)')
@@ -803,6 +833,7 @@ def identify(base: Config, records: Sequence[Any], keys: Sequence[str], *,
         std_x=[float(s) for s in std], log_scale=[p.log for p in params],
         correlation=np.where(np.isfinite(corr), corr, np.nan).tolist(),
         rms_before=rms_before, rms_after=rms_after, scale=dict(problem.scale),
+        noise=dict(problem.noise),
         per_record=per_record, cost=float(0.5 * r @ r), converged=converged,
         trustworthy=not problems, problems=problems, warnings=warnings,
         strategy={'name': opt.strategy, 'frequency_start': use_freq,
@@ -819,12 +850,15 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
     (the sweeps' engine: a LocalCluster by default, ``scheduler`` for a cluster)."""
     out: list[dict[str, Any]] = []
     bar = None
-    if opt.progress:
-        import sys
 
-        from tqdm import tqdm
-        bar = tqdm(total=len(starts), desc='identify', unit='start', file=sys.stderr,
-                   dynamic_ncols=True)
+    def start_bar() -> None:   # after the engine is up: no bar before a connection error
+        nonlocal bar
+        if opt.progress:
+            import sys
+
+            from tqdm import tqdm
+            bar = tqdm(total=len(starts), desc='identify', unit='start', file=sys.stderr,
+                       dynamic_ncols=True)
 
     def done(r: dict[str, Any]) -> None:
         out.append(r)
@@ -836,6 +870,7 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
 
     try:
         if opt.serial or (len(starts) == 1 and opt.client is None and opt.scheduler is None):
+            start_bar()
             for i, x0 in enumerate(starts):
                 done(_start_task(problem, list(x0), list(windows), opt.max_nfev,
                                  opt.diff_step, i))
@@ -846,6 +881,7 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
                 if len(cl.run(warm_up)) == 0:
                     raise ConnectionError('the Dask cluster has no workers')
                 pf = cl.scatter(problem, broadcast=True)
+                start_bar()
                 futs = [cl.submit(_start_task, pf, list(x0), list(windows), opt.max_nfev,
                                   opt.diff_step, i, pure=False) for i, x0 in enumerate(starts)]
                 try:

@@ -49,6 +49,7 @@ from .model import (
     P_LW,
     P_MAXIT,
     P_MAXSUB,
+    P_MESH_COSINE,
     P_MESH_LINEAR,
     P_PHASE0,
     P_RG,
@@ -102,8 +103,8 @@ def _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, b0, b1, b2):
 @njit(cache=True, error_model='numpy')
 def _phase_cycle(p, th2, th3):
     """Index of the mesh cycle (tooth hand-over count) at a position."""
-    if p[P_MESH_LINEAR] != 0.0:
-        return 0.0
+    if p[P_MESH_LINEAR] != 0.0 or p[P_MESH_COSINE] != 0.0:
+        return 0.0          # no hand-over discontinuity
     return math.floor((0.5 * (th2 + p[P_ZG] * th3) + p[P_PHASE0]) / (2.0 * math.pi))
 
 

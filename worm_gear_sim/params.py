@@ -33,6 +33,9 @@ __all__ = [
 
 NODE_NAME = 'worm_gear_sim'
 DEG = math.pi / 180.0
+# Mesh phase at which the mesh stiffness k_Y of the cosine contact mapping equals its mean
+# over the cycle (default parameters; test_model checks it)
+PHASE_AT_MEAN_STIFFNESS = 1.8373
 
 
 class ConfigError(ValueError):
@@ -151,8 +154,14 @@ class Mesh:
     calibrate_to_linear_mean: bool = _f(True, 'Shift the contact-position origin so that the '
                                         'mean of Eqs. 16-17 over a mesh cycle equals the '
                                         'linear values')
-    phase_offset: float = _f(0.0, 'Mesh-cycle phase (worm rotation) at theta2 = theta3 = 0',
-                             'rad', 0.0, 2.0 * math.pi)
+    contact_mapping: str = _f('cosine', 'Contact positions x of Eqs. 16-17 over a mesh cycle '
+                              '(one worm revolution): cosine: x = x0 + 180(1 - cos s) deg, out '
+                              'along the fitted range and back, no jump at the tooth hand-over; '
+                              'sawtooth: x = x0 + s, jumps 27 % (worm) / 18 % (gear) at every '
+                              'hand-over', choices=('cosine', 'sawtooth'))
+    phase_offset: float = _f(PHASE_AT_MEAN_STIFFNESS, 'Mesh-cycle phase (worm rotation) at '
+                             'theta2 = theta3 = 0; the default starts the cosine mapping at '
+                             'the mean mesh stiffness', 'rad', 0.0, 2.0 * math.pi)
     worm_tooth_stiffness_multiplier: float = _f(1.0, 'Multiplier on c_w k_w (Fig. 17 study)',
                                                 '', 0.0, 1e6, lo_open=True)
     gear_tooth_stiffness_multiplier: float = _f(1.0, 'Multiplier on c_g k_g (Fig. 17 study)',
