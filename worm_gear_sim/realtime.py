@@ -174,7 +174,7 @@ class Prediction:
     reference: float         # theta1_ref the positioning error is measured against [rad]
     positioning_error: float  # theta4 - reference l_w / r_g [rad] (~/positioning_error)
     worm_error: float        # theta2 - theta1 [rad] (~/worm_error)
-    held: bool = False       # a held prediction of a paused stream (or a tick's hold)
+    held: bool = False       # held: the stream is stale, the last command is held
 
     @property
     def position(self) -> tuple:
@@ -802,7 +802,7 @@ class RealtimePredictor:
             except (SimulationError, ValueError) as exc:
                 self._simulation_failed(exc, t, out)
             self._drive_t = t
-        out.predictions.append(self._prediction(ns, True))
+        out.predictions.append(self._prediction(ns, self._stale))
 
     def _catch_up(self, t: float, out: Output) -> None:
         sim = self.sim
