@@ -28,11 +28,15 @@ import yaml
 
 __all__ = [
     'ConfigError', 'Config', 'Derived', 'derive', 'load_config', 'config_from_mapping',
-    'default_config', 'default_config_path', 'NODE_NAME',
+    'default_config', 'default_config_path', 'NODE_NAME', 'check_usable', 'ANGLE_LIMIT',
 ]
 
 NODE_NAME = 'worm_gear_sim'
 DEG = math.pi / 180.0
+#: Largest |angle| [rad] the model accepts (commands, initial states, equilibria): at 1e9 rad
+#: the mesh phase and the approach q = l_w theta2 - r_g theta3 keep ~1e-7 of their resolution
+#: in double precision (a year of continuous slewing of the worm at 30 rad/s).
+ANGLE_LIMIT = 1e9
 # Mesh phase at which the mesh stiffness k_Y of the cosine contact mapping equals its mean
 # over the cycle (default parameters; test_model checks it)
 PHASE_AT_MEAN_STIFFNESS = 1.8373
@@ -265,7 +269,7 @@ class NodeSettings:
                        'single_threaded'), read_only=True)
     max_command_jump: float = _f(1.0, 'Largest accepted change of theta1 between two '
                                  'commands', 'rad', 0.0, 1e4, lo_open=True)
-    max_command_abs: float = _f(1e4, 'Largest accepted |theta1|', 'rad', 0.0, 1e9,
+    max_command_abs: float = _f(1e4, 'Largest accepted |theta1|', 'rad', 0.0, ANGLE_LIMIT,
                                 lo_open=True)
     max_catch_up: float = _f(0.05, 'Largest simulated time integrated in one tick; the rest '
                              'is dropped and counted as an overrun', 's', 0.0, 10.0,
@@ -357,7 +361,8 @@ class Config:
         return nested
 
     def replace(self, overrides: Mapping[str, Any] | None = None, **kw: Any) -> Config:
-        """Return a validated copy with dotted-name overrides applied (all or nothing)."""
+        """Return a validated copy with dotted-name overrides applied (all or nothing): per
+        field, cross-field, and usable (:func:`check_usable`, naming the keys changed)."""
         changes = dict(overrides or {})
         changes.update({k.replace('__', '.'): v for k, v in kw.items()})
         nested = self.to_nested_dict()
@@ -366,7 +371,9 @@ class Config:
             if sec not in nested or name not in nested[sec]:
                 raise ConfigError(key, 'unknown parameter' + _suggest(key, self.to_flat_dict()))
             nested[sec][name] = value
-        return config_from_mapping(nested, source='overrides')
+        cfg = config_from_mapping(nested, source='overrides', usable=False)
+        check_usable(cfg, changed=[k for k in changes])
+        return cfg
 
     @staticmethod
     def metadata() -> dict[str, dict[str, Any]]:
@@ -478,8 +485,10 @@ def validate(cfg: Config) -> None:
                           f'{1.0 / cfg.node.publish_rate_hz:g} s')
 
 
-def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>') -> Config:
-    """Build a Config from nested sections (the ``ros__parameters`` content) or dotted keys."""
+def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>',
+                        usable: bool = True) -> Config:
+    """Build a Config from nested sections (the ``ros__parameters`` content) or dotted keys,
+    validated per field, across fields and (``usable``) by :func:`check_usable`."""
     if not isinstance(data, Mapping):
         raise ConfigError('', f'{source}: parameters must be a mapping, got {type(data).__name__}')
     nested: dict[str, dict[str, Any]] = {}
@@ -510,7 +519,24 @@ def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>') -> C
             default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
             sec_kwargs[name] = _coerce(key, value, default, f.metadata)
         kwargs[sec] = cls(**sec_kwargs)
-    return Config(**kwargs)
+    cfg = Config(**kwargs)
+    if usable:
+        check_usable(cfg)
+    return cfg
+
+
+def check_usable(cfg: Config, changed: Any = None) -> None:
+    """Raise :class:`ConfigError` unless the parameter set can be simulated: tooth
+    stiffness finite and > 0 over the mesh cycle, no spring of the chain lost next to its
+    neighbour (singular stiffness), every mode resolved by the time step, and a trial
+    (equilibrium, modes, a 2 ms move) computable and finite.  The error names the keys that
+    set the failing quantity, the ``changed`` keys first (default: the keys that differ from
+    the defaults).  Called by :func:`config_from_mapping`, :meth:`Config.replace`,
+    :func:`load_config` and the Simulator; cached per Config; pure (no shared state
+    besides the cache), so it can run off the node's real-time path.  The rules:
+    :mod:`worm_gear_sim.usability`."""
+    from .usability import check_usable as _check
+    _check(cfg, changed)
 
 
 def _ros_parameters(doc: Any, path: str, node_name: str) -> Mapping[str, Any]:
