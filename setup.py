@@ -3,10 +3,23 @@
 """ament_python package: `colcon build` on a ROS 2 install, or `pip install .[ros]` in a venv."""
 
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
 package_name = 'worm_gear_sim'
+HERE = Path(__file__).resolve().parent
+
+
+def ros_wheels(distro: str) -> list[str]:
+    """The PyPI ROS 2 wheels of one distro, from requirements/ros-<distro>.txt (one list for
+    scripts/setup_env.sh and the extras; the file is absent only outside a source tree)."""
+    path = HERE / 'requirements' / f'ros-{distro}.txt'
+    if not path.is_file():
+        return []
+    lines = (ln.split('#', 1)[0].strip() for ln in path.read_text().splitlines())
+    return [ln for ln in lines if ln]
+
 
 setup(
     name=package_name,
@@ -16,6 +29,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
     ],
     # Only setuptools here, as in the ROS template: pkg_resources-style wrappers check these
     # at `ros2 run`, and apt-installed numpy/scipy carry no pip metadata.  The PyPI ROS wheels
@@ -24,9 +38,11 @@ setup(
     extras_require={
         'core': ['numpy>=1.24', 'scipy>=1.10', 'numba>=0.58', 'pyyaml>=6', 'matplotlib>=3.7'],
         'studies': ['dask[distributed]>=2023.1', 'tqdm>=4.60'],
-        'ros': ['ros-rclpy', 'ros-std-msgs', 'ros-sensor-msgs', 'ros-diagnostic-msgs',
-                'ros-rosgraph-msgs', 'ros-rcl-interfaces', 'ros-rmw-fastrtps-cpp'],
-        'test': ['pytest', 'ruff', 'colcon-core', 'colcon-ros', 'colcon-python-setup-py'],
+        # pip install .[ros] (Kilted, rclpy 9.x) or .[ros-jazzy] (Jazzy LTS, rclpy 7.1.x)
+        'ros': ros_wheels('kilted'),
+        'ros-jazzy': ros_wheels('jazzy'),
+        'test': ['pytest', 'ruff', 'colcon-core', 'colcon-ros', 'colcon-python-setup-py',
+                 'colcon-package-selection'],
     },
     zip_safe=True,
     maintainer='worm_gear_sim developers',

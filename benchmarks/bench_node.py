@@ -207,7 +207,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--executor', choices=('events', 'single_threaded'), default='events')
     ap.add_argument('--command-rate', type=float, default=1000.0,
                     help='worm_angle_command rate [Hz] (default 1000)')
-    ap.add_argument('--domain-id', type=int, default=44)
+    ap.add_argument('--domain-id', type=int,
+                    default=int(os.environ.get('ROS_DOMAIN_ID', '44') or 44),
+                    help='ROS domain of the node and the probe [$ROS_DOMAIN_ID, else 44]')
     ap.add_argument('--breakdown', action='store_true',
                     help='also measure the per-tick costs in-process')
     ap.add_argument('--feedforward', action='store_true',

@@ -2,35 +2,50 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 #
-# Set up (first run) and run the worm_gear_sim ROS 2 node with a demo command stream,
-# showing the predicted antenna positioning error live in the terminal.
+# Set up (first run) and run the worm_gear_sim ROS 2 node with the demo servo
+# (worm_gear_sim.ros.demo_commander) streaming a reference to it; shows the predicted antenna
+# error live (one line on a terminal, one line per move otherwise) and a summary.
 #
 #   scripts/run_demo.sh [DURATION_S] [paper|slew]
 #
-# Environment: DEMO_DURATION (default 20 s), DEMO_PATTERN (paper | slew, default paper),
-# DEMO_COMPENSATED=1 (the node predicts with ~/feedforward applied), VENV (default .venv), ROS_DOMAIN_ID (default: yours, or 0),
-# ROS_AUTOMATIC_DISCOVERY_RANGE (default LOCALHOST: nothing leaves this machine).
-# Needs python3 (3.11 or newer with venv); the ROS 2 PyPI wheels come from requirements.txt.
+# Environment:
+#   DEMO_DURATION     seconds of streaming (default 20)
+#   DEMO_PATTERN      paper | slew (default paper)
+#   DEMO_INTERFACE    stamped | float64 (default: the demo's, see --interface)
+#   DEMO_COMPENSATED  1: the node predicts with its feed-forward applied
+#                     (node.compensation_applied), the demo reports the benefit in numbers
+#   DEMO_PREVIEW      seconds the servo streams ahead (compensation.preview_time), e.g. 0.002
+#   ROS_DISTRO        kilted (default, .venv) | jazzy (.venv-jazzy); VENV overrides the venv
+#   ROS_DOMAIN_ID     default: yours, or 0; ROS_AUTOMATIC_DISCOVERY_RANGE default LOCALHOST
+# Needs python3 (3.11 or newer with venv); the ROS 2 PyPI wheels come from requirements/.
 set -euo pipefail
 
 cd "$(dirname "$0")/.."
 DURATION="${1:-${DEMO_DURATION:-20}}"
 PATTERN="${2:-${DEMO_PATTERN:-paper}}"
-VENV="${VENV:-.venv}"
-
-VENV="$VENV" scripts/setup_env.sh      # creates the venv and installs everything (first run)
+# shellcheck source=scripts/ros_distro.sh
+. scripts/ros_distro.sh                # ROS_DISTRO=kilted (.venv, default) | jazzy (.venv-jazzy)
+scripts/setup_env.sh                   # creates the venv and installs everything (first run)
 PY="$VENV/bin/python"
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 CONFIG="$("$PY" -c 'from worm_gear_sim.params import default_config_path; print(default_config_path())')"
 
 NODE_ARGS=(--ros-args --params-file "$CONFIG" --log-level warn)
+DEMO_ARGS=(--duration "$DURATION" --pattern "$PATTERN" --config "$CONFIG")
 if [ "${DEMO_COMPENSATED:-0}" = "1" ]; then
     NODE_ARGS+=(-p node.compensation_applied:=true)
 fi
+if [ -n "${DEMO_PREVIEW:-}" ]; then
+    NODE_ARGS+=(-p "compensation.preview_time:=$DEMO_PREVIEW")
+fi
+if [ -n "${DEMO_INTERFACE:-}" ]; then
+    DEMO_ARGS+=(--interface "$DEMO_INTERFACE")
+fi
 "$PY" -m worm_gear_sim.node "${NODE_ARGS[@]}" &
 NODE_PID=$!
-echo "[demo] node (pid $NODE_PID): $PY -m worm_gear_sim.node ${NODE_ARGS[*]}"
+echo "[demo] ROS 2 $ROS_DISTRO: worm_gear_sim node (pid $NODE_PID), ${CONFIG#"$PWD"/}${NODE_ARGS[*]:5}" \
+    | cut -c1-80
 stop_node() {
     if kill -0 "$NODE_PID" 2>/dev/null; then
         kill -TERM "$NODE_PID" 2>/dev/null || true   # background jobs of a script ignore SIGINT
@@ -42,7 +57,7 @@ stop_node() {
 trap 'stop_node || true' INT TERM
 
 set +e
-"$PY" -m worm_gear_sim.demo_commander --duration "$DURATION" --pattern "$PATTERN"
+"$PY" -m worm_gear_sim.demo_commander "${DEMO_ARGS[@]}"
 DEMO_RC=$?
 stop_node
 NODE_RC=$?

@@ -1,13 +1,21 @@
 #!/usr/bin/env bash
-# The whole test suite: set-up (idempotent), lint, then every test. Extra arguments go to
-# pytest (e.g. scripts/run_tests.sh -k radau). DDS traffic stays on this machine.
+# The whole test suite: set-up (idempotent), lint, then every test, on the PyPI wheels of
+# ROS_DISTRO (kilted, the default, in .venv; or jazzy, in .venv-jazzy):
+#   scripts/run_tests.sh                      # Kilted
+#   ROS_DISTRO=jazzy scripts/run_tests.sh     # Jazzy (LTS)
+# Extra arguments go to pytest (e.g. scripts/run_tests.sh -k radau). DDS traffic stays on
+# this machine; ROS_DOMAIN_ID (default 42) is used in-process, ROS_DOMAIN_ID+1 by child processes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# shellcheck source=scripts/ros_distro.sh
+. scripts/ros_distro.sh
 scripts/setup_env.sh
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42}
 export MPLBACKEND=Agg
+echo "[tests] ROS 2 $ROS_DISTRO ($RCLPY_DIST $("$VENV/bin/python" -c \
+    "from importlib.metadata import version; print(version('$RCLPY_DIST'))"), $VENV)"
 echo "[tests] ruff check ."
-.venv/bin/ruff check .
+"$VENV/bin/ruff" check .
 echo "[tests] pytest"
-exec .venv/bin/python -m pytest "$@"
+exec "$VENV/bin/python" -m pytest "$@"

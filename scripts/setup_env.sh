@@ -1,23 +1,25 @@
 #!/usr/bin/env bash
-# Create (or refresh) the project venv ($VENV, default .venv) with everything a plain machine needs:
-# numeric stack, ROS 2 Kilted PyPI wheels (rclpy + messages + Fast DDS), test tools, and
-# this package in editable mode. Idempotent: re-installs only when requirements.txt,
-# setup.py or package.xml changed since the last successful run.
+# Create (or refresh) the project venv with everything a plain machine needs: numeric stack,
+# the ROS 2 PyPI wheels of $ROS_DISTRO (kilted, the default, into .venv; jazzy into
+# .venv-jazzy; rclpy + messages + Fast DDS), test tools, and this package in editable mode.
+# Idempotent: re-installs only when a requirements file, setup.py or package.xml changed since
+# the last successful run.  VENV overrides the venv path, PYTHON the interpreter (3.11+).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# shellcheck source=scripts/ros_distro.sh
+. scripts/ros_distro.sh
 PY=${PYTHON:-python3}
-VENV=${VENV:-.venv}
 if [ ! -x "$VENV/bin/python" ]; then
-    echo "[setup] creating $VENV with $($PY --version)"
+    echo "[setup] creating $VENV ($ROS_DISTRO) with $($PY --version)"
     "$PY" -m venv "$VENV"
 fi
 stamp="$VENV/.worm_gear_sim_installed"
-if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ setup.py -nt "$stamp" ] \
-        || [ package.xml -nt "$stamp" ]; then
-    echo "[setup] installing requirements into $VENV (PyPI: numpy, scipy, numba, ROS 2 wheels;"\
-         "first run: about a minute)"
+if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ "$ROS_REQUIREMENTS" -nt "$stamp" ] \
+        || [ setup.py -nt "$stamp" ] || [ package.xml -nt "$stamp" ]; then
+    echo "[setup] installing requirements into $VENV (PyPI: numpy, scipy, numba, ROS 2" \
+         "$ROS_DISTRO wheels; first run: a few minutes)"
     "$VENV/bin/python" -m pip install --quiet --upgrade pip 'setuptools>=61,<80' wheel
-    "$VENV/bin/python" -m pip install --quiet -r requirements.txt
+    "$VENV/bin/python" -m pip install --quiet -r requirements.txt -r "$ROS_REQUIREMENTS"
     # Editable install: no data_files; the package finds config/ in the source tree.
     "$VENV/bin/python" -m pip install --quiet --no-deps --no-build-isolation -e .
     touch "$stamp"

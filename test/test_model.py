@@ -26,6 +26,7 @@ VARIANTS = {
     'no_compliance_friction': {'friction.in_compliance': False},
     'paper_lead': {'geometry.lead_convention': 'paper', 'friction.model': 'constant'},
     'load': {'load.output_torque': 3.0, 'load.output_viscous_coefficient': 0.5},
+    'sawtooth_mapping': {'mesh.contact_mapping': 'sawtooth'},
 }
 
 
@@ -160,3 +161,95 @@ def test_overdamped_mode_keeps_the_table_aligned():
     assert m.frequencies_hz[0] == pytest.approx(94.5, rel=5e-3)
     assert m.frequencies_hz[1] == pytest.approx(1566.0, rel=5e-3)
     assert m.frequencies_hz[2] == 0.0 and m.damping_ratios[2] > 1.0
+
+
+def _rigid_end_frequencies(cfg: Config) -> np.ndarray:
+    """Independent 2-DOF reference for the drive without flywheel: the massless gear shaft
+    ends free (assumption 8), so it carries no torque; worm on K_w, gear on the mesh only.
+    Written from the parameters (Eqs. 7-10 frictionless), not from modal.py."""
+    from worm_gear_sim.params import derive
+    d = derive(cfg)
+    g, m = cfg.geometry, cfg.mesh
+    sl, cl, cphi = math.sin(d.lead_angle), math.cos(d.lead_angle), math.cos(g.pressure_angle)
+    kgws = (1 / m.worm_tooth_stiffness_linear + 1 / m.gear_tooth_stiffness_linear
+            + cphi * sl * sl / d.k_gs + cphi * cl * cl / d.k_ws)
+    kY = cphi * cl * cl / kgws
+    lw, rg = d.l_w, g.gear_pitch_radius
+    K = np.array([[d.K_w + lw * lw * kY, -lw * rg * kY], [-lw * rg * kY, rg * rg * kY]])
+    Minv_sqrt = np.diag([d.J_w ** -0.5, d.J_g ** -0.5])
+    return np.sqrt(np.linalg.eigvalsh(Minv_sqrt @ K @ Minv_sqrt)) / (2 * math.pi)
+
+
+@pytest.mark.parametrize('mesh_model', ['linear', 'nonlinear'])
+def test_no_flywheel_is_the_rigid_free_end(mesh_model):
+    """flywheel_enabled false = assumption 8: no extra degree of freedom (no 2.43 kHz mode of
+    a lumped shaft-end inertia), the gear mode at the rigid-end value (1466 Hz)."""
+    cfg = Config().replace({'geometry.flywheel_enabled': False,
+                            'mesh.stiffness_model': mesh_model, 'friction.model': 'off'})
+    ref = _rigid_end_frequencies(cfg)
+    assert ref[0] == pytest.approx(1466, rel=1e-3)
+    m = modes(cfg)
+    assert len(m.undamped_hz) == 2                          # no spurious third mode
+    assert m.undamped_hz == pytest.approx(ref, rel=2e-3)
+    # theta4 follows theta3 in the shapes (rigid end)
+    assert np.allclose(m.shapes[2], m.shapes[1], atol=1e-12)
+
+
+def test_no_flywheel_end_inertia_is_explicit():
+    """A documented end inertia brings the third degree of freedom back on request."""
+    cfg = Config().replace({'geometry.flywheel_enabled': False, 'mesh.stiffness_model': 'linear',
+                            'friction.model': 'off'})
+    assert len(modes(cfg.replace({'geometry.shaft_end_inertia': 1e-4})).undamped_hz) == 3
+    # the end inertia only counts without the flywheel
+    a = modes(Config().replace({'geometry.shaft_end_inertia': 1e-4})).undamped_hz
+    assert a == pytest.approx(modes(Config()).undamped_hz, rel=1e-12)
+
+
+def test_no_flywheel_theta4_follows_theta3_under_load():
+    """Without flywheel theta4 is the free shaft end: theta4 = theta3 - T_load/K_g at every
+    step of a move (the massless shaft transmits the load torque, no dynamics of its own)."""
+    from worm_gear_sim import simulate
+    from worm_gear_sim.params import derive
+    for T in (0.0, 2.0):
+        cfg = Config().replace({'geometry.flywheel_enabled': False, 'load.output_torque': T})
+        tr = simulate(cfg, t_end=0.03)
+        K_g = derive(cfg).K_g
+        assert np.all(np.isfinite(tr.theta)) and tr.stats['failed_steps'] == 0
+        assert np.abs(tr.theta4 - (tr.theta3 - T / K_g)).max() <= 1e-12 * np.abs(
+            tr.theta3).max() + 1e-15
+
+
+@pytest.mark.parametrize('mapping, jump_w, jump_g', [('cosine', 0.0, 0.0),
+                                                     ('sawtooth', 0.266, -0.183)])
+def test_tooth_hand_over(mapping, jump_w, jump_g):
+    """The sawtooth contact mapping jumps by e^{360 b} - 1 at each hand-over (27 % worm,
+    18 % gear); the default cosine mapping is continuous (steps between neighbouring
+    phases shrink with the spacing) and spans the same fitted range."""
+    p = pack_parameters(Config().replace({'mesh.contact_mapping': mapping,
+                                          'mesh.phase_offset': 0.0}))
+    n = 100000
+    ph = np.linspace(0, 4 * math.pi, 2 * n + 1)          # two cycles, theta2 = 2 phase
+    k = np.array([tooth_stiffness(p, 2 * x, 0.0)[:2] for x in ph])
+    rel = np.diff(k, axis=0) / k[:-1]
+    big = np.abs(rel).max(axis=0)
+    if jump_w == 0.0:
+        assert np.all(big < 20 * 2 * math.pi / n * 0.24)   # smooth: |dk/k| <= 0.24 per rad
+    else:
+        i = np.argmax(np.abs(rel[:, 0]))
+        assert rel[i, 0] == pytest.approx(math.exp(-360 * 0.000656069) - 1, rel=1e-3)
+        assert rel[i, 1] == pytest.approx(math.exp(360 * 0.00055956) - 1, rel=1e-3)
+        assert abs(math.exp(360 * 0.000656069) - 1 - jump_w) < 2e-3
+        assert abs(math.exp(-360 * 0.00055956) - 1 - jump_g) < 2e-3
+    assert k[:, 0].max() / k[:, 0].min() == pytest.approx(math.exp(360 * 0.000656069),
+                                                          rel=1e-3)
+
+
+def test_default_phase_starts_at_the_mean_mesh_stiffness():
+    """At theta = 0 the default phase offset puts the mesh stiffness k_Y (teeth in series
+    with the bearings, what the dynamics see) at its cycle mean."""
+    from worm_gear_sim.model import mesh_stiffness_y
+    p = pack_parameters(Config())
+    ph = np.linspace(0, 2 * math.pi, 20001)[:-1]
+    kY = np.array([mesh_stiffness_y(p, 2 * x, 0.0) for x in ph])
+    assert mesh_stiffness_y(p, 0.0, 0.0) == pytest.approx(kY.mean(), rel=1e-5)
+    assert kY.max() / kY.min() > 1.005                      # it does vary over the cycle

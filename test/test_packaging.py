@@ -1,7 +1,8 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Packaging for a real ROS 2 install: ``colcon build`` (colcon-core + colcon-ros from PyPI,
-no ROS install needed for an ament_python package) into a temporary workspace, then what
+"""Packaging for a real ROS 2 install: package.xml declares every import as a rosdep key;
+the README's workspace steps, ``colcon build`` (colcon-core + colcon-ros from PyPI, no ROS
+install needed for an ament_python package) in a temporary workspace, then what
 ``ros2 run worm_gear_sim worm_gear_sim_node`` resolves (ament index marker -> prefix ->
 ``lib/worm_gear_sim/worm_gear_sim_node``), the installed config and package.xml, and the
 installed executable run with the installed config, publishing JointState over DDS."""
@@ -32,31 +33,42 @@ def _colcon() -> str | None:
     return str(here) if here.exists() else shutil.which('colcon')
 
 
+def _source_files() -> list[str]:
+    """What a clone of this repository holds: tracked files plus new, not ignored ones (so
+    the test also sees uncommitted work); without git, the tree minus venvs and outputs."""
+    try:
+        out = subprocess.run(['git', 'ls-files', '-z', '--cached', '--others',
+                              '--exclude-standard'], cwd=ROOT, capture_output=True,
+                             check=True, timeout=60).stdout.decode()
+        return [f for f in out.split('\0') if f and (ROOT / f).is_file()]
+    except (OSError, subprocess.SubprocessError):
+        skip = {'.git', '.venv', 'build', 'install', 'log', '__pycache__'}
+        return [str(p.relative_to(ROOT)) for p in ROOT.rglob('*')
+                if p.is_file() and not skip & set(p.relative_to(ROOT).parts)
+                and not p.relative_to(ROOT).parts[0].startswith('.venv')]
+
+
 @pytest.fixture(scope='module')
 def colcon_install(tmp_path_factory) -> Path:
-    """A workspace with only what the package needs, built by colcon; returns the
-    install base (isolated layout: <install>/worm_gear_sim/...)."""
+    """The README's workspace steps (`On a real ROS 2 install`): the repository into
+    ``ws/src/worm_gear_sim``, then ``colcon build --packages-select worm_gear_sim`` in
+    ``ws``; returns the install base (isolated layout: <install>/worm_gear_sim/...)."""
     colcon = _colcon()
     if colcon is None:
         pytest.skip('colcon is not installed (pip install colcon-core colcon-ros '
                     'colcon-python-setup-py)')
-    ws = tmp_path_factory.mktemp('colcon_ws')
+    ws = tmp_path_factory.mktemp('ws')
     src = ws / 'src' / PKG
-    src.mkdir(parents=True)
-    for name in ('setup.py', 'setup.cfg', 'package.xml'):
-        shutil.copy2(ROOT / name, src / name)
-    for name in ('resource', 'config'):
-        shutil.copytree(ROOT / name, src / name)
-    shutil.copytree(ROOT / PKG, src / PKG,
-                    ignore=shutil.ignore_patterns('__pycache__', '*.pyc', '*.nbi', '*.nbc'))
+    for rel in _source_files():
+        (src / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / rel, src / rel)
     env = dict(os.environ)
     env.pop('AMENT_PREFIX_PATH', None)
     env.pop('COLCON_PREFIX_PATH', None)
-    proc = subprocess.run(
-        [colcon, '--log-base', str(ws / 'log'), 'build', '--base-paths', str(ws / 'src'),
-         '--build-base', str(ws / 'build'), '--install-base', str(ws / 'install')],
-        cwd=ws, env=env, capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([colcon, 'build', '--packages-select', PKG], cwd=ws, env=env,
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f'Finished <<< {PKG}' in proc.stdout, proc.stdout
     return ws / 'install'
 
 
@@ -88,7 +100,9 @@ def test_colcon_install_layout_resolves_like_ros2_run(colcon_install, monkeypatc
     installed_cfg = share / 'config' / 'worm_gear_sim.yaml'
     assert installed_cfg.is_file()
     assert load_config(installed_cfg) == load_config(ROOT / 'config' / 'worm_gear_sim.yaml')
-    assert (prefix / 'lib' / PY / 'site-packages' / PKG / 'node.py').is_file()
+    assert (prefix / 'lib' / PY / 'site-packages' / PKG / 'ros' / 'node.py').is_file()
+    urdf = share / 'urdf' / 'worm_gear_drive.urdf'      # for robot_state_publisher
+    assert urdf.read_text() == (ROOT / 'urdf' / 'worm_gear_drive.urdf').read_text()
     assert not (prefix / 'bin' / EXE).exists()       # setup.cfg puts scripts in lib/<pkg>
 
 
@@ -139,3 +153,88 @@ def test_installed_executable_publishes_joint_states(colcon_install, ros_dds_con
     assert str(prefix / 'lib' / PY / 'site-packages') in subprocess.run(
         [sys.executable, '-c', 'import worm_gear_sim, sys; print(worm_gear_sim.__file__)'],
         env=env, capture_output=True, text=True, cwd=tmp_path).stdout
+
+
+# ---- package.xml: every import is a declared rosdep key ------------------------------------
+# Import name -> rosdep key.  ROS packages are their own keys; the others are keys of the
+# rosdistro rosdep database (rosdep/python.yaml, checked 2026-08) except those in LOCAL_KEYS,
+# which rosdep/worm_gear_sim.yaml defines.  A new third-party import fails the test below
+# until it is added here and to package.xml.
+ROSDEP_KEYS = {
+    'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'python3-yaml',
+    'numba': 'python3-numba', 'matplotlib': 'python3-matplotlib', 'tqdm': 'python3-tqdm',
+    'dask': 'python3-dask', 'distributed': 'python3-distributed',
+    'rosbags': 'python3-rosbags-pip', 'pytest': 'python3-pytest',
+    'hypothesis': 'python3-hypothesis',
+}
+ROS_PACKAGES = {'rclpy', 'builtin_interfaces', 'std_msgs', 'sensor_msgs', 'diagnostic_msgs',
+                'rcl_interfaces', 'rosgraph_msgs', 'ament_index_python', 'launch',
+                'launch_ros'}
+LOCAL_KEYS = {'python3-dask', 'python3-distributed'}
+# Declared without an import: started by the launch file, not imported.
+RUN_ONLY = {'robot_state_publisher'}
+# Test tools in requirements.txt that a test may use before one does.
+TEST_TOOLS = {'python3-hypothesis'}
+
+
+def _imports(paths: list[Path]) -> set[str]:
+    import ast
+    names: set[str] = set()
+    for path in paths:
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                names.update(a.name.split('.')[0] for a in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names.add(node.module.split('.')[0])
+            elif (isinstance(node, ast.Call) and getattr(node.func, 'attr', '') in
+                  ('importorskip', 'import_module') and node.args
+                  and isinstance(node.args[0], ast.Constant)):
+                names.add(str(node.args[0].value).split('.')[0])
+    return {n for n in names if n not in sys.stdlib_module_names and n != PKG}
+
+
+def _keys(modules: set[str]) -> set[str]:
+    unknown = modules - set(ROSDEP_KEYS) - ROS_PACKAGES
+    assert not unknown, f'no rosdep key known for {sorted(unknown)}: add it to package.xml ' \
+                        'and ROSDEP_KEYS'
+    return {ROSDEP_KEYS.get(m, m) for m in modules}
+
+
+def _declared() -> dict[str, set[str]]:
+    import xml.etree.ElementTree as ET
+    root = ET.parse(ROOT / 'package.xml').getroot()
+    out: dict[str, set[str]] = {}
+    for tag in ('depend', 'exec_depend', 'test_depend', 'build_depend'):
+        out[tag] = {e.text.strip() for e in root.findall(tag)}
+    return out
+
+
+def test_package_xml_declares_every_import_and_nothing_unused():
+    runtime = _keys(_imports(sorted((ROOT / PKG).rglob('*.py'))
+                             + sorted((ROOT / 'launch').glob('*.py'))))
+    tests = _keys(_imports(sorted((ROOT / 'test').rglob('*.py')))) - runtime
+    dec = _declared()
+    run_dec = dec['depend'] | dec['exec_depend']
+    assert runtime <= run_dec, f'undeclared run-time imports: {sorted(runtime - run_dec)}'
+    test_dec = run_dec | dec['test_depend']
+    assert tests <= test_dec, f'undeclared test imports: {sorted(tests - test_dec)}'
+    unused = (run_dec - runtime - RUN_ONLY) | (dec['test_depend'] - tests - runtime - TEST_TOOLS)
+    assert not unused, f'declared but imported nowhere: {sorted(unused)}'
+
+
+def test_local_rosdep_keys_are_defined():
+    import yaml
+    rules = yaml.safe_load((ROOT / 'rosdep' / 'worm_gear_sim.yaml').read_text())
+    declared = set().union(*_declared().values())
+    assert set(rules) == LOCAL_KEYS & declared
+    for key, rule in rules.items():       # apt package of the same name on Debian/Ubuntu
+        assert rule['debian'] == [key] and rule['ubuntu'] == [key], key
+
+
+def test_setup_py_and_package_xml_agree():
+    import xml.etree.ElementTree as ET
+    root = ET.parse(ROOT / 'package.xml').getroot()
+    setup_py = (ROOT / 'setup.py').read_text()
+    assert root.find('name').text == PKG
+    assert f"version='{root.find('version').text}'" in setup_py
+    assert root.find('export/build_type').text == 'ament_python'

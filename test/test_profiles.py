@@ -73,11 +73,11 @@ def test_sampled_hold_and_csv(tmp_path):
 
 @pytest.mark.parametrize('content, words', [
     ('t,theta1\n0.0,0.0\n0.0,0.1\n', 'increase'),
-    ('t,theta1\n0.0,0.0\n0.01,nan\n', 'numeric'),
+    ('t,theta1\n0.0,0.0\n0.01,nan\n', 'not a finite angle'),
     ('t,theta1\n0.0,0.0\n0.01,inf\n', 'finite'),
-    ('0.0\n0.01\n', 'two columns'),
-    ('t,theta1\nzero,one\n', 'numeric'),
-    ('t,theta1\n0.0,0.0\n0.01,\n', 'numeric'),
+    ('0.0\n0.01\n', 'no header'),
+    ('t,theta1\nzero,one\n', 'not a finite time'),
+    ('t,theta1\n0.0,0.0\n0.01,\n', 'empty'),
 ])
 def test_bad_csv_is_a_clear_error(tmp_path, content, words):
     f = tmp_path / 'bad.csv'

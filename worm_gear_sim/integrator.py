@@ -49,6 +49,7 @@ from .model import (
     P_LW,
     P_MAXIT,
     P_MAXSUB,
+    P_MESH_COSINE,
     P_MESH_LINEAR,
     P_PHASE0,
     P_RG,
@@ -102,8 +103,8 @@ def _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, b0, b1, b2):
 @njit(cache=True, error_model='numpy')
 def _phase_cycle(p, th2, th3):
     """Index of the mesh cycle (tooth hand-over count) at a position."""
-    if p[P_MESH_LINEAR] != 0.0:
-        return 0.0
+    if p[P_MESH_LINEAR] != 0.0 or p[P_MESH_COSINE] != 0.0:
+        return 0.0          # no hand-over discontinuity
     return math.floor((0.5 * (th2 + p[P_ZG] * th3) + p[P_PHASE0]) / (2.0 * math.pi))
 
 
@@ -181,9 +182,12 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
         j22 = m2 * c_a + (c22 + cout) * c_v + Kg
         # residual as acceleration error: |R_i| / M_ii against atol + rtol |a_i|, with a
         # round-off floor of a few ulps of u_i seen through the Jacobian
+        # (a massless degree of freedom, J_4 = 0 without flywheel, is algebraic: its
+        # residual is scaled by j22 beta dt^2, the same acceleration-error measure)
         t0 = m0 * (atol + rtol * abs(a_0)) + 8.0 * _EPS * abs(x0) * abs(j00)
         t1 = m1 * (atol + rtol * abs(a_1)) + 8.0 * _EPS * abs(x1) * abs(j11)
-        t2 = m2 * (atol + rtol * abs(a_2)) + 8.0 * _EPS * abs(x2) * abs(j22)
+        m2t = m2 if m2 > 0.0 else j22 / c_a
+        t2 = m2t * (atol + rtol * abs(a_2)) + 8.0 * _EPS * abs(x2) * abs(j22)
         r_norm = max(abs(R0) / t0, abs(R1) / t1, abs(R2) / t2)
         if n_solves == 0:
             r0 = r_norm
@@ -329,8 +333,17 @@ def consistent_acceleration(p, C, u, v, theta1, theta1_dot, a):
     rel1 = v[1] - r3 * theta1_dot
     rel2 = v[2] - r3 * theta1_dot
     m = (p[P_JW], p[P_JG], p[P_J4])
-    for i in range(3):
+    for i in range(2):
         a[i] = (f[i] - C[i, 0] * rel0 - C[i, 1] * rel1 - C[i, 2] * rel2) / m[i]
+    if m[2] > 0.0:
+        a[2] = (f[2] - C[2, 0] * rel0 - C[2, 1] * rel1 - C[2, 2] * rel2) / m[2]
+    else:
+        # massless shaft end: 0 = Q4 - C (v - r th1'), differentiated in time
+        c_end = C[2, 2] + p[P_COUT]
+        if c_end > 0.0:
+            a[2] = (p[P_KG] * (v[1] - v[2]) - C[2, 0] * a[0] - C[2, 1] * a[1]) / c_end
+        else:
+            a[2] = a[1]
 
 
 @njit(cache=True, error_model='numpy')

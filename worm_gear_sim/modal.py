@@ -38,6 +38,11 @@ def static_equilibrium(p: np.ndarray, theta1: float, u_guess=None, tol: float = 
     return u
 
 
+#: Damping ratios below this are the round-off of the state-space eigenvalues (an undamped
+#: model gives +-1e-16, which printed as -1.4e-16): they are returned as 0.
+ZETA_RESOLUTION = 1e-12
+
+
 @dataclass(frozen=True)
 class ModalResult:
     """Linearised modes at an operating point, lowest first."""
@@ -75,29 +80,43 @@ def modes(cfg: Config, theta1: float = 0.0, sliding_rate: float = 0.0,
     M = mass_matrix(p)
     K = -dQdu
     C = damping_matrix(cfg, p) - dQdv if include_damping else np.zeros((3, 3))
-    w2, vecs = sla.eig(K, M)
-    order = np.argsort(w2.real)
-    w2 = w2.real[order]
-    undamped = np.sqrt(np.clip(w2, 0.0, None)) / (2 * np.pi)
-    shapes = vecs.real[:, order]
-    shapes = shapes / np.max(np.abs(shapes), axis=0) * np.sign(shapes[np.argmax(
-        np.abs(shapes), axis=0), np.arange(3)])
+    undamped, shapes = _undamped_modes(K, M)
     # state-space eigenvalues for damped frequencies and damping ratios
-    damped, zeta = _damped_modes(M, K, C)
+    damped, zeta = _damped_modes(M, K, C, len(undamped))
     return ModalResult(frequencies_hz=damped, undamped_hz=undamped, damping_ratios=zeta,
                        shapes=shapes, M=M, K=K, C=C, operating_point=u)
 
 
-def _damped_modes(M: np.ndarray, K: np.ndarray, C: np.ndarray):
+def _undamped_modes(K: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Natural frequencies [Hz] and shapes (columns, max |entry| = 1) of K phi = w^2 M phi,
+    lowest first.  A massless degree of freedom (J_4 = 0 without flywheel) is a constraint,
+    not a mode: its infinite eigenvalue is dropped, its entry of each shape follows the
+    others through K."""
+    w2, vecs = sla.eig(K, M)
+    keep = np.isfinite(w2) & (np.abs(w2) < 1e300)
+    w2, vecs = w2[keep].real, vecs[:, keep].real
+    order = np.argsort(w2)
+    w2, shapes = w2[order], vecs[:, order]
+    undamped = np.sqrt(np.clip(w2, 0.0, None)) / (2 * np.pi)
+    n = shapes.shape[1]
+    shapes = shapes / np.max(np.abs(shapes), axis=0) * np.sign(shapes[np.argmax(
+        np.abs(shapes), axis=0), np.arange(n)])
+    return undamped, shapes
+
+
+def _damped_modes(M: np.ndarray, K: np.ndarray, C: np.ndarray, n_modes: int = 3):
     """Damped frequency [Hz] and damping ratio of each mode, lowest natural frequency first.
 
-    The 6 state-space eigenvalues are grouped into modes: a complex-conjugate pair is an
-    under-damped mode (omega_n = |lambda|, zeta = -Re/|lambda|); the real eigenvalues,
-    sorted, are paired into over-damped modes (omega_n = sqrt(l1 l2), zeta =
-    -(l1 + l2) / (2 omega_n) >= 1, damped frequency 0)."""
-    Minv = np.linalg.inv(M)
-    A = np.block([[np.zeros((3, 3)), np.eye(3)], [-Minv @ K, -Minv @ C]])
-    lam = np.linalg.eigvals(A)
+    The finite eigenvalues of the first-order pencil ([0 I; -K -C], [I 0; 0 M]) are grouped
+    into modes: a complex-conjugate pair is an under-damped mode (omega_n = |lambda|, zeta =
+    -Re/|lambda|); the real eigenvalues, sorted, are paired into over-damped modes (omega_n =
+    sqrt(l1 l2), zeta = -(l1 + l2) / (2 omega_n) >= 1, damped frequency 0).  A massless
+    degree of freedom gives infinite eigenvalues, which are dropped."""
+    n = M.shape[0]
+    A = np.block([[np.zeros((n, n)), np.eye(n)], [-K, -C]])
+    B = np.block([[np.eye(n), np.zeros((n, n))], [np.zeros((n, n)), M]])
+    lam = sla.eigvals(A, B)
+    lam = lam[np.isfinite(lam) & (np.abs(lam) < 1e300)]
     scale = np.abs(lam).max() + 1.0
     is_real = np.abs(lam.imag) <= 1e-9 * scale
     modes_ = []
@@ -110,8 +129,10 @@ def _damped_modes(M: np.ndarray, K: np.ndarray, C: np.ndarray):
         wn = np.sqrt(abs(l1 * l2))
         modes_.append((wn, 0.0, -(l1 + l2) / (2 * wn) if wn > 0 else 1.0))
     modes_.sort(key=lambda m: m[0])
-    modes_ = (modes_ + [(0.0, 0.0, 1.0)] * 3)[:3]
-    return (np.array([m[1] for m in modes_]), np.array([m[2] for m in modes_]))
+    modes_ = (modes_ + [(0.0, 0.0, 1.0)] * n_modes)[:n_modes]
+    zeta = np.array([m[2] for m in modes_])
+    zeta[np.abs(zeta) < ZETA_RESOLUTION] = 0.0
+    return np.array([m[1] for m in modes_]), zeta
 
 
 def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:
@@ -126,9 +147,11 @@ def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:
     C = d.rayleigh_alpha * M + d.rayleigh_beta * K0
     zetas = np.asarray(d.modal_damping_ratios, float)
     if np.any(zetas > 0):
-        w2, phi = sla.eigh(K0, M)            # mass-normalised: phi^T M phi = I
-        w = np.sqrt(np.clip(w2, 0.0, None))
-        C = C + M @ phi @ np.diag(2.0 * zetas * w) @ phi.T @ M
+        f_hz, phi = _undamped_modes(K0, M)   # without flywheel: 2 modes, zetas[:2] used
+        phi = phi / np.sqrt(np.einsum('ik,ij,jk->k', phi, M, phi))   # phi^T M phi = I
+        w = 2 * np.pi * f_hz
+        z = zetas[:len(w)]
+        C = C + M @ phi @ np.diag(2.0 * z * w) @ phi.T @ M
     return np.ascontiguousarray(C)
 
 

@@ -28,10 +28,14 @@ the effective signed coefficient is mu_eff = mu(|v_s|) tanh(v_s/v_eps) sgn(q), s
 W_f = mu |W_n| sgn(v_s) always opposes sliding; ``direction: paper`` keeps mu_eff = mu(|v_s|).
 
 Mesh stiffness (Eqs. 16-17): two tooth pairs one axial pitch apart share the load.  The
-contact position x is in degrees of worm-thread phase: x_i = x0 + s, x_j = x_i + 360 with
-s = mesh phase in [0, 360) deg, phase = (theta2 + z_g theta3)/2 + phase_offset, so x moves
-through one mesh cycle per axial pitch (one worm revolution, one gear tooth).  x0 is
-calibrated so that the cycle mean equals the linear values (3.5e8 / 2.5e8 N/m).
+contact position x is in degrees of worm-thread phase, x_j = x_i + 360, and moves through one
+mesh cycle per axial pitch (one worm revolution, one gear tooth): phase s = (theta2 + z_g
+theta3)/2 + phase_offset.  The paper does not define the mapping x(s).  Default (``cosine``):
+x_i = x0 + 180 (1 - cos s): the contact runs out along the fitted range [x0, x0 + 360] and
+back, so the stiffness is periodic, smooth and has no jump at the tooth hand-over.  With
+``sawtooth`` (x_i = x0 + s) the sum of two exponentials jumps by e^{360 b} (27 % worm,
+18 % gear) once per worm revolution.  x0 is calibrated so that the cycle mean equals the
+linear values (3.5e8 / 2.5e8 N/m).
 """
 
 from __future__ import annotations
@@ -59,7 +63,8 @@ P_BETA, P_GAMMA, P_RTOL, P_ATOL, P_MAXIT, P_MAXSUB = 34, 35, 36, 37, 38, 39
 P_RIGID3 = 40                                        # theta3/theta1 of the rigid motion
 P_INV_KGS, P_INV_KWS, P_INV_VEPS, P_LIN_COMPLIANCE = 41, 42, 43, 44   # precomputed
 P_INV_SQRT_VS = 45
-N_PARAMS = 46
+P_MESH_COSINE = 46                                   # contact mapping: 1 cosine, 0 sawtooth
+N_PARAMS = 47
 
 # layout of the flat output of mesh_eval: Q (3), dQ/du (3x3 row-major), dQ/dv (3x3), aux
 O_Q, O_DQDU, O_DQDV, O_AUX = 0, 3, 12, 21
@@ -76,12 +81,18 @@ MODULE_OF_FIT = 2.0     # Eqs. 16-17 and the linear tooth stiffnesses are the pa
 TWO_PI = 2.0 * math.pi
 
 
-def _calibrated_origin(scale: float, b: float, target_mean: float) -> float:
-    """x0 [deg] such that mean over s in [0,360) of scale*(e^{b(x0+s)} + e^{b(x0+s+360)})
-    equals ``target_mean`` (the linear tooth stiffness)."""
+def _calibrated_origin(scale: float, b: float, target_mean: float,
+                       cosine: bool = True) -> float:
+    """x0 [deg] such that the mean over a mesh cycle of scale*(e^{b x} + e^{b(x+360)})
+    equals ``target_mean`` (the linear tooth stiffness).  Sawtooth mapping x = x0 + s,
+    s in [0, 360): mean factor (1 + e^{360b}) (e^{360b} - 1)/(360 b) e^{b x0}; cosine mapping
+    x = x0 + 180 (1 - cos s): mean factor (1 + e^{360b}) e^{b(x0 + 180)} I0(180 b)."""
     if b == 0.0:
         return 0.0
     e = math.exp(360.0 * b)
+    if cosine:
+        factor = (1.0 + e) * float(np.i0(180.0 * b))
+        return math.log(target_mean / (scale * factor)) / b - 180.0
     cycle_mean_factor = (1.0 + e) * (e - 1.0) / (360.0 * b)
     return math.log(target_mean / (scale * cycle_mean_factor)) / b
 
@@ -109,8 +120,11 @@ def pack_parameters(cfg: Config) -> np.ndarray:
     if mesh.calibrate_to_linear_mean:
         fit_w = MODULE_OF_FIT * math.exp(mesh.worm_fit_a)
         fit_g = MODULE_OF_FIT * math.exp(mesh.gear_fit_a)
-        x0w = _calibrated_origin(fit_w, mesh.worm_fit_b, mesh.worm_tooth_stiffness_linear)
-        x0g = _calibrated_origin(fit_g, mesh.gear_fit_b, mesh.gear_tooth_stiffness_linear)
+        cosine = mesh.contact_mapping == 'cosine'
+        x0w = _calibrated_origin(fit_w, mesh.worm_fit_b, mesh.worm_tooth_stiffness_linear,
+                                 cosine)
+        x0g = _calibrated_origin(fit_g, mesh.gear_fit_b, mesh.gear_tooth_stiffness_linear,
+                                 cosine)
     else:
         x0w = x0g = 0.0
     # second pair one axial pitch (360 deg) further on: e^{b(x+360)} = e^{bx} e^{360 b}
@@ -121,6 +135,7 @@ def pack_parameters(cfg: Config) -> np.ndarray:
     p[P_WORM_B], p[P_WORM_X0] = mesh.worm_fit_b, x0w
     p[P_GEAR_B], p[P_GEAR_X0] = mesh.gear_fit_b, x0g
     p[P_ZG], p[P_PHASE0] = d.gear_teeth, mesh.phase_offset
+    p[P_MESH_COSINE] = 1.0 if mesh.contact_mapping == 'cosine' else 0.0
     p[P_FRIC_MODEL] = {'off': FRICTION_OFF, 'constant': FRICTION_CONSTANT,
                        'stribeck': FRICTION_STRIBECK}[fr.model]
     p[P_FRIC_PAPER] = 1.0 if fr.direction == 'paper' else 0.0
@@ -147,8 +162,16 @@ def tooth_stiffness(p, theta2, theta3):
     if p[P_MESH_LINEAR] != 0.0:
         return p[P_CWKW_LIN], p[P_CGKG_LIN], 0.0, 0.0
     phase = 0.5 * (theta2 + p[P_ZG] * theta3) + p[P_PHASE0]
-    s_deg = (phase - TWO_PI * math.floor(phase / TWO_PI)) * DEG_PER_RAD   # in [0, 360)
     bw, bg = p[P_WORM_B], p[P_GEAR_B]
+    if p[P_MESH_COSINE] != 0.0:
+        # x = x0 + 180 (1 - cos s) deg: out along the fitted range and back over one cycle,
+        # continuous and smooth through the tooth hand-over
+        c, sn = math.cos(phase), math.sin(phase)
+        cwkw = p[P_WORM_SCALE] * math.exp(bw * (p[P_WORM_X0] + 180.0 * (1.0 - c)))
+        cgkg = p[P_GEAR_SCALE] * math.exp(bg * (p[P_GEAR_X0] + 180.0 * (1.0 - c)))
+        return cwkw, cgkg, cwkw * bw * 180.0 * sn, cgkg * bg * 180.0 * sn
+    # sawtooth: x = x0 + s, s in [0, 360) deg; jumps by e^{360 b} at each hand-over
+    s_deg = (phase - TWO_PI * math.floor(phase / TWO_PI)) * DEG_PER_RAD   # in [0, 360)
     # Eq. 16 / 17: M e^a (e^{b x_i} + e^{b x_j}), x_j = x_i + 360; (1 + e^{360 b}) in SCALE
     cwkw = p[P_WORM_SCALE] * math.exp(bw * (p[P_WORM_X0] + s_deg))
     cgkg = p[P_GEAR_SCALE] * math.exp(bg * (p[P_GEAR_X0] + s_deg))

@@ -187,23 +187,14 @@ class SampledProfile(Profile):
 
     @classmethod
     def from_csv(cls, path: str | Path, interpolation: str = 'linear') -> SampledProfile:
-        """Read columns ``t, theta1`` (header line optional, '#' comments allowed)."""
-        p = Path(path)
-        if not p.is_file():
-            raise ConfigError('input.csv_path', f'file not found: {p}')
+        """The ``t``, ``theta1`` columns of a CSV named by its header, with units, times
+        relative to the first sample (see :func:`worm_gear_sim.records.read_csv`)."""
+        from .records import RecordError, read_csv
         try:
-            data = np.genfromtxt(p, delimiter=',', comments='#', dtype=float, ndmin=2)
-        except ValueError as exc:
-            raise ConfigError('input.csv_path', f'{p}: not a numeric CSV ({exc})') from None
-        if data.ndim == 2 and data.shape[0] > 0 and np.all(np.isnan(data[0])):
-            data = data[1:]   # header row
-        if data.ndim != 2 or data.shape[1] < 2 or data.shape[0] < 1:
-            raise ConfigError('input.csv_path', f'{p}: need at least two columns t, theta1')
-        bad = np.argwhere(np.isnan(data[:, :2]))
-        if bad.size:
-            raise ConfigError('input.csv_path', f'{p}: non-numeric or missing value in data '
-                              f'row {bad[0][0] + 1}, column {bad[0][1] + 1}')
-        return cls(data[:, 0], data[:, 1], interpolation, source=str(p))
+            rec = read_csv(path)
+        except RecordError as exc:
+            raise ConfigError('input.csv_path', str(exc)) from None
+        return cls(rec.t, rec.theta1, interpolation, source=str(path))
 
     def describe(self):
         src = f' from {self.source}' if self.source else ''

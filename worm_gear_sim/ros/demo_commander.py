@@ -1,20 +1,34 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Demo command stream for the worm_gear_sim node, with a live terminal display.
+"""Demo servo for the worm_gear_sim node: streams a reference, shows the predicted antenna
+error live and sums it up move by move.
 
-Publishes ``worm_angle_command`` (std_msgs/Float64, rad) at ``--rate`` Hz like a servo
-would, following one of two patterns built from the core's profiles (no physics here):
+Two interfaces to the node (``--interface``):
 
-* ``paper``: the paper's 18-step move (0.1131 rad of worm in 20 ms, trapezoidal), forward
-  then back, every ``--move-period`` seconds;
-* ``slew``: a radar slew: constant worm rate (``--slew-rate``) with a sharp reversal every
-  ``--slew-period`` seconds (triangle).
+* ``stamped``: behaves like a tracking servo.  Each reference sample is a
+  ``sensor_msgs/JointState`` on ``worm_angle_reference`` whose ``header.stamp`` is the
+  instant it applies (samples on an exact ``--rate`` grid, streamed ahead by the node's
+  ``compensation.preview_time`` (``--preview``) plus ``--lead``, so that each correction
+  arrives before its instant), ``name[0]`` the worm input
+  joint, ``position[0]`` theta1_ref [rad].  It consumes the node's
+  ``~/compensated_command`` (theta1_ref + delta for the same stamp: what a servo would
+  command) and its ``joint_states``, stamped with the instant they predict, from which the
+  live residual e = theta4 - theta1_ref(stamp) l_w/r_g is computed here, sample by sample.
+* ``float64`` (default): the simple interface, ``worm_angle_command`` (std_msgs/Float64) at
+  ``--rate``; the error is the node's ``~/positioning_error``, timed on arrival.
 
-and shows what the node predicts, refreshed ~10 times a second: the command, the antenna
-angle theta4, the antenna positioning error theta4 - theta1 l_w/r_g (urad, with a bar),
-its peak since the last move, the feed-forward correction and the node's real-time figures
-from /diagnostics.  Stops after ``--duration`` seconds of streaming (exit code 0), or on
-Ctrl-C.
+Patterns (built from the core's profiles; no physics here): ``paper``, the paper's 18-step
+move (0.1131 rad of worm in 20 ms, trapezoidal) forward then back every ``--move-period``
+seconds; ``slew``, a radar slew at ``--slew-rate`` with a sharp reversal every
+``--slew-period`` seconds.
+
+Output: on a terminal ONE status line (at most 80 columns) refreshed 10 times a second;
+otherwise one line per completed move: peak error, ringing once the applied command rests,
+settling to 10 urad (:func:`worm_gear_sim.studies.compensation_eval.move_metrics`, the rules
+of the offline evaluation).  At the end, a summary and the same moves run offline through the core
+(``run_scenario``, with and without the feed-forward), so the live figures stand next to
+what the model says with and without compensation.  Exit code 0 after ``--duration``
+seconds of streaming, 1 if the node never answers.
 
     python -m worm_gear_sim.demo_commander --duration 20 --pattern paper
 """
@@ -23,37 +37,51 @@ from __future__ import annotations
 
 import argparse
 import math
+import shutil
 import sys
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, TextIO
 
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.srv import GetParameters
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..params import Config, derive
+from ..modal import modes
+from ..params import Config, derive, load_config
 from ..profiles import TrapezoidalProfile
+from ..studies.compensation_eval import SETTLE_TOLERANCE, Scenario, move_metrics, run_scenario
 
-__all__ = ['DemoCommander', 'command_pattern', 'main']
+__all__ = ['DemoCommander', 'MOVE_HEADER', 'MoveSummary', 'MoveTracker', 'command_pattern',
+           'format_move', 'format_status', 'main', 'offline_moves', 'pattern_segments']
+
+REFERENCE_TOPIC = 'worm_angle_reference'
+COMMAND_TOPIC = 'worm_angle_command'
+LINE_WIDTH = 80                 # every line the demo prints fits 80 columns
+REFERENCE_DEPTH = 100           # reliable, keep last >= 100: every sample matters
+PAPER_LEAD = 0.05               # s of rest before the first paper move
+MAX_BURST = 200                 # samples published in one timer call after a stall
 
 
 def command_pattern(name: str, cfg: Config, move_period: float = 0.5,
-                    slew_rate: float = 2.0, slew_period: float = 2.0):
+                    slew_rate: float = 2.0, slew_period: float = 2.0
+                    ) -> Callable[[Any], np.ndarray]:
     """theta1(t) [rad] of the demo stream, vectorised over t [s]."""
     if name == 'paper':
         inp = cfg.input
         move = TrapezoidalProfile(inp.target_angle, inp.move_time, inp.accel_time, 0.0)
-        lead = 0.05   # rest before the first move [s]
 
         def theta1(t):
-            t = np.asarray(t, float) - lead
+            t = np.asarray(t, float) - PAPER_LEAD
             k = np.floor(np.maximum(t, 0.0) / move_period)
             tau = np.where(t < 0.0, -1.0, t - k * move_period)
             x = move.theta1(tau)
@@ -69,95 +97,383 @@ def command_pattern(name: str, cfg: Config, move_period: float = 0.5,
     raise ValueError(f'unknown pattern {name!r} (paper | slew)')
 
 
+@dataclass(frozen=True)
+class Segments:
+    """Moves of a pattern: move k spans [first + k period, first + (k+1) period); its
+    reference moves until ``motion`` after its start, then rests (paper) or keeps a
+    constant rate (slew, ``constant_rate``)."""
+
+    first: float
+    period: float
+    motion: float
+    constant_rate: bool
+    labels: tuple[str, str]
+
+
+def pattern_segments(name: str, cfg: Config, move_period: float = 0.5,
+                     slew_period: float = 2.0) -> Segments:
+    if name == 'paper':
+        return Segments(PAPER_LEAD, move_period, cfg.input.move_time, False, ('fwd', 'back'))
+    if name == 'slew':
+        return Segments(0.0, slew_period, 0.0, True, ('up', 'down'))
+    raise ValueError(f'unknown pattern {name!r} (paper | slew)')
+
+
+@dataclass(frozen=True)
+class MoveSummary:
+    index: int
+    label: str
+    start: float                  # s of pattern time
+    peak: float                   # max |e| over the move [rad]
+    ringing: float                # max |e - static| once the applied command rests [rad]
+    settling: float               # s from the end of the motion into +-10 urad (inf: never)
+    tracking_rms: float           # rad, slew legs (nan for paper moves)
+    samples: int
+
+
+class MoveTracker:
+    """Collects (t, e) samples in time order and closes each move of the pattern when a
+    sample past its end arrives; a move with a gap longer than ``max_gap`` (or not covered
+    to within ``max_gap`` of its ends) is dropped and counted in ``incomplete``.
+
+    The metrics are :func:`~worm_gear_sim.studies.compensation_eval.move_metrics`: ``ringing``
+    is its ``residual_peak``, measured once the applied command rests.  Without command samples
+    (``add_command``) the command is the reference, which rests when its motion ends; with
+    a feed-forward applied, the command keeps moving for the correction's span."""
+
+    def __init__(self, seg: Segments, mode_hz: float, max_gap: float = 0.02):
+        self.seg, self.mode_hz, self.max_gap = seg, mode_hz, max_gap
+        self.moves: list[MoveSummary] = []
+        self.incomplete = 0
+        self._k = 0
+        self._t: list[float] = []
+        self._e: list[float] = []
+        self._moving: dict[int, float] = {}     # move -> last instant its command moved
+        self._last_cmd: tuple[float, float] | None = None
+        self.use_commands = True                # False: the command is the reference
+
+    def _bounds(self, k: int) -> tuple[float, float]:
+        a = self.seg.first + k * self.seg.period
+        return a, a + self.seg.period
+
+    def add_command(self, t: float, command: float) -> None:
+        """A sample of the command applied to the drive (theta1_ref + delta)."""
+        last = self._last_cmd
+        self._last_cmd = (t, command)
+        if last is None or t <= last[0] or abs(command - last[1]) <= 1e-12:
+            return
+        k = int((t - self.seg.first) // self.seg.period)
+        if k >= 0:
+            self._moving[k] = t
+
+    def add(self, t: float, e: float) -> MoveSummary | None:
+        """Add a sample; returns the move it completed, if any."""
+        a, b = self._bounds(self._k)
+        if t < a:
+            return None
+        done = None
+        if t >= b:
+            done = self._close()
+            k = int((t - self.seg.first) // self.seg.period)
+            self.incomplete += k - self._k - 1      # moves without a single sample
+            self._k = k
+        self._t.append(t)
+        self._e.append(e)
+        return done
+
+    def _close(self) -> MoveSummary | None:
+        a, b = self._bounds(self._k)
+        t, e = np.asarray(self._t), np.asarray(self._e)
+        self._t, self._e = [], []
+        moved = self._moving.pop(self._k, None)
+        for k in [k for k in self._moving if k < self._k]:
+            del self._moving[k]
+        if t.size < 3 or t[0] - a > self.max_gap or b - t[-1] > self.max_gap \
+                or np.max(np.diff(t)) > self.max_gap:
+            self.incomplete += 1
+            return None
+        tr = t - a
+        seg = self.seg
+        sc = Scenario(name='demo move', times=tr, theta1_ref=np.zeros_like(tr),
+                      move_end=seg.motion,
+                      constant_rate=((seg.motion, seg.period),) if seg.constant_rate else ())
+        command_end = seg.motion
+        if moved is not None and self.use_commands and not seg.constant_rate:
+            command_end = min(max(moved - a, seg.motion), float(tr[-1]))
+        m = move_metrics(tr, e, sc, self.mode_hz, command_end)
+        summary = MoveSummary(self._k, seg.labels[self._k % 2], a, float(np.max(np.abs(e))),
+                              m['residual_peak'], m['settling_time'], m['tracking_rms'],
+                              int(t.size))
+        self.moves.append(summary)
+        return summary
+
+
+def offline_moves(cfg: Config, theta1: Callable[[Any], np.ndarray], seg: Segments,
+                  t_end: float, rate: float, compensated: bool) -> list[MoveSummary]:
+    """The same reference, sampled at ``rate`` up to ``t_end``, through the core
+    (``run_scenario``: nonlinear plant, feed-forward of ``cfg`` when ``compensated``), cut
+    into the same moves as the live trace."""
+    times = np.arange(0.0, t_end + 0.5 / rate, 1.0 / rate)
+    x = np.asarray(theta1(times), float)
+    sc = Scenario(name='demo', times=times, theta1_ref=x, move_end=t_end, constant_rate=())
+    record = max(1, int(round(1.0 / (rate * cfg.integrator.time_step))))
+    run = run_scenario(cfg, sc, cfg if compensated else None, record_every=record)
+    tracker = MoveTracker(seg, float(modes(cfg).frequencies_hz[0]))
+    if compensated:
+        for ti, ci in zip(times, x + run.delta):
+            tracker.add_command(float(ti), float(ci))
+    for ti, ei in zip(run.trajectory.t, run.error):
+        tracker.add(float(ti), float(ei))
+    return tracker.moves
+
+
+# ---- text: every line fits LINE_WIDTH ------------------------------------------------------
+def _urad(x: float, width: int = 7, sign: bool = False) -> str:
+    """x [rad] in urad, right-aligned in ``width`` characters, as many decimals as fit."""
+    if not math.isfinite(x):
+        return f'{"-" if math.isnan(x) else ("+inf" if x > 0 else "-inf"):>{width}}'
+    v = x * 1e6
+    plus = '+' if sign else ''
+    for d in (2, 1, 0):
+        s = f'{v:{plus}{width}.{d}f}'
+        if len(s) <= width:
+            return s
+    return f'{v:{plus}{width}.0e}'
+
+
+def _ms(x: float) -> str:
+    return 'never' if math.isinf(x) else ('-' if math.isnan(x) else f'{x * 1e3:.1f} ms')
+
+
+def fit(line: str, width: int = LINE_WIDTH) -> str:
+    return line if len(line) <= width else line[:width - 1] + '>'
+
+
+MOVE_HEADER = ' move           t [s]  peak [urad]  ringing [urad]  rms [urad]  settling'
+
+
+def format_move(m: MoveSummary) -> str:
+    """One line per completed move (no terminal), in the columns of MOVE_HEADER."""
+    rms = _urad(m.tracking_rms, 10) if math.isfinite(m.tracking_rms) else f'{"":10}'
+    return fit(f'{m.index:5d} {m.label:<4} {m.start:10.2f}  {_urad(m.peak, 11)}  '
+               f'{_urad(m.ringing, 14)}  {rms}  {_ms(m.settling):>8}')
+
+
+def format_status(t: float, e: float, scale: float, last: MoveSummary | None,
+                  extra: str = '', width: int = LINE_WIDTH) -> str:
+    """The one terminal line: time, live error with a bar, the last move's summary."""
+    n = 6
+    k = 0 if not (math.isfinite(e) and scale > 0) else int(round(min(1.0, abs(e) / scale) * n))
+    bar = (' ' * (n - k) + '#' * k + '|' + ' ' * n) if e < 0 else \
+        (' ' * n + '|' + '#' * k + ' ' * (n - k))
+    s = f'{t:6.1f}s e{_urad(e, 9, True)} urad [{bar}]'
+    if last is not None:
+        s += f' #{last.index} ring{_urad(last.ringing, 7)}, {_ms(last.settling)}'
+    if extra:
+        s += ' ' + extra
+    return fit(s, width - 1)          # never the last column: no wrap on any terminal
+
+
+def _stats(values: list[float]) -> tuple[float, float]:
+    a = np.asarray([v for v in values if math.isfinite(v)])
+    return (float(np.median(a)), float(np.max(a))) if a.size else (math.nan, math.nan)
+
+
+# ---- the ROS node ----------------------------------------------------------------------------
 class DemoCommander(Node):
-    """Streams the pattern and keeps the latest predictions for the display."""
+    """Streams the pattern and tracks what the node predicts."""
 
     def __init__(self, pattern: str = 'paper', rate: float = 1000.0,
                  node_under_test: str = 'worm_gear_sim', move_period: float = 0.5,
-                 slew_rate: float = 2.0, slew_period: float = 2.0, **kwargs: Any):
+                 slew_rate: float = 2.0, slew_period: float = 2.0,
+                 interface: str = 'stamped', preview: float = 0.0, lead: float = 0.0,
+                 config: Config | None = None, **kwargs: Any):
         super().__init__('demo_commander', **kwargs)
-        self.cfg = Config()
+        if interface not in ('stamped', 'float64'):
+            raise ValueError(f'interface must be stamped or float64, got {interface!r}')
+        self.cfg = config if config is not None else load_config()
         self.ratio = derive(self.cfg).output_per_input
         self.theta1 = command_pattern(pattern, self.cfg, move_period, slew_rate, slew_period)
-        self.pattern = pattern
-        self.segment_period = move_period if pattern == 'paper' else slew_period
-        self.segment = -1
-        self.pub = self.create_publisher(Float64, 'worm_angle_command', QoSProfile(depth=10))
-        ns = node_under_test
-        self.js: JointState | None = None
-        self.js_at_error: JointState | None = None
+        self.segments = pattern_segments(pattern, self.cfg, move_period, slew_period)
+        self.tracker = MoveTracker(self.segments, float(modes(self.cfg).frequencies_hz[0]))
+        self.tracker.use_commands = False   # until the node says its feed-forward is applied
+        self.pattern, self.interface, self.rate = pattern, interface, rate
+        self.preview = preview              # s: the node's preview: stream this far ahead
+        self.lead = lead                    # s: ... plus this, so corrections come in time
+        self.node_preview: float | None = None   # the node's compensation.preview_time
+        self.period_ns = int(round(1e9 / rate))
+        self.target = node_under_test
+        self.joint = self.cfg.node.joint_names[0]
+        self.t0_ns: int | None = None       # stamp of grid sample 0 (stream running)
+        self.t0_mono: float | None = None
+        self.k_next = 0                     # next grid sample to publish
+        self.sent = self.held = 0
+        self.n_js = self.n_cc = self.n_err = 0
         self.error = math.nan
-        self.feedforward = math.nan
-        self.diag: dict[str, str] = {}
-        self.n_js = 0
-        self.peak_error = 0.0       # since the last move started
+        self.t_error = 0.0
         self.peak_all = 0.0
-        self.t0: float | None = None   # streaming starts when the node answers
-        self.sent = 0
-        self.last_cmd = float(self.theta1(0.0))
-        self.create_subscription(JointState, 'joint_states', self._on_js, 10)
-        self.create_subscription(Float64, f'/{ns}/positioning_error', self._on_err, 10)
-        self.create_subscription(Float64, f'/{ns}/feedforward',
-                                 lambda m: setattr(self, 'feedforward', m.data), 10)
+        self.latency_ns: list[int] = []     # stamp - reception of compensated commands
+        self.delta = math.nan
+        self.diag: dict[str, str] = {}
+        self.last_move: MoveSummary | None = None
+        self.new_moves: list[MoveSummary] = []
+        self._last_hold = -math.inf
+        reliable = QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+        if interface == 'stamped':
+            self.pub = self.create_publisher(JointState, REFERENCE_TOPIC, reliable)
+            self._ref_msg = JointState(name=[self.joint], position=[0.0])
+            self.create_subscription(JointState, f'/{node_under_test}/compensated_command',
+                                     self._on_compensated, reliable)
+        else:
+            self.pub = self.create_publisher(Float64, COMMAND_TOPIC, QoSProfile(depth=10))
+            self.create_subscription(Float64, f'/{node_under_test}/positioning_error',
+                                     self._on_error, 100)
+        self.create_subscription(JointState, 'joint_states', self._on_js, reliable)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
         self.create_timer(1.0 / rate, self._on_timer)
 
+    # -- streaming --
     def elapsed(self) -> float:
-        return 0.0 if self.t0 is None else time.monotonic() - self.t0
+        return 0.0 if self.t0_mono is None else time.monotonic() - self.t0_mono
+
+    def started(self) -> bool:
+        return self.t0_ns is not None
 
     def _on_timer(self) -> None:
-        # Before the node answers, hold the first sample (it starts the simulation there).
-        t = self.elapsed()
-        v = float(self.theta1(t))
-        segment = int(t // self.segment_period)
-        if segment != self.segment:     # a new move / slew leg: restart the peak
-            self.segment, self.peak_error = segment, 0.0
-        self.pub.publish(Float64(data=v))
-        self.last_cmd = v
-        self.sent += 1
+        now = self.get_clock().now().nanoseconds
+        if self.interface == 'float64':
+            v = float(self.theta1(self.elapsed()))
+            self.pub.publish(Float64(data=v))
+            if self.t0_ns is None:
+                self.held += 1                  # the first sample, until the node answers
+            else:
+                self.sent += 1
+            return
+        if self.t0_ns is None:
+            # Until the node answers, hold the first sample (it starts the simulation
+            # there), stamped now, 20 times a second.
+            if now - self._last_hold >= 50e6:
+                self._publish_ref(now, float(self.theta1(0.0)))
+                self._last_hold = now
+                self.held += 1
+            return
+        # every grid sample whose instant is at most preview + lead ahead, in stamp order
+        horizon = now + int((self.preview + self.lead) * 1e9)
+        n = 0
+        while n < MAX_BURST:
+            stamp = self.t0_ns + self.k_next * self.period_ns
+            if stamp > horizon:
+                break
+            self._publish_ref(stamp, float(self.theta1(self.k_next * self.period_ns * 1e-9)))
+            self.k_next += 1
+            self.sent += 1
+            n += 1
+
+    def _publish_ref(self, stamp_ns: int, value: float) -> None:
+        m = self._ref_msg
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+        m.position[0] = value
+        self.pub.publish(m)
+
+    def _start(self) -> None:
+        now = self.get_clock().now().nanoseconds
+        self.t0_mono = time.monotonic()
+        # the grid starts after the last held sample (stamps must increase)
+        self.t0_ns = max(now, int(self._last_hold) + self.period_ns) \
+            if self.interface == 'stamped' else now
+
+    # -- what the node says --
+    def _pattern_time(self, stamp: Any) -> float:
+        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        return (ns - self.t0_ns) * 1e-9 if self.t0_ns is not None else -1.0
 
     def _on_js(self, msg: JointState) -> None:
-        self.js = msg
         self.n_js += 1
-        if self.t0 is None:
-            self.t0 = time.monotonic()
+        if self.t0_ns is None:
+            self._start()
+            return
+        if self.interface != 'stamped' or len(msg.position) < 4:
+            return
+        t = self._pattern_time(msg.header.stamp)
+        if t < 0.0:
+            return                          # a prediction of the hold phase
+        e = msg.position[3] - self.ratio * float(self.theta1(t))
+        self._record(t, e)
 
-    def _on_err(self, msg: Float64) -> None:
-        self.error = msg.data
-        self.js_at_error = self.js      # published just before it, in the same tick
-        if self.t0 is not None:
-            self.peak_error = max(self.peak_error, abs(msg.data))
-            self.peak_all = max(self.peak_all, abs(msg.data))
+    def _on_error(self, msg: Float64) -> None:
+        self.n_err += 1
+        if self.t0_ns is not None:
+            self._record(self.elapsed(), msg.data)
+
+    def _record(self, t: float, e: float) -> None:
+        self.error, self.t_error = e, t
+        self.peak_all = max(self.peak_all, abs(e))
+        done = self.tracker.add(t, e)
+        if done is not None:
+            self.last_move = done
+            self.new_moves.append(done)
+
+    def _on_compensated(self, msg: JointState) -> None:
+        if self.t0_ns is None or not msg.position:
+            return
+        now = self.get_clock().now().nanoseconds
+        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        if stamp < self.t0_ns:
+            return
+        self.n_cc += 1
+        self.latency_ns.append(stamp - now)       # > 0: arrived before its instant
+        self.tracker.add_command((stamp - self.t0_ns) * 1e-9, msg.position[0])
+        self.delta = msg.position[0] - float(self.theta1((stamp - self.t0_ns) * 1e-9))
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for s in msg.status:
             if s.name.endswith(': simulation'):
                 self.diag = {kv.key: kv.value for kv in s.values}
 
-    def status_line(self, width: int = 24) -> str:
-        js = self.js_at_error or self.js
-        if js is None:
-            return 'waiting for joint_states from the worm_gear_sim node ...'
-        e_urad = self.error * 1e6
-        scale = max(50.0, self.peak_all * 1e6)
-        n = int(round(min(1.0, abs(e_urad) / scale) * width))
-        bar = (' ' * (width - n) + '#' * n + '|' + ' ' * width) if e_urad < 0 else \
-            (' ' * width + '|' + '#' * n + ' ' * (width - n))
-        d = self.diag
-        rt = f'rtf {float(d["real_time_factor"]):.3f} load {float(d["compute_load"]):.2f}' \
-            if d else 'rtf -'
-        return (f't {self.elapsed():6.2f} s  theta1 {js.position[0]:+.5f}  theta4 '
-                f'{js.position[3]:+.6f} rad  error {e_urad:+8.2f} urad [{bar}] '
-                f'peak {self.peak_error * 1e6:7.2f}  ff {self.feedforward * 1e6:+8.2f} urad'
-                f'  {rt}')
+    def status_line(self, width: int = LINE_WIDTH) -> str:
+        if self.t0_ns is None:
+            return fit(f'waiting for the {self.target} node (joint_states) ...', width - 1)
+        extra = f' ff{_urad(self.delta, 8, True)}' if self.interface == 'stamped' else ''
+        return format_status(self.t_error, self.error, max(50e-6, self.peak_all),
+                             self.last_move, extra, width)
+
+
+def node_parameters(node: Node, ex: Any, target: str, names: list[str],
+                    timeout: float = 5.0) -> dict[str, Any]:
+    """Values of the target node's parameters (empty if it does not answer)."""
+    cli = node.create_client(GetParameters, f'/{target}/get_parameters')
+    try:
+        if not cli.wait_for_service(timeout_sec=timeout):
+            return {}
+        fut = cli.call_async(GetParameters.Request(names=names))
+        ex.spin_until_future_complete(fut, timeout_sec=timeout)
+        if not fut.done() or fut.result() is None:
+            return {}
+        out = {}
+        for name, v in zip(names, fut.result().values):
+            out[name] = {1: v.bool_value, 2: v.integer_value, 3: v.double_value,
+                         4: v.string_value}.get(v.type)
+        return out
+    finally:
+        node.destroy_client(cli)
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog='demo_commander', description=__doc__.split('\n\n')[0])
     ap.add_argument('--pattern', choices=('paper', 'slew'), default='paper')
+    ap.add_argument('--interface', choices=('stamped', 'float64'), default='float64',
+                    help='stamped: worm_angle_reference + ~/compensated_command; '
+                         'float64: worm_angle_command (default)')
     ap.add_argument('--duration', type=float, default=20.0,
                     help='seconds of streaming after the node answers [20]')
-    ap.add_argument('--rate', type=float, default=1000.0, help='command rate [Hz] (1000)')
+    ap.add_argument('--rate', type=float, default=1000.0, help='reference rate [Hz] (1000)')
+    ap.add_argument('--preview', type=float, default=None,
+                    help='stamped: stream this many seconds ahead [default: the node\'s '
+                         'compensation.preview_time]')
+    ap.add_argument('--lead', type=float, default=0.02,
+                    help='stamped: stream this much further ahead, so that each correction '
+                         'arrives before its instant and a late timer of this process does '
+                         'not stall the stream [0.02 s]')
     ap.add_argument('--move-period', type=float, default=0.5,
                     help='paper: seconds between moves [0.5]')
     ap.add_argument('--slew-rate', type=float, default=2.0,
@@ -167,7 +483,80 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     ap.add_argument('--startup-timeout', type=float, default=120.0,
                     help='seconds to wait for the node (first start compiles numba) [120]')
     ap.add_argument('--node-name', default='worm_gear_sim')
-    return ap.parse_args(argv)
+    ap.add_argument('--config', default=None,
+                    help='the node\'s parameter file (ratio, joint names, model for the '
+                         'offline comparison) [config/worm_gear_sim.yaml]')
+    ap.add_argument('--no-offline', action='store_true',
+                    help='skip the offline comparison at the end')
+    opts = ap.parse_args(argv)
+    if not (opts.rate > 0 and opts.duration > 0 and opts.move_period > 0
+            and opts.slew_period > 0):
+        ap.error('--rate, --duration, --move-period and --slew-period must be > 0')
+    if opts.preview is not None and not 0.0 <= opts.preview <= 1.0:
+        ap.error('--preview must be within [0, 1] s')
+    if not 0.0 <= opts.lead <= 0.5:
+        ap.error('--lead must be within [0, 0.5] s')
+    return opts
+
+
+def _summary(node: DemoCommander, opts: argparse.Namespace, compensated: bool | None,
+             out: TextIO) -> None:
+    def say(line: str) -> None:
+        print(fit(line), file=out, flush=True)
+    moves = node.tracker.moves
+    say(f'demo done: {node.elapsed():.1f} s of {opts.pattern} moves, {node.interface} '
+        f'references at {opts.rate:g} Hz' + (f', {(node.preview + node.lead) * 1e3:g} ms '
+                                               'ahead' if node.interface == 'stamped' else ''))
+    if node.interface == 'stamped':
+        share = 100.0 * node.n_cc / node.sent if node.sent else 0.0
+        say(f'  references {node.sent}, compensated commands {node.n_cc} ({share:.2f} %), '
+            f'joint_states {node.n_js}')
+        if node.latency_ns:
+            ahead = np.asarray(node.latency_ns) * 1e-6
+            med, worst = np.percentile(ahead, 50), np.percentile(ahead, 1)
+            if worst >= 0.0:
+                say(f'  corrections arrived {med:.2f} ms (median), {worst:.2f} ms (1 %) '
+                    'before their instant')
+            else:
+                say(f'  corrections arrived {med:+.2f} ms (median), {worst:+.2f} ms (1 %) '
+                    'ahead of their instant: late')
+    else:
+        say(f'  commands {node.sent}, joint_states {node.n_js}, positioning errors '
+            f'{node.n_err}')
+    label = {True: 'with feed-forward', False: 'without feed-forward',
+             None: 'feed-forward unknown'}[compensated]
+    med, mx = _stats([m.ringing for m in moves])
+    say(f'  {len(moves)} moves {label}: ringing median {med * 1e6:.2f}, '
+        f'max {mx * 1e6:.2f} urad')
+    settled = [m.settling for m in moves if math.isfinite(m.settling)]
+    say(f'  largest error {node.peak_all * 1e6:.2f} urad; settled to '
+        f'{SETTLE_TOLERANCE * 1e6:g} urad {len(settled)}/{len(moves)}'
+        + (f', median {_ms(float(np.median(settled)))}' if settled else '')
+        + (f'; {node.tracker.incomplete} moves with gaps' if node.tracker.incomplete else ''))
+    if opts.no_offline or not moves or node.interface != 'stamped':
+        return
+    # the same moves through the core, offline: with and without the feed-forward
+    t_end = moves[-1].start + node.segments.period + 1e-3
+    cfg = node.cfg
+    if node.node_preview is not None:        # the feed-forward the node computes
+        cfg = cfg.replace({'compensation.preview_time': node.node_preview})
+    off = {c: {m.index: m for m in offline_moves(cfg, node.theta1, node.segments, t_end,
+                                                 node.rate, c)} for c in (False, True)}
+    same = [m for m in moves if m.index in off[False] and m.index in off[True]]
+    if not same:
+        return
+    o_off = _stats([off[False][m.index].ringing for m in same])[0]
+    o_on = _stats([off[True][m.index].ringing for m in same])[0]
+    live = _stats([m.ringing for m in same])[0]
+    say(f'  offline, same moves: ringing {o_off * 1e6:.2f} urad without, '
+        f'{o_on * 1e6:.2f} with feed-forward')
+    if compensated is not None:
+        ref = off[compensated]
+        dev = max(abs(m.ringing - ref[m.index].ringing) for m in same)
+        say(f'  live vs offline ({label}): largest difference {dev * 1e6:.3f} urad')
+    if compensated and live > 0:
+        say(f'  => ~/compensated_command applied: the antenna rings {o_off / live:.0f}x '
+            'less than without')
 
 
 def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
@@ -175,44 +564,78 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
     opts = _parse(remove_ros_args(args=argv)[1:])
     out = out or sys.stdout
     tty = out.isatty()
+    width = min(LINE_WIDTH, shutil.get_terminal_size((LINE_WIDTH, 24)).columns) if tty \
+        else LINE_WIDTH
     from .node import make_executor
+    cfg = load_config(opts.config) if opts.config else load_config()
+    # rclpy.init() as a context manager exists only from Kilted (rclpy 9) on: on Jazzy
+    # (rclpy 7.1) it returns None, so init, then try_shutdown in a finally.
+    rclpy.init(args=argv)
+    node = None
     try:
-        with rclpy.init(args=argv):
-            node = DemoCommander(opts.pattern, opts.rate, opts.node_name, opts.move_period,
-                                 opts.slew_rate, opts.slew_period)
-            ex = make_executor('events')
-            ex.add_node(node)
-            never = Future()
-            t_start = time.monotonic()
-            last_print = 0.0
-            print(f'demo: {opts.pattern} pattern at {opts.rate:g} Hz on '
-                  f'{node.resolve_topic_name("worm_angle_command")}; antenna error = theta4 - '
-                  f'theta1 l_w/r_g (ratio 1:{1 / node.ratio:.4g})', file=out, flush=True)
-            while True:
-                ex.spin_until_future_complete(never, timeout_sec=0.1)
-                now = time.monotonic()
-                if node.t0 is None and now - t_start > opts.startup_timeout:
-                    print(f'\nno joint_states within {opts.startup_timeout:g} s: is the node '
-                          'running (same ROS_DOMAIN_ID)?', file=out, flush=True)
-                    return 1
-                if node.t0 is not None and node.elapsed() >= opts.duration:
-                    break
-                if tty and now - last_print >= 0.1:
-                    out.write('\r' + node.status_line() + '\x1b[K')
-                    out.flush()
-                    last_print = now
-                elif not tty and now - last_print >= 1.0:
-                    print(node.status_line(), file=out, flush=True)
-                    last_print = now
-            if tty:
-                out.write('\n')
-            print(f'demo done: {node.sent} commands sent, {node.n_js} joint_states received, '
-                  f'largest antenna error {node.peak_all * 1e6:.2f} urad', file=out,
-                  flush=True)
-            ex.shutdown(1.0)
-            node.destroy_node()
+        node = DemoCommander(opts.pattern, opts.rate, opts.node_name, opts.move_period,
+                             opts.slew_rate, opts.slew_period, opts.interface,
+                             opts.preview or 0.0, opts.lead, cfg)
+        ex = make_executor('events')
+        ex.add_node(node)
+        never = Future()
+        topic = REFERENCE_TOPIC if opts.interface == 'stamped' else COMMAND_TOPIC
+        print(fit(f'demo: {opts.pattern} pattern, {node.resolve_topic_name(topic)} at '
+                  f'{opts.rate:g} Hz'), file=out, flush=True)
+        print(fit(f'      antenna error e = theta4 - theta1 l_w/r_g (ratio 1:{1 / node.ratio:.4g})'
+                  + ('' if tty else '; one line per move')), file=out, flush=True)
+        t_start = time.monotonic()
+        last_print = 0.0
+        compensated: bool | None = None
+        asked = False
+        while True:
+            ex.spin_until_future_complete(never, timeout_sec=0.05)
+            now = time.monotonic()
+            if not node.started() and now - t_start > opts.startup_timeout:
+                print(fit(f'no joint_states within {opts.startup_timeout:g} s: is the node '
+                          'running (same ROS_DOMAIN_ID)?'), file=out, flush=True)
+                return 1
+            if node.started() and not asked:
+                asked = True
+                p = node_parameters(node, ex, opts.node_name,
+                                    ['node.compensation_applied',
+                                     'compensation.preview_time'])
+                compensated = p.get('node.compensation_applied')
+                node.tracker.use_commands = bool(compensated)
+                if p.get('compensation.preview_time') is not None:
+                    node.node_preview = float(p['compensation.preview_time'])
+                    if opts.preview is None:
+                        node.preview = node.node_preview
+                if not tty:
+                    state = {True: 'applied', False: 'not applied',
+                             None: 'unknown'}[compensated]
+                    print(fit(f'      node {opts.node_name}: feed-forward {state}'
+                              + (f', preview {node.preview * 1e3:g} ms, '
+                                 f'{(node.preview + node.lead) * 1e3:g} ms ahead'
+                                 if opts.interface == 'stamped' else '')), file=out,
+                          flush=True)
+            if node.started() and node.elapsed() >= opts.duration:
+                break
+            if tty and now - last_print >= 0.1:
+                out.write('\r' + node.status_line(width) + '\x1b[K')
+                out.flush()
+                last_print = now
+            elif not tty:
+                for m in node.new_moves:
+                    if m is node.tracker.moves[0]:
+                        print(MOVE_HEADER, file=out, flush=True)
+                    print(format_move(m), file=out, flush=True)
+            node.new_moves.clear()
+        if tty:
+            out.write('\r' + node.status_line(width) + '\x1b[K\n')
+        ex.shutdown(1.0)
+        _summary(node, opts, compensated, out)
     except (KeyboardInterrupt, ExternalShutdownException):
         print('', file=out)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
     return 0
 
 

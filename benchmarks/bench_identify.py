@@ -1,0 +1,198 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Identification benchmark (issue 9): robustness of the search strategies and fit time.
+
+Test drives differ from the defaults; two are model VARIANTS (Table 1 lead angle, constant
+friction, the sawtooth contact mapping and another mesh phase; linear tooth stiffness and soft
+bearings) so that no fit can be exact.  Each is
+recorded as the paper's 18-step move (training) and a held-out S-curve move the other way,
+0.15 s at 10 kHz, theta4 measured by a 20-bit encoder (6 urad steps) plus 1 urad RMS noise.
+
+    python benchmarks/bench_identify.py                 # timing: 4-parameter robust fit
+    python benchmarks/bench_identify.py --compare       # strategies x drives table
+
+Printed: per strategy and drive the held-out theta4 error (RMS of predicted - measured, and of
+predicted - noise-free truth) as % of the oscillation amplitude (half peak-to-peak of theta4 -
+theta1 l_w/r_g), the wall time and the verdict.  Absolute times depend on the machine's load
+(printed with ``os.getloadavg``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from worm_gear_sim import derive, load_config, modes  # noqa: E402
+from worm_gear_sim.identification import (  # noqa: E402
+    STRATEGIES,
+    FitOptions,
+    Record,
+    identify,
+    prediction_errors,
+    record_from_model,
+)
+from worm_gear_sim.profiles import SCurveProfile, TrapezoidalProfile  # noqa: E402
+
+KEYS = ['materials.gear_shaft_shear_modulus', 'materials.flywheel_density',
+        'damping.modal_damping_ratios[0]', 'friction.mu_kinetic']
+TRAIN = TrapezoidalProfile(0.11309733552923255, 0.020, 0.004, 0.005)
+HOLD = SCurveProfile(-0.06, 0.012, 0.003, 0.002)
+DURATION, RATE, RESOLUTION, NOISE = 0.15, 1e4, 2 * math.pi / 2 ** 20, 1e-6
+
+
+def drives(base):
+    """name -> (true config, is a model variant)."""
+    kg, rho = base.materials.gear_shaft_shear_modulus, base.materials.flywheel_density
+    mu = base.friction.mu_kinetic
+    return {
+        'stiffer/lighter': (base.replace({'materials.gear_shaft_shear_modulus': kg * 1.25,
+                                          'materials.flywheel_density': rho * 0.9,
+                                          'damping.modal_damping_ratios': [0.005, 0.0, 0.0],
+                                          'friction.mu_kinetic': mu * 1.3}), False),
+        'softer/heavier': (base.replace({'materials.gear_shaft_shear_modulus': kg * 0.8,
+                                         'materials.flywheel_density': rho * 1.15,
+                                         'damping.modal_damping_ratios': [0.02, 0.0, 0.0]}),
+                           False),
+        'lightly damped, far: stiffer': (base.replace({
+            'materials.gear_shaft_shear_modulus': kg * 1.6,
+            'materials.flywheel_density': rho * 0.9,
+            'damping.modal_damping_ratios': [0.0005, 0.0, 0.0]}), False),
+        'lightly damped, far: heavier': (base.replace({
+            'materials.flywheel_density': rho * 1.6,
+            'damping.modal_damping_ratios': [0.001, 0.0, 0.0],
+            'friction.mu_kinetic': mu * 0.7}), False),
+        'variant: lead angle, const mu, mapping': (base.replace({
+            'geometry.lead_angle': 0.064286, 'friction.model': 'constant',
+            'mesh.contact_mapping': 'sawtooth',
+            'friction.constant_coefficient': 0.12, 'mesh.phase_offset': 2.0,
+            'materials.gear_shaft_shear_modulus': kg * 1.3,
+            'materials.flywheel_density': rho * 0.95,
+            'damping.modal_damping_ratios': [0.008, 0.0, 0.0]}), True),
+        'variant: linear mesh, soft bearings': (base.replace({
+            'mesh.stiffness_model': 'linear', 'mesh.worm_tooth_stiffness_multiplier': 0.7,
+            'mesh.gear_tooth_stiffness_multiplier': 0.7,
+            'shafts.gear_bearing_axial_stiffness': 1.2e8,
+            'materials.gear_shaft_shear_modulus': kg * 1.1,
+            'materials.flywheel_density': rho * 0.8,
+            'damping.modal_damping_ratios': [0.012, 0.0, 0.0]}), True),
+    }
+
+
+def records(truth, seed: int, duration: float = DURATION) -> tuple[Record, Record, Record]:
+    kw = dict(sample_rate=RATE, outputs=('theta4',), noise_rad=NOISE,
+              resolution_rad=RESOLUTION)
+    train = record_from_model(truth, TRAIN, duration, seed=seed, name='train', **kw)
+    hold = record_from_model(truth, HOLD, duration, seed=seed + 1, name='held-out', **kw)
+    clean = record_from_model(truth, HOLD, duration, sample_rate=RATE, name='held-out clean')
+    return train, hold, clean
+
+
+def held_out(cfg, hold: Record, clean: Record) -> tuple[float, float]:
+    e = prediction_errors(cfg, [hold])[0]['theta4']
+    c = prediction_errors(cfg, [Record(t=clean.t, theta1=clean.theta1,
+                                       measured=clean.measured, name='clean')])[0]['theta4']
+    return 100 * e['rel'], 100 * c['rms_rad'] / e['amplitude_rad']
+
+
+def compare(args) -> None:
+    base = load_config(args.config) if args.config else load_config()
+    names = args.strategies or list(STRATEGIES)
+    print(f'load average {os.getloadavg()}; base antenna mode '
+          f'{modes(base).undamped_hz[0]:.2f} Hz; keys {", ".join(KEYS)}')
+    print(f'{"drive":<38} {"strategy":<18} {"hold %":>7} {"vs truth %":>10} {"train %":>8} '
+          f'{"time s":>7}  verdict')
+    summary: dict[str, list[float]] = {s: [] for s in names}
+    times: dict[str, list[float]] = {s: [] for s in names}
+    ratio = derive(base).output_per_input
+    chosen = {k: v for k, v in drives(base).items()
+              if not args.drives or any(d in k for d in args.drives)}
+    for (dname, (truth, _variant)), duration in itertools.product(chosen.items(),
+                                                                  args.durations):
+        train, hold, clean = records(truth, seed=7, duration=duration)
+        f_true = modes(truth).undamped_hz[0]
+        h0, c0 = held_out(base, hold, clean)
+        print(f'{dname + f" {f_true:.1f} Hz, {duration:g} s":<38} {"(default config)":<18} '
+              f'{h0:>7.1f} {c0:>10.1f}')
+        for s in names:
+            opt = FitOptions(strategy=s, serial=args.serial, workers=args.workers,
+                             method=args.method)
+            t0 = time.perf_counter()
+            res = identify(base, [train], KEYS, options=opt)
+            wall = time.perf_counter() - t0
+            h, c = held_out(res.config, hold, clean)
+            tr = 100 * res.rms_after['theta4'] / (0.5 * np.ptp(
+                train.measured['theta4'] - train.theta1 * ratio))
+            verdict = 'trustworthy' if res.trustworthy else \
+                f'NOT trustworthy: {res.problems[0][:60]}'
+            summary[s].append(h)
+            times[s].append(wall)
+            print(f'{"":<38} {s:<18} {h:>7.2f} {c:>10.2f} {tr:>8.2f} {wall:>7.1f}  {verdict}')
+    print('\nstrategy            cases with held-out theta4 error <= 3 %   worst %   '
+          'median time s')
+    for s, v in summary.items():
+        print(f'{s:<20} {sum(x <= 3.0 for x in v)}/{len(v):<35} {max(v):>7.2f}   '
+              f'{float(np.median(times[s])):.1f}')
+
+
+def timing(args) -> None:
+    base = load_config(args.config) if args.config else load_config()
+    truth, _ = drives(base)['variant: lead angle, const mu, mapping']
+    train, hold, clean = records(truth, seed=7)
+    print(f'4-parameter fit, {train.t.size} samples ({DURATION} s at {RATE:g} Hz), '
+          f'strategy robust; load average before {os.getloadavg()}')
+    rows = []
+    from worm_gear_sim.studies import local_cluster_client
+    n = args.workers or os.cpu_count()
+    for label, opt in (('serial (this process)', FitOptions(serial=True)),
+                       (f'Dask LocalCluster, {n} workers, incl. start-up',
+                        FitOptions(workers=args.workers)),
+                       (f'Dask LocalCluster, {n} workers, running', None)):
+        t0 = time.perf_counter()
+        if opt is None:
+            with local_cluster_client(args.workers) as client:
+                client.run(lambda: None)
+                t0 = time.perf_counter()
+                res = identify(base, [train], KEYS, options=FitOptions(client=client))
+                wall = time.perf_counter() - t0
+        else:
+            res = identify(base, [train], KEYS, options=opt)
+            wall = time.perf_counter() - t0
+        h, c = held_out(res.config, hold, clean)
+        nfev = sum(s['nfev'] for s in res.starts)
+        rows.append((label, wall))
+        print(f'  {label:<44} {wall:6.1f} s  starts {res.strategy["n_starts"]}  '
+              f'nfev {nfev}  held-out theta4 {h:.2f} % (vs truth {c:.2f} %)  '
+              f'{"trustworthy" if res.trustworthy else "NOT trustworthy"}')
+    print(f'  ratio serial / running Dask: {rows[0][1] / rows[2][1]:.2f}; target <= 60 s; '
+          f'load average after {os.getloadavg()}')
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--compare', action='store_true', help='strategies x drives table')
+    ap.add_argument('--strategies', nargs='*', help=f'subset of {", ".join(STRATEGIES)}')
+    ap.add_argument('--serial', action='store_true', help='no Dask in --compare')
+    ap.add_argument('--workers', type=int, default=None)
+    ap.add_argument('--durations', type=float, nargs='*', default=[0.15, 0.5],
+                    help='record lengths [s] in --compare')
+    ap.add_argument('--method', default='dogbox', help='least_squares method (--compare)')
+    ap.add_argument('--drives', nargs='*', help='substrings of drive names in --compare')
+    ap.add_argument('--config', help='base YAML (default: the package config)')
+    args = ap.parse_args()
+    if args.compare:
+        compare(args)
+    else:
+        timing(args)
+
+
+if __name__ == '__main__':
+    main()

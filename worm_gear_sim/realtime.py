@@ -1,0 +1,872 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The real-time pipeline of the node, in the core (no rclpy): :class:`RealtimePredictor`.
+
+One object turns a stream of reference samples theta1_ref into
+
+* **corrections** (:class:`Correction`): the feed-forward delta of
+  :class:`~worm_gear_sim.compensation.Compensator` for every accepted sample, stamped with
+  the sample's stamp, and ``compensated = theta1_ref + delta`` (what the servo should
+  command for that instant);
+* **predictions** (:class:`Prediction`): the simulated drive
+  (:class:`~worm_gear_sim.simulation.Simulator`) at the instant they predict: theta1..theta4,
+  rates, shaft torques, the antenna positioning error and the worm error;
+* **events** (:class:`Event`) the node logs once (warning): resyncs, clock restarts, a
+  stale or resumed stream, overruns, simulation or compensation errors;
+* **counters** (:attr:`RealtimePredictor.counters`): integers with stable names for
+  /diagnostics.
+
+The node (``worm_gear_sim.ros``) only translates messages into these calls and back.
+``compensation.feedforward_series`` (the offline twin) drives the same object.
+
+Time
+    Stamps are integer nanoseconds on the caller's clock (ROS time: epoch ~1.7e18 ns, or
+    /clock with ``use_sim_time``).  Internally every time is ``(stamp - base) * 1e-9``
+    seconds, with ``base`` the first accepted stamp (or ``base_ns``): a float of epoch
+    seconds would lose ~0.2 us of resolution, i.e. ~7e-6 rad of correction.
+
+Stamped path (``push``; ``sensor_msgs/JointState`` ``worm_angle_reference``)
+    ``push(stamp_ns, theta1_ref, now_ns=...)`` validates the sample and rejects it with a
+    :class:`Reject` reason (counted as ``rejected_<reason>``; the state is untouched):
+    NaN, inf, ``|theta1_ref| > node.max_command_abs``, a stamp <= 0, a stamp more than
+    ``max_stamp_age`` before or ``max_stamp_lead`` after ``now_ns``, a stamp equal to
+    (``duplicate``) or older than (``out_of_order``) the last accepted sample, a change of
+    more than ``node.max_command_jump`` from the last accepted sample (``jump``).
+    Accepted samples are processed in stamp order:
+
+    * With ``compensation.preview_time`` P the servo streams its reference P ahead: the
+      correction for stamp t is computed (the compensator evaluated at exactly t) as soon
+      as a sample stamped at or after t + P has been accepted, and returned by that push.
+      With P = 0 every push returns its own correction.
+    * The simulator is advanced to each sample's stamp with the applied command (samples
+      joined as ``node.command_interpolation`` says): theta1_ref at once when the
+      compensation is not applied; theta1_ref + delta when its correction is ready when it
+      is (``apply_compensation``, default ``node.compensation_applied``).  Each advance
+      returns a prediction stamped with the sample's stamp.
+    * The result depends only on the accepted (stamp, value) pairs, never on when or in
+      which bursts they arrive: ``feedforward_series`` of the same pairs gives the same
+      deltas (tested to <= 1e-6 rad; measured bit for bit).
+
+Gaps, pauses and the stale stream
+    Let G = max(3.5 / node.publish_rate_hz, 2 min(last sample interval, 50 ms)).  A stamp
+    more than G after the previous sample means the stream paused and the reference RESTED
+    at its last value: rest samples (the last value, stamps previous + G + k/publish_rate,
+    k = 0..K-1, K covering the filter and the preview) are inserted before it.  They are
+    fed to the compensator and the simulator but produce no :class:`Correction` (the servo
+    never sent them).  ``hold(now_ns)``, called by the node's slow timer, declares the
+    stream stale when ``now_ns`` is more than G + ``stale_margin`` after the last sample:
+    it inserts the rest samples due by ``now_ns`` (the same ones a later sample would
+    insert, so the deltas stay those of the offline twin), releases the corrections that
+    were waiting for a preview, advances the simulator holding the last command up to
+    ``now_ns`` and returns that held prediction stamped ``now_ns``; ``stale`` is True
+    (event ``stream_stale`` once).  The next accepted sample ends it (``stream_resumed``).
+    A sample that arrives after its stale time with a stamp before an inserted rest sample
+    is rejected (``out_of_order``): the only case where the live deltas can differ from
+    the offline twin.
+
+Resync policy (jumps and restarts)
+    A rejected ``jump`` sample, or an ``out_of_order`` one more than 100 ms older than the
+    last sample (a late packet is not a restart), is kept as a candidate.  When
+    ``confirm_samples`` (3) candidates in a row agree with each other (stamps increasing
+    by at most 50 ms, values within ``node.max_command_jump``), the new level or timeline
+    is real (a servo that really moved 3 rad; a servo whose stamps restarted): the pipeline
+    resynchronises: corrections waiting for a preview are released (the old reference
+    rested), the simulator restarts at rest at the first candidate (static equilibrium)
+    and the other candidates follow; counted in ``resyncs``, event ``resync``.  A single
+    outlier (a spike, a late packet) stays rejected.  A caller clock going backwards
+    (``now_ns`` earlier than the previous ``now_ns`` by more than 1 ms: a simulator reset,
+    a looping bag with ``use_sim_time``) re-initialises at once: pending corrections of
+    the old timeline are dropped (``corrections_dropped``), the next accepted sample
+    starts afresh (new base; ``clock_restarts``, event ``clock_restart``).
+
+Float64 path (``push_command`` + ``tick``; ``std_msgs/Float64`` ``worm_angle_command``)
+    Unstamped commands are handed over with their reception time; ``tick(now_ns)`` at
+    ``node.publish_rate_hz`` turns them into samples as ``node.command_timing`` says
+    (``tick``: the newest command since the previous tick is a sample at the tick;
+    ``reception``; ``stream``: :class:`~worm_gear_sim.command_timing.StreamClock`; with
+    ``sim_time`` the /clock reading at reception), feeds them through the same sample
+    path (a sample not after the previous one replaces its value: ``merged_samples``),
+    holds the last command up to the tick (or to the last corrected sample when a preview
+    delays the applied compensation) and returns one prediction at that instant.  The
+    first tick after the first command starts the simulation at rest at the newest command.
+    The stream is stale after G without a command (no margin: tick stamps are never late).
+
+Catch-up
+    The simulator never integrates more than ``node.max_catch_up`` seconds for one sample
+    or hold; the rest of the interval is skipped (``Simulator.resync``, counted in
+    ``overruns`` and ``dropped_time_ns``, event ``overrun``).  ``node.max_catch_up`` must
+    be at least the tick period 1 / ``node.publish_rate_hz`` (a :class:`ConfigError`
+    otherwise), so the physics always advances.
+
+Parameters are swapped with :meth:`RealtimePredictor.reconfigure`; the expensive part
+(compensator design, the model's matrices) is :meth:`RealtimePredictor.prepare`, which the
+node can run off the real-time path.
+"""
+
+from __future__ import annotations
+
+import collections
+import copy
+import math
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+from .command_timing import CommandQueue, StreamClock
+from .compensation import Compensator
+from .params import Config
+from .simulation import SimulationError, Simulator
+
+__all__ = ['RealtimePredictor', 'Correction', 'Prediction', 'Event', 'Output', 'Reject',
+           'Prepared', 'STALE_PERIODS', 'STALE_MAX_INTERVAL', 'CONFIRM_SAMPLES',
+           'COUNTER_NAMES']
+
+STALE_PERIODS = 3.5          # tick periods without a sample: the reference rests
+STALE_MAX_INTERVAL = 0.05    # s: sample intervals longer than this are pauses, not a rate
+CONFIRM_SAMPLES = 3          # agreeing candidates that confirm a jump or a new timeline
+CHAIN_MAX_GAP_NS = 50_000_000  # candidates further apart do not confirm each other
+RESTART_MIN_BACK_NS = 100_000_000  # a stamp this much older may start a new timeline
+CLOCK_TOLERANCE_NS = 1_000_000  # now_ns may step back this much without a restart
+HOLD_EPS = 0.5e-9            # s: 'hold' steps just after the sample time (stamps are whole ns)
+
+
+class Reject(StrEnum):
+    """Why a sample was rejected (counter ``rejected_<value>``)."""
+
+    NAN = 'nan'
+    INF = 'inf'
+    OUT_OF_RANGE = 'out_of_range'     # |theta1_ref| > node.max_command_abs
+    JUMP = 'jump'                     # change > node.max_command_jump (until confirmed)
+    ZERO_STAMP = 'zero_stamp'         # stamp <= 0 (unset header)
+    TOO_OLD = 'too_old'               # stamp < now - max_stamp_age
+    TOO_NEW = 'too_new'               # stamp > now + max_stamp_lead
+    DUPLICATE = 'duplicate'           # stamp equal to the last accepted sample's
+    OUT_OF_ORDER = 'out_of_order'     # stamp before the last accepted sample's
+
+
+@dataclass(frozen=True, slots=True)
+class Correction:
+    """Feed-forward for one accepted sample: command ``compensated`` at ``stamp_ns``."""
+
+    stamp_ns: int
+    theta1_ref: float        # the sample [rad]
+    delta: float             # correction to ADD [rad] (~/feedforward)
+
+    @property
+    def compensated(self) -> float:
+        """theta1_ref + delta [rad] (~/compensated_command)."""
+        return self.theta1_ref + self.delta
+
+
+@dataclass(frozen=True, slots=True)
+class Prediction:
+    """The simulated drive at ``stamp_ns`` (the instant it predicts; the state lies on the
+    dt grid point at or just before it)."""
+
+    stamp_ns: int
+    theta1: float            # command as applied [rad]
+    theta1_dot: float        # [rad/s]
+    theta: tuple             # (theta2, theta3, theta4) [rad]
+    omega: tuple             # (omega2, omega3, omega4) [rad/s]
+    effort: tuple            # Simulator.joint_torques(): K_w twist, r_w F_X, r_g F_Y,
+    #                          K_g twist [N m]
+    reference: float         # theta1_ref the positioning error is measured against [rad]
+    positioning_error: float  # theta4 - reference l_w / r_g [rad] (~/positioning_error)
+    worm_error: float        # theta2 - theta1 [rad] (~/worm_error)
+    held: bool = False       # a held prediction of a paused stream (or a tick's hold)
+
+    @property
+    def position(self) -> tuple:
+        """JointState.position: theta1..theta4."""
+        return (self.theta1, *self.theta)
+
+    @property
+    def velocity(self) -> tuple:
+        """JointState.velocity: theta1_dot, omega2..omega4."""
+        return (self.theta1_dot, *self.omega)
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """Something the node should log once as a warning.  ``kind``: resync,
+    clock_restart, stream_stale, stream_resumed, overrun, simulation_error,
+    compensation_error, input_changed."""
+
+    kind: str
+    message: str
+
+
+@dataclass(slots=True)
+class Output:
+    """What one call produced.  ``accepted``/``rejected``: the pushed sample's fate
+    (``push``/``push_command``); ``stale``: the stream is stale after this call."""
+
+    accepted: bool = False
+    rejected: Reject | None = None
+    corrections: list = field(default_factory=list)
+    predictions: list = field(default_factory=list)
+    events: list = field(default_factory=list)
+    stale: bool = False
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A configuration made ready for :meth:`RealtimePredictor.reconfigure` (the
+    compensator designed, the simulator's parameters checked)."""
+
+    config: Config
+    compensator: Any
+    error: str = ''          # compensator design failure (the swap keeps running without)
+
+
+COUNTER_NAMES = (
+    'samples_received', 'samples_accepted', 'rejected_samples',
+    *(f'rejected_{r.value}' for r in Reject),
+    'commands_received', 'commands_used', 'commands_merged', 'commands_restamped',
+    'commands_dropped', 'merged_samples', 'rest_samples', 'corrections',
+    'corrections_dropped', 'predictions', 'late_for_simulation', 'resyncs',
+    'clock_restarts', 'stale_events', 'overruns', 'dropped_time_ns', 'steps',
+    'simulation_errors', 'compensation_errors', 'reconfigurations', 'stream_relocks',
+    'stream_outliers')
+
+
+class _StreamingCompensator(Compensator):
+    """The Compensator with its streaming split in three: add a sample, evaluate at any
+    time covered by the history, trim what no evaluation needs any more."""
+
+    def add_sample(self, t: float, x: float) -> None:
+        ht, hx = self._hist_t, self._hist_x
+        if t < ht[-1]:
+            raise ValueError(f'add_sample: time went backwards ({t!r} < {ht[-1]!r})')
+        if t == ht[-1]:
+            hx[-1] = x
+        else:
+            ht.append(t)
+            hx.append(x)
+
+    def evaluate(self, te: float) -> float:
+        return self._evaluate(te)
+
+    def trim(self, te_min: float) -> None:
+        """Drop samples no evaluation at te >= te_min needs (one before the window kept)."""
+        ht, hx = self._hist_t, self._hist_x
+        t_old = te_min - float(self._tau[-1])
+        n = 0
+        while len(ht) - n > 2 and ht[n + 1] <= t_old:
+            n += 1
+        if n:
+            del ht[:n]
+            del hx[:n]
+
+    def adopt(self, other: Compensator) -> None:
+        """Take over the reference history and outputs of ``other`` (a reconfiguration)."""
+        self._hist_t, self._hist_x = list(other._hist_t), list(other._hist_x)
+        self._last_delta, self._reference = other._last_delta, other._reference
+
+
+class RealtimePredictor:
+    """The real-time pipeline: samples in, corrections and predictions out (module doc).
+
+    ``config``: a validated :class:`Config` (the plant model AND the compensator's nominal
+    design).  ``compensate``: compute corrections; ``apply_compensation``: drive the
+    simulator with theta1_ref + delta (None: ``node.compensation_applied``);
+    ``simulate``: run the simulator at all (False: corrections only, as
+    ``feedforward_series``); ``base_ns``: the time origin (None: the first accepted
+    stamp); ``sim_time``: the Float64 path's reception times are /clock readings;
+    ``max_stamp_age`` / ``max_stamp_lead`` [s]: accepted stamp window around ``now_ns``
+    (lead: plus the preview time); ``stale_margin`` [s]: lateness allowed to samples
+    before ``hold`` declares the stream stale; ``confirm_samples``: agreeing candidates
+    that confirm a jump or a restart.
+    """
+
+    def __init__(self, config: Config, *, compensate: bool = True,
+                 apply_compensation: bool | None = None, simulate: bool = True,
+                 base_ns: int | None = None, sim_time: bool = False,
+                 max_stamp_age: float = 1.0, max_stamp_lead: float = 1.0,
+                 stale_margin: float = 0.02, confirm_samples: int = CONFIRM_SAMPLES) -> None:
+        if confirm_samples < 2:
+            raise ValueError('confirm_samples must be >= 2')
+        if not (max_stamp_age > 0.0 and max_stamp_lead > 0.0 and stale_margin >= 0.0):
+            raise ValueError('max_stamp_age and max_stamp_lead must be > 0, '
+                             'stale_margin >= 0')
+        self.counters: dict[str, int] = dict.fromkeys(COUNTER_NAMES, 0)
+        self.compensate = bool(compensate)
+        self._apply_arg = apply_compensation
+        self._explicit_base = None if base_ns is None else int(base_ns)
+        self.sim_time = bool(sim_time)
+        self.max_stamp_age_ns = int(round(max_stamp_age * 1e9))
+        self.max_stamp_lead_ns = int(round(max_stamp_lead * 1e9))
+        self.stale_margin_ns = int(round(stale_margin * 1e9))
+        self.confirm_samples = int(confirm_samples)
+        self.compensation_error = ''
+        self.last_error = ''
+        self._comp: _StreamingCompensator | None = None
+        self.sim: Simulator | None = Simulator(config, 0.0, 0.0) if simulate else None
+        if self.sim is not None:                      # compile / load the kernel now
+            self.sim.advance_to(10 * self.sim.dt, 0.0)
+            self.sim.reset(0.0, 0.0)
+        self._queue = CommandQueue()
+        self._set_config(config, self._design(config))
+        self._stream = StreamClock(float(self._period_ns))
+        self._last_now_ns: int | None = None
+        self._last_tick_ns = 0
+        self._cmd: float | None = None             # last accepted Float64 command
+        self._cmd_chain: list[float] = []
+        self._init_state()
+
+    # ---- configuration -----------------------------------------------------------------
+    def _design(self, config: Config) -> Prepared:
+        if not self.compensate:
+            return Prepared(config, None)
+        try:
+            return Prepared(config, _StreamingCompensator(config))
+        except Exception as exc:  # noqa: BLE001 - run uncompensated, say why
+            return Prepared(config, None, f'{type(exc).__name__}: {exc}')
+
+    def _set_config(self, config: Config, prepared: Prepared) -> None:
+        self.config = config
+        node = config.node
+        self.apply_compensation = node.compensation_applied if self._apply_arg is None \
+            else bool(self._apply_arg)
+        self._period_ns = int(round(1e9 / node.publish_rate_hz))
+        self._gap0_ns = int(round(STALE_PERIODS * self._period_ns))
+        comp = prepared.compensator
+        if comp is not None and self._comp is not None:
+            comp.adopt(self._comp)
+        self._comp = comp
+        self.compensation_error = prepared.error
+        self.preview_ns = int(round(config.compensation.preview_time * 1e9))
+        self._lead_ns = self.max_stamp_lead_ns + self.preview_ns
+        span = 0.0 if comp is None else float(comp._tau[-1]) + comp.preview
+        self._rest_count = int(math.ceil(span * 1e9 / self._period_ns)) + 2
+        self._max_jump = node.max_command_jump
+        self._max_abs = node.max_command_abs
+        self._max_catch_up = node.max_catch_up
+        if self.sim is not None:
+            self.sim.interpolation = node.command_interpolation
+            self._ratio = self.sim.derived.output_per_input
+
+    def prepare(self, config: Config) -> Prepared:
+        """Design for ``config`` off the real-time path (compensator design, a trial
+        of the simulator's parameters).  Raises ValueError (ConfigError) if the simulator
+        cannot take it (``integrator.time_step`` changed, non-finite acceleration)."""
+        if self.sim is not None:
+            trial = copy.copy(self.sim)   # shallow: reconfigure only reads the state
+            trial.reconfigure(config)
+        return self._design(config)
+
+    def reconfigure(self, new: Config | Prepared) -> None:
+        """Swap in a validated configuration (or what :meth:`prepare` made of one),
+        keeping time, state, reference history and pending corrections.  On ValueError
+        nothing changed."""
+        prepared = new if isinstance(new, Prepared) else self.prepare(new)
+        if self.sim is not None:
+            self.sim.reconfigure(prepared.config)
+        self._set_config(prepared.config, prepared)
+        if self._stream.period0 != float(self._period_ns):  # pragma: no cover - read-only
+            self._stream = StreamClock(float(self._period_ns))
+        self.counters['reconfigurations'] += 1
+
+    def reset(self) -> None:
+        """Forget the stream (the next accepted sample or tick starts afresh at rest);
+        the counters are kept."""
+        self._init_state()
+        self._queue.clear()
+        self._stream.reset()
+        self._cmd = None
+        self._cmd_chain = []
+        self._last_now_ns = None
+
+    def _init_state(self) -> None:
+        self._started = False
+        self._mode = ''                          # 'stamped' | 'command' once started
+        self._base: int | None = self._explicit_base
+        self._last_ns = 0                        # last sample fed (real or rest) [ns]
+        self._last_real_ns = 0                   # last accepted sample [ns]
+        self._last_real_x = 0.0
+        self._gap_ns = self._gap0_ns             # G at the last accepted sample
+        self._rest_k = 0                         # rest samples inserted after it
+        self._pending: collections.deque = collections.deque()   # (ns, x, real)
+        self._chain: list[tuple[int, float]] = []
+        self._stale = False
+        self._drive_t = -math.inf                # last command time given to the simulator
+        self._held = 0.0                         # command the simulator holds [rad]
+        self._held_ref = 0.0                     # reference of that command [rad]
+        self._delta = 0.0                        # last correction [rad]
+
+    # ---- properties --------------------------------------------------------------------
+    @property
+    def started(self) -> bool:
+        return self._started
+
+    @property
+    def stale(self) -> bool:
+        return self._stale
+
+    @property
+    def base_ns(self) -> int | None:
+        """The time origin: stamp_ns maps to (stamp_ns - base_ns) * 1e-9 s."""
+        return self._base
+
+    @property
+    def last_delta(self) -> float:
+        """The newest correction computed [rad]."""
+        return self._delta
+
+    @property
+    def last_stamp_ns(self) -> int:
+        """Stamp of the last accepted sample (0 before the first)."""
+        return self._last_real_ns
+
+    @property
+    def stale_after_ns(self) -> int:
+        """G: a stamp gap longer than this is a pause (module doc)."""
+        return self._gap_ns
+
+    @property
+    def pending(self) -> int:
+        """Samples whose correction waits for the preview."""
+        return len(self._pending)
+
+    @property
+    def compensator(self) -> Compensator | None:
+        return self._comp
+
+    @property
+    def stream_clock(self) -> StreamClock:
+        return self._stream
+
+    # ---- the stamped path --------------------------------------------------------------
+    def push(self, stamp_ns: int, theta1_ref: float, *, now_ns: int | None = None) -> Output:
+        """A stamped reference sample (see the module doc for the rules).  ``now_ns``: the
+        caller's clock at reception (same clock as the stamps); None skips the stamp
+        window and the clock-restart check (offline)."""
+        out = Output()
+        c = self.counters
+        c['samples_received'] += 1
+        stamp_ns = int(stamp_ns)
+        x = float(theta1_ref)
+        if now_ns is not None:
+            self._check_clock(int(now_ns), out)
+        if self._mode == 'command':
+            self._restart(out, 'input_changed', 'stamped references after Float64 commands: '
+                          'the pipeline restarts on the stamped stream', drop=False)
+        reason = self._value_reason(x)
+        if reason is None:
+            if stamp_ns <= 0:
+                reason = Reject.ZERO_STAMP
+            elif now_ns is not None and stamp_ns < now_ns - self.max_stamp_age_ns:
+                reason = Reject.TOO_OLD
+            elif now_ns is not None and stamp_ns > now_ns + self._lead_ns:
+                reason = Reject.TOO_NEW
+            elif self._started and stamp_ns == self._last_ns:
+                reason = Reject.DUPLICATE
+            elif self._started and stamp_ns < self._last_ns:
+                reason = Reject.OUT_OF_ORDER
+            elif self._started and abs(x - self._last_real_x) > self._max_jump:
+                reason = Reject.JUMP
+        if reason is not None:
+            restart = reason is Reject.OUT_OF_ORDER and \
+                self._last_ns - stamp_ns > RESTART_MIN_BACK_NS    # not a late packet
+            if (reason is Reject.JUMP or restart) and self._candidate(stamp_ns, x):
+                self._resync(out)          # confirmed: this sample is accepted
+            else:
+                self._reject(out, reason)
+            out.stale = self._stale
+            return out
+        self._chain.clear()
+        self._accept(stamp_ns, x, out, predict=True)
+        out.stale = self._stale
+        return out
+
+    def hold(self, now_ns: int) -> Output:
+        """Stamped path, from a slow timer: if the stream is stale (no sample for
+        G + ``stale_margin`` before ``now_ns``), insert the rest samples due, release the
+        corrections waiting for them, advance the simulator holding the last command up to
+        ``now_ns`` and return that held prediction.  Otherwise nothing."""
+        out = Output()
+        now_ns = int(now_ns)
+        self._check_clock(now_ns, out)
+        if not self._started or self._mode != 'stamped':
+            out.stale = self._stale
+            return out
+        if now_ns - self._last_real_ns > self._gap_ns + self.stale_margin_ns:
+            self._go_stale(now_ns, out)
+            self._hold_to(now_ns, out)
+        out.stale = self._stale
+        return out
+
+    def finish(self) -> Output:
+        """End of a finite stream (offline): the reference rests from its last sample;
+        every pending correction is released (as ``hold`` would, much later)."""
+        out = Output()
+        if self._started:
+            self._insert_rest(None, out, predict=False)
+            self._release(None, out, predict=False)
+        return out
+
+    # ---- the Float64 path --------------------------------------------------------------
+    def push_command(self, receive_ns: int, theta1_ref: float) -> Output:
+        """An unstamped command received at ``receive_ns`` (the node's clock: monotonic,
+        or /clock with ``sim_time``).  Validated at once (value rules of ``push``; a jump
+        is confirmed by ``confirm_samples`` agreeing commands, then the next tick restarts
+        at rest at the new level); queued until ``tick``."""
+        out = Output()
+        c = self.counters
+        c['commands_received'] += 1
+        x = float(theta1_ref)
+        reason = self._value_reason(x)
+        if reason is None and self._cmd is not None and abs(x - self._cmd) > self._max_jump:
+            reason = Reject.JUMP
+        if reason is not None:
+            ch = self._cmd_chain
+            if reason is Reject.JUMP:
+                if ch and abs(x - ch[-1]) <= self._max_jump:
+                    ch.append(x)
+                else:
+                    ch[:] = [x]
+            if len(ch) < self.confirm_samples or reason is not Reject.JUMP:
+                self._reject(out, reason)
+            else:
+                self._event(out, 'resync', f'worm_angle_command jumped from {self._cmd!r} '
+                            f'to {x!r} rad, confirmed by {len(ch)} commands: the '
+                            'simulation restarts at rest at the new level')
+                c['resyncs'] += 1
+                if self._started:
+                    self._release(None, out, predict=False)
+                self._init_state()
+                self._queue.clear()
+                self._cmd_chain = []
+                self._accept_command(receive_ns, x, out)
+            return out
+        self._cmd_chain = []
+        self._accept_command(receive_ns, x, out)
+        return out
+
+    def _accept_command(self, receive_ns: int, x: float, out: Output) -> None:
+        c = self.counters
+        self._cmd = x
+        out.accepted = True
+        receive_ns = int(receive_ns)
+        if self.sim_time:
+            self._queue.push('sim', receive_ns, x)
+        else:
+            timing = self.config.node.command_timing
+            if timing == 'reception':
+                self._queue.push('wall', receive_ns, x)
+            elif timing == 'stream':
+                self._queue.push('wall', self._stream(receive_ns), x)
+                c['stream_relocks'] = self._stream.relocks
+                c['stream_outliers'] = self._stream.outliers
+            else:                   # 'tick': no time of its own, restamped to the next tick
+                self._queue.push('wall', self._last_tick_ns, x)
+
+    def tick(self, now_ns: int) -> Output:
+        """Float64 path, at ``node.publish_rate_hz``: the queued commands become samples
+        (``node.command_timing``), the simulator holds the last command up to ``now_ns``
+        (or to the last corrected sample when the applied compensation waits for a
+        preview) and one prediction of that instant is returned.  Nothing before the first
+        command."""
+        out = Output()
+        now_ns = int(now_ns)
+        self._check_clock(now_ns, out)
+        if self._mode == 'stamped':
+            self._restart(out, 'input_changed', 'Float64 commands after stamped '
+                          'references: the pipeline restarts on the commands', drop=False)
+        c = self.counters
+        base = 'sim' if self.sim_time else 'wall'
+        if not self._started:
+            if self._cmd is None:
+                return out
+            q = self._queue
+            q.merged += max(q.clear() - 1, 0)
+            self._mode = 'command'
+            self._last_tick_ns = now_ns
+            self._accept(now_ns, self._cmd, out, predict=False)
+            c['commands_used'] += 1
+        else:
+            if now_ns <= self._last_tick_ns:
+                out.stale = self._stale
+                return out                       # no time has passed
+            restamp = self.sim_time or self.config.node.command_timing == 'tick'
+            samples = self._queue.take(base, self._last_tick_ns, now_ns, restamp=restamp)
+            c['commands_used'] += len(samples)
+            for ns, v in samples:
+                if ns <= self._last_ns:          # same time or earlier: replaces the value
+                    c['merged_samples'] += 1
+                    ns = self._last_ns
+                self._accept(ns, v, out, predict=False, merge=True)
+            self._last_tick_ns = now_ns
+            if now_ns - self._last_real_ns > self._gap_ns:
+                self._go_stale(now_ns, out)
+        q = self._queue
+        c['commands_dropped'], c['commands_restamped'] = q.dropped, q.restamped
+        c['commands_merged'] = q.merged + c['merged_samples']
+        self._hold_to(now_ns, out)
+        out.stale = self._stale
+        return out
+
+    # ---- internals: validation ---------------------------------------------------------
+    def _value_reason(self, x: float) -> Reject | None:
+        if math.isnan(x):
+            return Reject.NAN
+        if math.isinf(x):
+            return Reject.INF
+        if abs(x) > self._max_abs:
+            return Reject.OUT_OF_RANGE
+        return None
+
+    def _reject(self, out: Output, reason: Reject) -> None:
+        out.rejected = reason
+        self.counters['rejected_samples'] += 1
+        self.counters['rejected_' + reason.value] += 1
+
+    def _check_clock(self, now_ns: int, out: Output) -> bool:
+        """A caller clock that went backwards beyond the tolerance restarts the pipeline."""
+        last = self._last_now_ns
+        self._last_now_ns = now_ns if last is None else max(now_ns, last)
+        if last is not None and now_ns < last - CLOCK_TOLERANCE_NS:
+            self._last_now_ns = now_ns
+            self.counters['clock_restarts'] += 1
+            self._restart(out, 'clock_restart', f'clock went backwards by '
+                          f'{(last - now_ns) * 1e-9:.6g} s: the pipeline restarts')
+            return True
+        return False
+
+    def _candidate(self, ns: int, x: float) -> bool:
+        """Keep a rejected sample as a resync candidate; True when confirmed."""
+        ch = self._chain
+        if ch:
+            pns, px = ch[-1]
+            if not (0 < ns - pns <= CHAIN_MAX_GAP_NS and abs(x - px) <= self._max_jump):
+                ch.clear()
+        ch.append((ns, x))
+        return len(ch) >= self.confirm_samples
+
+    def _resync(self, out: Output) -> None:
+        chain, self._chain = self._chain, []
+        old_ns, old_x = self._last_real_ns, self._last_real_x
+        self.counters['resyncs'] += 1
+        self._event(out, 'resync', f'reference moved from {old_x!r} rad at {old_ns} ns to '
+                    f'{chain[0][1]!r} rad at {chain[0][0]} ns, confirmed by {len(chain)} '
+                    'samples: the simulation restarts at rest there')
+        if self._started:
+            self._release(None, out, predict=True)
+        mode = self._mode
+        self._init_state()
+        self._mode = mode
+        for ns, x in chain:
+            self._accept(ns, x, out, predict=True)
+
+    def _restart(self, out: Output, kind: str, message: str, drop: bool = True) -> None:
+        if self._started:
+            if drop:
+                self.counters['corrections_dropped'] += sum(
+                    1 for p in self._pending if p[2])
+            else:
+                self._release(None, out, predict=False)
+        self._event(out, kind, message)
+        self._init_state()
+        self._queue.clear()
+        self._stream.reset()
+
+    def _event(self, out: Output, kind: str, message: str) -> None:
+        out.events.append(Event(kind, message))
+        if kind not in ('stream_resumed',):
+            self.last_error = message
+
+    # ---- internals: the sample path ----------------------------------------------------
+    def _accept(self, ns: int, x: float, out: Output, predict: bool,
+                merge: bool = False) -> None:
+        c = self.counters
+        if not self._started:
+            self._start(ns, x, predict)
+        elif ns - self._last_real_ns > self._gap_ns:     # a pause: the reference rested
+            self._insert_rest(ns, out, predict)
+        if self._stale:
+            self._stale = False
+            self._event(out, 'stream_resumed', 'reference stream resumed')
+        if not merge or ns > self._last_real_ns:
+            if self._last_real_ns and ns > self._last_real_ns:
+                self._gap_ns = max(self._gap0_ns, 2 * min(ns - self._last_real_ns,
+                                                          int(STALE_MAX_INTERVAL * 1e9)))
+            self._rest_k = 0
+        self._last_real_ns, self._last_real_x = ns, x
+        c['samples_accepted'] += 1
+        out.accepted = True
+        self._feed(ns, x, True, out, predict)
+
+    def _start(self, ns: int, x: float, predict: bool) -> None:
+        if self._base is None:
+            self._base = ns
+        t = (ns - self._base) * 1e-9
+        comp = self._comp
+        d = 0.0
+        if comp is not None:
+            try:
+                comp.reset(x, t)
+                d = comp.evaluate(t)      # the rest correction (static wind-up)
+            except Exception as exc:  # noqa: BLE001 - a compensator bug must not stop us
+                self._compensation_failed(exc, Output())
+        self._delta = d
+        self._held_ref = x
+        self._held = x + d if self.apply_compensation else x
+        if self.sim is not None:
+            self.sim.reset(self._held, t)
+            self._drive_t = t
+        self._started = True
+        self._last_ns = ns
+        if not self._mode:
+            self._mode = 'stamped' if predict else 'command'
+
+    def _insert_rest(self, until_ns: int | None, out: Output, predict: bool) -> None:
+        """Rest samples (the last value) at last + G + k period, k < K, before
+        ``until_ns`` (None: all), as the module doc says."""
+        base = self._last_real_ns + self._gap_ns
+        x = self._last_real_x
+        while self._rest_k < self._rest_count:
+            r = base + self._rest_k * self._period_ns
+            if until_ns is not None and r >= until_ns:
+                break
+            self._rest_k += 1
+            if r <= self._last_ns:
+                continue
+            self.counters['rest_samples'] += 1
+            self._feed(r, x, False, out, predict)
+
+    def _feed(self, ns: int, x: float, real: bool, out: Output, predict: bool) -> None:
+        """One sample into the compensator and (unless the compensation is applied) the
+        simulator; release the corrections that became ready."""
+        t = (ns - self._base) * 1e-9
+        comp = self._comp
+        if comp is not None:
+            try:
+                comp.add_sample(t, x)
+            except Exception as exc:  # noqa: BLE001
+                self._compensation_failed(exc, out)
+            p = self._pending
+            if p and p[-1][0] == ns:             # a merge: the same time, a new value
+                p[-1] = (ns, x, p[-1][2] or real)
+            else:
+                p.append((ns, x, real))
+        self._last_ns = ns
+        if comp is None or not self.apply_compensation:
+            self._drive(ns, t, x, x, out, predict)
+        if comp is not None:
+            self._release(ns, out, predict)
+            try:
+                comp.trim((self._pending[0][0] - self._base) * 1e-9 if self._pending else t)
+            except Exception as exc:  # noqa: BLE001  # pragma: no cover
+                self._compensation_failed(exc, out)
+
+    def _release(self, newest_ns: int | None, out: Output, predict: bool) -> None:
+        """Corrections whose preview has arrived (all with ``newest_ns`` None)."""
+        p = self._pending
+        comp = self._comp
+        if comp is None:
+            return
+        P = self.preview_ns
+        while p and (newest_ns is None or p[0][0] + P <= newest_ns):
+            ns, x, real = p.popleft()
+            t = (ns - self._base) * 1e-9
+            try:
+                d = float(comp.evaluate(t))
+                if not math.isfinite(d):
+                    raise ValueError(f'non-finite correction {d!r}')
+            except Exception as exc:  # noqa: BLE001
+                self._compensation_failed(exc, out)
+                d = self._delta
+            self._delta = d
+            if real:
+                out.corrections.append(Correction(ns, x, d))
+                self.counters['corrections'] += 1
+            if self.apply_compensation:
+                self._drive(ns, t, x + d, x, out, predict)
+
+    def _compensation_failed(self, exc: Exception, out: Output) -> None:
+        self.counters['compensation_errors'] += 1
+        self._event(out, 'compensation_error', f'feed-forward failed ({type(exc).__name__}: '
+                    f'{exc}); keeping the last correction {self._delta:.3g} rad')
+
+    # ---- internals: the simulator ------------------------------------------------------
+    def _drive(self, ns: int, t: float, cmd: float, ref: float, out: Output,
+               predict: bool) -> None:
+        """Advance the simulator to ``t`` with the command sample ``cmd``."""
+        sim = self.sim
+        self._held, self._held_ref = cmd, ref
+        if sim is None:
+            return
+        if t < self._drive_t:           # already integrated past it: applies from there
+            self.counters['late_for_simulation'] += 1
+            t = self._drive_t
+        self._catch_up(t, out)
+        try:
+            if sim.interpolation == 'hold':   # the grid point at or after t takes cmd
+                self.counters['steps'] += sim.advance_to(t - HOLD_EPS, None)
+            self.counters['steps'] += sim.advance_to(t, cmd)
+        except (SimulationError, ValueError) as exc:
+            self._simulation_failed(exc, t, out)
+        self._drive_t = max(self._drive_t, t)
+        if predict:
+            out.predictions.append(self._prediction(ns, False))
+
+    def _hold_to(self, ns: int, out: Output) -> None:
+        """Hold the last command up to ``ns`` (not past a sample whose applied
+        correction is still pending) and predict there."""
+        sim = self.sim
+        if sim is None or not self._started:
+            return
+        if self.apply_compensation and self._pending:
+            ns = min(ns, self._pending[0][0])
+        t = (ns - self._base) * 1e-9
+        if t > self._drive_t:
+            self._catch_up(t, out)
+            try:
+                self.counters['steps'] += sim.advance_to(t, self._held)
+            except (SimulationError, ValueError) as exc:
+                self._simulation_failed(exc, t, out)
+            self._drive_t = t
+        out.predictions.append(self._prediction(ns, True))
+
+    def _catch_up(self, t: float, out: Output) -> None:
+        sim = self.sim
+        behind = t - sim.t
+        cap = self._max_catch_up
+        if behind > cap:
+            sim.resync(t - cap)
+            c = self.counters
+            c['overruns'] += 1
+            c['dropped_time_ns'] += int(round((behind - cap) * 1e9))
+            self._event(out, 'overrun', f'{behind:.4g} s behind: integrated the last {cap:g} s '
+                        '(node.max_catch_up) and skipped the rest')
+
+    def _simulation_failed(self, exc: Exception, t: float, out: Output) -> None:
+        self.counters['simulation_errors'] += 1
+        sim = self.sim
+        self._event(out, 'simulation_error', f'simulation error: {exc}; keeping the last good '
+                    f'state (t = {sim.t:.6f} s) and continuing from t = {t:.6f} s')
+        sim.resync(t)
+
+    def _go_stale(self, now_ns: int, out: Output) -> None:
+        if not self._stale:
+            self._stale = True
+            self.counters['stale_events'] += 1
+            self._event(out, 'stream_stale', 'no reference sample for '
+                        f'{(now_ns - self._last_real_ns) * 1e-9:.4g} s: the reference rests '
+                        'at its last value; holding the prediction')
+        self._insert_rest(now_ns + 1, out, predict=False)
+        if self._rest_k >= self._rest_count:
+            self._release(None, out, predict=False)
+
+    def _prediction(self, ns: int, held: bool) -> Prediction:
+        sim = self.sim
+        st = sim.state
+        u, v = st.theta, st.omega
+        th1 = st.theta1
+        ref = self._held_ref if self.apply_compensation else th1
+        self.counters['predictions'] += 1
+        th2, th3, th4 = float(u[0]), float(u[1]), float(u[2])
+        return Prediction(ns, th1, st.theta1_dot, (th2, th3, th4),
+                          (float(v[0]), float(v[1]), float(v[2])),
+                          tuple(sim.joint_torques().tolist()), ref,
+                          th4 - ref * self._ratio, th2 - th1, held)

@@ -1,0 +1,694 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Records of a drive: commanded and measured angles from CSV files and rosbag2 bags.
+
+One reader for every consumer (``simulate --csv/--bag``, identification): a
+:class:`Record` holds the command theta1 and the measured theta2..theta4 [rad] on one time
+base t [s] relative to ``t0_ns``, the source clock's reading at t = 0 (an absolute epoch
+stamp when the source had one).  :func:`write_bag` writes a prediction as a rosbag2 bag
+with the node's topics and message types.  Bags are read and written with the ``rosbags``
+library: no ROS installation is needed and rclpy is never imported.
+
+Formats (columns, units, topics, types): docs/data-formats.md.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ['Record', 'RecordError', 'read_csv', 'read_bag', 'read_record', 'write_bag',
+           'BagStream', 'prediction_streams', 'write_streams', 'bag_topics',
+           'ANGLE_UNITS', 'TIME_UNITS', 'DEFAULT_COMMAND_TOPICS',
+           'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE', 'FLOAT64', 'JOINT_STATE']
+
+#: angle units accepted in a CSV header, factor to rad
+ANGLE_UNITS: dict[str, float] = {'rad': 1.0, 'mrad': 1e-3, 'urad': 1e-6, 'µrad': 1e-6,
+                                 'deg': math.pi / 180.0}
+#: time units accepted in a CSV header, factor to s (exact decimals)
+TIME_UNITS: dict[str, Decimal] = {'s': Decimal(1), 'ms': Decimal('1e-3'),
+                                  'us': Decimal('1e-6'), 'µs': Decimal('1e-6'),
+                                  'ns': Decimal('1e-9')}
+TIME_NAMES = ('t', 'time', '__time')            # __time: PlotJuggler's CSV export
+ANGLE_NAMES = ('theta1', 'theta2', 'theta3', 'theta4')
+MEASURED_NAMES = ('theta2', 'theta3', 'theta4')
+#: a start later than this (1973-03-03) is an absolute epoch stamp
+EPOCH_MIN_NS = 10 ** 17
+#: a unitless time column starting above this many "seconds" (year 5138) is refused:
+#: it is a stamp in ms/us/ns whose unit the header must name
+PLAUSIBLE_SECONDS = 1e11
+
+DEFAULT_COMMAND_TOPICS = ('worm_angle_reference', 'worm_angle_command')
+DEFAULT_MEASURED_TOPICS = ('measured_joint_states', 'joint_states')
+NODE_NAMESPACE = 'worm_gear_sim'                # the node's name: its ~/ topics live here
+FLOAT64 = 'std_msgs/msg/Float64'
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+BAG_VERSION = 8                                 # rosbag2 format read by Humble..Kilted
+
+
+class RecordError(ValueError):
+    """A record that cannot be read as asked: one line naming the cause, the file and the
+    row/column or topic (the CLI reports it with exit status 2)."""
+
+
+@dataclass
+class Record:
+    """Command and measurements of one run on one time base.
+
+    ``t`` [s] is relative to ``t0_ns`` (the source clock at t = 0; 0 when the source times
+    started at 0) and strictly increasing; ``theta1`` [rad] is the command at ``t``;
+    ``measured`` maps a subset of ``theta2``, ``theta3``, ``theta4`` to angles [rad] at
+    ``t``.  When the command came as a separate stream (a bag), ``command_stamps_ns``
+    (absolute, int64) and ``command_values`` [rad] hold its raw samples in arrival order,
+    invalid ones included, as a live node would have received them; ``t``/``theta1`` then
+    hold the valid samples sorted by stamp (or the command interpolated at the measurement
+    stamps when a measured topic was read).  ``source`` says where everything came from.
+    """
+
+    name: str
+    t: np.ndarray
+    theta1: np.ndarray
+    measured: dict[str, np.ndarray] = field(default_factory=dict)
+    t0_ns: int = 0
+    command_stamps_ns: np.ndarray | None = None
+    command_values: np.ndarray | None = None
+    source: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def is_epoch(self) -> bool:
+        """True if ``t0_ns`` is an absolute (Unix epoch) time."""
+        return self.t0_ns >= EPOCH_MIN_NS
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1]) if self.t.size else 0.0
+
+    def command_samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """The valid command samples sorted by time: (t [s] relative to t0_ns, theta1)."""
+        if self.command_stamps_ns is None:
+            return self.t, self.theta1
+        return _valid_sorted(self.command_stamps_ns, self.command_values, self.t0_ns)[:2]
+
+    def command_stream(self) -> tuple[np.ndarray, np.ndarray]:
+        """The command as received: (absolute stamps [ns] int64, values [rad]) in arrival
+        order (a CSV's rows when the command did not come separately)."""
+        if self.command_stamps_ns is not None:
+            return self.command_stamps_ns, self.command_values
+        return self.t0_ns + np.round(self.t * 1e9).astype(np.int64), self.theta1
+
+    def describe(self) -> str:
+        """One line: samples, span, measured outputs, epoch."""
+        meas = ', '.join(self.measured) or 'none'
+        start = (f'; t = 0 at {iso_time(self.t0_ns)}' if self.is_epoch else
+                 f'; times shifted by -{self.t0_ns * 1e-9:.9g} s' if self.t0_ns else '')
+        return (f'{self.name}: {self.t.size} samples over {self.duration:.6g} s, measured: '
+                f'{meas}{start}')
+
+
+def iso_time(ns: int) -> str:
+    """An epoch stamp [ns] as ISO 8601 UTC with nanoseconds."""
+    sec, frac = divmod(int(ns), 10 ** 9)
+    return datetime.fromtimestamp(sec, UTC).strftime('%Y-%m-%dT%H:%M:%S') + \
+        f'.{frac:09d}Z'
+
+
+# ---- CSV ---------------------------------------------------------------------------------
+_HEADER_RE = re.compile(r'^\s*(?P<name>[^\[\(]*?)\s*(?:[\[\(](?P<unit>[^\]\)]*)[\]\)])?\s*$')
+
+
+def _split_header(field_text: str) -> tuple[str, str]:
+    """'theta1 [deg]' -> ('theta1', 'deg'); 't(s)' -> ('t', 's'); 'theta2' -> ('theta2', '')."""
+    text = field_text.strip().strip('"\'')
+    m = _HEADER_RE.match(text)
+    if not m:
+        return text, ''
+    return m.group('name').strip(), (m.group('unit') or '').strip()
+
+
+def read_csv(path: str | Path, *, columns: Mapping[str, str] | None = None,
+             name: str | None = None, min_samples: int = 2,
+             require_measured: bool = False) -> Record:
+    """Read a CSV record whose header names its columns.
+
+    Required: a time column ``t`` (also ``time`` or PlotJuggler's ``__time``) and
+    ``theta1``; optional ``theta2``, ``theta3``, ``theta4``.  A unit in brackets or
+    parentheses after the name is converted (time: s, ms, us, ns; angles: rad, mrad, urad,
+    deg); without one, SI (s, rad) is assumed.  ``columns`` maps a role to a header name
+    (``{'theta1': '/worm_angle_command/data'}``).  Other columns are ignored and listed in
+    ``source['ignored_columns']``.  Lines starting with '#' are comments.  Times become
+    relative to the first sample, read as exact decimals (epoch stamps keep their
+    nanoseconds); ``t0_ns`` is the first time.  Every problem raises :class:`RecordError`
+    naming the line and column.
+    """
+    p = Path(path)
+    where = str(p)
+    if not p.exists():
+        raise RecordError(f'{where}: file not found')
+    if p.is_dir():
+        raise RecordError(f'{where}: is a directory (a rosbag2 bag? use --bag)')
+    try:
+        text = p.read_text(encoding='utf-8-sig')
+    except UnicodeDecodeError:
+        raise RecordError(f'{where}: not a text CSV file') from None
+    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
+             if ln.strip() and not ln.lstrip().startswith('#')]
+    if not lines:
+        raise RecordError(f'{where}: empty (no header, no data)')
+    head_no, head = lines[0]
+    delim = next((d for d in (',', ';', '\t') if d in head), ',')
+    header = next(csv.reader([head], delimiter=delim))
+    if all(_is_number(h) for h in header):
+        raise RecordError(f'{where}: line {head_no}: no header line; the first line must '
+                          "name the columns, e.g. 't [s],theta1 [rad]'")
+    fields = [_split_header(h) for h in header]
+    roles = _assign_roles(fields, header, columns or {}, where)
+    units, scale = {}, {}
+    for role, col in roles.items():
+        unit = fields[col][1]
+        if role == 't':
+            unit = unit or 's'
+            if unit not in TIME_UNITS:
+                raise RecordError(f'{where}: column {header[col].strip()!r}: unknown time unit '
+                                  f'{unit!r} (use one of {", ".join(TIME_UNITS)})')
+        else:
+            unit = unit or 'rad'
+            if unit not in ANGLE_UNITS:
+                raise RecordError(f'{where}: column {header[col].strip()!r}: unknown angle '
+                                  f'unit {unit!r} (use one of {", ".join(ANGLE_UNITS)})')
+            scale[role] = ANGLE_UNITS[unit]
+        units[role] = unit
+    n_fields = len(header)
+    times: list[Decimal] = []
+    values: dict[str, list[float]] = {r: [] for r in roles if r != 't'}
+    t_col = roles['t']
+    prev: Decimal | None = None
+    for line_no, ln in lines[1:]:
+        row = next(csv.reader([ln], delimiter=delim))
+        if len(row) == n_fields + 1 and not row[-1].strip():
+            row = row[:-1]                        # trailing delimiter
+        if len(row) != n_fields:
+            raise RecordError(f'{where}: line {line_no}: {len(row)} fields, the header has '
+                              f'{n_fields}')
+        cell = row[t_col].strip()
+        try:
+            tv = Decimal(cell)
+        except InvalidOperation:
+            tv = Decimal('NaN')
+        if not tv.is_finite():
+            raise RecordError(f'{where}: line {line_no}, column {header[t_col].strip()!r}: '
+                              f'{cell!r} is not a finite time')
+        if prev is not None and tv <= prev:
+            what = 'repeats the previous time (duplicated sample)' if tv == prev else \
+                f'goes backwards (after {prev})'
+            raise RecordError(f'{where}: line {line_no}, column {header[t_col].strip()!r}: '
+                              f'time {cell} {what}; times must increase strictly')
+        prev = tv
+        times.append(tv)
+        for role, vals in values.items():
+            col = roles[role]
+            cell = row[col].strip()
+            try:
+                v = float(cell)
+            except ValueError:
+                what = 'empty' if not cell else f'{cell!r} is not a number'
+                raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
+                                  f'{what}') from None
+            if not math.isfinite(v):
+                raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
+                                  f'{cell} is not a finite angle')
+            vals.append(v * scale[role])
+    if len(times) < min_samples:
+        raise RecordError(f'{where}: {len(times)} data row(s); a record needs at least '
+                          f'{min_samples} samples')
+    sc = TIME_UNITS[units['t']]
+    first = times[0] * sc                                   # seconds, exact
+    if not fields[t_col][1] and abs(first) > PLAUSIBLE_SECONDS:
+        raise RecordError(f'{where}: column {header[t_col].strip()!r}: first time {times[0]} '
+                          'is not a plausible time in seconds; name its unit in the header, '
+                          "e.g. 't [ns]' or 't [ms]'")
+    t = np.array([float(tv * sc - first) for tv in times])
+    t0_ns = int((first * 10 ** 9).to_integral_value())
+    measured = {r: np.asarray(values[r]) for r in MEASURED_NAMES if r in values}
+    if require_measured and not measured:
+        raise RecordError(f'{where}: no measured column (theta2, theta3 or theta4) in the '
+                          f'header {", ".join(h.strip() for h in header)}')
+    used = set(roles.values())
+    src = {'kind': 'csv', 'path': str(p), 'units': units,
+           'columns': {r: header[c].strip() for r, c in roles.items()},
+           'ignored_columns': [header[i].strip() for i in range(n_fields) if i not in used]}
+    return Record(name=name or p.stem, t=t, theta1=np.asarray(values['theta1']),
+                  measured=measured, t0_ns=t0_ns, source=src)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _assign_roles(fields: list[tuple[str, str]], header: list[str],
+                  columns: Mapping[str, str], where: str) -> dict[str, int]:
+    """Column index of each role (t, theta1..theta4) by header name."""
+    known = ('t',) + ANGLE_NAMES
+    for role in columns:
+        if role not in known:
+            raise RecordError(f'column mapping {role!r}: unknown role (one of '
+                              f'{", ".join(known)})')
+    names = [f[0] for f in fields]
+    roles: dict[str, int] = {}
+    for role in known:
+        if role in columns:
+            want = columns[role].strip()
+            hits = [i for i, h in enumerate(header) if h.strip() == want or names[i] == want]
+            if not hits:
+                raise RecordError(f'{where}: no column {want!r} (mapped to {role}) in the '
+                                  f'header {", ".join(h.strip() for h in header)}'
+                                  + _did_you_mean(want, names))
+        else:
+            aliases = TIME_NAMES if role == 't' else (role,)
+            hits = [i for i, n in enumerate(names) if n in aliases
+                    and not any(names[i] == columns[r] for r in columns)]
+        if len(hits) > 1:
+            cols = ', '.join(repr(header[i].strip()) for i in hits)
+            raise RecordError(f'{where}: columns {cols} all give {role}: ambiguous, keep one')
+        if hits:
+            roles[role] = hits[0]
+    for role in ('t', 'theta1'):
+        if role not in roles:
+            what = 'time' if role == 't' else 'commanded worm angle'
+            raise RecordError(f'{where}: no column {role!r} ({what}) in the header '
+                              f'{", ".join(h.strip() for h in header)}'
+                              + _did_you_mean(role, names, TIME_NAMES if role == 't' else ())
+                              + '; name it in the header or map it (--column ROLE=NAME)')
+    return roles
+
+
+def _did_you_mean(name: str, candidates: Sequence[str], aliases: Sequence[str] = ()) -> str:
+    for n in (name, *aliases):
+        close = difflib.get_close_matches(n, list(candidates), n=1, cutoff=0.5)
+        if close:
+            return f' (did you mean {close[0]!r}?)'
+    return ''
+
+
+# ---- rosbag2 -----------------------------------------------------------------------------
+def _typestore() -> Any:
+    from rosbags.typesys import Stores, get_typestore
+    return get_typestore(Stores.ROS2_JAZZY)   # Float64/JointState are the same in Kilted
+
+
+def _open_reader(path: Path) -> Any:
+    from rosbags.rosbag2 import Reader, ReaderError
+    if not path.exists():
+        raise RecordError(f'{path}: bag not found')
+    try:
+        reader = Reader(path)
+        reader.open()
+    except (ReaderError, OSError, ValueError, KeyError) as exc:
+        raise RecordError(f'{path}: not a readable rosbag2 bag (sqlite3 or mcap): '
+                          f'{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}'
+                          ) from None
+    return reader
+
+
+def bag_topics(path: str | Path) -> dict[str, str]:
+    """{topic: message type} of a bag."""
+    reader = _open_reader(Path(path))
+    try:
+        return {c.topic: c.msgtype for c in reader.connections}
+    finally:
+        reader.close()
+
+
+def _topic_list(topics: Mapping[str, str]) -> str:
+    return ', '.join(f'{k} ({v})' for k, v in sorted(topics.items())) or 'no topics'
+
+
+def _find_topic(topics: Mapping[str, str], wanted: str) -> str | None:
+    """The bag topic named ``wanted`` (relative names match absolute ones and, if unique,
+    a namespaced one: 'joint_states' finds '/arm1/joint_states')."""
+    w = '/' + wanted.strip().lstrip('/')
+    if w in topics:
+        return w
+    if wanted.strip().startswith('/'):
+        return None
+    hits = [t for t in topics if t.endswith(w)]
+    return hits[0] if len(hits) == 1 else None
+
+
+def _resolve_topic(topics: Mapping[str, str], given: str | None, defaults: Sequence[str],
+                   what: str, option: str, where: str, required: bool) -> str | None:
+    names = [given] if given else list(defaults)
+    for n in names:
+        hit = _find_topic(topics, n)
+        if hit:
+            return hit
+    if given or required:
+        said = given or ' or '.join(defaults)
+        raise RecordError(f'{where}: no {what} topic {said} in the bag; it has: '
+                          f'{_topic_list(topics)} (choose one with {option})')
+    return None
+
+
+def _stamp_ns(header: Any) -> int:
+    return int(header.stamp.sec) * 10 ** 9 + int(header.stamp.nanosec)
+
+
+def read_bag(path: str | Path, *, command_topic: str | None = None,
+             joint_states_topic: str | None = None,
+             joint_names: Sequence[str] | None = None, name: str | None = None,
+             require_measured: bool = False, interpolation: str = 'linear',
+             min_samples: int = 2) -> Record:
+    """Read a rosbag2 bag (a directory with metadata.yaml, or a single .db3/.mcap file).
+
+    Command: ``command_topic`` (default: ``worm_angle_reference``, else
+    ``worm_angle_command``), of type std_msgs/Float64 (stamp = the bag's receive time) or
+    sensor_msgs/JointState (the stamped reference: stamp = header.stamp, theta1 =
+    the position of ``joint_names[0]``, or position[0] without names).  Measured:
+    ``joint_states_topic`` (default: ``measured_joint_states``, else ``joint_states``),
+    sensor_msgs/JointState; theta2..theta4 by ``joint_names[1:4]`` (default
+    ``node.joint_names``), stamps from header.stamp (the receive time if every stamp is 0).
+    With measurements, ``t`` is their stamps and ``theta1`` the command interpolated there
+    (``interpolation`` linear or hold); measurements before the first command are dropped
+    (counted in ``source``).  Without, ``t``/``theta1`` are the valid command samples.
+    ``t0_ns`` is the first command stamp.
+    """
+    p = Path(path)
+    where = str(p)
+    if joint_names is None:
+        from .params import Config
+        joint_names = tuple(Config().node.joint_names)
+    joint_names = tuple(joint_names)
+    if len(joint_names) != 4:
+        raise RecordError(f'joint names: need 4 (theta1..theta4), got {list(joint_names)}')
+    if interpolation not in ('linear', 'hold'):
+        raise RecordError(f'interpolation must be linear or hold, got {interpolation!r}')
+    reader = _open_reader(p)
+    try:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        cmd_topic = _resolve_topic(topics, command_topic, DEFAULT_COMMAND_TOPICS, 'command',
+                                   '--command-topic', where, True)
+        assert cmd_topic is not None
+        if topics[cmd_topic] not in (FLOAT64, JOINT_STATE):
+            raise RecordError(f'{where}: command topic {cmd_topic} is {topics[cmd_topic]}; '
+                              f'expected {FLOAT64} or {JOINT_STATE} (the stamped reference)')
+        meas_topic = _resolve_topic(topics, joint_states_topic, DEFAULT_MEASURED_TOPICS,
+                                    'measured JointState', '--joint-states-topic', where,
+                                    require_measured)
+        if meas_topic is not None and topics[meas_topic] != JOINT_STATE:
+            raise RecordError(f'{where}: measured topic {meas_topic} is {topics[meas_topic]}; '
+                              f'expected {JOINT_STATE}')
+        cmd = _read_commands(reader, cmd_topic, topics[cmd_topic], joint_names[0], where)
+        meas = (_read_joint_states(reader, meas_topic, joint_names[1:], where)
+                if meas_topic else None)
+    finally:
+        reader.close()
+    stamps, vals, n_rejected = cmd
+    src: dict[str, Any] = {'kind': 'bag', 'path': str(p), 'command_topic': cmd_topic,
+                           'command_type': topics[cmd_topic],
+                           'command_stamp': 'header.stamp' if topics[cmd_topic] == JOINT_STATE
+                           else 'bag receive time', 'rejected_commands': n_rejected,
+                           'topics': topics}
+    if stamps.size == 0:
+        raise RecordError(f'{where}: no command samples on {cmd_topic}')
+    ok = np.isfinite(vals)
+    if not ok.any():
+        raise RecordError(f'{where}: no finite command sample on {cmd_topic}')
+    t0_ns = int(stamps[ok].min())
+    tc, yc, n_dup = _valid_sorted(stamps, vals, t0_ns)
+    src['non_finite_commands'] = int((~ok).sum())
+    src['duplicate_command_stamps'] = n_dup
+    rec_name = name or p.stem
+    if meas is None:
+        if tc.size < min_samples:
+            raise RecordError(f'{where}: {tc.size} valid command sample(s) on {cmd_topic}; '
+                              f'a record needs at least {min_samples}')
+        return Record(rec_name, tc, yc, {}, t0_ns, stamps, vals, src)
+    m_stamps, m_vals, m_info = meas
+    src.update({'joint_states_topic': meas_topic, **m_info})
+    keep = m_stamps >= t0_ns
+    src['measurements_before_first_command'] = int((~keep).sum())
+    t = (m_stamps[keep] - t0_ns) * 1e-9
+    if t.size < min_samples:
+        raise RecordError(f'{where}: {t.size} measurement(s) on {meas_topic} at or after the '
+                          f'first command; a record needs at least {min_samples}')
+    if interpolation == 'linear':
+        th1 = np.interp(t, tc, yc)
+    else:
+        th1 = yc[np.clip(np.searchsorted(tc, t, side='right') - 1, 0, None)]
+    measured = {k: v[keep] for k, v in m_vals.items()}
+    return Record(rec_name, t, th1, measured, t0_ns, stamps, vals, src)
+
+
+def _valid_sorted(stamps: np.ndarray, vals: np.ndarray, t0_ns: int
+                  ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Finite samples sorted by stamp (stable: of equal stamps the first received is kept),
+    as (t [s] relative to t0_ns, values, number of duplicates dropped)."""
+    ok = np.isfinite(vals)
+    s, v = stamps[ok], vals[ok]
+    order = np.argsort(s, kind='stable')
+    s, v = s[order], v[order]
+    first = np.concatenate(([True], np.diff(s) > 0))
+    return (s[first] - t0_ns) * 1e-9, v[first], int((~first).sum())
+
+
+def _read_commands(reader: Any, topic: str, msgtype: str, worm_joint: str, where: str
+                   ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Raw command samples in bag order: (stamps [ns], values, messages without a value)."""
+    ts = _typestore()
+    conns = [c for c in reader.connections if c.topic == topic]
+    stamps: list[int] = []
+    vals: list[float] = []
+    rejected = 0
+    for conn, log_ns, raw in reader.messages(connections=conns):
+        msg = ts.deserialize_cdr(raw, conn.msgtype)
+        if msgtype == FLOAT64:
+            stamps.append(int(log_ns))
+            vals.append(float(msg.data))
+            continue
+        names = list(msg.name)
+        idx = names.index(worm_joint) if worm_joint in names else (0 if not names else -1)
+        if idx < 0 or idx >= len(msg.position):
+            rejected += 1           # wrong joint name or empty position: the node rejects it
+            continue
+        stamps.append(_stamp_ns(msg.header))
+        vals.append(float(msg.position[idx]))
+    return np.array(stamps, dtype=np.int64), np.array(vals, dtype=float), rejected
+
+
+def _read_joint_states(reader: Any, topic: str, joints: Sequence[str], where: str
+                       ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
+    """Measured theta2..theta4 from a JointState topic, sorted by stamp."""
+    ts = _typestore()
+    conns = [c for c in reader.connections if c.topic == topic]
+    per: dict[str, tuple[list[int], list[float]]] = {j: ([], []) for j in joints}
+    header_ns: list[int] = []
+    log: list[int] = []
+    seen: set[str] = set()
+    malformed = 0
+    for conn, log_ns, raw in reader.messages(connections=conns):
+        msg = ts.deserialize_cdr(raw, conn.msgtype)
+        names = list(msg.name)
+        seen.update(names)
+        if len(msg.position) != len(names):
+            malformed += 1
+            continue
+        stamp = _stamp_ns(msg.header)
+        for j in joints:
+            if j in names:
+                v = float(msg.position[names.index(j)])
+                per[j][0].append(len(header_ns))
+                per[j][1].append(v)
+        header_ns.append(stamp)
+        log.append(int(log_ns))
+    found = [j for j in joints if per[j][0]]
+    if not found:
+        raise RecordError(f'{where}: {topic} has joints {sorted(seen) or "none"}; none of '
+                          f'{", ".join(joints)} (node.joint_names for theta2..theta4; choose '
+                          'them with --joint-names)')
+    h = np.array(header_ns, dtype=np.int64)
+    stamp_kind = 'header.stamp'
+    if np.all(h == 0):
+        h, stamp_kind = np.array(log, dtype=np.int64), 'bag receive time (header stamps 0)'
+    elif np.any(h == 0):
+        raise RecordError(f'{where}: {topic}: {int((h == 0).sum())} of {h.size} messages have '
+                          'a zero header.stamp; cannot place them in time')
+    roles = dict(zip(joints, MEASURED_NAMES))
+    series = {}
+    for j in found:
+        idx = np.array(per[j][0])
+        s, v = h[idx], np.array(per[j][1])
+        bad = ~np.isfinite(v)
+        if bad.any():
+            raise RecordError(f'{where}: {topic}: joint {j} has {int(bad.sum())} non-finite '
+                              'position(s)')
+        series[j] = (s, v)
+    # one grid: the stamps carrying every found joint in the common span (exact in the usual
+    # case of one message per stamp with all joints), sorted; duplicates: first kept
+    grid = np.unique(np.concatenate([s for s, _ in series.values()]))
+    lo = max(s.min() for s, _ in series.values())
+    hi = min(s.max() for s, _ in series.values())
+    grid = grid[(grid >= lo) & (grid <= hi)]
+    out: dict[str, np.ndarray] = {}
+    n_dup = 0
+    for j, (s, v) in series.items():
+        order = np.argsort(s, kind='stable')
+        s, v = s[order], v[order]
+        first = np.concatenate(([True], np.diff(s) > 0))
+        n_dup = max(n_dup, int((~first).sum()))
+        s, v = s[first], v[first]
+        out[roles[j]] = np.interp(grid.astype(float), s.astype(float), v) \
+            if s.size != grid.size or np.any(s != grid) else v
+    info = {'measured_stamp': stamp_kind, 'measured_joints': {roles[j]: j for j in found},
+            'malformed_joint_states': malformed, 'duplicate_measurement_stamps': n_dup}
+    return grid, out, info
+
+
+def read_record(path: str | Path, **kwargs: Any) -> Record:
+    """A CSV file (``*.csv``) or a rosbag2 bag (a directory, ``*.db3`` or ``*.mcap``)."""
+    p = Path(path)
+    if p.is_dir() or p.suffix.lower() in ('.db3', '.mcap', '.yaml'):
+        if p.suffix.lower() == '.yaml':
+            p = p.parent
+        bag_keys = ('command_topic', 'joint_states_topic', 'joint_names', 'name',
+                    'require_measured', 'interpolation', 'min_samples')
+        return read_bag(p, **{k: v for k, v in kwargs.items() if k in bag_keys})
+    csv_keys = ('columns', 'name', 'min_samples', 'require_measured')
+    return read_csv(p, **{k: v for k, v in kwargs.items() if k in csv_keys})
+
+
+# ---- writing -----------------------------------------------------------------------------
+@dataclass
+class BagStream:
+    """One output topic: ``kind`` 'float64' (std_msgs/Float64, the bag time = the stamp) or
+    'joint_state' (sensor_msgs/JointState with header.stamp; ``position`` (n, k) for the
+    ``names``, optional ``velocity``/``effort`` of the same shape)."""
+
+    topic: str
+    stamps_ns: np.ndarray
+    position: np.ndarray
+    kind: str = 'float64'
+    names: tuple[str, ...] = ()
+    velocity: np.ndarray | None = None
+    effort: np.ndarray | None = None
+
+
+def write_streams(path: str | Path, streams: Sequence[BagStream], *,
+                  storage: str = 'sqlite3', overwrite: bool = False) -> Path:
+    """Write the streams as a rosbag2 bag (directory ``path``), messages in time order."""
+    import shutil
+
+    from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+    p = Path(path)
+    plugins = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
+    if storage not in plugins:
+        raise RecordError(f'bag storage must be sqlite3 or mcap, got {storage!r}')
+    if p.exists():
+        if not overwrite:
+            raise RecordError(f'{p}: exists already; choose another output bag or remove it')
+        if not (p / 'metadata.yaml').is_file():
+            raise RecordError(f'{p}: exists and is not a bag; not overwriting it')
+        shutil.rmtree(p)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    ts = _typestore()
+    Float64 = ts.types[FLOAT64]
+    JointState = ts.types[JOINT_STATE]
+    Header = ts.types['std_msgs/msg/Header']
+    Time = ts.types['builtin_interfaces/msg/Time']
+    empty = np.empty(0)
+    events: list[tuple[int, int, int]] = []         # (stamp, stream, row)
+    for k, s in enumerate(streams):
+        st = np.asarray(s.stamps_ns, dtype=np.int64)
+        if st.size and np.any(st < 0):
+            raise RecordError(f'{s.topic}: negative stamps cannot be written to a bag')
+        events.extend((int(x), k, i) for i, x in enumerate(st))
+    events.sort()
+    try:
+        with Writer(p, version=BAG_VERSION, storage_plugin=plugins[storage]) as writer:
+            conns = [writer.add_connection('/' + s.topic.lstrip('/'),
+                                           FLOAT64 if s.kind == 'float64' else JOINT_STATE,
+                                           typestore=ts) for s in streams]
+            for stamp, k, i in events:
+                s = streams[k]
+                if s.kind == 'float64':
+                    msg = Float64(data=float(np.ravel(s.position)[i]))
+                    writer.write(conns[k], stamp, ts.serialize_cdr(msg, FLOAT64))
+                    continue
+                pos = np.atleast_2d(s.position)
+                if pos.shape[0] == 1 and len(s.stamps_ns) != 1:
+                    pos = pos.T
+                sec, nsec = divmod(stamp, 10 ** 9)
+                msg = JointState(
+                    header=Header(stamp=Time(sec=sec, nanosec=nsec), frame_id=''),
+                    name=list(s.names), position=np.ascontiguousarray(pos[i], dtype=float),
+                    velocity=empty if s.velocity is None else
+                    np.ascontiguousarray(np.atleast_2d(s.velocity)[i], dtype=float),
+                    effort=empty if s.effort is None else
+                    np.ascontiguousarray(np.atleast_2d(s.effort)[i], dtype=float))
+                writer.write(conns[k], stamp, ts.serialize_cdr(msg, JOINT_STATE))
+    except WriterError as exc:
+        raise RecordError(f'{p}: cannot write the bag: {exc}') from None
+    return p
+
+
+def prediction_streams(stamps_ns: np.ndarray, position: np.ndarray, *,
+                       joint_names: Sequence[str], velocity: np.ndarray | None = None,
+                       effort: np.ndarray | None = None,
+                       positioning_error: np.ndarray | None = None,
+                       worm_error: np.ndarray | None = None,
+                       feedforward: tuple[np.ndarray, np.ndarray] | None = None,
+                       compensated_command: tuple[np.ndarray, np.ndarray] | None = None,
+                       stamped: bool = False, namespace: str = '') -> list[BagStream]:
+    """The node's output topics for a prediction: ``joint_states`` (theta1..theta4, rates,
+    torques), ``worm_gear_sim/positioning_error``, ``worm_gear_sim/worm_error`` and, when
+    given as (stamps_ns, values), ``worm_gear_sim/feedforward`` and
+    ``worm_gear_sim/compensated_command`` (JointState of the worm input joint).  With
+    ``stamped`` the errors and feed-forward are JointStates of one joint (antenna, worm,
+    worm input) carrying header.stamp instead of Float64.  ``namespace`` prefixes every
+    topic (e.g. 'replay' -> /replay/joint_states)."""
+    names = tuple(joint_names)
+    ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    priv = f'{ns}/{NODE_NAMESPACE}'
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    out = [BagStream(f'{ns}/joint_states', stamps, np.asarray(position), 'joint_state', names,
+                     velocity, effort)]
+
+    def scalar(topic: str, st: np.ndarray, v: np.ndarray, joint: str) -> BagStream:
+        if stamped:
+            return BagStream(topic, st, np.asarray(v).reshape(-1, 1), 'joint_state', (joint,))
+        return BagStream(topic, st, np.asarray(v), 'float64')
+
+    if positioning_error is not None:
+        out.append(scalar(f'{priv}/positioning_error', stamps, positioning_error, names[3]))
+    if worm_error is not None:
+        out.append(scalar(f'{priv}/worm_error', stamps, worm_error, names[1]))
+    if feedforward is not None:
+        out.append(scalar(f'{priv}/feedforward', feedforward[0], feedforward[1], names[0]))
+    if compensated_command is not None:
+        out.append(BagStream(f'{priv}/compensated_command', compensated_command[0],
+                             np.asarray(compensated_command[1]).reshape(-1, 1), 'joint_state',
+                             (names[0],)))
+    return out
+
+
+def write_bag(path: str | Path, stamps_ns: np.ndarray, position: np.ndarray, *,
+              joint_names: Sequence[str], storage: str = 'sqlite3', overwrite: bool = False,
+              **topics: Any) -> Path:
+    """Write a prediction (``position`` (n, 4) theta1..theta4 at ``stamps_ns``, absolute on
+    the recording's clock) with the node's topics as a rosbag2 bag: see
+    :func:`prediction_streams` for the optional topics (velocity, effort, errors,
+    feed-forward, stamped, namespace).  Storage sqlite3 (default) or mcap."""
+    streams = prediction_streams(stamps_ns, position, joint_names=joint_names, **topics)
+    return write_streams(path, streams, storage=storage, overwrite=overwrite)
