@@ -24,7 +24,6 @@ import pytest
 pytest.importorskip('rclpy')
 
 from worm_gear_sim import Config  # noqa: E402
-from worm_gear_sim.compensation import SETTLE_TOLERANCE  # noqa: E402
 from worm_gear_sim.ros.demo_commander import (  # noqa: E402
     LINE_WIDTH,
     MOVE_HEADER,
@@ -35,6 +34,7 @@ from worm_gear_sim.ros.demo_commander import (  # noqa: E402
     format_status,
     pattern_segments,
 )
+from worm_gear_sim.studies.compensation_eval import SETTLE_TOLERANCE  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config' / 'worm_gear_sim.yaml'

@@ -877,7 +877,7 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
                 done(_start_task(problem, list(x0), list(windows), opt.max_nfev,
                                  opt.diff_step, i, opt.method))
         else:
-            from .studies import _dask_client, warm_up
+            from .studies.engine import _dask_client, warm_up
             with _dask_client(opt.client, opt.scheduler, opt.workers) as cl:
                 from distributed import as_completed
                 if len(cl.run(warm_up)) == 0:

@@ -390,13 +390,34 @@ def _suggest(key: str, known: Mapping[str, Any]) -> str:
     return f' (did you mean {close[0]}?)' if close else ''
 
 
-def _coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
-    """Type-check one value against its field's default type and metadata."""
+#: The parameter kinds; a parameter's kind is the type of its default (:func:`value_kind`).
+VALUE_KINDS = ('bool', 'int', 'float', 'str', 'str_list', 'float_list')
+
+
+def value_kind(default: Any) -> str:
+    """The kind of a parameter, from its default: the one typing rule of the YAML loader,
+    ``--set`` parsing (:mod:`worm_gear_sim.config_io`) and the node's ROS parameters."""
     if isinstance(default, bool):
+        return 'bool'
+    if isinstance(default, int):
+        return 'int'
+    if isinstance(default, float):
+        return 'float'
+    if isinstance(default, str):
+        return 'str'
+    if isinstance(default, (tuple, list)):
+        return 'str_list' if default and isinstance(default[0], str) else 'float_list'
+    raise TypeError(f'unsupported parameter default {default!r}')
+
+
+def _coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
+    """Type-check one value against its field's kind (:func:`value_kind`) and metadata."""
+    kind = value_kind(default)
+    if kind == 'bool':
         if not isinstance(value, bool):
             raise ConfigError(key, f'must be true or false, got {value!r}')
         return value
-    if isinstance(default, int):
+    if kind == 'int':
         if isinstance(value, bool) or not isinstance(value, int):
             if isinstance(value, float) and value.is_integer():
                 value = int(value)
@@ -404,25 +425,25 @@ def _coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
                 raise ConfigError(key, f'must be an integer, got {value!r}')
         _check_range(key, float(value), meta)
         return value
-    if isinstance(default, float):
+    if kind == 'float':
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(key, f'must be a number, got {value!r}')
         value = float(value)
         _check_range(key, value, meta)
         return value
-    if isinstance(default, str):
+    if kind == 'str':
         if not isinstance(value, str):
             raise ConfigError(key, f'must be a string, got {value!r}')
         if meta.get('choices') and value not in meta['choices']:
             raise ConfigError(key, f'must be one of {", ".join(meta["choices"])}; got {value!r}')
         return value
-    if isinstance(default, tuple):
+    if kind in ('str_list', 'float_list'):
         if isinstance(value, (str, bytes)) or not hasattr(value, '__iter__'):
             raise ConfigError(key, f'must be a list, got {value!r}')
         value = tuple(value)
         if meta.get('length') is not None and len(value) != meta['length']:
             raise ConfigError(key, f'must have {meta["length"]} entries, got {len(value)}')
-        if default and isinstance(default[0], str):
+        if kind == 'str_list':
             if not all(isinstance(v, str) and v for v in value):
                 raise ConfigError(key, 'entries must be non-empty strings')
             if len(set(value)) != len(value):

@@ -24,8 +24,8 @@ seconds; ``slew``, a radar slew at ``--slew-rate`` with a sharp reversal every
 
 Output: on a terminal ONE status line (at most 80 columns) refreshed 10 times a second;
 otherwise one line per completed move: peak error, ringing once the applied command rests,
-settling to 10 urad (:func:`worm_gear_sim.compensation.move_metrics`, the rules of the
-offline evaluation).  At the end, a summary and the same moves run offline through the core
+settling to 10 urad (:func:`worm_gear_sim.studies.compensation_eval.move_metrics`, the rules
+of the offline evaluation).  At the end, a summary and the same moves run offline through the core
 (``run_scenario``, with and without the feed-forward), so the live figures stand next to
 what the model says with and without compensation.  Exit code 0 after ``--duration``
 seconds of streaming, 1 if the node never answers.
@@ -56,10 +56,10 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..compensation import SETTLE_TOLERANCE, Scenario, move_metrics, run_scenario
 from ..modal import modes
 from ..params import Config, derive, load_config
 from ..profiles import TrapezoidalProfile
+from ..studies.compensation_eval import SETTLE_TOLERANCE, Scenario, move_metrics, run_scenario
 
 __all__ = ['DemoCommander', 'MOVE_HEADER', 'MoveSummary', 'MoveTracker', 'command_pattern',
            'format_move', 'format_status', 'main', 'offline_moves', 'pattern_segments']
@@ -136,8 +136,8 @@ class MoveTracker:
     sample past its end arrives; a move with a gap longer than ``max_gap`` (or not covered
     to within ``max_gap`` of its ends) is dropped and counted in ``incomplete``.
 
-    The metrics are :func:`~worm_gear_sim.compensation.move_metrics`: ``ringing`` is its
-    ``residual_peak``, measured once the applied command rests.  Without command samples
+    The metrics are :func:`~worm_gear_sim.studies.compensation_eval.move_metrics`: ``ringing``
+    is its ``residual_peak``, measured once the applied command rests.  Without command samples
     (``add_command``) the command is the reference, which rests when its motion ends; with
     a feed-forward applied, the command keeps moving for the correction's span."""
 
