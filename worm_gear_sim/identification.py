@@ -519,7 +519,7 @@ STRATEGIES: dict[str, dict[str, Any]] = {
     'windows': dict(frequency_start=False, growing_windows=True, n_starts=1),
     'frequency+windows': dict(frequency_start=True, growing_windows=True, n_starts=1),
     'multistart': dict(frequency_start=False, growing_windows=False, n_starts=8),
-    'robust': dict(frequency_start=True, growing_windows=True, n_starts=8),
+    'robust': dict(frequency_start=True, growing_windows=True, n_starts=4),
 }
 
 

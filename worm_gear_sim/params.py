@@ -287,6 +287,13 @@ class NodeSettings:
                                     'to the command')
     diagnostic_period: float = _f(1.0, 'Period of /diagnostics', 's', 0.01, 60.0,
                                   read_only=True)
+    residual_window: float = _f(1.0, 'Live model check: window of the RMS of measured - '
+                                'predicted (measured_joint_states)', 's', 0.0, 3600.0,
+                                lo_open=True, read_only=True)
+    residual_warn_rms: tuple = _f([1e-3, 1e-4, 1e-4], 'Live model check: /diagnostics turns '
+                                  'WARN when the windowed residual RMS of theta2, theta3 or '
+                                  'theta4 exceeds its entry', 'rad', 0.0, 1e3, lo_open=True,
+                                  length=3)
 
 
 @dataclass(frozen=True)
