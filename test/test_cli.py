@@ -159,7 +159,7 @@ def test_modes_outputs(tmp_path, capsys):
     assert status == 0
     header, rows = read_csv(tmp_path / 'm.csv')
     f = [float(r[header.index('undamped_hz')]) for r in rows]
-    assert f == pytest.approx([94.5, 1561, 8588], rel=0.01)   # MODEL-NOTES reference
+    assert f == pytest.approx([94.5, 1561, 8588], rel=0.01)   # docs/model-notes.md reference
     doc = json.loads((tmp_path / 'm.json').read_text())
     assert len(doc['modes']) == 3 and np.shape(doc['K']) == (3, 3)
     assert_png(tmp_path / 'm.png')

@@ -3,7 +3,7 @@
 """Is a parameter set *usable*: the rules behind :func:`worm_gear_sim.params.check_usable`.
 
 Every field of a :class:`~worm_gear_sim.params.Config` can lie inside its declared range while
-the set as a whole cannot be simulated.  The causes found (issue 10) are structural, so they are
+the set as a whole cannot be simulated.  The causes found are structural, so they are
 written as rules on the derived quantities, each naming the parameters that set them:
 
 1. **Mesh stiffness over a cycle** (Eqs. 16-17).  Each tooth stiffness varies by a factor
@@ -85,7 +85,8 @@ def check_usable(cfg: Config, changed: Iterable[str] | None = None) -> None:
         return
     keys = tuple(changed) if changed is not None else _differs_from_defaults(cfg)
     try:
-        _check(cfg, keys)
+        with np.errstate(all='ignore'):     # thread-local: a bad set fails below, silently
+            _check(cfg, keys)
     except ConfigError:
         raise
     except (ArithmeticError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
@@ -126,6 +127,7 @@ def _check(cfg: Config, changed: Sequence[str]) -> None:
         P_GEAR_B,
         P_KG,
         P_KW,
+        P_LIN_COMPLIANCE,
         P_LW,
         P_MESH_LINEAR,
         P_RG,
@@ -153,6 +155,10 @@ def _check(cfg: Config, changed: Sequence[str]) -> None:
         # theta2 = 2 (phase - phase_offset) with theta3 = 0 gives that mesh phase
         states.append((2.0 * (phase - cfg.mesh.phase_offset), 0.0))
     linear = p[P_MESH_LINEAR] != 0.0
+    if not math.isfinite(p[P_LIN_COMPLIANCE]):
+        raise _blame(cfg, changed, _TEETH['worm'][2:] + _TEETH['gear'][2:4],
+                     'the linear tooth compliance 1/c_w k_w + 1/c_g k_g (Eq. 7) overflows: '
+                     'a tooth stiffness this small is no mesh')
     for side, lin_idx, b_idx in (('worm', P_CWKW_LIN, P_WORM_B), ('gear', P_CGKG_LIN,
                                                                    P_GEAR_B)):
         vals = [tooth_stiffness(p, th2, th3)[0 if side == 'worm' else 1]

@@ -130,7 +130,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         import numpy as np
         traj = simulate(cfg, profile, t_end, record_every=stride)
         traj.to_csv(out, header_comment=header(args) + note)
-        np.savez(args.npz, **traj.columns())
+        np.savez(args.npz, allow_pickle=False, **traj.columns())
     else:                       # streamed: bounded memory; traj is a thinned copy
         traj = simulate_to_csv(cfg, out, profile, t_end, record_every=stride,
                                header_comment=header(args) + note)
