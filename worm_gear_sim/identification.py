@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Fit model parameters to measured records (issue 9); the live model check is in
+"""Fit model parameters to measured records; the live model check is in
 :mod:`worm_gear_sim.model_check`.
 
 Pure core (no rclpy, no plotting).  A *record* is one measured run of the drive: sample times

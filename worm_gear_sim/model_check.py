@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Live model check (issue 9.2): does the model still match the drive?
+"""Live model check: does the model still match the drive?
 
 Pure core (no rclpy); the node feeds it.  Every tick the node pushes the predicted angles
 (theta2, theta3, theta4) at the simulated time into a :class:`PredictionHistory`; every measured

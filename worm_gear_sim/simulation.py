@@ -329,11 +329,25 @@ class Simulator:
         """Shaft torques for JointState.effort [N m]: motor on worm shaft K_w (theta1 -
         theta2), mesh torque on the worm r_w F_X, on the gear r_g F_Y, gear shaft
         K_g (theta3 - theta4)."""
-        f = self.forces()
-        rw, rg = self.config.geometry.worm_pitch_radius, self.config.geometry.gear_pitch_radius
-        d = self.derived
-        return np.array([d.K_w * (self._theta1 - self._u[0]), rw * f['F_X'], rg * f['F_Y'],
-                         d.K_g * (self._u[1] - self._u[2])])
+        return np.array(self.joint_state()[2])
+
+    def joint_state(self) -> tuple[tuple, tuple, tuple]:
+        """The JointState fields at the current state, as tuples of floats: position
+        (theta1..theta4 [rad]), velocity (theta1_dot, omega2..omega4 [rad/s]) and effort
+        (:meth:`joint_torques` [N m]); one compiled force evaluation into reused buffers
+        (the real-time path publishes this for every sample)."""
+        buf = self.__dict__.get('_force_buf')
+        if buf is None:
+            buf = self._force_buf = (np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)),
+                                     np.zeros(N_AUX))
+        u, v, th1 = self._u, self._v, self._theta1
+        generalized_forces(self.p, u, v, th1, buf[0], buf[1], buf[2], buf[3])
+        aux = buf[3]
+        g, d = self.config.geometry, self.derived
+        u2, u3, u4 = float(u[0]), float(u[1]), float(u[2])
+        return ((th1, u2, u3, u4), (self._theta1_dot, float(v[0]), float(v[1]), float(v[2])),
+                (d.K_w * (th1 - u2), g.worm_pitch_radius * float(aux[AUX_FX]),
+                 g.gear_pitch_radius * float(aux[AUX_FY]), d.K_g * (u3 - u4)))
 
     def energy(self) -> float:
         return float(mechanical_energy(self.p, self._u, self._v, self._theta1))

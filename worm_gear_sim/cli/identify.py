@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""``identify`` command: fit parameters of the model to measured records (issue 9).
+"""``identify`` command: fit parameters of the model to measured records.
 
     worm-gear-sim identify DATA [DATA ...] --fit KEY[,KEY...] -o FITTED.yaml
                            [--config FILE] [--set KEY=VALUE] [--validate DATA [DATA ...]]

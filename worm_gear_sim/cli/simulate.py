@@ -52,7 +52,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     files = [out]
     if args.npz:
         import numpy as np
-        np.savez(args.npz, **traj.columns())
+        np.savez(args.npz, allow_pickle=False, **traj.columns())
         files.append(Path(args.npz))
     if not args.no_plot:
         png = Path(args.plot) if args.plot else out.with_suffix('.png')

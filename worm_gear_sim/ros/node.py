@@ -66,7 +66,7 @@ from .params_bridge import (
     to_core_value,
 )
 
-try:  # issue 5 builds the compensator in parallel; the node must work (and say so) without it
+try:  # the node must work (and say so) without the compensator
     from ..compensation import Compensator
     COMPENSATION_IMPORT_ERROR: str = ''
 except ImportError as _exc:  # pragma: no cover - depends on the checkout

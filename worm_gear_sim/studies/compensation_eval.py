@@ -255,7 +255,7 @@ def not_worse(metric: str, off: float, on: float, tolerance: float = 0.05) -> bo
 def detuning_cases() -> list[tuple[str, dict]]:
     """The plants of the robustness study: nominal, each group +-20 %, and the two corners
     that move the antenna mode most (soft teeth + heavy flywheel, stiff + light)."""
-    cases = [('nominal', {})]
+    cases: list[tuple[str, dict]] = [('nominal', {})]
     for g in DETUNINGS:
         for f in (0.8, 1.2):
             cases.append((f'{g} {f - 1:+.0%}', {g: f}))
