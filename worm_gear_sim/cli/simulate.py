@@ -95,7 +95,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.bag:
         return _simulate_bag(args)
     from ..plotting import plot_trajectory
-    from ..profiles import SampledProfile, make_profile
+    from ..profiles import Profile, SampledProfile, make_profile
     from ..records import read_csv
     from ..simulation import simulate, simulate_to_csv
     from ..studies import equilibrium, move_end_time, oscillation_metrics
@@ -107,6 +107,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise CliError(f'--output must end in .csv, got {out}')
     stride, rate_text = _stride(args, cfg.integrator.time_step)
     note = ''
+    profile: Profile
     if cfg.input.profile == 'csv':
         rec = read_csv(cfg.input.csv_path, columns=_columns(args.column))
         profile = SampledProfile(rec.t, rec.theta1, source=cfg.input.csv_path)
@@ -183,7 +184,7 @@ def _simulate_bag(args: argparse.Namespace) -> int:
     src = rec.source
     say(args, f'input: {rec.describe()}')
     say(args, f'command: {src["command_topic"]} ({src["command_type"]}, time = '
-        f'{src["command_stamp"]}), {rec.command_values.size} samples')
+        f'{src["command_stamp"]}), {rec.command_stream()[1].size} samples')
     t0 = time.perf_counter()
     rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time)
     wall = time.perf_counter() - t0
