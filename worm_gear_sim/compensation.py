@@ -396,7 +396,7 @@ class Compensator:
         self._n_deriv = n_deriv
         self._inv = _Inverse(config)
         self._span = self.filter.lag_span + self.preview
-        self._out_per_in = 1.0 / self._inv.ratio
+        self._output_per_input = 1.0 / self._inv.ratio
 
     # ---- streaming -------------------------------------------------------------------------
     def reset(self, theta1_ref: float, t: float) -> None:
@@ -451,7 +451,7 @@ class Compensator:
         """The correction for time ``te`` from the history so far (the reference at ``te``
         becomes :attr:`reference`); any ``te`` not before the last :meth:`trim`."""
         d, ref = compensation_kernel(float(te), self._tau, self._W, self._ht, self._hx,
-                                     self._lo, self._hi, self._inv.p, self._out_per_in,
+                                     self._lo, self._hi, self._inv.p, self._output_per_input,
                                      self.quasi_static, self.dynamic, self.enabled,
                                      self._derivs)
         self._reference = ref
