@@ -33,6 +33,9 @@ DEFERRED_BACK_EDGES = {
     # The start-up entry installs its signal handlers before importing the node (seconds of
     # numpy/numba/rclpy imports); the node then calls back into start-up.
     (f'{WING}.startup', f'{WING}.node'),
+    # compensation.feedforward_series, the offline twin, runs the real-time pipeline (which
+    # feeds the Compensator), so that live and offline corrections are one code path.
+    (f'{ROOT}.compensation', f'{ROOT}.realtime'),
 }
 
 
