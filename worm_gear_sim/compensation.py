@@ -359,6 +359,7 @@ class Compensator:
     """
 
     def __init__(self, config: Config) -> None:
+        self._derivs = np.zeros(0)       # r, r', ... of the filtered reference (reset fills it)
         self.reconfigure(config)
         self.reset(0.0, 0.0)
 
@@ -391,7 +392,7 @@ class Compensator:
                                     n_deriv)
         self._tau = np.ascontiguousarray(self.filter.tau)
         self._W = np.ascontiguousarray(self.filter.weights)
-        if getattr(self, '_derivs', None) is not None and self._derivs.size != n_deriv:
+        if self._derivs.size != n_deriv:
             self._derivs = np.zeros(n_deriv)
         self._n_deriv = n_deriv
         self._inv = _Inverse(config)
