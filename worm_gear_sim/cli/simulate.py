@@ -95,7 +95,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.bag:
         return _simulate_bag(args)
     from ..plotting import plot_trajectory
-    from ..profiles import SampledProfile, make_profile
+    from ..profiles import Profile, SampledProfile, make_profile
     from ..records import read_csv
     from ..simulation import simulate, simulate_to_csv
     from ..studies import equilibrium, move_end_time, oscillation_metrics
@@ -109,7 +109,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     note = ''
     if cfg.input.profile == 'csv':
         rec = read_csv(cfg.input.csv_path, columns=_columns(args.column))
-        profile = SampledProfile(rec.t, rec.theta1, source=cfg.input.csv_path)
+        profile: Profile = SampledProfile(rec.t, rec.theta1, source=cfg.input.csv_path)
         say(args, f'input: {rec.describe()}')
         cols = ', '.join(f'{r} = {c!r}' for r, c in rec.source['columns'].items())
         say(args, f'columns: {cols}' + (f'; ignored: {", ".join(rec.source["ignored_columns"])}'
@@ -182,8 +182,9 @@ def _simulate_bag(args: argparse.Namespace) -> int:
                    joint_names=names)
     src = rec.source
     say(args, f'input: {rec.describe()}')
+    n_commands = 0 if rec.command_values is None else rec.command_values.size
     say(args, f'command: {src["command_topic"]} ({src["command_type"]}, time = '
-        f'{src["command_stamp"]}), {rec.command_values.size} samples')
+        f'{src["command_stamp"]}), {n_commands} samples')
     t0 = time.perf_counter()
     rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time)
     wall = time.perf_counter() - t0
