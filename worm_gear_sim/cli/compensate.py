@@ -172,7 +172,7 @@ def write_csv(path: str | Path, off: Any, on: Any, header: str = '') -> Path:
     cols = {
         't[s]': t, 'theta1_ref[rad]': ref, 'delta[rad]': delta,
         'theta1_cmd[rad]': ref + delta,
-        'theta4_ref[rad]': ref * on.trajectory.output_ratio,
+        'theta4_ref[rad]': ref * on.trajectory.output_per_input,
         'theta4_uncompensated[rad]': off.trajectory.theta[:, 2],
         'theta4_compensated[rad]': on.trajectory.theta[:, 2],
         'error_uncompensated[rad]': off.error, 'error_compensated[rad]': on.error,

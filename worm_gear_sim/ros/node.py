@@ -294,7 +294,7 @@ class WormGearSimNode(Node):
         self.config: Config = cfg
         self.sim = Simulator(cfg, theta1=0.0, t0=0.0)
         self._warm_up()
-        self.ratio = self.sim.derived.output_per_input
+        self.output_per_input = self.sim.derived.output_per_input
 
         # --- command input state -----------------------------------------------------------
         self._cmd: float | None = None           # latest accepted command theta1_ref [rad]
@@ -363,7 +363,8 @@ class WormGearSimNode(Node):
                                              self._guard(self.publish_diagnostics))
         self.get_logger().info(
             f'ready: dt = {self.sim.dt:g} s, {cfg.node.publish_rate_hz:g} Hz, ratio '
-            f'1:{1.0 / self.ratio:.6g}; waiting for {self.resolve_topic_name(COMMAND_TOPIC)}')
+            f'1:{1.0 / self.output_per_input:.6g}; '
+            f'waiting for {self.resolve_topic_name(COMMAND_TOPIC)}')
         if self.compensator is None:
             self.get_logger().error(
                 f'feed-forward unavailable ({self.compensation_error}); ~/feedforward is not '
@@ -730,7 +731,7 @@ class WormGearSimNode(Node):
         # Trajectory.output_error); compensated: the servo's reference theta1_ref.
         reference = st.theta1 if ref is None else ref
         if self._pub_err.get_subscription_count():
-            self._f_err.data = float(th[2]) - reference * self.ratio
+            self._f_err.data = float(th[2]) - reference * self.output_per_input
             self._pub_err.publish(self._f_err)
         if self._pub_worm.get_subscription_count():
             self._f_worm.data = float(th[0]) - st.theta1
@@ -794,7 +795,7 @@ class WormGearSimNode(Node):
         self.sim.interpolation = cfg.node.command_interpolation
         if cfg.node.command_timing != self.config.node.command_timing:
             self._stream.reset()
-        self.ratio = self.sim.derived.output_per_input
+        self.output_per_input = self.sim.derived.output_per_input
         old = self.config
         self.config = cfg
         self.counters['accepted_parameter_sets'] += 1

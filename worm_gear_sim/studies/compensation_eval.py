@@ -138,9 +138,9 @@ def run_scenario(plant: Config, scenario: Scenario, compensator: Config | None,
         else np.zeros_like(x)
     traj = simulate(plant, SampledProfile(t, x + delta), t_end=scenario.t_end,
                     record_every=record_every, theta1_initial=float(x[0] + delta[0]))
-    ratio_out = traj.output_ratio
+    output_per_input = traj.output_per_input
     ref = np.interp(traj.t, t, x)
-    err = traj.theta[:, 2] - ref * ratio_out
+    err = traj.theta[:, 2] - ref * output_per_input
     mode_hz = float(modes(plant).frequencies_hz[0])
     command_end = scenario.move_end
     if compensator is not None:
