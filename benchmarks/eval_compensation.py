@@ -2,7 +2,8 @@
 # Licensed under the Apache License, Version 2.0
 """Evaluate the feed-forward compensation (issue 5) on the nonlinear model with friction.
 
-Scenarios (worm_gear_sim.compensation): the paper's 18-step move (no load, as the paper) and
+Scenarios (worm_gear_sim.studies.compensation_eval): the paper's 18-step move (no load,
+as the paper) and
 a radar slew with a sharp reversal under the illustrative antenna load RADAR_LOAD (5 N m
 wind, 2 N m s/rad bearing drag).  The reference is streamed at 1 kHz; the plant is the
 nonlinear model (Eqs. 16-18), nominal or detuned by +-20 % (tooth stiffness, friction,
@@ -30,11 +31,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from worm_gear_sim.compensation import (  # noqa: E402
+from worm_gear_sim.compensation import Compensator  # noqa: E402
+from worm_gear_sim.params import Config  # noqa: E402
+from worm_gear_sim.simulation import SimulationError  # noqa: E402
+from worm_gear_sim.studies.compensation_eval import (  # noqa: E402
     METRIC_FLOOR,
     METRICS,
     RADAR_LOAD,
-    Compensator,
     detuned,
     detuning_cases,
     improvement,
@@ -43,8 +46,6 @@ from worm_gear_sim.compensation import (  # noqa: E402
     radar_slew_scenario,
     run_scenario,
 )
-from worm_gear_sim.params import Config  # noqa: E402
-from worm_gear_sim.simulation import SimulationError  # noqa: E402
 
 CANDIDATES = {
     'inverse, causal (default)': {},

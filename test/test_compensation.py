@@ -156,7 +156,7 @@ def test_reconfigure_keeps_history_and_changes_design():
 
 
 def test_metric_helpers():
-    from worm_gear_sim.compensation import METRIC_FLOOR, improvement, not_worse
+    from worm_gear_sim.studies.compensation_eval import METRIC_FLOOR, improvement, not_worse
     assert improvement('settling_time', math.inf, 0.01) == math.inf
     assert improvement('settling_time', math.inf, math.inf) == 1.0
     assert improvement('settling_time', 0.01, math.inf) == 0.0
@@ -170,7 +170,7 @@ def test_metric_helpers():
 
 
 def test_move_metrics_on_synthetic_traces():
-    from worm_gear_sim.compensation import Scenario, move_metrics
+    from worm_gear_sim.studies.compensation_eval import Scenario, move_metrics
     t = np.arange(0.0, 1.0, 1e-4)
     scen = Scenario('s', t, np.zeros_like(t), 0.1, ((0.02, 0.08),))
     ring = np.where(t > 0.1, 2e-5 * np.exp(-(t - 0.1) / 0.05) * np.sin(600 * t), 0.0)

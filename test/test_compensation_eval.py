@@ -12,7 +12,8 @@ import math
 
 import pytest
 
-from worm_gear_sim.compensation import (
+from worm_gear_sim.params import Config
+from worm_gear_sim.studies.compensation_eval import (
     METRIC_FLOOR,
     METRICS,
     RADAR_LOAD,
@@ -24,7 +25,6 @@ from worm_gear_sim.compensation import (
     radar_slew_scenario,
     run_scenario,
 )
-from worm_gear_sim.params import Config
 
 DESIGNS = {'causal': {}, 'preview': {'compensation.preview_time': 0.002}}
 CASES = [name for name, _ in detuning_cases()]

@@ -24,9 +24,9 @@ import pytest
 pytest.importorskip('rclpy')
 
 from worm_gear_sim import Config  # noqa: E402
-from worm_gear_sim.compensation import SETTLE_TOLERANCE  # noqa: E402
 from worm_gear_sim.ros.demo_commander import (  # noqa: E402
     LINE_WIDTH,
+    MOVE_HEADER,
     MoveSummary,
     MoveTracker,
     command_pattern,
@@ -34,6 +34,7 @@ from worm_gear_sim.ros.demo_commander import (  # noqa: E402
     format_status,
     pattern_segments,
 )
+from worm_gear_sim.studies.compensation_eval import SETTLE_TOLERANCE  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config' / 'worm_gear_sim.yaml'
@@ -85,7 +86,7 @@ def test_move_tracker_against_a_direct_computation():
         tm, em = t[inside] - a, e[inside]
         assert m.peak == pytest.approx(600e-6)
         after = tm >= seg.motion
-        assert m.residual == pytest.approx(np.max(np.abs(em[after])), rel=1e-3)
+        assert m.ringing == pytest.approx(np.max(np.abs(em[after])), rel=1e-3)
         out = np.nonzero(after & (np.abs(em) > SETTLE_TOLERANCE))[0]
         settle = tm[out[-1] + 1] - seg.motion
         assert m.settling == pytest.approx(settle, abs=1e-9)
@@ -104,14 +105,25 @@ def test_move_tracker_against_a_direct_computation():
 def test_lines_fit_80_columns():
     worst = MoveSummary(12345, 'back', 12345.678, 1.0, 123.0, math.inf, 0.5, 10)
     assert len(format_move(worst)) <= LINE_WIDTH
-    ok = MoveSummary(3, 'fwd', 1.55, 400e-6, 320e-6, 3.4e-3, math.nan, 500)
-    line = format_move(ok)
-    assert len(line) <= LINE_WIDTH and '320.00' in line and '3.4 ms' in line
+    # realistic moves fit without being cut
+    slew = MoveSummary(9999, 'down', 9999.5, 1234.5e-6, 999.99e-6, math.inf, 123.45e-6, 500)
+    paper = MoveSummary(3, 'fwd', 1.55, 400e-6, 320e-6, 3.4e-3, math.nan, 500)
+    for m in (slew, paper):
+        line = format_move(m)
+        assert len(line) <= LINE_WIDTH and not line.endswith('>'), line
+    assert len(MOVE_HEADER) <= LINE_WIDTH
+    assert '320.00' in format_move(paper) and '3.4 ms' in format_move(paper)
+    assert ' 123.45 ' in format_move(slew) and 'never' in format_move(slew)
+    # the columns line up under the header
+    for m in (slew, paper):
+        assert len(format_move(m)) == len(MOVE_HEADER)
     for e in (0.0, -3e-4, 2.5e-4, 1.0, -1e9, math.nan, math.inf):
-        for last in (None, worst, ok):
-            s = format_status(99999.9, e, 50e-6, last, extra='d  +12.34')
+        for last in (None, worst, slew, paper):
+            s = format_status(99999.9, e, 50e-6, last, extra=' ff  +12.34')
             assert len(s) < LINE_WIDTH, s
             assert '\n' not in s and '\r' not in s
+    s = format_status(1234.5, -12.3e-6, 50e-6, slew, extra=' ff  +12.34')
+    assert not s.endswith('>'), s
 
 
 # ---- the demo and the node as processes ----------------------------------------------------
@@ -164,11 +176,12 @@ def test_demo_float64_one_line_per_move(ros_subprocess_env, tmp_path):
     assert demo.returncode == 0, out + node_text
     lines = demo.stdout.splitlines()
     assert all(len(ln) <= LINE_WIDTH for ln in lines), out
-    moves = [ln for ln in lines if ln.startswith('move ')]
+    i = lines.index(MOVE_HEADER)
+    moves = [ln for ln in lines[i + 1:] if re.match(r' +\d+ (fwd|back) ', ln)]
     assert len(moves) >= 2, out                    # 2 s of paper moves, one every 0.5 s
     assert 'feed-forward not applied' in out
-    m = re.search(r'after the move \((\d+) moves, without feed-forward\): median '
-                  r'([0-9.]+), max ([0-9.]+) urad', out)
+    m = re.search(r'(\d+) moves without feed-forward: ringing median ([0-9.]+), max '
+                  r'([0-9.]+) urad', out)
     assert m and int(m.group(1)) == len(moves), out
     assert 10.0 < float(m.group(2)) < 1e4          # the 18-step move rings the antenna
     assert node_rc == 0 and 'Traceback' not in node_text, node_text
@@ -220,4 +233,5 @@ def test_demo_on_a_terminal_is_one_updating_line(ros_subprocess_env, tmp_path):
     assert 'demo done' in summary and len(head.splitlines()) == 2, text
     assert all(len(ln) <= LINE_WIDTH for ln in head.splitlines() + summary.splitlines())
     assert node_rc == 0, node_text
+
 

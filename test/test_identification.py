@@ -110,10 +110,11 @@ def test_encoder_record_recovers_parameters(base):
 def test_model_variant_held_out_move_within_3_percent(base):
     """Training: the 18-step move; held out: an S-curve the other way.  The true drive is a
     variant the fitted model cannot represent exactly (Table 1 lead angle, constant friction,
-    another mesh phase) and differs from the defaults (antenna mode ~108 Hz)."""
+    the other contact mapping, another mesh phase) and differs from the defaults (antenna mode
+    ~108 Hz)."""
     truth = _set(base, kg=1.3, rho=0.95, zeta=0.008, geometry__lead_angle=0.064286,
                  friction__model='constant', friction__constant_coefficient=0.12,
-                 mesh__phase_offset=2.0)
+                 mesh__contact_mapping='sawtooth', mesh__phase_offset=2.0)
     train = _rec(truth, TRAIN, seed=3)
     hold = _rec(truth, HOLD, seed=4)
     clean = record_from_model(truth, HOLD, 0.15, 1e4)

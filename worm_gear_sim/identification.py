@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Fit model parameters to measured records (issue 9); the live model check is in
+"""Fit model parameters to measured records; the live model check is in
 :mod:`worm_gear_sim.model_check`.
 
 Pure core (no rclpy, no plotting).  A *record* is one measured run of the drive: sample times
@@ -519,7 +519,7 @@ STRATEGIES: dict[str, dict[str, Any]] = {
     'windows': dict(frequency_start=False, growing_windows=True, n_starts=1),
     'frequency+windows': dict(frequency_start=True, growing_windows=True, n_starts=1),
     'multistart': dict(frequency_start=False, growing_windows=False, n_starts=8),
-    'robust': dict(frequency_start=True, growing_windows=True, n_starts=8),
+    'robust': dict(frequency_start=True, growing_windows=True, n_starts=4),
 }
 
 
@@ -535,6 +535,8 @@ class FitOptions:
     seed: int = 0
     max_nfev: int = 100
     diff_step: float = 1e-6
+    method: str = 'dogbox'     # least_squares method; trf creeps away from a start near a
+    #                            bound (its step scales with the distance to the bound)
     workers: int | None = None
     scheduler: str | None = None
     serial: bool = False
@@ -553,14 +555,14 @@ class FitOptions:
 
 
 def _local_fit(problem: Problem, x0: np.ndarray, windows: Sequence[float | None],
-               max_nfev: int, diff_step: float) -> dict[str, Any]:
+               max_nfev: int, diff_step: float, method: str = 'dogbox') -> dict[str, Any]:
     lo, hi = (np.array(b) for b in zip(*[p.x_bounds for p in problem.params]))
     x = _interior(problem, x0)
     t0 = time.perf_counter()
     res = None
     stages = []
     for w in windows:
-        res = least_squares(problem.residuals, x, bounds=(lo, hi), args=(w,),
+        res = least_squares(problem.residuals, x, bounds=(lo, hi), args=(w,), method=method,
                             diff_step=diff_step, max_nfev=max_nfev, x_scale=1.0,
                             xtol=1e-8, ftol=1e-8, gtol=1e-8)
         x = res.x
@@ -606,8 +608,8 @@ def jacobian(problem: Problem, x: np.ndarray, h: float = 1e-5) -> np.ndarray:
 
 
 def _start_task(problem: Problem, x0: list[float], windows: list[float | None], max_nfev: int,
-                diff_step: float, index: int) -> dict[str, Any]:
-    out = _local_fit(problem, np.asarray(x0), windows, max_nfev, diff_step)
+                diff_step: float, index: int, method: str = 'dogbox') -> dict[str, Any]:
+    out = _local_fit(problem, np.asarray(x0), windows, max_nfev, diff_step, method)
     out['index'] = index
     return out
 
@@ -873,9 +875,9 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
             start_bar()
             for i, x0 in enumerate(starts):
                 done(_start_task(problem, list(x0), list(windows), opt.max_nfev,
-                                 opt.diff_step, i))
+                                 opt.diff_step, i, opt.method))
         else:
-            from .studies import _dask_client, warm_up
+            from .studies.engine import _dask_client, warm_up
             with _dask_client(opt.client, opt.scheduler, opt.workers) as cl:
                 from distributed import as_completed
                 if len(cl.run(warm_up)) == 0:
@@ -883,7 +885,8 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
                 pf = cl.scatter(problem, broadcast=True)
                 start_bar()
                 futs = [cl.submit(_start_task, pf, list(x0), list(windows), opt.max_nfev,
-                                  opt.diff_step, i, pure=False) for i, x0 in enumerate(starts)]
+                                  opt.diff_step, i, opt.method, pure=False)
+                        for i, x0 in enumerate(starts)]
                 try:
                     for fut in as_completed(futs):
                         done(fut.result())

@@ -10,9 +10,6 @@ import numpy as np
 import scipy.linalg as sla
 
 from .model import (
-    P_J4,
-    P_JG,
-    P_JW,
     forces,
     linear_stiffness,
     mass_matrix,
@@ -39,7 +36,7 @@ def static_equilibrium(p: np.ndarray, theta1: float, u_guess=None, tol: float = 
 
 
 #: Damping ratios below this are the round-off of the state-space eigenvalues (an undamped
-#: model gives +-1e-16): printed as 0.
+#: model gives +-1e-16, which printed as -1.4e-16): they are returned as 0.
 ZETA_RESOLUTION = 1e-12
 
 
@@ -60,10 +57,8 @@ class ModalResult:
         lines = ['mode  f [Hz]      f_undamped [Hz]  zeta        shape (theta2, theta3, theta4)']
         for i in range(len(self.undamped_hz)):
             s = ', '.join(f'{x:+.4f}' for x in self.shapes[:, i])
-            z = self.damping_ratios[i]
-            z = 0.0 if abs(z) < ZETA_RESOLUTION else z     # eigen-solver round-off: 0
             lines.append(f'{i + 1:<5d} {self.frequencies_hz[i]:<11.4f} '
-                         f'{self.undamped_hz[i]:<16.4f} {z:<11.3e} ({s})')
+                         f'{self.undamped_hz[i]:<16.4f} {self.damping_ratios[i]:<11.3e} ({s})')
         return '\n'.join(lines)
 
 
@@ -132,7 +127,9 @@ def _damped_modes(M: np.ndarray, K: np.ndarray, C: np.ndarray, n_modes: int = 3)
         modes_.append((wn, 0.0, -(l1 + l2) / (2 * wn) if wn > 0 else 1.0))
     modes_.sort(key=lambda m: m[0])
     modes_ = (modes_ + [(0.0, 0.0, 1.0)] * n_modes)[:n_modes]
-    return (np.array([m[1] for m in modes_]), np.array([m[2] for m in modes_]))
+    zeta = np.array([m[2] for m in modes_])
+    zeta[np.abs(zeta) < ZETA_RESOLUTION] = 0.0
+    return np.array([m[1] for m in modes_]), zeta
 
 
 def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:
@@ -153,7 +150,3 @@ def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:
         z = zetas[:len(w)]
         C = C + M @ phi @ np.diag(2.0 * z * w) @ phi.T @ M
     return np.ascontiguousarray(C)
-
-
-def inertias(p: np.ndarray) -> tuple[float, float, float]:
-    return float(p[P_JW]), float(p[P_JG]), float(p[P_J4])

@@ -28,11 +28,15 @@ import yaml
 
 __all__ = [
     'ConfigError', 'Config', 'Derived', 'derive', 'load_config', 'config_from_mapping',
-    'default_config', 'default_config_path', 'NODE_NAME',
+    'default_config', 'default_config_path', 'NODE_NAME', 'check_usable', 'ANGLE_LIMIT',
 ]
 
 NODE_NAME = 'worm_gear_sim'
 DEG = math.pi / 180.0
+#: Largest |angle| [rad] the model accepts (commands, initial states, equilibria): at 1e9 rad
+#: the mesh phase and the approach q = l_w theta2 - r_g theta3 keep ~1e-7 of their resolution
+#: in double precision (a year of continuous slewing of the worm at 30 rad/s).
+ANGLE_LIMIT = 1e9
 # Mesh phase at which the mesh stiffness k_Y of the cosine contact mapping equals its mean
 # over the cycle (default parameters; test_model checks it)
 PHASE_AT_MEAN_STIFFNESS = 1.8373
@@ -270,7 +274,7 @@ class NodeSettings:
                        'single_threaded'), read_only=True)
     max_command_jump: float = _f(1.0, 'Largest accepted change of theta1 between two '
                                  'commands', 'rad', 0.0, 1e4, lo_open=True)
-    max_command_abs: float = _f(1e4, 'Largest accepted |theta1|', 'rad', 0.0, 1e9,
+    max_command_abs: float = _f(1e4, 'Largest accepted |theta1|', 'rad', 0.0, ANGLE_LIMIT,
                                 lo_open=True)
     max_catch_up: float = _f(0.05, 'Largest simulated time integrated in one tick; the rest '
                              'is dropped and counted as an overrun', 's', 0.0, 10.0,
@@ -288,6 +292,13 @@ class NodeSettings:
                                     'to the command')
     diagnostic_period: float = _f(1.0, 'Period of /diagnostics', 's', 0.01, 60.0,
                                   read_only=True)
+    residual_window: float = _f(1.0, 'Live model check: window of the RMS of measured - '
+                                'predicted (measured_joint_states)', 's', 0.0, 3600.0,
+                                lo_open=True, read_only=True)
+    residual_warn_rms: tuple = _f([1e-3, 1e-4, 1e-4], 'Live model check: /diagnostics turns '
+                                  'WARN when the windowed residual RMS of theta2, theta3 or '
+                                  'theta4 exceeds its entry', 'rad', 0.0, 1e3, lo_open=True,
+                                  length=3)
 
 
 @dataclass(frozen=True)
@@ -362,7 +373,8 @@ class Config:
         return nested
 
     def replace(self, overrides: Mapping[str, Any] | None = None, **kw: Any) -> Config:
-        """Return a validated copy with dotted-name overrides applied (all or nothing)."""
+        """Return a validated copy with dotted-name overrides applied (all or nothing): per
+        field, cross-field, and usable (:func:`check_usable`, naming the keys changed)."""
         changes = dict(overrides or {})
         changes.update({k.replace('__', '.'): v for k, v in kw.items()})
         nested = self.to_nested_dict()
@@ -371,7 +383,9 @@ class Config:
             if sec not in nested or name not in nested[sec]:
                 raise ConfigError(key, 'unknown parameter' + _suggest(key, self.to_flat_dict()))
             nested[sec][name] = value
-        return config_from_mapping(nested, source='overrides')
+        cfg = config_from_mapping(nested, source='overrides', usable=False)
+        check_usable(cfg, changed=[k for k in changes])
+        return cfg
 
     @staticmethod
     def metadata() -> dict[str, dict[str, Any]]:
@@ -388,13 +402,44 @@ def _suggest(key: str, known: Mapping[str, Any]) -> str:
     return f' (did you mean {close[0]}?)' if close else ''
 
 
-def _coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
-    """Type-check one value against its field's default type and metadata."""
+#: The parameter kinds; a parameter's kind is the type of its default (:func:`value_kind`).
+VALUE_KINDS = ('bool', 'int', 'float', 'str', 'str_list', 'float_list')
+
+
+def value_kind(default: Any) -> str:
+    """The kind of a parameter, from its default: the one typing rule of the YAML loader,
+    ``--set`` parsing (:mod:`worm_gear_sim.config_io`) and the node's ROS parameters."""
     if isinstance(default, bool):
+        return 'bool'
+    if isinstance(default, int):
+        return 'int'
+    if isinstance(default, float):
+        return 'float'
+    if isinstance(default, str):
+        return 'str'
+    if isinstance(default, (tuple, list)):
+        return 'str_list' if default and isinstance(default[0], str) else 'float_list'
+    raise TypeError(f'unsupported parameter default {default!r}')
+
+
+def _field_default(f: dataclasses.Field) -> Any:
+    """The default of a dataclass field (given, or made by its factory)."""
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    factory = f.default_factory
+    if not callable(factory):
+        raise TypeError(f'field {f.name} has no default')
+    return factory()
+
+
+def _coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
+    """Type-check one value against its field's kind (:func:`value_kind`) and metadata."""
+    kind = value_kind(default)
+    if kind == 'bool':
         if not isinstance(value, bool):
             raise ConfigError(key, f'must be true or false, got {value!r}')
         return value
-    if isinstance(default, int):
+    if kind == 'int':
         if isinstance(value, bool) or not isinstance(value, int):
             if isinstance(value, float) and value.is_integer():
                 value = int(value)
@@ -402,25 +447,25 @@ def _coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
                 raise ConfigError(key, f'must be an integer, got {value!r}')
         _check_range(key, float(value), meta)
         return value
-    if isinstance(default, float):
+    if kind == 'float':
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(key, f'must be a number, got {value!r}')
         value = float(value)
         _check_range(key, value, meta)
         return value
-    if isinstance(default, str):
+    if kind == 'str':
         if not isinstance(value, str):
             raise ConfigError(key, f'must be a string, got {value!r}')
         if meta.get('choices') and value not in meta['choices']:
             raise ConfigError(key, f'must be one of {", ".join(meta["choices"])}; got {value!r}')
         return value
-    if isinstance(default, tuple):
+    if kind in ('str_list', 'float_list'):
         if isinstance(value, (str, bytes)) or not hasattr(value, '__iter__'):
             raise ConfigError(key, f'must be a list, got {value!r}')
         value = tuple(value)
         if meta.get('length') is not None and len(value) != meta['length']:
             raise ConfigError(key, f'must have {meta["length"]} entries, got {len(value)}')
-        if default and isinstance(default[0], str):
+        if kind == 'str_list':
             if not all(isinstance(v, str) and v for v in value):
                 raise ConfigError(key, 'entries must be non-empty strings')
             if len(set(value)) != len(value):
@@ -455,7 +500,7 @@ def validate(cfg: Config) -> None:
         obj = getattr(cfg, sec)
         for f in fields(obj):
             key = f'{sec}.{f.name}'
-            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+            default = _field_default(f)
             _coerce(key, getattr(obj, f.name), default, f.metadata)
     integ = cfg.integrator
     if not (2.0 * integ.newmark_beta >= integ.newmark_gamma - 1e-15):
@@ -483,8 +528,10 @@ def validate(cfg: Config) -> None:
                           f'{1.0 / cfg.node.publish_rate_hz:g} s')
 
 
-def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>') -> Config:
-    """Build a Config from nested sections (the ``ros__parameters`` content) or dotted keys."""
+def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>',
+                        usable: bool = True) -> Config:
+    """Build a Config from nested sections (the ``ros__parameters`` content) or dotted keys,
+    validated per field, across fields and (``usable``) by :func:`check_usable`."""
     if not isinstance(data, Mapping):
         raise ConfigError('', f'{source}: parameters must be a mapping, got {type(data).__name__}')
     nested: dict[str, dict[str, Any]] = {}
@@ -512,10 +559,27 @@ def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>') -> C
             if name not in names:
                 raise ConfigError(key, 'unknown parameter' + _suggest(key, known))
             f = names[name]
-            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+            default = _field_default(f)
             sec_kwargs[name] = _coerce(key, value, default, f.metadata)
         kwargs[sec] = cls(**sec_kwargs)
-    return Config(**kwargs)
+    cfg = Config(**kwargs)
+    if usable:
+        check_usable(cfg)
+    return cfg
+
+
+def check_usable(cfg: Config, changed: Any = None) -> None:
+    """Raise :class:`ConfigError` unless the parameter set can be simulated: tooth
+    stiffness finite and > 0 over the mesh cycle, no spring of the chain lost next to its
+    neighbour (singular stiffness), every mode resolved by the time step, and a trial
+    (equilibrium, modes, a 2 ms move) computable and finite.  The error names the keys that
+    set the failing quantity, the ``changed`` keys first (default: the keys that differ from
+    the defaults).  Called by :func:`config_from_mapping`, :meth:`Config.replace`,
+    :func:`load_config` and the Simulator; cached per Config; pure (no shared state
+    besides the cache), so it can run off the node's real-time path.  The rules:
+    :mod:`worm_gear_sim.usability`."""
+    from .usability import check_usable as _check
+    _check(cfg, changed)
 
 
 def _ros_parameters(doc: Any, path: str, node_name: str) -> Mapping[str, Any]:

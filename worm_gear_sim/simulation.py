@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -57,10 +58,11 @@ from .model import (
     mesh_forces_mu,
     pack_parameters,
 )
-from .params import Config, derive
+from .params import ANGLE_LIMIT, Config, check_usable, derive
 from .profiles import Profile, make_profile
 
-__all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate', 'ring_down']
+__all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate',
+           'simulate_to_csv', 'TrajectoryCsvWriter', 'csv_bytes_estimate', 'ring_down']
 
 
 class SimulationError(RuntimeError):
@@ -90,7 +92,7 @@ class Trajectory:
     omega: np.ndarray
     alpha: np.ndarray
     aux: np.ndarray          # (n, N_AUX): W_n, mu, cwkw, cgkg, v_s, F_X, F_Y, q
-    output_ratio: float      # l_w / r_g: rigid theta4 per theta1
+    output_per_input: float      # l_w / r_g: rigid theta4 per theta1
     profile: str = ''
     stats: dict = field(default_factory=dict)
 
@@ -109,7 +111,7 @@ class Trajectory:
     @property
     def output_error(self) -> np.ndarray:
         """theta4 - theta1 l_w / r_g [rad]: antenna positioning error."""
-        return self.theta[:, 2] - self.theta1 * self.output_ratio
+        return self.theta[:, 2] - self.theta1 * self.output_per_input
 
     def energy(self, config: Config) -> np.ndarray:
         """Kinetic + shaft torsion + mesh energy 0.5 k_Y q^2 [J] at every row."""
@@ -132,19 +134,72 @@ class Trajectory:
 
     def to_csv(self, path: str | Path, header_comment: str = '') -> None:
         """Write all columns (SI units, rad) with a commented header."""
-        cols = self.columns()
-        units = {'t': 's', 'normal_force': 'N', 'force_x': 'N', 'force_y': 'N',
-                 'mu': '1', 'sliding_velocity': 'm/s', 'worm_tooth_stiffness': 'N/m',
-                 'gear_tooth_stiffness': 'N/m', 'mesh_deflection': 'm'}
-        names = [f'{k}[{_csv_unit(k, units)}]' for k in cols]
+        with TrajectoryCsvWriter(path, header_comment) as w:
+            w.write(self)
+
+    def rows(self, index: np.ndarray | slice) -> Trajectory:
+        """The selected rows as a Trajectory (same profile, ratio and stats)."""
+        return Trajectory(t=self.t[index], theta1=self.theta1[index],
+                          theta1_dot=self.theta1_dot[index], theta=self.theta[index],
+                          omega=self.omega[index], alpha=self.alpha[index],
+                          aux=self.aux[index], output_per_input=self.output_per_input,
+                          profile=self.profile, stats=self.stats)
+
+    @staticmethod
+    def concatenate(parts: list[Trajectory]) -> Trajectory:
+        """Chunks of one run (e.g. from :meth:`Simulator.iter_run`) joined in order."""
+        if not parts:
+            raise ValueError('no trajectory parts to concatenate')
+        last = parts[-1]
+        return Trajectory(*(np.concatenate([getattr(t, n) for t in parts]) for n in (
+            't', 'theta1', 'theta1_dot', 'theta', 'omega', 'alpha', 'aux')),
+            output_per_input=last.output_per_input, profile=last.profile, stats=last.stats)
+
+
+#: CSV number format: t to 1 ns whatever the duration; every other column to 12
+#: significant digits (relative 5e-12: 0.1 rad to 5e-13 rad, 56 rad to 3e-10 rad)
+CSV_FORMAT = ['%.9f', '%.12g']
+
+
+class TrajectoryCsvWriter:
+    """Streaming CSV writer of Trajectory rows (chunks of one run in order): the commented
+    header and the column line once, then rows as they come.  ``Trajectory.to_csv`` and
+    :func:`simulate_to_csv` use it, so a streamed file equals an in-memory one."""
+
+    def __init__(self, path: str | Path, header_comment: str = ''):
+        self.path = Path(path)
+        self.header_comment = header_comment
+        self.rows_written = 0
+        self._fh = None
+
+    def write(self, traj: Trajectory) -> None:
+        cols = traj.columns()
+        if self._fh is None:
+            units = {'t': 's', 'normal_force': 'N', 'force_x': 'N', 'force_y': 'N',
+                     'mu': '1', 'sliding_velocity': 'm/s', 'worm_tooth_stiffness': 'N/m',
+                     'gear_tooth_stiffness': 'N/m', 'mesh_deflection': 'm'}
+            names = [f'{k}[{_csv_unit(k, units)}]' for k in cols]
+            comment = f'# worm_gear_sim; profile: {traj.profile}\n'
+            if self.header_comment:
+                comment += ''.join(f'# {line}\n' for line in self.header_comment.splitlines())
+            self._fh = open(self.path, 'w')
+            self._fh.write(comment)
+            self._fh.write(','.join(names) + '\n')
         data = np.column_stack(list(cols.values()))
-        comment = f'# worm_gear_sim; profile: {self.profile}\n'
-        if header_comment:
-            comment += ''.join(f'# {line}\n' for line in header_comment.splitlines())
-        with open(path, 'w') as fh:
-            fh.write(comment)
-            fh.write(','.join(names) + '\n')
-            np.savetxt(fh, data, delimiter=',', fmt='%.12g')
+        np.savetxt(self._fh, data, delimiter=',', fmt=CSV_FORMAT[:1] + CSV_FORMAT[1:] *
+                   (data.shape[1] - 1))
+        self.rows_written += len(traj.t)
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def __enter__(self) -> TrajectoryCsvWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def _csv_unit(name: str, units: dict[str, str]) -> str:
@@ -157,6 +212,39 @@ def _csv_unit(name: str, units: dict[str, str]) -> str:
     return 'rad'
 
 
+#: Largest |rate| [rad/s] of an initial state (the worm at ~1e7 rpm).
+RATE_LIMIT = 1e6
+#: Largest |time| [s] (3e4 years): t0 + k dt keeps 1e-9 s of resolution up to ~1e7 s.
+TIME_LIMIT = 1e12
+
+
+def _finite_scalar(name: str, x: float, limit: float, unit: str) -> float:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be a number, got {x!r}') from None
+    if not math.isfinite(x) or abs(x) > limit:
+        raise ValueError(f'{name} = {x!r} {unit}: must be finite and within +-{limit:g} {unit}')
+    return x
+
+
+def _finite_vector(name: str, x, limit: float, unit: str) -> np.ndarray:
+    try:
+        arr = np.array(x, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be 3 numbers (theta2, theta3, theta4), got {x!r}') \
+            from None
+    if arr.shape != (3,):
+        raise ValueError(f'{name} must be 3 numbers (theta2, theta3, theta4), got {x!r}')
+    if not (np.all(np.isfinite(arr)) and np.all(np.abs(arr) <= limit)):
+        raise ValueError(f'{name} = {arr}: must be finite and within +-{limit:g} {unit}')
+    return arr
+
+
+#: advance_to integrates long spans in chunks of this many steps (1 MB of command samples).
+ADVANCE_CHUNK = 1 << 16
+
+
 class Simulator:
     """Stateful Newmark integrator of the worm-gear drive on a fixed grid t0 + k dt.
 
@@ -165,8 +253,14 @@ class Simulator:
     (``interpolation='linear'``) or applied at once (``'hold'``).  Batch: :meth:`run`.
     """
 
+    #: Default step limit of one :meth:`advance_to` call (1e8 steps: 1000 s at 10 us,
+    #: roughly half a minute of computation).
+    max_advance_steps: int = 10 ** 8
+
     def __init__(self, config: Config, theta1: float = 0.0, t0: float = 0.0,
-                 interpolation: str | None = None):
+                 interpolation: str | None = None, *, check: bool = True):
+        if check:   # ConfigError naming the keys unless the set can be simulated
+            check_usable(config)
         self.config = config
         self.p = pack_parameters(config)
         self.C = damping_matrix(config, self.p)
@@ -180,20 +274,31 @@ class Simulator:
 
     # ---- state ---------------------------------------------------------------------------
     def reset(self, theta1: float = 0.0, t0: float = 0.0, theta=None, omega=None) -> None:
-        """Start at time t0 with command theta1; by default at rest in static equilibrium."""
-        if not (math.isfinite(theta1) and math.isfinite(t0)):
-            raise ValueError('reset: theta1 and t0 must be finite')
-        self._t0 = float(t0)
+        """Start at time t0 with command theta1; by default at rest in static equilibrium.
+        Raises ValueError (state unchanged) for a non-finite or out-of-range input: angles
+        beyond ANGLE_LIMIT, rates beyond RATE_LIMIT, or a state whose acceleration is not
+        finite."""
+        theta1 = _finite_scalar('reset: theta1', theta1, ANGLE_LIMIT, 'rad')
+        t0 = _finite_scalar('reset: t0', t0, TIME_LIMIT, 's')
+        if theta is None:
+            u = static_equilibrium(self.p, theta1)
+        else:
+            u = _finite_vector('reset: theta', theta, ANGLE_LIMIT, 'rad')
+        v = np.zeros(3) if omega is None else _finite_vector('reset: omega', omega,
+                                                             RATE_LIMIT, 'rad/s')
+        a = np.zeros(3)
+        consistent_acceleration(self.p, self.C, u, v, theta1, 0.0, a)
+        if not (np.all(np.isfinite(u)) and np.all(np.abs(u) <= ANGLE_LIMIT)
+                and np.all(np.isfinite(a))):
+            raise ValueError(f'reset: the state at theta1 = {theta1:g} rad is not finite '
+                             f'(theta = {u}, acceleration = {a})')
+        self._t0 = t0
         self._k = 0
-        self._u = static_equilibrium(self.p, theta1) if theta is None else \
-            np.array(theta, float)
-        self._v = np.zeros(3) if omega is None else np.array(omega, float)
-        self._a = np.zeros(3)
-        self._theta1 = float(theta1)
+        self._u, self._v, self._a = u, v, a
+        self._theta1 = theta1
         self._theta1_dot = 0.0
         self._cmd_t = self._t0
-        self._cmd_value = float(theta1)
-        consistent_acceleration(self.p, self.C, self._u, self._v, self._theta1, 0.0, self._a)
+        self._cmd_value = theta1
         self._ctl[:] = 0.0
         self._ctl[C_RHO] = 1.0
         self._ctl[C_MODE] = self._slip_mode()
@@ -203,6 +308,7 @@ class Simulator:
         The time step cannot change (it is read-only in the node)."""
         if config.integrator.time_step != self.dt:
             raise ValueError('integrator.time_step cannot change on a running simulator')
+        check_usable(config)
         p = pack_parameters(config)
         C = damping_matrix(config, p)
         a = np.zeros(3)
@@ -255,40 +361,74 @@ class Simulator:
         """Shaft torques for JointState.effort [N m]: motor on worm shaft K_w (theta1 -
         theta2), mesh torque on the worm r_w F_X, on the gear r_g F_Y, gear shaft
         K_g (theta3 - theta4)."""
-        f = self.forces()
-        rw, rg = self.config.geometry.worm_pitch_radius, self.config.geometry.gear_pitch_radius
-        d = self.derived
-        return np.array([d.K_w * (self._theta1 - self._u[0]), rw * f['F_X'], rg * f['F_Y'],
-                         d.K_g * (self._u[1] - self._u[2])])
+        return np.array(self.joint_state()[2])
+
+    def joint_state(self) -> tuple[tuple, tuple, tuple]:
+        """The JointState fields at the current state, as tuples of floats: position
+        (theta1..theta4 [rad]), velocity (theta1_dot, omega2..omega4 [rad/s]) and effort
+        (:meth:`joint_torques` [N m]); one compiled force evaluation into reused buffers
+        (the real-time path publishes this for every sample)."""
+        buf = self.__dict__.get('_force_buf')
+        if buf is None:
+            buf = self._force_buf = (np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)),
+                                     np.zeros(N_AUX))
+        u, v, th1 = self._u, self._v, self._theta1
+        generalized_forces(self.p, u, v, th1, buf[0], buf[1], buf[2], buf[3])
+        if self.p[P_FRIC_SET_VALUED] != 0.0:       # the friction the integrator solved for
+            record_aux(self.p, u, v, th1, self._ctl[C_MU], buf[3])
+        aux = buf[3]
+        g, d = self.config.geometry, self.derived
+        u2, u3, u4 = float(u[0]), float(u[1]), float(u[2])
+        return ((th1, u2, u3, u4), (self._theta1_dot, float(v[0]), float(v[1]), float(v[2])),
+                (d.K_w * (th1 - u2), g.worm_pitch_radius * float(aux[AUX_FX]),
+                 g.gear_pitch_radius * float(aux[AUX_FY]), d.K_g * (u3 - u4)))
 
     def energy(self) -> float:
         return float(mechanical_energy(self.p, self._u, self._v, self._theta1))
 
     # ---- stepping --------------------------------------------------------------------------
-    def advance_to(self, t_target: float, theta1: float | None = None) -> int:
+    def advance_to(self, t_target: float, theta1: float | None = None, *,
+                   max_steps: int | None = None) -> int:
         """Integrate whole steps up to ``t_target`` with ``theta1`` as the command sample at
         ``t_target`` (None: hold the last command).  Returns the number of steps taken;
-        raises SimulationError (state unchanged past the last good step) on failure."""
+        raises SimulationError (state unchanged past the last good step) on failure.
+
+        Raises ValueError before integrating when ``t_target`` or ``theta1`` is not a finite
+        number, |theta1| > ANGLE_LIMIT, or the span needs more than ``max_steps`` steps
+        (default :attr:`max_advance_steps`, about a minute of computation): long offline runs
+        belong to :meth:`run` / :meth:`iter_run`.  Memory is bounded (the span is integrated
+        in chunks of ``ADVANCE_CHUNK`` steps)."""
         if theta1 is None:
             theta1 = self._cmd_value
-        if not (math.isfinite(t_target) and math.isfinite(theta1)):
-            raise ValueError('advance_to: t_target and theta1 must be finite')
+        t_target = _finite_scalar('advance_to: t_target', t_target, TIME_LIMIT, 's')
+        theta1 = _finite_scalar('advance_to: theta1', theta1, ANGLE_LIMIT, 'rad')
         n = int(math.floor((t_target - self.t) / self.dt + 1e-9))
+        limit = self.max_advance_steps if max_steps is None else int(max_steps)
+        if n > limit:
+            raise ValueError(
+                f'advance_to({t_target:g}): {n:.3g} steps of {self.dt:g} s from t = '
+                f'{self.t:g} s exceed max_steps = {limit:.3g} (~{limit * 3e-7:.0f} s of '
+                'computation); advance in smaller spans, pass max_steps=..., or use '
+                'Simulator.run / iter_run for long offline runs')
         if n > 0:
             if self.interpolation == 'hold' or t_target <= self._cmd_t:
                 slope = 0.0
             else:
                 slope = (theta1 - self._cmd_value) / (t_target - self._cmd_t)
-            done, status = advance_segment(
-                self.p, self.C, self._u, self._v, self._a, self._theta1, self._theta1_dot,
-                self._t0, self._k, self.dt, n, self._cmd_t,
-                self._cmd_value if slope != 0.0 else float(theta1), slope, t_target,
-                float(theta1), self._stats, self._ctl)
-            self._after_kernel(done, status,
-                               self._segment_value(done, theta1, slope, t_target), slope)
+            left = n
+            while left > 0:
+                m = min(left, ADVANCE_CHUNK)
+                done, status = advance_segment(
+                    self.p, self.C, self._u, self._v, self._a, self._theta1,
+                    self._theta1_dot, self._t0, self._k, self.dt, m, self._cmd_t,
+                    self._cmd_value if slope != 0.0 else theta1, slope, t_target,
+                    theta1, self._stats, self._ctl)
+                self._after_kernel(done, status,
+                                   self._segment_value(done, theta1, slope, t_target), slope)
+                left -= m
         if t_target > self._cmd_t or n > 0:
             self._cmd_t = max(t_target, self._cmd_t)
-            self._cmd_value = float(theta1)
+            self._cmd_value = theta1
         return max(n, 0)
 
     def resync(self, t: float) -> None:
@@ -321,53 +461,173 @@ class Simulator:
 
     # ---- batch ---------------------------------------------------------------------------
     def run(self, profile: Profile, t_end: float, record_every: int = 1,
-            chunk_steps: int = 1 << 18) -> Trajectory:
+            chunk_steps: int = 1 << 18, max_bytes: float | None = None) -> Trajectory:
         """Integrate the profile from the current state to ``t_end`` and record every
-        ``record_every`` steps (row 0 = current state)."""
-        n_total = int(math.floor((t_end - self.t) / self.dt + 1e-9))
-        if n_total < 0:
-            raise ValueError(f't_end {t_end} is before the current time {self.t}')
-        stride = max(1, int(record_every))
-        chunk = max(stride, (chunk_steps // stride) * stride)
+        ``record_every`` steps (row 0 = current state), all in memory.
+
+        Raises ValueError before integrating when the recorded rows would take more than
+        ``max_bytes`` (default :data:`RUN_MEMORY_LIMIT`): stream long runs with
+        :meth:`iter_run` / :func:`simulate_to_csv` (bounded memory), or record fewer rows."""
+        n_total, stride = self._plan(t_end, record_every)
         n_rec = n_total // stride
+        need = (n_rec + 1) * ROW_BYTES
+        limit = RUN_MEMORY_LIMIT if max_bytes is None else max_bytes
+        if need > limit:
+            raise ValueError(
+                f'recording {n_rec + 1:.4g} rows to t_end = {t_end:g} s (dt = {self.dt:g} s, '
+                f'every {stride} step(s)) needs {need / 1e9:.3g} GB, above the limit '
+                f'max_bytes = {limit / 1e9:.3g} GB: raise record_every, shorten t_end, pass '
+                'max_bytes=..., or stream it (Simulator.iter_run, simulate_to_csv: bounded '
+                'memory)')
         t_rec = np.empty(n_rec + 1)
         th_rec, td_rec = np.empty(n_rec + 1), np.empty(n_rec + 1)
         u_rec, v_rec, a_rec = (np.empty((n_rec + 1, 3)) for _ in range(3))
         aux_rec = np.empty((n_rec + 1, N_AUX))
-        t_rec[0], th_rec[0], td_rec[0] = self.t, self._theta1, self._theta1_dot
-        u_rec[0], v_rec[0], a_rec[0] = self._u, self._v, self._a
-        record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux_rec[0])
+        self._row0(t_rec, th_rec, td_rec, u_rec, v_rec, a_rec, aux_rec)
         row = 1
-        done_total = 0
-        while done_total < n_total:
-            n = min(chunk, n_total - done_total)
-            ks = self._k + np.arange(1, n + 1)
-            grid = self._t0 + ks * self.dt
-            th = np.concatenate(([self._theta1], profile.theta1(grid)))
-            td = np.concatenate(([self._theta1_dot], profile.theta1_dot(grid)))
-            m = n // stride
+        for m, fill in self._chunks(profile, n_total, stride, chunk_steps):
             sl = slice(row, row + m)
-            self._run_kernel(th, td, stride, u_rec[sl], v_rec[sl], a_rec[sl], aux_rec[sl])
-            idx = np.arange(1, m + 1) * stride
-            t_rec[sl], th_rec[sl], td_rec[sl] = grid[idx - 1], th[idx], td[idx]
+            fill(t_rec[sl], th_rec[sl], td_rec[sl], u_rec[sl], v_rec[sl], a_rec[sl],
+                 aux_rec[sl])
             row += m
-            done_total += n
         self._cmd_t, self._cmd_value = self.t, self._theta1
         return Trajectory(t=t_rec[:row], theta1=th_rec[:row], theta1_dot=td_rec[:row],
                           theta=u_rec[:row], omega=v_rec[:row], alpha=a_rec[:row],
-                          aux=aux_rec[:row], output_ratio=float(self.p[P_RIGID3]),
+                          aux=aux_rec[:row], output_per_input=float(self.p[P_RIGID3]),
                           profile=profile.describe(), stats=self.stats)
+
+    def iter_run(self, profile: Profile, t_end: float, record_every: int = 1,
+                 chunk_steps: int = 1 << 16) -> Iterator[Trajectory]:
+        """:meth:`run` as a stream: yields Trajectory chunks of at most ``chunk_steps //
+        record_every`` rows (the first starts with the current state), so memory stays
+        bounded whatever ``t_end`` is.  Concatenated, the chunks equal :meth:`run` bit for
+        bit.  Stopping the iteration early leaves the simulator at the last chunk's end."""
+        n_total, stride = self._plan(t_end, record_every)
+        first = True
+        desc, ratio = profile.describe(), float(self.p[P_RIGID3])
+
+        def make(rows: int) -> tuple[np.ndarray, ...]:
+            return (np.empty(rows), np.empty(rows), np.empty(rows), np.empty((rows, 3)),
+                    np.empty((rows, 3)), np.empty((rows, 3)), np.empty((rows, N_AUX)))
+
+        def traj(arrs: tuple[np.ndarray, ...]) -> Trajectory:
+            return Trajectory(t=arrs[0], theta1=arrs[1], theta1_dot=arrs[2], theta=arrs[3],
+                              omega=arrs[4], alpha=arrs[5], aux=arrs[6], output_per_input=ratio,
+                              profile=desc, stats=self.stats)
+
+        for m, fill in self._chunks(profile, n_total, stride, chunk_steps):
+            off = 1 if first else 0
+            arrs = make(m + off)
+            if first:
+                self._row0(*arrs)
+            fill(*(a[off:] for a in arrs))
+            self._cmd_t, self._cmd_value = self.t, self._theta1
+            first = False
+            yield traj(arrs)
+        if first:                      # nothing to integrate: the current state alone
+            arrs = make(1)
+            self._row0(*arrs)
+            yield traj(arrs)
+
+    def _plan(self, t_end: float, record_every: int) -> tuple[int, int]:
+        t_end = _finite_scalar('t_end', t_end, TIME_LIMIT, 's')
+        n_total = int(math.floor((t_end - self.t) / self.dt + 1e-9))
+        if n_total < 0:
+            raise ValueError(f't_end {t_end} is before the current time {self.t}')
+        stride = int(record_every)
+        if stride < 1:
+            raise ValueError(f'record_every must be >= 1, got {record_every!r}')
+        return n_total, stride
+
+    def _row0(self, t_rec, th_rec, td_rec, u_rec, v_rec, a_rec, aux_rec) -> None:
+        t_rec[0], th_rec[0], td_rec[0] = self.t, self._theta1, self._theta1_dot
+        u_rec[0], v_rec[0], a_rec[0] = self._u, self._v, self._a
+        record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux_rec[0])
+
+    def _chunks(self, profile: Profile, n_total: int, stride: int, chunk_steps: int):
+        """Yield (rows, fill) per chunk of whole strides; ``fill(t, th, td, u, v, a, aux)``
+        integrates the chunk writing its recorded rows into the given arrays."""
+        chunk = max(stride, (int(chunk_steps) // stride) * stride)
+        done_total = 0
+        while done_total < n_total:
+            n = min(chunk, n_total - done_total)
+            m = n // stride
+
+            def fill(t_rec, th_rec, td_rec, u_rec, v_rec, a_rec, aux_rec, n=n, m=m):
+                ks = self._k + np.arange(1, n + 1)
+                grid = self._t0 + ks * self.dt
+                th = np.concatenate(([self._theta1], profile.theta1(grid)))
+                td = np.concatenate(([self._theta1_dot], profile.theta1_dot(grid)))
+                self._run_kernel(th, td, stride, u_rec, v_rec, a_rec, aux_rec)
+                idx = np.arange(1, m + 1) * stride
+                t_rec[:], th_rec[:], td_rec[:] = grid[idx - 1], th[idx], td[idx]
+
+            yield m, fill
+            done_total += n
+
+
+#: Bytes per recorded row of a Trajectory (t, theta1, theta1_dot, 3 x theta/omega/alpha,
+#: N_AUX mesh quantities; float64).
+ROW_BYTES = 8 * (3 + 9 + N_AUX)
+#: Default memory limit of an in-memory run (Simulator.run / simulate).
+RUN_MEMORY_LIMIT = 2e9
+#: Rows kept in memory by simulate_to_csv for plots and metrics (every k-th row).
+KEEP_ROWS = 200_000
 
 
 def simulate(config: Config, profile: Profile | None = None, t_end: float | None = None,
-             record_every: int = 1, theta1_initial: float | None = None) -> Trajectory:
-    """Batch run from rest: the config's input profile (or ``profile``) to ``t_end``."""
+             record_every: int = 1, theta1_initial: float | None = None,
+             max_bytes: float | None = None) -> Trajectory:
+    """Batch run from rest: the config's input profile (or ``profile``) to ``t_end``, in
+    memory (up-front ValueError beyond ``max_bytes``, see :meth:`Simulator.run`; long runs:
+    :func:`simulate_to_csv`)."""
     profile = profile if profile is not None else make_profile(config.input)
     t_end = config.input.end_time if t_end is None else t_end
     th0 = float(profile.theta1(np.array([0.0]))[0]) if theta1_initial is None else \
         theta1_initial
     sim = Simulator(config, theta1=th0)
-    return sim.run(profile, t_end, record_every)
+    return sim.run(profile, t_end, record_every, max_bytes=max_bytes)
+
+
+def csv_bytes_estimate(rows: int) -> float:
+    """Approximate size [bytes] of ``rows`` CSV rows of a Trajectory (22 columns of up to 18
+    characters each with '%.12g')."""
+    return rows * 22 * 18.0
+
+
+def simulate_to_csv(config: Config, path: str | Path, profile: Profile | None = None,
+                    t_end: float | None = None, record_every: int = 1,
+                    theta1_initial: float | None = None, header_comment: str = '',
+                    keep_rows: int = KEEP_ROWS, chunk_steps: int = 1 << 16) -> Trajectory:
+    """:func:`simulate` streamed to a CSV file in chunks: memory stays bounded whatever the
+    duration.  Returns a thinned Trajectory (every k-th recorded row, at most about
+    ``keep_rows`` rows, always the last) for plots and metrics; the file has every
+    recorded row and equals ``simulate(...).to_csv(path)``."""
+    profile = profile if profile is not None else make_profile(config.input)
+    t_end = config.input.end_time if t_end is None else t_end
+    th0 = float(profile.theta1(np.array([0.0]))[0]) if theta1_initial is None else \
+        theta1_initial
+    sim = Simulator(config, theta1=th0)
+    n_total, stride = sim._plan(t_end, record_every)
+    n_rows = n_total // stride + 1
+    keep = max(1, -(-n_rows // max(1, int(keep_rows))))     # ceil
+    kept: list[Trajectory] = []
+    row = 0
+    last = None
+    with TrajectoryCsvWriter(path, header_comment) as w:
+        for part in sim.iter_run(profile, t_end, stride, chunk_steps):
+            w.write(part)
+            idx = np.arange(row, row + len(part.t))
+            sel = (idx % keep) == 0
+            if sel.any():
+                kept.append(part.rows(sel))
+            row += len(part.t)
+            last = part
+    if last is not None and (row - 1) % keep != 0:
+        kept.append(last.rows(slice(-1, None)))
+    out = Trajectory.concatenate(kept)
+    out.stats = sim.stats
+    return out
 
 
 def ring_down(traj: Trajectory, t_move: float, theta4_eq: float, horizon: float = 0.5,

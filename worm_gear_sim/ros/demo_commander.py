@@ -7,8 +7,9 @@ Two interfaces to the node (``--interface``):
 
 * ``stamped``: behaves like a tracking servo.  Each reference sample is a
   ``sensor_msgs/JointState`` on ``worm_angle_reference`` whose ``header.stamp`` is the
-  instant it applies (samples on an exact ``--rate`` grid, streamed ``--preview`` seconds
-  ahead: by default the node's ``compensation.preview_time``), ``name[0]`` the worm input
+  instant it applies (samples on an exact ``--rate`` grid, streamed ahead by the node's
+  ``compensation.preview_time`` (``--preview``) plus ``--lead``, so that each correction
+  arrives before its instant), ``name[0]`` the worm input
   joint, ``position[0]`` theta1_ref [rad].  It consumes the node's
   ``~/compensated_command`` (theta1_ref + delta for the same stamp: what a servo would
   command) and its ``joint_states``, stamped with the instant they predict, from which the
@@ -22,9 +23,9 @@ seconds; ``slew``, a radar slew at ``--slew-rate`` with a sharp reversal every
 ``--slew-period`` seconds.
 
 Output: on a terminal ONE status line (at most 80 columns) refreshed 10 times a second;
-otherwise one line per completed move (peak error, residual after the move, settling to
-10 urad: :func:`worm_gear_sim.compensation.move_metrics`, the same rule as the offline
-evaluation).  At the end, a summary and the same moves run offline through the core
+otherwise one line per completed move: peak error, ringing once the applied command rests,
+settling to 10 urad (:func:`worm_gear_sim.studies.compensation_eval.move_metrics`, the rules
+of the offline evaluation).  At the end, a summary and the same moves run offline through the core
 (``run_scenario``, with and without the feed-forward), so the live figures stand next to
 what the model says with and without compensation.  Exit code 0 after ``--duration``
 seconds of streaming, 1 if the node never answers.
@@ -55,13 +56,13 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..compensation import SETTLE_TOLERANCE, Scenario, move_metrics, run_scenario
 from ..modal import modes
 from ..params import Config, derive, load_config
 from ..profiles import TrapezoidalProfile
+from ..studies.compensation_eval import SETTLE_TOLERANCE, Scenario, move_metrics, run_scenario
 
-__all__ = ['DemoCommander', 'MoveSummary', 'MoveTracker', 'command_pattern', 'format_move',
-           'format_status', 'main', 'offline_moves', 'pattern_segments']
+__all__ = ['DemoCommander', 'MOVE_HEADER', 'MoveSummary', 'MoveTracker', 'command_pattern',
+           'format_move', 'format_status', 'main', 'offline_moves', 'pattern_segments']
 
 REFERENCE_TOPIC = 'worm_angle_reference'
 COMMAND_TOPIC = 'worm_angle_command'
@@ -124,7 +125,7 @@ class MoveSummary:
     label: str
     start: float                  # s of pattern time
     peak: float                   # max |e| over the move [rad]
-    residual: float               # max |e - static| after the reference's motion [rad]
+    ringing: float                # max |e - static| once the applied command rests [rad]
     settling: float               # s from the end of the motion into +-10 urad (inf: never)
     tracking_rms: float           # rad, slew legs (nan for paper moves)
     samples: int
@@ -133,7 +134,12 @@ class MoveSummary:
 class MoveTracker:
     """Collects (t, e) samples in time order and closes each move of the pattern when a
     sample past its end arrives; a move with a gap longer than ``max_gap`` (or not covered
-    to within ``max_gap`` of its ends) is dropped and counted in ``incomplete``."""
+    to within ``max_gap`` of its ends) is dropped and counted in ``incomplete``.
+
+    The metrics are :func:`~worm_gear_sim.studies.compensation_eval.move_metrics`: ``ringing``
+    is its ``residual_peak``, measured once the applied command rests.  Without command samples
+    (``add_command``) the command is the reference, which rests when its motion ends; with
+    a feed-forward applied, the command keeps moving for the correction's span."""
 
     def __init__(self, seg: Segments, mode_hz: float, max_gap: float = 0.02):
         self.seg, self.mode_hz, self.max_gap = seg, mode_hz, max_gap
@@ -142,10 +148,23 @@ class MoveTracker:
         self._k = 0
         self._t: list[float] = []
         self._e: list[float] = []
+        self._moving: dict[int, float] = {}     # move -> last instant its command moved
+        self._last_cmd: tuple[float, float] | None = None
+        self.use_commands = True                # False: the command is the reference
 
     def _bounds(self, k: int) -> tuple[float, float]:
         a = self.seg.first + k * self.seg.period
         return a, a + self.seg.period
+
+    def add_command(self, t: float, command: float) -> None:
+        """A sample of the command applied to the drive (theta1_ref + delta)."""
+        last = self._last_cmd
+        self._last_cmd = (t, command)
+        if last is None or t <= last[0] or abs(command - last[1]) <= 1e-12:
+            return
+        k = int((t - self.seg.first) // self.seg.period)
+        if k >= 0:
+            self._moving[k] = t
 
     def add(self, t: float, e: float) -> MoveSummary | None:
         """Add a sample; returns the move it completed, if any."""
@@ -166,6 +185,9 @@ class MoveTracker:
         a, b = self._bounds(self._k)
         t, e = np.asarray(self._t), np.asarray(self._e)
         self._t, self._e = [], []
+        moved = self._moving.pop(self._k, None)
+        for k in [k for k in self._moving if k < self._k]:
+            del self._moving[k]
         if t.size < 3 or t[0] - a > self.max_gap or b - t[-1] > self.max_gap \
                 or np.max(np.diff(t)) > self.max_gap:
             self.incomplete += 1
@@ -175,9 +197,12 @@ class MoveTracker:
         sc = Scenario(name='demo move', times=tr, theta1_ref=np.zeros_like(tr),
                       move_end=seg.motion,
                       constant_rate=((seg.motion, seg.period),) if seg.constant_rate else ())
-        m = move_metrics(tr, e, sc, self.mode_hz)
+        command_end = seg.motion
+        if moved is not None and self.use_commands and not seg.constant_rate:
+            command_end = min(max(moved - a, seg.motion), float(tr[-1]))
+        m = move_metrics(tr, e, sc, self.mode_hz, command_end)
         summary = MoveSummary(self._k, seg.labels[self._k % 2], a, float(np.max(np.abs(e))),
-                              m['post_move_peak'], m['settling_time'], m['tracking_rms'],
+                              m['residual_peak'], m['settling_time'], m['tracking_rms'],
                               int(t.size))
         self.moves.append(summary)
         return summary
@@ -189,11 +214,14 @@ def offline_moves(cfg: Config, theta1: Callable[[Any], np.ndarray], seg: Segment
     (``run_scenario``: nonlinear plant, feed-forward of ``cfg`` when ``compensated``), cut
     into the same moves as the live trace."""
     times = np.arange(0.0, t_end + 0.5 / rate, 1.0 / rate)
-    sc = Scenario(name='demo', times=times, theta1_ref=np.asarray(theta1(times), float),
-                  move_end=t_end, constant_rate=())
+    x = np.asarray(theta1(times), float)
+    sc = Scenario(name='demo', times=times, theta1_ref=x, move_end=t_end, constant_rate=())
     record = max(1, int(round(1.0 / (rate * cfg.integrator.time_step))))
     run = run_scenario(cfg, sc, cfg if compensated else None, record_every=record)
     tracker = MoveTracker(seg, float(modes(cfg).frequencies_hz[0]))
+    if compensated:
+        for ti, ci in zip(times, x + run.delta):
+            tracker.add_command(float(ti), float(ci))
     for ti, ei in zip(run.trajectory.t, run.error):
         tracker.add(float(ti), float(ei))
     return tracker.moves
@@ -221,11 +249,14 @@ def fit(line: str, width: int = LINE_WIDTH) -> str:
     return line if len(line) <= width else line[:width - 1] + '>'
 
 
+MOVE_HEADER = ' move           t [s]  peak [urad]  ringing [urad]  rms [urad]  settling'
+
+
 def format_move(m: MoveSummary) -> str:
-    """One line per completed move (no terminal)."""
-    rms = f'  rms{_urad(m.tracking_rms)}' if math.isfinite(m.tracking_rms) else ''
-    return fit(f'move {m.index:4d} {m.label:<4} t {m.start:7.2f} s  peak{_urad(m.peak)}  '
-               f'after{_urad(m.residual)} urad  settle {_ms(m.settling):>8}{rms}')
+    """One line per completed move (no terminal), in the columns of MOVE_HEADER."""
+    rms = _urad(m.tracking_rms, 10) if math.isfinite(m.tracking_rms) else f'{"":10}'
+    return fit(f'{m.index:5d} {m.label:<4} {m.start:10.2f}  {_urad(m.peak, 11)}  '
+               f'{_urad(m.ringing, 14)}  {rms}  {_ms(m.settling):>8}')
 
 
 def format_status(t: float, e: float, scale: float, last: MoveSummary | None,
@@ -237,7 +268,7 @@ def format_status(t: float, e: float, scale: float, last: MoveSummary | None,
         (' ' * n + '|' + '#' * k + ' ' * (n - k))
     s = f'{t:6.1f}s e{_urad(e, 9, True)} urad [{bar}]'
     if last is not None:
-        s += f' #{last.index} after{_urad(last.residual, 7)}, {_ms(last.settling)}'
+        s += f' #{last.index} ring{_urad(last.ringing, 7)}, {_ms(last.settling)}'
     if extra:
         s += ' ' + extra
     return fit(s, width - 1)          # never the last column: no wrap on any terminal
@@ -255,18 +286,20 @@ class DemoCommander(Node):
     def __init__(self, pattern: str = 'paper', rate: float = 1000.0,
                  node_under_test: str = 'worm_gear_sim', move_period: float = 0.5,
                  slew_rate: float = 2.0, slew_period: float = 2.0,
-                 interface: str = 'stamped', preview: float = 0.0,
+                 interface: str = 'stamped', preview: float = 0.0, lead: float = 0.0,
                  config: Config | None = None, **kwargs: Any):
         super().__init__('demo_commander', **kwargs)
         if interface not in ('stamped', 'float64'):
             raise ValueError(f'interface must be stamped or float64, got {interface!r}')
         self.cfg = config if config is not None else load_config()
-        self.ratio = derive(self.cfg).output_per_input
+        self.output_per_input = derive(self.cfg).output_per_input
         self.theta1 = command_pattern(pattern, self.cfg, move_period, slew_rate, slew_period)
         self.segments = pattern_segments(pattern, self.cfg, move_period, slew_period)
         self.tracker = MoveTracker(self.segments, float(modes(self.cfg).frequencies_hz[0]))
+        self.tracker.use_commands = False   # until the node says its feed-forward is applied
         self.pattern, self.interface, self.rate = pattern, interface, rate
-        self.preview = preview              # s: how far ahead the stream runs
+        self.preview = preview              # s: the node's preview: stream this far ahead
+        self.lead = lead                    # s: ... plus this, so corrections come in time
         self.node_preview: float | None = None   # the node's compensation.preview_time
         self.period_ns = int(round(1e9 / rate))
         self.target = node_under_test
@@ -279,7 +312,7 @@ class DemoCommander(Node):
         self.error = math.nan
         self.t_error = 0.0
         self.peak_all = 0.0
-        self.latency_ns: list[int] = []     # compensated command received - its stamp
+        self.latency_ns: list[int] = []     # stamp - reception of compensated commands
         self.delta = math.nan
         self.diag: dict[str, str] = {}
         self.last_move: MoveSummary | None = None
@@ -311,7 +344,10 @@ class DemoCommander(Node):
         if self.interface == 'float64':
             v = float(self.theta1(self.elapsed()))
             self.pub.publish(Float64(data=v))
-            self.sent += 1
+            if self.t0_ns is None:
+                self.held += 1                  # the first sample, until the node answers
+            else:
+                self.sent += 1
             return
         if self.t0_ns is None:
             # Until the node answers, hold the first sample (it starts the simulation
@@ -321,8 +357,8 @@ class DemoCommander(Node):
                 self._last_hold = now
                 self.held += 1
             return
-        # every grid sample whose instant is at most `preview` ahead, in stamp order
-        horizon = now + int(self.preview * 1e9)
+        # every grid sample whose instant is at most preview + lead ahead, in stamp order
+        horizon = now + int((self.preview + self.lead) * 1e9)
         n = 0
         while n < MAX_BURST:
             stamp = self.t0_ns + self.k_next * self.period_ns
@@ -361,7 +397,7 @@ class DemoCommander(Node):
         t = self._pattern_time(msg.header.stamp)
         if t < 0.0:
             return                          # a prediction of the hold phase
-        e = msg.position[3] - self.ratio * float(self.theta1(t))
+        e = msg.position[3] - self.output_per_input * float(self.theta1(t))
         self._record(t, e)
 
     def _on_error(self, msg: Float64) -> None:
@@ -385,7 +421,8 @@ class DemoCommander(Node):
         if stamp < self.t0_ns:
             return
         self.n_cc += 1
-        self.latency_ns.append(now - stamp)
+        self.latency_ns.append(stamp - now)       # > 0: arrived before its instant
+        self.tracker.add_command((stamp - self.t0_ns) * 1e-9, msg.position[0])
         self.delta = msg.position[0] - float(self.theta1((stamp - self.t0_ns) * 1e-9))
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
@@ -433,6 +470,10 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     ap.add_argument('--preview', type=float, default=None,
                     help='stamped: stream this many seconds ahead [default: the node\'s '
                          'compensation.preview_time]')
+    ap.add_argument('--lead', type=float, default=0.02,
+                    help='stamped: stream this much further ahead, so that each correction '
+                         'arrives before its instant and a late timer of this process does '
+                         'not stall the stream [0.02 s]')
     ap.add_argument('--move-period', type=float, default=0.5,
                     help='paper: seconds between moves [0.5]')
     ap.add_argument('--slew-rate', type=float, default=2.0,
@@ -453,6 +494,8 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         ap.error('--rate, --duration, --move-period and --slew-period must be > 0')
     if opts.preview is not None and not 0.0 <= opts.preview <= 1.0:
         ap.error('--preview must be within [0, 1] s')
+    if not 0.0 <= opts.lead <= 0.5:
+        ap.error('--lead must be within [0, 0.5] s')
     return opts
 
 
@@ -462,30 +505,34 @@ def _summary(node: DemoCommander, opts: argparse.Namespace, compensated: bool | 
         print(fit(line), file=out, flush=True)
     moves = node.tracker.moves
     say(f'demo done: {node.elapsed():.1f} s of {opts.pattern} moves, {node.interface} '
-        f'references at {opts.rate:g} Hz' + (f', preview {node.preview * 1e3:g} ms'
-                                               if node.interface == 'stamped' else ''))
+        f'references at {opts.rate:g} Hz' + (f', {(node.preview + node.lead) * 1e3:g} ms '
+                                               'ahead' if node.interface == 'stamped' else ''))
     if node.interface == 'stamped':
         share = 100.0 * node.n_cc / node.sent if node.sent else 0.0
-        say(f'  references sent {node.sent}, compensated commands received {node.n_cc} '
-            f'({share:.2f} %), joint_states {node.n_js}')
+        say(f'  references {node.sent}, compensated commands {node.n_cc} ({share:.2f} %), '
+            f'joint_states {node.n_js}')
         if node.latency_ns:
-            lat = np.asarray(node.latency_ns) * 1e-6
-            say(f'  compensated command received {np.percentile(lat, 50):+.2f} ms (p50), '
-                f'{np.percentile(lat, 99):+.2f} ms (p99) after its instant')
+            ahead = np.asarray(node.latency_ns) * 1e-6
+            med, worst = np.percentile(ahead, 50), np.percentile(ahead, 1)
+            if worst >= 0.0:
+                say(f'  corrections arrived {med:.2f} ms (median), {worst:.2f} ms (1 %) '
+                    'before their instant')
+            else:
+                say(f'  corrections arrived {med:+.2f} ms (median), {worst:+.2f} ms (1 %) '
+                    'ahead of their instant: late')
     else:
-        say(f'  commands sent {node.sent}, joint_states {node.n_js}, positioning errors '
+        say(f'  commands {node.sent}, joint_states {node.n_js}, positioning errors '
             f'{node.n_err}')
     label = {True: 'with feed-forward', False: 'without feed-forward',
              None: 'feed-forward unknown'}[compensated]
-    med, mx = _stats([m.residual for m in moves])
-    settled = [m.settling for m in moves if math.isfinite(m.settling)]
-    say(f'  after the move ({len(moves)} moves, {label}): median {med * 1e6:.2f}, '
+    med, mx = _stats([m.ringing for m in moves])
+    say(f'  {len(moves)} moves {label}: ringing median {med * 1e6:.2f}, '
         f'max {mx * 1e6:.2f} urad')
-    say(f'  settled to {SETTLE_TOLERANCE * 1e6:g} urad: {len(settled)}/{len(moves)} moves'
+    settled = [m.settling for m in moves if math.isfinite(m.settling)]
+    say(f'  largest error {node.peak_all * 1e6:.2f} urad; settled to '
+        f'{SETTLE_TOLERANCE * 1e6:g} urad {len(settled)}/{len(moves)}'
         + (f', median {_ms(float(np.median(settled)))}' if settled else '')
-        + (f'; {node.tracker.incomplete} with gaps left out'
-           if node.tracker.incomplete else ''))
-    say(f'  largest antenna error {node.peak_all * 1e6:.2f} urad')
+        + (f'; {node.tracker.incomplete} moves with gaps' if node.tracker.incomplete else ''))
     if opts.no_offline or not moves or node.interface != 'stamped':
         return
     # the same moves through the core, offline: with and without the feed-forward
@@ -495,17 +542,17 @@ def _summary(node: DemoCommander, opts: argparse.Namespace, compensated: bool | 
         cfg = cfg.replace({'compensation.preview_time': node.node_preview})
     off = {c: {m.index: m for m in offline_moves(cfg, node.theta1, node.segments, t_end,
                                                  node.rate, c)} for c in (False, True)}
-    same = [m for m in moves if m.index in off[compensated or False]]
+    same = [m for m in moves if m.index in off[False] and m.index in off[True]]
     if not same:
         return
-    o_off = _stats([off[False][m.index].residual for m in same if m.index in off[False]])[0]
-    o_on = _stats([off[True][m.index].residual for m in same if m.index in off[True]])[0]
-    live = _stats([m.residual for m in same])[0]
-    say(f'  offline model, same moves: median {o_off * 1e6:.2f} urad without, '
-        f'{o_on * 1e6:.2f} urad with feed-forward')
+    o_off = _stats([off[False][m.index].ringing for m in same])[0]
+    o_on = _stats([off[True][m.index].ringing for m in same])[0]
+    live = _stats([m.ringing for m in same])[0]
+    say(f'  offline, same moves: ringing {o_off * 1e6:.2f} urad without, '
+        f'{o_on * 1e6:.2f} with feed-forward')
     if compensated is not None:
         ref = off[compensated]
-        dev = max(abs(m.residual - ref[m.index].residual) for m in same)
+        dev = max(abs(m.ringing - ref[m.index].ringing) for m in same)
         say(f'  live vs offline ({label}): largest difference {dev * 1e6:.3f} urad')
     if compensated and live > 0:
         say(f'  => ~/compensated_command applied: the antenna rings {o_off / live:.0f}x '
@@ -528,14 +575,15 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
     try:
         node = DemoCommander(opts.pattern, opts.rate, opts.node_name, opts.move_period,
                              opts.slew_rate, opts.slew_period, opts.interface,
-                             opts.preview or 0.0, cfg)
+                             opts.preview or 0.0, opts.lead, cfg)
         ex = make_executor('events')
         ex.add_node(node)
         never = Future()
         topic = REFERENCE_TOPIC if opts.interface == 'stamped' else COMMAND_TOPIC
         print(fit(f'demo: {opts.pattern} pattern, {node.resolve_topic_name(topic)} at '
                   f'{opts.rate:g} Hz'), file=out, flush=True)
-        print(fit(f'      antenna error e = theta4 - theta1 l_w/r_g (ratio 1:{1 / node.ratio:.4g})'
+        ratio = 1 / node.output_per_input
+        print(fit(f'      antenna error e = theta4 - theta1 l_w/r_g (ratio 1:{ratio:.4g})'
                   + ('' if tty else '; one line per move')), file=out, flush=True)
         t_start = time.monotonic()
         last_print = 0.0
@@ -554,15 +602,17 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
                                     ['node.compensation_applied',
                                      'compensation.preview_time'])
                 compensated = p.get('node.compensation_applied')
+                node.tracker.use_commands = bool(compensated)
                 if p.get('compensation.preview_time') is not None:
                     node.node_preview = float(p['compensation.preview_time'])
                     if opts.preview is None:
                         node.preview = node.node_preview
                 if not tty:
-                    state = {True: 'applied to the prediction', False: 'not applied',
+                    state = {True: 'applied', False: 'not applied',
                              None: 'unknown'}[compensated]
                     print(fit(f'      node {opts.node_name}: feed-forward {state}'
-                              + (f', preview {node.preview * 1e3:g} ms'
+                              + (f', preview {node.preview * 1e3:g} ms, '
+                                 f'{(node.preview + node.lead) * 1e3:g} ms ahead'
                                  if opts.interface == 'stamped' else '')), file=out,
                           flush=True)
             if node.started() and node.elapsed() >= opts.duration:
@@ -573,6 +623,8 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
                 last_print = now
             elif not tty:
                 for m in node.new_moves:
+                    if m is node.tracker.moves[0]:
+                        print(MOVE_HEADER, file=out, flush=True)
                     print(format_move(m), file=out, flush=True)
             node.new_moves.clear()
         if tty:

@@ -40,12 +40,9 @@ from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.exceptions import (
-    InvalidParameterTypeException,
-    InvalidParameterValueException,
-    ParameterException,
-)
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
@@ -55,10 +52,13 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..params import NODE_NAME, Config, ConfigError, config_from_mapping, load_config
+from ..params import NODE_NAME, SECTIONS, Config, ConfigError, config_from_mapping, load_config
+from ..params import _suggest as suggest_name
 from ..simulation import SimulationError, Simulator
 from . import diagnostics as diag
+from . import startup
 from .params_bridge import (
+    MODEL_PARAMETER_NAMES,
     coerce_parameter,
     declare_config,
     is_model_parameter,
@@ -66,16 +66,18 @@ from .params_bridge import (
     to_core_value,
 )
 
-try:  # issue 5 builds the compensator in parallel; the node must work (and say so) without it
+try:  # the node must work (and say so) without the compensator
     from ..compensation import Compensator
     COMPENSATION_IMPORT_ERROR: str = ''
 except ImportError as _exc:  # pragma: no cover - depends on the checkout
     Compensator = None  # type: ignore[assignment,misc]
     COMPENSATION_IMPORT_ERROR = f'{type(_exc).__name__}: {_exc}'
 
-__all__ = ['WormGearSimNode', 'CommandQueue', 'main', 'file_defaults', 'make_executor',
-           'spin_until_shutdown', 'COMMAND_TOPIC', 'JOINT_STATES_TOPIC', 'REJECT_REASONS',
-           'COMMAND_QUEUE_LENGTH', 'STALE_PERIODS', 'StreamClock']
+__all__ = ['WormGearSimNode', 'LogThrottle', 'CommandQueue', 'main', 'file_defaults',
+           'make_executor', 'spin_until_shutdown', 'COMMAND_TOPIC', 'JOINT_STATES_TOPIC',
+           'REJECT_REASONS', 'COMMAND_QUEUE_LENGTH', 'STALE_PERIODS', 'StreamClock']
+
+RCLError = _rclpy_impl.RCLError          # RCLInvalidROSArgsError derives from it
 
 COMMAND_TOPIC = 'worm_angle_command'
 JOINT_STATES_TOPIC = 'joint_states'
@@ -88,6 +90,27 @@ HOLD_EPS = 0.5e-9  # s: 'hold' steps just after the sample time (stamps are whol
 STREAM_GAIN = 0.02  # steady alpha of the stream clock (a memory of about 50 samples)
 STREAM_WINDOW = 0.35  # periods: a stamp further from its grid slot is an outlier
 STREAM_OUTLIER_RATE = 0.3  # re-lock when the outlier rate (1/8 smoothing) exceeds this
+
+
+class LogThrottle:
+    """One log line per cause every ``period`` seconds (monotonic clock); the lines held
+    back are counted and reported with the next line of that cause."""
+
+    def __init__(self, period: float) -> None:
+        self.period_ns = int(period * 1e9)
+        self._last: dict[str, int] = {}
+        self._held: dict[str, int] = {}
+
+    def __call__(self, cause: str, text: str) -> str:
+        """The line to log now for ``cause`` ('' while throttled)."""
+        now = time.monotonic_ns()
+        last = self._last.get(cause)
+        if last is not None and now - last < self.period_ns:
+            self._held[cause] = self._held.get(cause, 0) + 1
+            return ''
+        self._last[cause] = now
+        held = self._held.pop(cause, 0)
+        return f'{text} [{held} more like this held back]' if held else text
 
 
 class StreamClock:
@@ -271,7 +294,7 @@ class WormGearSimNode(Node):
         self.config: Config = cfg
         self.sim = Simulator(cfg, theta1=0.0, t0=0.0)
         self._warm_up()
-        self.ratio = self.sim.derived.output_per_input
+        self.output_per_input = self.sim.derived.output_per_input
 
         # --- command input state -----------------------------------------------------------
         self._cmd: float | None = None           # latest accepted command theta1_ref [rad]
@@ -302,6 +325,7 @@ class WormGearSimNode(Node):
             simulation_errors=0, compensation_errors=0, rejected_parameter_sets=0,
             accepted_parameter_sets=0, steps=0, max_steps_per_tick=0)
         self.last_error = ''
+        self._throttle = LogThrottle(LOG_THROTTLE_S)
         self._window = self._new_window()
 
         # --- feed-forward --------------------------------------------------------------
@@ -327,6 +351,8 @@ class WormGearSimNode(Node):
         self._f_err, self._f_worm, self._f_ff = Float64(), Float64(), Float64()
         self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
 
+        self._check_overrides()
+
         self.add_pre_set_parameters_callback(self._pre_set)
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
@@ -337,13 +363,34 @@ class WormGearSimNode(Node):
                                              self._guard(self.publish_diagnostics))
         self.get_logger().info(
             f'ready: dt = {self.sim.dt:g} s, {cfg.node.publish_rate_hz:g} Hz, ratio '
-            f'1:{1.0 / self.ratio:.6g}; waiting for {self.resolve_topic_name(COMMAND_TOPIC)}')
+            f'1:{1.0 / self.output_per_input:.6g}; '
+            f'waiting for {self.resolve_topic_name(COMMAND_TOPIC)}')
         if self.compensator is None:
             self.get_logger().error(
                 f'feed-forward unavailable ({self.compensation_error}); ~/feedforward is not '
                 'published and the prediction is uncompensated')
 
     # ---- helpers -----------------------------------------------------------------------
+    def _check_overrides(self) -> None:
+        """Parameters given to this node (params file, ``-p``, ``parameter_overrides``) that
+        it does not declare: a misspelt model or QoS key raises :class:`ConfigError` naming
+        it, with the closest declared name; any other unknown name is logged and ignored
+        (a ``/**`` block shared by several nodes may hold theirs)."""
+        declared = {name: None for name in MODEL_PARAMETER_NAMES}
+        unknown = sorted(n for n in self._parameter_overrides if not self.has_parameter(n))
+        for name in unknown:
+            head = name.split('.', 1)[0]
+            hint = suggest_name(name, declared)
+            if head in SECTIONS or head == 'qos_overrides' or hint:
+                if head == 'qos_overrides':
+                    hint = suggest_name(name, {n: None for n in self._qos_parameter_names()})
+                raise ConfigError(name, 'unknown parameter of this node' + hint)
+            self.get_logger().warning(f'ignoring parameter {name!r}: not a parameter of '
+                                      f'{self.get_name()}')
+
+    def _qos_parameter_names(self) -> list[str]:
+        return ['qos_overrides.' + n for n in self.get_parameters_by_prefix('qos_overrides')]
+
     def _guard(self, callback: Any) -> Any:
         """Timer callback that ends quietly when Ctrl-C / SIGTERM shut the context down
         while it runs (a publish on a dying context raises); other errors propagate."""
@@ -402,9 +449,13 @@ class WormGearSimNode(Node):
             except Exception as exc:  # noqa: BLE001
                 self._compensation_failed(exc)
 
-    def _warn(self, text: str) -> None:
+    def _warn(self, cause: str, text: str) -> None:
+        """Log ``text`` at most once per LOG_THROTTLE_S for each ``cause`` (a command
+        rejection never hides a parameter rejection or a simulation error)."""
         self.last_error = text
-        self.get_logger().warning(text, throttle_duration_sec=LOG_THROTTLE_S)
+        line = self._throttle(cause, text)
+        if line:
+            self.get_logger().warning(line)
 
     # ---- command input ---------------------------------------------------------------
     def _on_command(self, msg: Float64) -> None:
@@ -431,7 +482,7 @@ class WormGearSimNode(Node):
                      'jump': f' (|change| > node.max_command_jump = '
                              f'{self.config.node.max_command_jump:g} rad from {self._cmd!r})'
                      }.get(reason, '')
-            self._warn(f'rejected worm_angle_command {v!r}: {reason}{limit}; '
+            self._warn('command_' + reason, f'rejected worm_angle_command {v!r}: {reason}{limit}; '
                        f'{c["rejected_commands"]} rejected so far')
             return
         self._cmd = v
@@ -473,8 +524,8 @@ class WormGearSimNode(Node):
         if t <= self._last_t and self.counters['ticks']:
             if t < self._last_t:
                 self.counters['clock_backwards'] += 1
-                self._warn(f'clock went backwards ({self._last_t:.9f} s -> {t:.9f} s since '
-                           'start); tick ignored, state kept')
+                self._warn('clock_backwards', f'clock went backwards ({self._last_t:.9f} s '
+                           f'-> {t:.9f} s since start); tick ignored, state kept')
             return                      # no time has passed: nothing new to publish
         if base == 'wall':
             self._count_missed(ns)
@@ -623,8 +674,8 @@ class WormGearSimNode(Node):
 
     def _compensation_failed(self, exc: Exception) -> None:
         self.counters['compensation_errors'] += 1
-        self._warn(f'feed-forward failed ({type(exc).__name__}: {exc}); keeping the last '
-                   f'correction {self._delta:.3g} rad')
+        self._warn('compensation', f'feed-forward failed ({type(exc).__name__}: {exc}); '
+                   f'keeping the last correction {self._delta:.3g} rad')
 
     def _advance(self, t: float, drives: list[tuple[float, float]]) -> int:
         """Integrate up to the tick time ``t`` through the command samples ``drives``
@@ -640,7 +691,7 @@ class WormGearSimNode(Node):
             self.counters['overruns'] += 1
             self.counters['dropped_time'] += behind - cap
             self._window['overruns'] += 1
-            self._warn(f'{behind:.4g} s behind: integrated the last {cap:g} s '
+            self._warn('overrun', f'{behind:.4g} s behind: integrated the last {cap:g} s '
                        '(node.max_catch_up) and dropped the rest')
         t_before = sim.t
         held = self._held
@@ -660,7 +711,7 @@ class WormGearSimNode(Node):
         except (SimulationError, ValueError) as exc:
             self.counters['simulation_errors'] += 1
             self._window['errors'] += 1
-            self._warn(f'simulation error: {exc}; keeping the last good state '
+            self._warn('simulation', f'simulation error: {exc}; keeping the last good state '
                        f'(t = {sim.t:.6f} s) and continuing from t = {t:.6f} s')
             sim.resync(t)
         self._window['sim_time'] += sim.t - t_before
@@ -680,7 +731,7 @@ class WormGearSimNode(Node):
         # Trajectory.output_error); compensated: the servo's reference theta1_ref.
         reference = st.theta1 if ref is None else ref
         if self._pub_err.get_subscription_count():
-            self._f_err.data = float(th[2]) - reference * self.ratio
+            self._f_err.data = float(th[2]) - reference * self.output_per_input
             self._pub_err.publish(self._f_err)
         if self._pub_worm.get_subscription_count():
             self._f_worm.data = float(th[0]) - st.theta1
@@ -722,7 +773,7 @@ class WormGearSimNode(Node):
         reason, _ = self._evaluate(params)
         if reason:
             self.counters['rejected_parameter_sets'] += 1
-            self._warn(f'rejected parameter set: {reason}')
+            self._warn('parameters', f'rejected parameter set: {reason}')
         return params
 
     def _on_set(self, params: list[Parameter]) -> SetParametersResult:
@@ -739,12 +790,12 @@ class WormGearSimNode(Node):
         try:
             self.sim.reconfigure(cfg)
         except ValueError as exc:  # pragma: no cover - _evaluate ran the same call
-            self._warn(f'could not apply parameters: {exc}')
+            self._warn('parameters', f'could not apply parameters: {exc}')
             return
         self.sim.interpolation = cfg.node.command_interpolation
         if cfg.node.command_timing != self.config.node.command_timing:
             self._stream.reset()
-        self.ratio = self.sim.derived.output_per_input
+        self.output_per_input = self.sim.derived.output_per_input
         old = self.config
         self.config = cfg
         self.counters['accepted_parameter_sets'] += 1
@@ -857,45 +908,83 @@ def _parse_args(argv: list[str]) -> argparse.Namespace:
     return ap.parse_args(argv)
 
 
-def main(args: list[str] | None = None) -> int:
-    """Entry point of ``worm_gear_sim_node`` and ``python -m worm_gear_sim.node``.
+#: Errors of the parameters given at start-up: one line and exit code 2 (``startup``).
+#: ValueError covers numerically unusable values (LinAlgError is one) until the core proves
+#: a set usable itself.
+STARTUP_CONFIG_ERRORS = (ConfigError, ParameterException, ValueError, ArithmeticError)
 
-    Returns 0 after Ctrl-C / SIGTERM (no traceback), 1 when the parameters are invalid.
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``worm_gear_sim_node`` and ``python -m worm_gear_sim.node`` (through
+    :func:`worm_gear_sim.ros.startup.node_main`, which installs the signal handlers before
+    the heavy imports).
+
+    Returns 0 after Ctrl-C / SIGTERM at any time (no traceback), 2 after one line naming a
+    configuration error (broken, missing or unreadable params file, malformed ``-p``,
+    unknown or misspelt parameter, invalid or unusable value).  Portable across rclpy 7
+    (Jazzy) and 9 (Kilted): ``rclpy.init`` + ``try/finally rclpy.try_shutdown()``.
     """
-    argv = sys.argv if args is None else args
-    opts = _parse_args(remove_ros_args(args=argv)[1:])
+    startup.install_signal_handlers()
+    argv = list(sys.argv if args is None else args)
+    bad = startup.check_params_files(argv)
+    if bad:
+        return startup.config_error(bad)
+    try:   # parses --ros-args, params files included: errors end here, before rclpy.init
+        rest = remove_ros_args(args=argv)
+    except RCLError as exc:
+        return startup.config_error(startup.clean_rcl_message(exc))
+    opts = _parse_args(rest[1:])
     try:
-        with rclpy.init(args=argv):
-            context = rclpy.get_default_context()
-            try:
-                node = WormGearSimNode()
-            except (ConfigError, InvalidParameterTypeException, InvalidParameterValueException,
-                    ParameterException) as exc:
-                rclpy.logging.get_logger(NODE_NAME).fatal(f'invalid parameters: {exc}')
-                return 1
-            kind = opts.executor or node.config.node.executor
-            executor = make_executor(kind)
-            # Move everything allocated so far (numba, scipy, rclpy: a large heap) out of
-            # the cyclic GC's reach: full collections of it took milliseconds and showed
-            # up as missed ticks.
-            gc.collect()
-            gc.freeze()
-            executor.add_node(node)
-            node.get_logger().info(f'spinning with the {kind} executor')
-            try:
-                spin_until_shutdown(executor, context)
-            except (KeyboardInterrupt, ExternalShutdownException):
-                pass
-            except Exception:
-                if context.ok():
-                    raise
-                # The signal handler shut the context down while a callback was running
-                # (e.g. a publish on a context being torn down): a normal shutdown.
-            finally:
-                _quietly(executor.shutdown, 1.0)
-                _quietly(node.destroy_node)
+        rclpy.init(args=argv)
+    except RCLError as exc:
+        return startup.config_error(startup.clean_rcl_message(exc))
+    startup.set_phase('ros')        # from now on rclpy's handler shuts the context down
+    try:
+        return _run(opts)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    finally:
+        startup.set_phase('stopping')
+        _quietly(rclpy.try_shutdown)
+
+
+def _run(opts: argparse.Namespace) -> int:
+    context = rclpy.get_default_context()
+    try:
+        node = WormGearSimNode()
+    except STARTUP_CONFIG_ERRORS as exc:
+        if not context.ok():        # a signal shut the context down during declaration
+            return 0
+        return startup.config_error(f'invalid parameters: {exc}')
+    except Exception:
+        if not context.ok():
+            return 0
+        raise
+    if not context.ok():            # Ctrl-C / SIGTERM while the node was being built
+        _quietly(node.destroy_node)
+        return 0
+    kind = opts.executor or node.config.node.executor
+    executor = make_executor(kind)
+    # Move everything allocated so far (numba, scipy, rclpy: a large heap) out of the
+    # cyclic GC's reach: full collections of it took milliseconds and showed up as missed
+    # ticks.
+    gc.collect()
+    gc.freeze()
+    executor.add_node(node)
+    node.get_logger().info(f'spinning with the {kind} executor')
+    try:
+        spin_until_shutdown(executor, context)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if context.ok():
+            raise
+        # The signal handler shut the context down while a callback was running (e.g. a
+        # publish on a context being torn down): a normal shutdown.
+    finally:
+        startup.set_phase('stopping')
+        _quietly(executor.shutdown, 1.0)
+        _quietly(node.destroy_node)
     return 0
 
 

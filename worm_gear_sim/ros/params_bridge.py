@@ -24,7 +24,7 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
-from ..params import Config
+from ..params import Config, value_kind
 
 __all__ = ['parameter_type', 'descriptor_for', 'declare_config', 'to_core_value',
            'coerce_parameter', 'is_model_parameter', 'MODEL_PARAMETER_NAMES']
@@ -39,21 +39,19 @@ def is_model_parameter(name: str) -> bool:
     return name in _NAMES
 
 
+_ROS_TYPE = {
+    'bool': ParameterType.PARAMETER_BOOL,
+    'int': ParameterType.PARAMETER_INTEGER,
+    'float': ParameterType.PARAMETER_DOUBLE,
+    'str': ParameterType.PARAMETER_STRING,
+    'str_list': ParameterType.PARAMETER_STRING_ARRAY,
+    'float_list': ParameterType.PARAMETER_DOUBLE_ARRAY,
+}
+
+
 def parameter_type(default: Any) -> int:
-    """ROS ParameterType of a Config default value."""
-    if isinstance(default, bool):
-        return ParameterType.PARAMETER_BOOL
-    if isinstance(default, int):
-        return ParameterType.PARAMETER_INTEGER
-    if isinstance(default, float):
-        return ParameterType.PARAMETER_DOUBLE
-    if isinstance(default, str):
-        return ParameterType.PARAMETER_STRING
-    if isinstance(default, (list, tuple)):
-        if default and all(isinstance(v, str) for v in default):
-            return ParameterType.PARAMETER_STRING_ARRAY
-        return ParameterType.PARAMETER_DOUBLE_ARRAY
-    raise TypeError(f'unsupported parameter default {default!r}')
+    """ROS ParameterType of a Config default value (its kind: :func:`value_kind`)."""
+    return _ROS_TYPE[value_kind(default)]
 
 
 def _fmt(x: float) -> str:

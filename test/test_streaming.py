@@ -1,0 +1,95 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Issue 10.8: long offline runs are refused up front when they would not fit in memory,
+and stream in chunks with bounded memory (Simulator.iter_run, simulate_to_csv)."""
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from worm_gear_sim.params import Config
+from worm_gear_sim.profiles import make_profile
+from worm_gear_sim.simulation import (
+    ROW_BYTES,
+    Simulator,
+    Trajectory,
+    simulate,
+    simulate_to_csv,
+)
+
+FIELDS = ('t', 'theta1', 'theta1_dot', 'theta', 'omega', 'alpha', 'aux')
+
+
+def test_iter_run_chunks_equal_run_bit_for_bit():
+    cfg = Config()
+    prof = make_profile(cfg.input)
+    whole = Simulator(cfg).run(prof, 0.03, record_every=3)
+    parts = list(Simulator(cfg).iter_run(prof, 0.03, record_every=3, chunk_steps=1000))
+    assert len(parts) == 4 and all(len(p.t) <= 1000 // 3 + 1 for p in parts)
+    joined = Trajectory.concatenate(parts)
+    for f in FIELDS:
+        assert np.array_equal(getattr(joined, f), getattr(whole, f)), f
+
+
+def test_iter_run_without_steps_yields_the_current_state():
+    sim = Simulator(Config())
+    parts = list(sim.iter_run(make_profile(Config().input), 0.0))
+    assert len(parts) == 1 and len(parts[0].t) == 1 and parts[0].t[0] == 0.0
+
+
+def test_streamed_csv_equals_in_memory_csv(tmp_path):
+    cfg = Config().replace({'input.end_time': 0.025})
+    a, b = tmp_path / 'a.csv', tmp_path / 'b.csv'
+    simulate(cfg, record_every=2).to_csv(a, header_comment='x')
+    thin = simulate_to_csv(cfg, b, record_every=2, header_comment='x', keep_rows=100,
+                           chunk_steps=512)
+    assert a.read_text() == b.read_text()
+    # the thinned copy: every k-th row plus the last, at most ~keep_rows rows
+    full = simulate(cfg, record_every=2)
+    assert 90 <= len(thin.t) <= 102
+    assert thin.t[-1] == full.t[-1] and thin.t[0] == 0.0
+    k = int(round(thin.t[1] / (full.t[1] - full.t[0])))
+    assert np.array_equal(thin.theta[:-1], full.theta[::k][:len(thin.t) - 1])
+    assert thin.stats['steps'] == 2500
+
+
+def test_huge_in_memory_run_is_refused_up_front():
+    """simulate(t_end=1e4) would record 1e9 rows (160 GB): refused at once, naming the
+    estimate, the limit and the ways out; nothing allocated, nothing integrated."""
+    cfg = Config()
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError) as exc:
+            simulate(cfg, t_end=1e4)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    msg = str(exc.value)
+    assert 'GB' in msg and 'max_bytes' in msg and 'simulate_to_csv' in msg
+    assert f'{1e9 * ROW_BYTES / 1e9:.3g} GB' in msg
+    assert peak < 20e6
+    # the limit is the caller's: a small run under a tiny limit is refused too
+    with pytest.raises(ValueError, match='max_bytes'):
+        simulate(cfg, t_end=0.01, max_bytes=1000)
+
+
+def test_streaming_memory_does_not_grow_with_duration(tmp_path):
+    """Peak Python allocation of simulate_to_csv for a 4x longer run stays the same (bounded
+    by the chunk and the thinned copy), while an in-memory run grows with it."""
+    cfg = Config()
+
+    def peak(t_end):
+        tracemalloc.start()
+        try:
+            simulate_to_csv(cfg, tmp_path / 'run.csv', t_end=t_end, keep_rows=1000,
+                            chunk_steps=4096)
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    short, long_ = peak(0.1), peak(0.4)
+    assert long_ < 1.3 * short + 200_000, (short, long_)
+    assert long_ < 0.5 * (0.4 / 1e-5) * ROW_BYTES         # below the whole run (6.4 MB)
+    lines = sum(1 for line in open(tmp_path / 'run.csv') if not line.startswith('#'))
+    assert lines == 40001 + 1                              # header line + every row

@@ -1,0 +1,218 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Issue 10.1 / 10.10: a parameter set is proven usable before it is accepted (API, config
+files, CLI), and absurd states or commands give a clear ValueError, never a NaN state."""
+
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from worm_gear_sim.modal import modes
+from worm_gear_sim.params import (
+    ANGLE_LIMIT,
+    Config,
+    ConfigError,
+    check_usable,
+    config_from_mapping,
+    load_config,
+)
+from worm_gear_sim.simulation import Simulator, simulate
+from worm_gear_sim.usability import OMEGA_DT_MAX, SPRING_RATIO_MIN
+
+REPO = Path(__file__).resolve().parents[1]
+
+# In-range values (each inside its declared range) that made the model fail before: the
+# reason each fails is asserted, not only that it does.
+UNUSABLE = [
+    # Eq. 16: c_w k_w varies by e^(360 b) = e^180 over a mesh cycle; the calibrated mean stays,
+    # the minimum collapses: the mesh no longer holds the gear (was LinAlgError: Singular)
+    ({'mesh.worm_fit_b': 0.5}, 'mesh.worm_fit_b', ['e^(360 |b|)', 'singular stiffness']),
+    ({'mesh.gear_fit_b': -0.4}, 'mesh.gear_fit_b', ['e^(360 |b|)', 'singular stiffness']),
+    # the calibration of Eq. 16 overflows (was "math domain error")
+    ({'mesh.contact_mapping': 'sawtooth', 'mesh.worm_fit_b': 0.9745}, 'mesh.worm_fit_b',
+     ['overflow']),
+    ({'mesh.worm_fit_b': 0.9745}, 'mesh.worm_fit_b', ['singular stiffness']),
+    # tooth stiffness <= 1e-9 N/m (was LinAlgError)
+    ({'mesh.stiffness_model': 'linear', 'mesh.gear_tooth_stiffness_linear': 1e-9},
+     'mesh.gear_tooth_stiffness_linear', ['mesh l_w^2 k_Y', 'singular stiffness']),
+    ({'mesh.worm_tooth_stiffness_multiplier': 1e-12}, 'mesh.worm_tooth_stiffness_multiplier',
+     ['singular stiffness']),
+    # a hair-thin worm shaft: the motor no longer holds the drive (was LinAlgError)
+    ({'shafts.worm_shaft_radius': 1.9e-8}, 'shafts.worm_shaft_radius',
+     ['worm shaft K_w', 'singular stiffness']),
+    # a 0.4 nm worm: 52 MHz mode, omega dt = 3300 (was a Newton failure mid-run)
+    ({'geometry.worm_length': 4e-10}, 'geometry.worm_length', ['not resolved', 'worm']),
+    ({'geometry.gear_pitch_radius': 1.6e-4}, 'geometry.gear_pitch_radius', ['not resolved']),
+]
+
+
+@pytest.mark.parametrize('overrides, key, words', UNUSABLE,
+                         ids=[next(iter(o)) + '=' + str(list(o.values())[-1])
+                              for o, _, _ in UNUSABLE])
+def test_unusable_in_range_sets_raise_config_error_naming_the_key(overrides, key, words):
+    meta = Config.metadata()
+    for k, v in overrides.items():            # really inside the declared range
+        m = meta[k]
+        if m['lo'] is not None and isinstance(v, float):
+            assert m['lo'] <= v <= m['hi'], k
+    with pytest.raises(ConfigError) as exc:
+        Config().replace(overrides)
+    assert exc.value.key == key
+    msg = str(exc.value)
+    assert msg.startswith(f'{key} = '), msg
+    for w in words:
+        assert w in msg, (w, msg)
+    # the same set from a file (the node's and the CLI's path) and at the Simulator
+    nested = {}
+    for k, v in overrides.items():
+        sec, name = k.split('.')
+        nested.setdefault(sec, {})[name] = v
+    with pytest.raises(ConfigError) as exc2:
+        config_from_mapping(nested)
+    assert exc2.value.key == key
+    cfg = config_from_mapping(nested, usable=False)     # built unchecked: the API refuses it
+    with pytest.raises(ConfigError):
+        Simulator(cfg)
+    with pytest.raises(ConfigError):
+        Simulator(Config()).reconfigure(cfg)
+
+
+def test_rule_thresholds_sit_where_the_numerics_break():
+    """Just inside each rule the model works (finite modes and a move); the rules are not
+    wider than the failures they prevent."""
+    # mesh: a weak but representable mesh (factor 1e-6 above the singular limit) still runs
+    base = Config()
+    weak = base.replace({'mesh.worm_tooth_stiffness_multiplier': 1e-4,
+                         'mesh.gear_tooth_stiffness_multiplier': 1e-4})
+    assert np.all(np.isfinite(modes(weak).undamped_hz))
+    tr = simulate(weak, t_end=0.005)
+    assert np.all(np.isfinite(tr.theta))
+    # resolution: the worm mode just below omega dt = pi integrates the 18-step move
+    f_worm = modes(base).undamped_hz[-1]
+    scale = (2 * math.pi * f_worm * 1e-5 / (0.9 * OMEGA_DT_MAX)) ** 2   # J_w ~ worm_length
+    short = base.replace({'geometry.worm_length': 0.015 * scale})
+    w_dt = 2 * math.pi * modes(short).undamped_hz[-1] * 1e-5
+    assert 0.8 * OMEGA_DT_MAX < w_dt < OMEGA_DT_MAX
+    tr = simulate(short, t_end=0.03)
+    assert np.all(np.isfinite(tr.theta))
+    assert SPRING_RATIO_MIN == 1e-9
+
+
+def test_changed_keys_are_named_when_no_rule_applies():
+    # check_usable names the keys given as changed, first the suspects among them
+    cfg = Config().replace({'mesh.worm_fit_b': 0.001})
+    check_usable(cfg)                       # usable: no error, remembered
+    with pytest.raises(ConfigError) as exc:
+        Config().replace({'load.output_torque': 1.0, 'mesh.worm_fit_b': 0.5})
+    assert exc.value.key == 'mesh.worm_fit_b'
+    assert 'load.output_torque' not in str(exc.value)
+
+
+def test_defaults_and_shipped_config_are_usable():
+    check_usable(Config())
+    check_usable(load_config())
+
+
+def test_config_file_with_an_unusable_value(tmp_path):
+    f = tmp_path / 'p.yaml'
+    f.write_text('worm_gear_sim:\n  ros__parameters:\n    mesh:\n      worm_fit_b: 0.5\n')
+    with pytest.raises(ConfigError) as exc:
+        load_config(f)
+    assert exc.value.key == 'mesh.worm_fit_b'
+
+
+def _cli(*args):
+    env = dict(os.environ, PYTHONPATH=str(REPO), MPLBACKEND='Agg')
+    return subprocess.run([sys.executable, '-m', 'worm_gear_sim', *args], capture_output=True,
+                          text=True, env=env, timeout=120, cwd=REPO)
+
+
+@pytest.mark.parametrize('setting, key', [
+    ('mesh.worm_fit_b=0.5', 'mesh.worm_fit_b'),
+    ('mesh.worm_fit_b=0.98', 'mesh.worm_fit_b'),
+    ('mesh.worm_tooth_stiffness_multiplier=1e-12', 'mesh.worm_tooth_stiffness_multiplier'),
+])
+def test_cli_names_the_key_in_one_line_exit_2(setting, key, tmp_path):
+    r = _cli('simulate', '--set', setting, '--end-time', '0.01', '-o', str(tmp_path / 'x.csv'),
+             '--no-plot')
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith('worm-gear-sim: error: ' + key), lines[0]
+    assert 'Traceback' not in r.stderr and 'Singular matrix' not in r.stderr
+
+
+# ---- issue 10.10: absurd initial states and commands -------------------------------------
+@pytest.mark.parametrize('theta1', [1e20, -1e20, float('nan'), float('inf'), 2 * ANGLE_LIMIT])
+def test_absurd_initial_command_is_a_value_error(theta1):
+    with pytest.raises(ValueError, match='theta1'):
+        Simulator(Config(), theta1=theta1)
+    sim = Simulator(Config())
+    before = sim.state
+    with pytest.raises(ValueError, match='theta1'):
+        sim.reset(theta1)
+    after = sim.state
+    assert after.t == before.t and np.array_equal(after.theta, before.theta)
+
+
+@pytest.mark.parametrize('kwargs, word', [
+    (dict(theta=[1e20, 0, 0]), 'theta'),
+    (dict(theta=[0, float('nan'), 0]), 'theta'),
+    (dict(theta=[0, 0]), '3 numbers'),
+    (dict(theta='abc'), '3 numbers'),
+    (dict(omega=[1e300, 0, 0]), 'omega'),
+    (dict(omega=[0, 0, float('inf')]), 'omega'),
+    (dict(t0=float('nan')), 't0'),
+    (dict(t0=1e300), 't0'),
+])
+def test_absurd_initial_state_is_a_value_error(kwargs, word):
+    sim = Simulator(Config())
+    with pytest.raises(ValueError, match=word):
+        sim.reset(0.0, **kwargs)
+    assert np.all(np.isfinite(sim.state.theta)) and sim.t == 0.0
+
+
+def test_large_but_legal_angle_stays_finite():
+    sim = Simulator(Config(), theta1=1e6)
+    sim.advance_to(0.002, 1e6 + 0.01)
+    s = sim.state
+    assert np.all(np.isfinite(s.theta)) and np.all(np.isfinite(s.omega))
+    assert abs(s.theta[0] - (1e6 + 0.01)) < 1e-2
+
+
+@pytest.mark.parametrize('args, word', [
+    ((float('nan'), 0.0), 't_target'),
+    ((float('inf'), 0.0), 't_target'),
+    ((1e300, 0.0), 't_target'),
+    ((0.001, 1e20), 'theta1'),
+    ((0.001, float('nan')), 'theta1'),
+    ((0.001, 'x'), 'theta1'),
+])
+def test_advance_to_rejects_non_finite_or_huge_inputs(args, word):
+    sim = Simulator(Config())
+    with pytest.raises(ValueError, match=word):
+        sim.advance_to(*args)
+    assert sim.t == 0.0 and np.all(np.isfinite(sim.state.theta))
+    sim.advance_to(0.001, 0.001)            # still usable afterwards
+    assert sim.t == pytest.approx(0.001)
+
+
+def test_advance_to_huge_span_is_refused_up_front():
+    """advance_to(1e4) at dt = 10 us is 1e9 steps: a clear error naming the limit and how to
+    raise it, instantly, before any allocation or integration."""
+    sim = Simulator(Config())
+    with pytest.raises(ValueError) as exc:
+        sim.advance_to(1e4, 0.0)
+    msg = str(exc.value)
+    assert 'max_steps' in msg and '1e+09 steps' in msg and 'iter_run' in msg
+    assert sim.t == 0.0
+    # the limit is the caller's to raise; spans are integrated in bounded chunks
+    n = sim.advance_to(0.002, 0.0, max_steps=200)
+    assert n == 200
+    with pytest.raises(ValueError, match='max_steps'):
+        sim.advance_to(1.0, 0.0, max_steps=200)

@@ -1,0 +1,254 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""``experiment`` (the paper's Sec. 3) and ``sweep`` (Sec. 4 parametric studies, any
+parameter, on Dask)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from ..config_io import params_document, params_json_dump, suggest, typed_value
+from ..params import Config, ConfigError
+from ..studies import PAPER_STUDIES
+from .common import CliError, add_config_options, config_from_args, fmt_table, say
+
+
+def register(sub: Any) -> None:
+    """Add the ``experiment`` and ``sweep`` commands to the subparsers ``sub``."""
+    p = sub.add_parser('experiment', help="the paper's Sec. 3 experiment (Figs. 9-11)",
+                       description='18-step move: nonlinear model vs the linear model '
+                       '(constant tooth stiffness 3.5e8/2.5e8 N/m, mu 0.145) in the '
+                       'kinematic and the paper lead convention; table of equilibrium levels, '
+                       'frequencies and amplitudes, plot of the oscillating parts.')
+    add_config_options(p)
+    p.add_argument('--out-dir', '-o', default='experiment', metavar='DIR',
+                   help='output directory (default: %(default)s)')
+    p.add_argument('--traces', action='store_true',
+                   help='also write the oscillating parts as CSV (experiment_traces.csv)')
+    p.add_argument('--trace-every', type=int, default=3, metavar='N',
+                   help='trace CSV keeps every N-th step (default: %(default)s = 30 us, '
+                   'the paper sampled at 25 us)')
+    p.set_defaults(func=cmd_experiment)
+
+    p = sub.add_parser('sweep', help="the paper's Sec. 4 parametric studies, in parallel",
+                       description='Parametric studies (paper Figs. 12-18) or a sweep of any '
+                       'parameter. Output per study: <study>.csv (max oscillation amplitudes '
+                       'of theta2 and theta4 after the move, and more) and <study>.png. Runs '
+                       'on a Dask LocalCluster with one worker process per core by default.')
+    add_config_options(p)
+    p.add_argument('study', nargs='*', metavar='STUDY',
+                   help=f'{", ".join(PAPER_STUDIES)} or all')
+    p.add_argument('--param', metavar='PATH[,PATH]', help='sweep this dotted parameter '
+                   '(several comma-separated paths get the same value)')
+    p.add_argument('--values', metavar='V1,V2,...', help='values for --param')
+    p.add_argument('--range', metavar='START:STOP:NUM', help='evenly spaced values for '
+                   '--param (with --log: geometric)')
+    p.add_argument('--log', action='store_true', help='geometric --range')
+    p.add_argument('--name', metavar='NAME', help='file name of a --param sweep '
+                   '(default: custom)')
+    p.add_argument('--compare', metavar='KEY=V1,V2', help='repeat every case for each value '
+                   'of KEY (one line per value), e.g. input.move_time=0.02,0.04; also writes '
+                   '<study>_envelope.csv/png, the worst case over those values')
+    p.add_argument('--out-dir', '-o', default='sweep', metavar='DIR',
+                   help='output directory (default: %(default)s)')
+    p.add_argument('--workers', '-j', type=int, metavar='N',
+                   help='LocalCluster worker processes (default: all cores)')
+    p.add_argument('--scheduler', metavar='ADDRESS', help='run on an existing Dask cluster, '
+                   'e.g. tcp://10.0.0.5:8786 (workers need worm_gear_sim installed)')
+    p.add_argument('--serial', action='store_true', help='run in this process (no Dask)')
+    p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    p.add_argument('--traces', action='store_true', help='also plot the time traces of '
+                   'studies with at most 8 cases (e.g. flywheel, Figs. 12-13)')
+    p.set_defaults(func=cmd_sweep)
+
+
+def cmd_experiment(args: argparse.Namespace) -> int:
+    from ..plotting import plot_experiment
+    from ..studies import EXPERIMENT_COLUMNS, experiment_table, move_end_time, rows_to_csv
+    cfg = config_from_args(args)
+    if cfg.geometry.lead_convention != 'kinematic' or cfg.mesh.stiffness_model != 'nonlinear':
+        say(args, 'note: the experiment sets lead_convention and the linear/nonlinear '
+             'model itself; the base values of those keys are ignored')
+    outdir = Path(args.out_dir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    rows, trajs = experiment_table(cfg)
+    rows_to_csv(rows, EXPERIMENT_COLUMNS, outdir / 'experiment.csv')
+    from ..profiles import make_profile
+    t_move = move_end_time(cfg, make_profile(cfg.input))
+    plot_experiment(trajs, rows, outdir / 'experiment.png', t_move=t_move)
+    if args.traces:
+        _write_traces(trajs, outdir / 'experiment_traces.csv', args.trace_every)
+    say(args, f'18-step move ({next(iter(trajs.values())).profile}), '
+         f'{cfg.input.end_time:g} s; levels in rad, amplitudes after the move:')
+    say(args, fmt_table(rows, [
+        ('model', 'model', ''), ('lead_convention', 'lead', ''),
+        ('eq2', 'theta2_eq', '.7f'), ('eq4', 'theta4_eq', '.7f'),
+        ('mean4', 'theta4_mean', '.7f'), ('freq4_hz', 'f4_fft[Hz]', '.2f'),
+        ('freq4_zc_hz', 'f4_zc[Hz]', '.2f'), ('modal4_hz', 'f1_modal[Hz]', '.2f'),
+        ('freq2_hz', 'f2_fft[Hz]', '.1f'), ('amp2', 'amp2', '.3e'), ('amp4', 'amp4', '.3e'),
+        ('max_err4', 'max|err4|', '.3e'), ('decay4', 'decay4', '.3f')]))
+    say(args, f'paper (Sec. 3.2): theta2 -> 0.1130973 rad, theta4 -> 0.0127076 rad; '
+         f'wrote {outdir / "experiment.csv"}, {outdir / "experiment.png"}')
+    return 0
+
+
+def _write_traces(trajs: Mapping[str, Any], path: Path, every: int) -> None:
+    import numpy as np
+    first = next(iter(trajs.values()))
+    cols = {'t': first.t[::every]}
+    for key, tr in trajs.items():
+        cols[f'{key}:theta2-theta1'] = tr.worm_error[::every]
+        cols[f'{key}:theta4-theta1*lw/rg'] = tr.output_error[::every]
+    with open(path, 'w') as fh:
+        fh.write(','.join(cols) + '\n')
+        np.savetxt(fh, np.column_stack(list(cols.values())), delimiter=',', fmt='%.12g')
+
+
+# ---- sweep -----------------------------------------------------------------------------
+SWEEP_COLUMNS: tuple[str, ...] = (
+    'study', 'series', 'label', 'x', 'amp2', 'amp3', 'amp4', 'half_pp2', 'half_pp4', 'eq2',
+    'eq4', 'mean2', 'mean4', 'freq2_hz', 'freq4_hz', 'max_err2', 'max_err4', 'decay4', 'J_4',
+    'ratio', 't_move', 't_end', 'steps', 'subdivision_events', 'overrides',
+)
+
+
+def _sweep_studies(args: argparse.Namespace, cfg: Config) -> list:
+    from ..studies import PAPER_STUDIES, paper_study, param_study, parse_values
+    names = list(args.study or [])
+    studies = []
+    if args.param:
+        paths = [s.strip() for s in args.param.split(',') if s.strip()]
+        defaults = cfg.to_flat_dict()
+        for pth in paths:
+            if pth not in defaults:
+                raise ConfigError(pth, 'unknown parameter' + suggest(pth, list(defaults)))
+        try:
+            raw = parse_values(args.values, args.range, args.log)
+        except ValueError as exc:
+            raise CliError(str(exc)) from None
+        values = [typed_value(paths[0], r, Config().to_flat_dict()[paths[0]]) for r in raw]
+        for pth in paths[1:]:
+            for r in raw:
+                typed_value(pth, r, Config().to_flat_dict()[pth])
+        studies.append(param_study(paths, values, labels=raw, name=args.name or 'custom'))
+    elif args.values or args.range:
+        raise CliError('--values/--range need --param PATH')
+    if 'all' in names:
+        names = [n for n in names if n != 'all'] + [n for n in PAPER_STUDIES if n not in names]
+    for n in dict.fromkeys(names):
+        if n not in PAPER_STUDIES:
+            raise CliError(f'unknown study {n!r}; choose from {", ".join(PAPER_STUDIES)}, all '
+                           '(or --param PATH --values ...)')
+        studies.append(paper_study(n, cfg))
+    if not studies:
+        raise CliError(f'nothing to sweep: name a study ({", ".join(PAPER_STUDIES)}, all) or '
+                       'give --param PATH --values V1,V2,...')
+    if args.compare:
+        studies = [_with_compare(s, args.compare, cfg) for s in studies]
+    # validate every case before starting workers (a bad value fails fast, in one line)
+    for st in studies:
+        for c in st.cases:
+            cfg.replace(dict(c.overrides))
+    return studies
+
+
+def _with_compare(study, spec: str, cfg: Config):
+    from ..studies import COMPARE_SEP, Case
+    key, sep, vals = spec.partition('=')
+    key = key.strip()
+    defaults = Config().to_flat_dict()
+    if not sep or not vals.strip():
+        raise CliError(f'--compare {spec!r}: expected KEY=V1,V2,...')
+    if key not in defaults:
+        raise ConfigError(key, 'unknown parameter' + suggest(key, list(defaults)))
+    raws = [v.strip() for v in vals.split(',') if v.strip()]
+    cases = []
+    for raw in raws:
+        v = typed_value(key, raw, defaults[key])
+        for c in study.cases:
+            if key in c.overrides:
+                raise CliError(f'--compare {key}: the {study.name} study sets it itself')
+            cases.append(Case(c.study, f'{c.series}{COMPARE_SEP}{key.split(".")[-1]}={raw}', c.x,
+                              c.label, {key: v, **c.overrides}))
+    return dataclasses.replace(study, cases=tuple(cases),
+                               title=f'{study.title}; compare {key}')
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from ..plotting import plot_sweep
+    from ..studies import ENVELOPE_COLUMNS, envelope_rows, rows_to_csv, run_cases
+    cfg = config_from_args(args)
+    if args.workers is not None and args.workers < 1:
+        raise CliError('--workers must be >= 1 (use --serial to run in this process)')
+    if args.serial and args.scheduler:
+        raise CliError('--serial and --scheduler exclude each other')
+    studies = _sweep_studies(args, cfg)
+    outdir = Path(args.out_dir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    all_cases = [c for st in studies for c in st.cases]
+    engine = ('this process' if args.serial else f'Dask scheduler {args.scheduler}'
+              if args.scheduler else
+              f'Dask LocalCluster, {args.workers or os.cpu_count()} worker processes')
+    say(args, f'{len(all_cases)} cases in {len(studies)} '
+         f'stud{"y" if len(studies) == 1 else "ies"} on {engine}')
+    t0 = time.perf_counter()
+    rows = run_cases(cfg, all_cases, workers=args.workers, scheduler=args.scheduler,
+                     serial=args.serial, progress=not args.no_progress)
+    wall = time.perf_counter() - t0
+    params_json_dump(params_document(cfg), outdir / 'sweep_params.json')
+    k = 0
+    for st in studies:
+        part = rows[k:k + len(st.cases)]
+        k += len(st.cases)
+        csv_path = outdir / f'{st.name}.csv'
+        png_path = outdir / f'{st.name}.png'
+        rows_to_csv(part, SWEEP_COLUMNS, csv_path)
+        plot_sweep(part, png_path, st.title, st.x_label, st.x_log, st.categorical)
+        say(args, f'\n{st.title}')
+        say(args, fmt_table(part, [('series', 'series', ''), ('label', 'case', ''),
+                                     ('amp2', 'amp theta2 [rad]', '.4e'),
+                                     ('amp4', 'amp theta4 [rad]', '.4e'),
+                                     ('freq4_hz', 'f4 [Hz]', '.2f'),
+                                     ('max_err4', 'max|err4| [rad]', '.4e')]))
+        say(args, f'wrote {csv_path}, {png_path}')
+        if args.compare:
+            env = envelope_rows(part)
+            env_csv, env_png = outdir / f'{st.name}_envelope.csv', \
+                outdir / f'{st.name}_envelope.png'
+            rows_to_csv(env, ENVELOPE_COLUMNS, env_csv)
+            key, _, vals = args.compare.partition('=')
+            plot_sweep(env, env_png, f'{st.title}: worst case over '
+                       f'{len(vals.split(","))} values of {key}', st.x_label, st.x_log,
+                       st.categorical)
+            say(args, f'worst case over {args.compare}:')
+            say(args, fmt_table(env, [('series', 'series', ''), ('label', 'case', ''),
+                                        ('amp2', 'amp theta2 [rad]', '.4e'),
+                                        ('amp2_at', 'at', ''),
+                                        ('amp4', 'amp theta4 [rad]', '.4e'),
+                                        ('amp4_at', 'at', '')]))
+            say(args, f'wrote {env_csv}, {env_png}')
+        if args.traces and len(st.cases) <= 8:
+            _sweep_traces(cfg, st, outdir / f'{st.name}_traces.png')
+            say(args, f'wrote {outdir / (st.name + "_traces.png")}')
+    kernel = sum(r.get('kernel_s', 0.0) for r in rows)
+    say(args, f'\n{len(rows)} cases in {wall:.2f} s wall ({len(rows) / wall:.2f} cases/s; '
+         f'integration time summed over the cases {kernel:.2f} s)')
+    return 0
+
+
+def _sweep_traces(cfg: Config, study, path: Path) -> None:
+    from ..plotting import plot_traces
+    from ..studies import move_end_time, run_case
+    trajs = {}
+    for c in study.cases:
+        res = run_case(cfg, c.overrides, keep_trajectory=True)
+        trajs[f'{c.series}: {c.label}' if len({x.series for x in study.cases}) > 1
+              else c.label] = res['trajectory']
+    from ..profiles import make_profile
+    plot_traces(trajs, path, study.title, move_end_time(cfg, make_profile(cfg.input)))

@@ -1,0 +1,227 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Configuration in and out: parameter files, ``--set`` overrides, the resolved-parameters
+document.
+
+* in: YAML (ROS layout or plain sections, :func:`worm_gear_sim.params.load_config`) or a
+  ``params`` JSON (:func:`load_params_json`, its ``derived`` block checked), chosen by
+  :func:`load_any_config`; ``--set key=value`` strings typed by the parameter's kind
+  (:func:`typed_value`, the rule of :func:`worm_gear_sim.params.value_kind`);
+* out: :func:`params_document` (every section plus the derived quantities), written as JSON
+  (:func:`params_json_dump`, exact float round trip) or as a ROS params YAML
+  (:func:`params_yaml_text`).
+
+Errors are :class:`~worm_gear_sim.params.ConfigError` naming the parameter.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .params import Config, ConfigError, config_from_mapping, derive, load_config, value_kind
+
+__all__ = ['PARAMS_FORMAT', 'typed_value', 'parse_set', 'check_key', 'params_document',
+           'load_params_json', 'load_any_config', 'resolve_config', 'params_json_dump',
+           'params_yaml_text']
+
+PARAMS_FORMAT = 'worm_gear_sim.params/1'
+_RESERVED_JSON_KEYS = ('format', 'derived')
+
+_TRUE = ('true', 'yes', 'on', '1')
+_FALSE = ('false', 'no', 'off', '0')
+
+
+def suggest(key: str, known: Sequence[str]) -> str:
+    """`` (did you mean x?)`` for a mistyped key, or ''."""
+    close = difflib.get_close_matches(key, list(known), n=1, cutoff=0.6)
+    return f' (did you mean {close[0]}?)' if close else ''
+
+
+def check_key(key: str) -> Any:
+    """The default of the dotted parameter ``key``; ConfigError for an unknown key."""
+    defaults = Config().to_flat_dict()
+    if key not in defaults:
+        raise ConfigError(key, 'unknown parameter' + suggest(key, list(defaults)))
+    return defaults[key]
+
+
+def typed_value(key: str, raw: str, default: Any) -> Any:
+    """Parse a command-line string for the parameter ``key`` by its kind (the type of its
+    default, :func:`~worm_gear_sim.params.value_kind`)."""
+    text = raw.strip()
+    kind = value_kind(default)
+    if kind == 'bool':
+        if text.lower() in _TRUE:
+            return True
+        if text.lower() in _FALSE:
+            return False
+        raise ConfigError(key, f'must be true or false, got {raw!r}')
+    if kind == 'int':
+        try:
+            return int(text)
+        except ValueError:
+            try:
+                f = float(text)
+            except ValueError:
+                raise ConfigError(key, f'must be an integer, got {raw!r}') from None
+            if not f.is_integer():
+                raise ConfigError(key, f'must be an integer, got {raw!r}') from None
+            return int(f)
+    if kind == 'float':
+        try:
+            return float(text)
+        except ValueError:
+            raise ConfigError(key, f'must be a number, got {raw!r}') from None
+    if kind in ('str_list', 'float_list'):
+        inner = text[1:-1] if text.startswith('[') and text.endswith(']') else text
+        items = [s.strip().strip('\'"') for s in inner.split(',')] if inner.strip() else []
+        if kind == 'str_list':
+            return items
+        out = []
+        for i, s in enumerate(items):
+            try:
+                out.append(float(s))
+            except ValueError:
+                raise ConfigError(f'{key}[{i}]', f'must be a number, got {s!r}') from None
+        return out
+    return raw
+
+
+def parse_set(items: Sequence[str] | None) -> dict[str, Any]:
+    """``['mesh.stiffness_model=linear', ...]`` -> typed dotted overrides (unknown keys and
+    malformed items raise ConfigError)."""
+    out: dict[str, Any] = {}
+    for item in items or ():
+        key, sep, raw = item.partition('=')
+        key = key.strip()
+        if not sep or not key:
+            raise ConfigError('', f'--set {item!r}: expected KEY=VALUE, e.g. '
+                              'mesh.stiffness_model=linear')
+        out[key] = typed_value(key, raw, check_key(key))
+    return out
+
+
+def params_document(cfg: Config) -> dict[str, Any]:
+    """The fully resolved parameters: every config section plus a ``derived`` block
+    (inertias, stiffnesses, lead per radian, ratio, mesh calibration, linear modes)."""
+    from .modal import modes
+    from .model import P_GEAR_X0, P_WORM_X0, pack_parameters
+    doc: dict[str, Any] = {'format': PARAMS_FORMAT}
+    doc.update(cfg.to_nested_dict())
+    d = dataclasses.asdict(derive(cfg))
+    d['output_per_input'] = derive(cfg).output_per_input
+    p = pack_parameters(cfg)
+    d['worm_contact_origin_deg'] = float(p[P_WORM_X0])
+    d['gear_contact_origin_deg'] = float(p[P_GEAR_X0])
+    try:
+        d['natural_frequencies_hz'] = [float(f) for f in modes(cfg).undamped_hz]
+    except Exception:  # noqa: BLE001 - informative only
+        d['natural_frequencies_hz'] = None
+    doc['derived'] = d
+    return doc
+
+
+def _close(a: Any, b: Any) -> bool:
+    if isinstance(a, bool) or isinstance(b, bool) or a is None or b is None:
+        return a == b
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-300)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def load_params_json(path: str | Path, doc: Mapping[str, Any] | None = None) -> Config:
+    """Config from a ``params`` JSON: sections are the parameters; the ``derived`` block is
+    checked against the values derived again (a mismatch is an error: derived quantities are
+    outputs, edit the sections instead)."""
+    p = Path(path)
+    if doc is None:
+        try:
+            doc = json.loads(p.read_text())
+        except json.JSONDecodeError as exc:
+            raise ConfigError('', f'{p}: broken JSON at line {exc.lineno}, column '
+                              f'{exc.colno}: {exc.msg}') from None
+    if not isinstance(doc, Mapping):
+        raise ConfigError('', f'{p}: expected a JSON object of parameter sections')
+    fmt = doc.get('format', PARAMS_FORMAT)
+    if fmt != PARAMS_FORMAT:
+        raise ConfigError('format', f'{p}: unsupported format {fmt!r} (expected '
+                          f'{PARAMS_FORMAT!r})')
+    sections = {k: v for k, v in doc.items() if k not in _RESERVED_JSON_KEYS}
+    cfg = config_from_mapping(sections, source=str(p))
+    derived = doc.get('derived')
+    if derived is not None:
+        if not isinstance(derived, Mapping):
+            raise ConfigError('derived', f'{p}: must be an object')
+        fresh = params_document(cfg)['derived']
+        for key, value in derived.items():
+            if key not in fresh:
+                raise ConfigError(f'derived.{key}', 'unknown derived quantity'
+                                  + suggest(key, list(fresh)))
+            if not _close(value, fresh[key]):
+                raise ConfigError(f'derived.{key}', f'{value!r} does not match the value '
+                                  f'derived from the parameters ({fresh[key]!r}); derived '
+                                  'quantities are outputs: edit the sections and delete the '
+                                  'derived block')
+    return cfg
+
+
+def load_any_config(path: str | Path | None) -> Config:
+    """YAML (ROS layout or plain sections) or a ``params`` JSON; None = package default."""
+    if path is None:
+        return load_config()
+    p = Path(path)
+    if not p.exists():
+        raise ConfigError('', f'config file not found: {p}')
+    if p.is_dir():
+        raise ConfigError('', f'config path is a directory: {p}')
+    if p.suffix.lower() == '.json':
+        return load_params_json(p)
+    text = p.read_text()
+    if text.lstrip().startswith('{'):
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError:
+            doc = None
+        if isinstance(doc, Mapping) and ('derived' in doc or 'format' in doc):
+            return load_params_json(p, doc)
+    return load_config(p)
+
+
+def resolve_config(config_path: str | Path | None, sets: Sequence[str] | None = None,
+                   extra: Mapping[str, Any] | None = None) -> Config:
+    """The run's config: file (or default) + ``--set`` items + command-specific overrides."""
+    cfg = load_any_config(config_path)
+    overrides = parse_set(sets)
+    if extra:
+        overrides.update(extra)
+    return cfg.replace(overrides) if overrides else cfg
+
+
+def params_json_dump(doc: Mapping[str, Any], path: str | Path | None) -> str:
+    """JSON text with exact float round trip (repr); written to ``path`` unless None."""
+    text = json.dumps(doc, indent=2, allow_nan=False) + '\n'
+    if path is not None:
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(text)
+    return text
+
+
+def params_yaml_text(doc: Mapping[str, Any]) -> str:
+    """A :func:`params_document` as a ROS params YAML (the derived block as a comment)."""
+    body = {k: v for k, v in doc.items() if k not in _RESERVED_JSON_KEYS}
+    derived = json.dumps(doc['derived'])
+    return ('# worm_gear_sim resolved parameters (ROS params file)\n'
+            f'# derived: {derived}\n'
+            + yaml.safe_dump({'worm_gear_sim': {'ros__parameters': body}},
+                             sort_keys=False, default_flow_style=None))

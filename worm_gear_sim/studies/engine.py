@@ -1,0 +1,230 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Running study cases: one case in this process, many cases serially or on Dask
+(LocalCluster, a remote scheduler or a given Client)."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..modal import static_equilibrium
+from ..params import Config, config_from_mapping, derive
+from ..profiles import Profile, make_profile
+from ..simulation import Simulator
+from .cases import Case
+from .metrics import move_end_time, oscillation_metrics
+
+__all__ = ['run_case', 'run_cases', 'case_config', 'warm_up', 'local_cluster_client',
+           'WORKER_ENV']
+
+
+# ---- running one case ---------------------------------------------------------------------
+def _as_config(base: Config | Mapping[str, Any]) -> Config:
+    return base if isinstance(base, Config) else config_from_mapping(base, source='base')
+
+
+def case_config(base: Config | Mapping[str, Any], overrides: Mapping[str, Any]) -> Config:
+    """The case's config: base (Config or nested dict) with the overrides (validated)."""
+    cfg = _as_config(base)
+    return cfg.replace(dict(overrides)) if overrides else cfg
+
+
+def run_case(base: Config | Mapping[str, Any], overrides: Mapping[str, Any] | None = None,
+             t_end: float | None = None, profile: Profile | None = None,
+             keep_trajectory: bool = False) -> dict[str, Any]:
+    """Run one case from rest and return its metrics (small, picklable) plus timings:
+    ``kernel_s`` (the Newmark integration itself) and ``case_s`` (everything, including
+    config validation, parameter packing, equilibrium and metrics), wall clock, and the same
+    as CPU time of this thread (``kernel_cpu_s``, ``case_cpu_s``)."""
+    t0, c0 = time.perf_counter(), time.thread_time()
+    cfg = case_config(base, overrides or {})
+    prof = make_profile(cfg.input) if profile is None else profile
+    t_end = cfg.input.end_time if t_end is None else float(t_end)
+    th0 = float(prof.theta1(np.array([0.0]))[0])
+    sim = Simulator(cfg, theta1=th0)
+    tk, ck = time.perf_counter(), time.thread_time()
+    traj = sim.run(prof, t_end, record_every=1)
+    kernel, kernel_cpu = time.perf_counter() - tk, time.thread_time() - ck
+    t_move = move_end_time(cfg, prof)
+    eq = static_equilibrium(sim.p, float(traj.theta1[-1]))
+    out = oscillation_metrics(traj, t_move, eq)
+    d = derive(cfg)
+    out.update(t_move=t_move, t_end=float(traj.t[-1]), J_4=d.J_4, ratio=d.ratio,
+               steps=traj.stats.get('steps', 0),
+               subdivision_events=traj.stats.get('subdivision_events', 0),
+               kernel_s=kernel, case_s=time.perf_counter() - t0, kernel_cpu_s=kernel_cpu,
+               case_cpu_s=time.thread_time() - c0)
+    if keep_trajectory:
+        out['trajectory'] = traj
+    return out
+
+
+def _run_payload(payload: tuple) -> dict[str, Any]:
+    """Run one case: (index, base nested dict, overrides, t_end) -> result dict."""
+    index, base, overrides, t_end = payload
+    res = run_case(base, overrides, t_end)
+    res['index'] = index
+    return res
+
+
+def _run_chunk(base: Mapping[str, Any], items: Sequence[tuple]) -> list[dict[str, Any]]:
+    """Worker entry point: several cases sharing one base config (fewer, larger tasks keep
+    the scheduler's per-task cost small against ~50 ms cases)."""
+    return [_run_payload((i, base, ov, t_end)) for i, ov, t_end in items]
+
+
+# ---- running many cases -------------------------------------------------------------------
+def _progress(total: int, enabled: bool, desc: str):
+    if not enabled:
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a declared dependency
+        return None
+    import sys
+    return tqdm(total=total, desc=desc, unit='case', file=sys.stderr, leave=True,
+                dynamic_ncols=True)
+
+
+def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None,
+              scheduler: str | None = None, serial: bool = False, progress: bool = False,
+              t_end: float | None = None, client: Any = None, chunk_size: int | None = None,
+              on_result: Callable[[dict], None] | None = None) -> list[dict[str, Any]]:
+    """Run the cases and return one result dict per case, in case order.
+
+    Engines: ``serial=True`` runs in this process; ``client`` uses a given
+    dask.distributed Client; ``scheduler`` connects to a running Dask scheduler
+    (``tcp://host:8786``); otherwise a Dask LocalCluster is started with ``workers``
+    processes (default: all cores), one thread each.  The base config goes to every worker
+    once (as a plain dict); each task carries a chunk of cases (their overrides; default
+    chunk: about 16 tasks per worker, at most 16 cases) and returns only their metrics.
+    Results do not depend on the engine (same code, same arithmetic, bit for bit).
+    """
+    base_map = base.to_nested_dict()
+    items = [(i, dict(c.overrides), t_end) for i, c in enumerate(cases)]
+    results: list[dict[str, Any] | None] = [None] * len(cases)
+    studies = list(dict.fromkeys(c.study for c in cases))
+    bar = None
+
+    def start_bar() -> None:   # after the engine is up: no bar before a connection error
+        nonlocal bar
+        bar = _progress(len(cases), progress, studies[0] if len(studies) == 1 else 'sweep')
+
+    def done(r: dict[str, Any]) -> None:
+        results[r['index']] = r
+        if on_result:
+            on_result(r)
+        if bar:
+            bar.update()
+
+    try:
+        if serial:
+            start_bar()
+            for i, ov, te in items:
+                done(_run_payload((i, base_map, ov, te)))
+        else:
+            with _dask_client(client, scheduler, workers) as cl:
+                from distributed import as_completed
+                n_workers = len(cl.run(warm_up))
+                if n_workers == 0:
+                    raise ConnectionError('the Dask cluster has no workers')
+                size = chunk_size if chunk_size else \
+                    max(1, min(16, math.ceil(len(items) / (16 * n_workers))))
+                chunks = [items[k:k + size] for k in range(0, len(items), size)]
+                base_future = cl.scatter(base_map, broadcast=True)
+                futures = [cl.submit(_run_chunk, base_future, ch, pure=False)
+                           for ch in chunks]
+                start_bar()
+                try:
+                    for fut in as_completed(futures):
+                        for r in fut.result():
+                            done(r)
+                finally:
+                    for f in futures:
+                        f.cancel()
+    finally:
+        if bar:
+            bar.close()
+    out = []
+    for c, r in zip(cases, results):
+        assert r is not None
+        row = {'study': c.study, 'series': c.series, 'x': c.x, 'label': c.label}
+        row.update({k: v for k, v in r.items() if k != 'index'})
+        row['overrides'] = dict(c.overrides)
+        out.append(row)
+    return out
+
+
+# Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in its workers, which also switches off glibc's
+# dynamic mmap threshold: every ~1 MB record array of a case is then mmap'ed and unmapped
+# (8000 page faults, ~10 ms of system time per 0.5 s case, a third of the kernel time).
+# A fixed 16 MB mmap threshold keeps them in the heap.  Set the same variables on the
+# workers of a remote cluster (see docs/studies.md).
+WORKER_ENV = {
+    'distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_': 1 << 24,
+    'distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_': 1 << 28,
+}
+
+
+def warm_up() -> float:
+    """Import the model and load its compiled (cached) kernels in this process; returns the
+    seconds it took.  Run on every Dask worker before the cases so that the first case of each
+    worker does not pay for imports and numba cache loading."""
+    t0 = time.perf_counter()
+    cfg = Config()
+    sim = Simulator(cfg)
+    sim.run(make_profile(cfg.input), 10 * cfg.integrator.time_step)
+    static_equilibrium(sim.p, 0.0)
+    return time.perf_counter() - t0
+
+
+class _dask_client:
+    """Context manager yielding a Client: the given one, a remote scheduler, or a
+    LocalCluster of ``workers`` processes (closed on exit)."""
+
+    def __init__(self, client: Any, scheduler: str | None, workers: int | None):
+        self.client, self.scheduler, self.workers = client, scheduler, workers
+        self._own: list[Any] = []
+
+    def __enter__(self):
+        if self.client is not None:
+            return self.client
+        import logging
+
+        from distributed import Client, LocalCluster
+        if self.scheduler:
+            try:
+                cl = Client(self.scheduler, timeout='5s')
+            except OSError as exc:
+                raise ConnectionError(f'cannot reach Dask scheduler {self.scheduler}: '
+                                      f'{exc}') from None
+            self._own.append(cl)
+            return cl
+        import dask
+        n = self.workers or os.cpu_count() or 1
+        with dask.config.set(WORKER_ENV):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
+        self._own.append(cluster)
+        cl = Client(cluster)
+        self._own.insert(0, cl)
+        return cl
+
+    def __exit__(self, *exc):
+        for obj in self._own:
+            try:
+                obj.close()
+            except Exception:  # noqa: BLE001 - best effort shutdown
+                pass
+        return False
+
+
+def local_cluster_client(workers: int | None = None):
+    """A started LocalCluster client (caller closes client and cluster); for benchmarks."""
+    return _dask_client(None, None, workers)

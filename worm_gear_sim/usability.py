@@ -1,0 +1,251 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Is a parameter set *usable*: the rules behind :func:`worm_gear_sim.params.check_usable`.
+
+Every field of a :class:`~worm_gear_sim.params.Config` can lie inside its declared range while
+the set as a whole cannot be simulated.  The causes found are structural, so they are
+written as rules on the derived quantities, each naming the parameters that set them:
+
+1. **Mesh stiffness over a cycle** (Eqs. 16-17).  Each tooth stiffness varies by a factor
+   e^{360 |b|} over one mesh cycle; the calibration holds its *mean* at the linear value, so a
+   large |b| (``mesh.worm_fit_b = 0.5``: e^180) drives the minimum towards 0 (or overflows the
+   calibration: "math domain error").  A tooth stiffness near 0 (``*_tooth_stiffness_*`` of
+   1e-9 N/m) does the same.
+2. **The spring chain must hold every body.**  The drive is held only through motor -K_w- worm
+   -mesh- gear -K_g- antenna.  Where two springs meet on one body (K_w and l_w^2 k_Y on the
+   worm, r_g^2 k_Y and K_g on the gear) and one is below ``SPRING_RATIO_MIN`` of the other, it
+   is lost in the sum in double precision: the stiffness matrix is singular (LinAlgError) or
+   the equilibrium is meaningless.  Checked at both ends of the mesh cycle.
+3. **The modes** must be computable and finite.
+4. **A trial**: static equilibrium at theta1 = 0 (finite, within ``ANGLE_LIMIT``), the modes,
+   and ``TRIAL_TIME`` of integration through a small command ramp must be computable and
+   finite.  Anything still failing becomes a :class:`ConfigError` naming the keys that were
+   changed (the cause is in them), never a raw numpy error.  When the trial fails and the
+   highest mode is not resolved by the time step (omega dt > pi: a 4e-10 m worm gives
+   omega dt = 3300), the error says so and names the inertia of that mode.  Unresolved
+   modes alone are allowed: the average-acceleration step is unconditionally stable, and
+   the paper's shear-modulus study runs at omega dt = 5.4.
+
+Cost: see :func:`check_usable` (measured in ``benchmarks/bench_soak.py --usable``); it is pure,
+allocation-light and thread-safe, so the node's parameter bridge can run it off the real-time
+path.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+from .params import ANGLE_LIMIT, Config, ConfigError
+
+__all__ = ['check_usable', 'SPRING_RATIO_MIN', 'OMEGA_DT_MAX', 'TRIAL_TIME']
+
+#: Two springs on one body: the smaller must be at least this share of the larger (it keeps
+#: 7 significant digits in their sum).
+SPRING_RATIO_MIN = 1e-9
+#: Highest linearised mode times the time step (pi: two steps per period).
+OMEGA_DT_MAX = math.pi
+#: Trial integration: a ramp of TRIAL_ANGLE over the first half, then held.
+TRIAL_TIME = 2e-3
+TRIAL_ANGLE = 0.0113
+
+_WORM_SHAFT = ('materials.worm_shaft_shear_modulus', 'shafts.worm_shaft_radius',
+               'shafts.worm_shaft_length')
+_GEAR_SHAFT = ('materials.gear_shaft_shear_modulus', 'shafts.gear_shaft_radius',
+               'shafts.gear_shaft_length')
+_TEETH = {
+    'worm': ('mesh.worm_fit_b', 'mesh.worm_fit_a', 'mesh.worm_tooth_stiffness_linear',
+             'mesh.worm_tooth_stiffness_multiplier', 'geometry.module'),
+    'gear': ('mesh.gear_fit_b', 'mesh.gear_fit_a', 'mesh.gear_tooth_stiffness_linear',
+             'mesh.gear_tooth_stiffness_multiplier', 'geometry.module'),
+}
+_MESH = ('shafts.worm_bearing_axial_stiffness', 'shafts.gear_bearing_axial_stiffness',
+         'materials.youngs_modulus', 'geometry.pressure_angle', 'geometry.lead_angle',
+         'geometry.lead', 'geometry.worm_pitch_radius', 'geometry.gear_pitch_radius')
+_INERTIA = {
+    0: ('geometry.worm_length', 'geometry.worm_pitch_radius', 'materials.worm_density',
+        'shafts.worm_shaft_inertia_fraction'),
+    1: ('geometry.gear_width', 'geometry.gear_pitch_radius', 'materials.gear_density',
+        'shafts.gear_shaft_inertia_fraction'),
+    2: ('geometry.flywheel_length', 'geometry.flywheel_radius', 'materials.flywheel_density',
+        'geometry.shaft_end_inertia', 'shafts.gear_shaft_inertia_fraction'),
+}
+
+
+def check_usable(cfg: Config, changed: Iterable[str] | None = None) -> None:
+    """Raise :class:`ConfigError` unless ``cfg`` can be simulated (see the module doc).
+
+    ``changed``: the dotted keys just set (``Config.replace``); they are named first, and
+    alone when a failure has no rule of its own.  Without it, the keys that differ from the
+    defaults are named.  A usable Config is remembered (Configs are immutable), so checking
+    it again is a dictionary look-up."""
+    if cfg in _USABLE:
+        return
+    keys = tuple(changed) if changed is not None else _differs_from_defaults(cfg)
+    try:
+        with np.errstate(all='ignore'):     # thread-local: a bad set fails below, silently
+            _check(cfg, keys)
+    except ConfigError:
+        raise
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
+        raise _blame(cfg, keys, (), f'not computable ({type(exc).__name__}: {exc})') \
+            from None
+    if len(_USABLE) >= _CACHE_SIZE:
+        _USABLE.pop(next(iter(_USABLE)), None)
+    _USABLE[cfg] = True
+
+
+_CACHE_SIZE = 512
+_USABLE: dict[Config, bool] = {}
+
+
+def _differs_from_defaults(cfg: Config) -> tuple[str, ...]:
+    ref = Config().to_flat_dict()
+    return tuple(k for k, v in cfg.to_flat_dict().items() if ref[k] != v)
+
+
+def _blame(cfg: Config, changed: Sequence[str], suspects: Sequence[str],
+           why: str) -> ConfigError:
+    """ConfigError on the most likely key: the changed suspects, else the changed keys, else
+    the first suspect.  The message shows their values; ``keys`` holds all of them."""
+    flat = cfg.to_flat_dict()
+    named = [k for k in suspects if k in changed] or list(changed) or list(suspects[:1])
+    head = ', '.join(f'{k} = {flat[k]!r}' for k in named if k in flat)
+    err = ConfigError(named[0] if named else '', why)
+    if head:
+        err.args = (f'{head}: {why}',)
+    err.keys = tuple(named)
+    return err
+
+
+def _check(cfg: Config, changed: Sequence[str]) -> None:
+    from .model import (
+        P_CGKG_LIN,
+        P_CWKW_LIN,
+        P_GEAR_B,
+        P_KG,
+        P_KW,
+        P_LIN_COMPLIANCE,
+        P_LW,
+        P_MESH_LINEAR,
+        P_RG,
+        P_WORM_B,
+        mesh_stiffness_y,
+        pack_parameters,
+        tooth_stiffness,
+    )
+    try:
+        p = pack_parameters(cfg)
+    except (ArithmeticError, ValueError):
+        # the calibration of Eqs. 16-17 overflows: e^{360 b} too steep
+        b_keys = [k for k in ('mesh.worm_fit_b', 'mesh.gear_fit_b') if k in changed] \
+            or ['mesh.worm_fit_b', 'mesh.gear_fit_b']
+        raise _blame(cfg, changed, b_keys, 'the tooth stiffness of Eqs. 16-17 varies by '
+                     'e^(360 |b|) over a mesh cycle; this b makes it overflow (the '
+                     'paper: |b| < 0.001 1/deg, a factor 1.3)') from None
+
+    # Rule 1: tooth stiffness over the cycle.  Eqs. 16-17 are exponentials of the contact
+    # position x(s); x takes its extremes at mesh phase 0 and 180 deg (cosine mapping) or 0
+    # and 360 deg (sawtooth): evaluate there.
+    two_pi = 2.0 * math.pi
+    states = []
+    for phase in (0.0, 0.5 * two_pi, two_pi * (1.0 - 1e-12)):
+        # theta2 = 2 (phase - phase_offset) with theta3 = 0 gives that mesh phase
+        states.append((2.0 * (phase - cfg.mesh.phase_offset), 0.0))
+    linear = p[P_MESH_LINEAR] != 0.0
+    if not math.isfinite(p[P_LIN_COMPLIANCE]):
+        raise _blame(cfg, changed, _TEETH['worm'][2:] + _TEETH['gear'][2:4],
+                     'the linear tooth compliance 1/c_w k_w + 1/c_g k_g (Eq. 7) overflows: '
+                     'a tooth stiffness this small is no mesh')
+    for side, lin_idx, b_idx in (('worm', P_CWKW_LIN, P_WORM_B), ('gear', P_CGKG_LIN,
+                                                                   P_GEAR_B)):
+        vals = [tooth_stiffness(p, th2, th3)[0 if side == 'worm' else 1]
+                for th2, th3 in states]
+        if linear:
+            vals = [p[lin_idx]]
+        lo, hi = min(vals), max(vals)
+        if not (math.isfinite(hi) and lo > 0.0 and math.isfinite(lo)):
+            sym = 'c_w k_w' if side == 'worm' else 'c_g k_g'
+            why = (f'the {side} tooth stiffness {sym} (Eq. {16 if side == "worm" else 17}) '
+                   f'spans {lo:.3g} .. {hi:.3g} N/m over a mesh cycle')
+            if not linear:
+                why += f' (a factor e^(360 |b|) = {math.exp(min(700.0, 360 * abs(p[b_idx]))):.3g})'
+            raise _blame(cfg, changed, _TEETH[side], why + ': it must stay finite and > 0')
+
+    # Rule 2: the spring chain holds every body, at both ends of the cycle.  Seen from the
+    # motor, each body is held by the springs between it and the motor (in series); if that
+    # holding stiffness is lost next to the spring leading further out, the pivot of the
+    # stiffness matrix at the next body cancels to 0: singular.
+    Kw, Kg, lw, rg = p[P_KW], p[P_KG], p[P_LW], p[P_RG]
+    variation = '' if linear else (
+        'over a mesh cycle the tooth stiffnesses of Eqs. 16-17 vary by e^(360 |b|) = '
+        f'{math.exp(min(700.0, 360 * abs(p[P_WORM_B]))):.3g} (worm), '
+        f'{math.exp(min(700.0, 360 * abs(p[P_GEAR_B]))):.3g} (gear); at its weakest ')
+    mesh_keys = _TEETH['worm'] + _TEETH['gear'][:4] + _MESH
+    for th2, th3 in states:
+        kY = mesh_stiffness_y(p, th2, th3)
+        springs = {'worm shaft K_w': (Kw, _WORM_SHAFT), 'mesh l_w^2 k_Y': (lw * lw * kY,
+                                                                             mesh_keys),
+                   'gear shaft K_g': (Kg * (lw / rg) ** 2, _GEAR_SHAFT)}  # at the worm
+        for name, (k, keys) in springs.items():
+            if not (math.isfinite(k) and k > 0.0):
+                raise _blame(cfg, changed, keys, f'the {name} stiffness is {k:.3g} N m/rad '
+                             '(seen at the worm): it must be finite and > 0')
+        held, inner = Kw, 'worm shaft K_w'
+        for outer in ('mesh l_w^2 k_Y', 'gear shaft K_g'):
+            k_out = springs[outer][0]
+            if held < SPRING_RATIO_MIN * k_out:
+                why = variation if 'mesh' in inner else ''
+                raise _blame(cfg, changed, springs[inner][1], why +
+                             f'the {inner} = {springs[inner][0]:.3g} N m/rad (seen at the '
+                             f'worm) is below {SPRING_RATIO_MIN:g} of the {outer} = '
+                             f'{k_out:.3g} beyond it: in double precision the drive is no '
+                             'longer held (singular stiffness matrix)')
+            held = 1.0 / (1.0 / held + 1.0 / k_out)      # in series, now out to `outer`
+            if k_out < springs[inner][0]:
+                inner = outer                               # the weakest spring so far
+
+    # Rule 3: the modes are computable (the diagnosis of a failing trial uses them)
+    from .modal import modes
+    m = modes(cfg, include_damping=False)
+    if not np.all(np.isfinite(m.undamped_hz)):
+        raise _blame(cfg, changed, (), 'the linearised natural frequencies are not finite')
+
+    # Rule 4: trial (equilibrium finite and in range, a short ramp integrates)
+    from .simulation import SimulationError, Simulator
+    try:
+        sim = Simulator(cfg, theta1=0.0, check=False)
+        u0 = sim.state.theta
+        if not (np.all(np.isfinite(u0)) and np.all(np.abs(u0) <= ANGLE_LIMIT)):
+            raise _blame(cfg, changed, ('load.output_torque',), f'the static equilibrium '
+                         f'(theta2, theta3, theta4) = {u0} is not finite or beyond '
+                         f'{ANGLE_LIMIT:g} rad')
+        sim.advance_to(0.5 * TRIAL_TIME, TRIAL_ANGLE)
+        sim.advance_to(TRIAL_TIME, TRIAL_ANGLE)
+        s = sim.state
+        if not (np.all(np.isfinite(s.theta)) and np.all(np.isfinite(s.omega))):
+            raise SimulationError('non-finite state')
+    except SimulationError as exc:
+        raise _trial_failure(cfg, changed, m, str(exc)) from None
+
+
+def _trial_failure(cfg: Config, changed: Sequence[str], m, what: str) -> ConfigError:
+    """The trial move failed: name the unresolved mode if there is one (the usual cause:
+    a tiny inertia or a huge stiffness puts a mode far above the step's Nyquist limit, where
+    the implicit step exists but Newton cannot follow the nonlinear mesh), else the keys."""
+    why = f'a {TRIAL_TIME * 1e3:g} ms trial move of {TRIAL_ANGLE:g} rad fails ({what})'
+    dt = cfg.integrator.time_step
+    i = int(np.argmax(m.undamped_hz))
+    wdt = 2.0 * math.pi * float(m.undamped_hz[i]) * dt
+    if wdt > OMEGA_DT_MAX:
+        body = int(np.argmax(np.abs(m.shapes[:, i])))
+        names = ('worm', 'gear', 'antenna')
+        return _blame(cfg, changed, ('integrator.time_step',) + _INERTIA[body],
+                      f'{why}: the highest mode ({m.undamped_hz[i]:.4g} Hz, mostly the '
+                      f'{names[body]}) is not resolved by integrator.time_step = {dt:g} s '
+                      f'(omega dt = {wdt:.3g} > pi); reduce the time step below '
+                      f'{OMEGA_DT_MAX / (2 * math.pi * m.undamped_hz[i]):.3g} s or check '
+                      f'the {names[body]} inertia')
+    return _blame(cfg, changed, (), why)
