@@ -246,7 +246,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
 
 @njit(cache=True, error_model='numpy')
 def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
-    """One Newmark step with the set-valued friction law in a fixed mode (issue 12.3).
+    """One Newmark step with the set-valued friction law in a fixed mode.
 
     mode 0, stick: the sliding speed at the end of the step is zero (a linear constraint on
     u) and mu_eff = lambda is an unknown solved with u in the same Newton iteration.  After a
