@@ -246,7 +246,7 @@ def test_read_only_parameters_rejected(ros_harness):
                         ('node.joint_names', ['a', 'b', 'c', 'd'])):
         res = h.node.set_parameters([Parameter(name, value=value)])[0]
         assert not res.successful and 'read-only' in res.reason, (name, res.reason)
-    assert h.node.sim.dt == 1e-5
+    assert h.node.sim.dt == Config().integrator.time_step
     assert h.node.counters['rejected_parameter_sets'] == 3
 
 
@@ -377,11 +377,12 @@ def test_wall_time_catch_up_is_capped(ros_harness):
     assert h.spin_until(lambda: h.node.counters['overruns'] >= 1)
     c = h.node.counters
     assert c['dropped_time'] >= 0.3 - 0.02 - 0.05
-    assert c['max_steps_per_tick'] <= 0.02 / 1e-5 + 1
+    dt = h.node.sim.dt
+    assert c['max_steps_per_tick'] <= 0.02 / dt + 1
     # the stall was dropped, not integrated: the simulated clock jumps (resync) and the
     # steps taken cover far less than the stalled time
     assert h.node.sim.t - t_before >= 0.3
-    assert 0 < c['steps'] - steps_before < 0.3 / 1e-5 / 2
+    assert 0 < c['steps'] - steps_before < 0.3 / dt / 2
 
 
 # ---- diagnostics, QoS -------------------------------------------------------------------

@@ -45,7 +45,7 @@ from .model import (
     P_GAMMA,
     P_J4,
     P_JG,
-    P_JW,
+    P_JW_STEP,
     P_KG,
     P_LW,
     P_MAXIT,
@@ -127,7 +127,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     """One Newmark step from (u0, v0, a0) (3-tuples).  Returns
     (ok, u, v, a, rho, since, n_solves, n_evals, verified)."""
     beta, gamma = p[P_BETA], p[P_GAMMA]
-    m0, m1, m2 = p[P_JW], p[P_JG], p[P_J4]
+    m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
     r3 = p[P_RIGID3]
     rtol, atol = p[P_RTOL], p[P_ATOL]
     Kg, cout = p[P_KG], p[P_COUT]
@@ -259,7 +259,7 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
     Returns (ok, u, v, a, mu_eff, n_solves, n_evals, da/dmu of theta2, theta3 (stick));
     ok False also when the slip hypothesis cannot hold (the speed would change sign)."""
     beta, gamma = p[P_BETA], p[P_GAMMA]
-    m0, m1, m2 = p[P_JW], p[P_JG], p[P_J4]
+    m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
     r3 = p[P_RIGID3]
     rtol, atol = p[P_RTOL], p[P_ATOL]
     Kg, cout = p[P_KG], p[P_COUT]
@@ -565,7 +565,7 @@ def consistent_acceleration(p, C, u, v, theta1, theta1_dot, a):
     rel0 = v[0] - theta1_dot
     rel1 = v[1] - r3 * theta1_dot
     rel2 = v[2] - r3 * theta1_dot
-    m = (p[P_JW], p[P_JG], p[P_J4])
+    m = (p[P_JW_STEP], p[P_JG], p[P_J4])
     for i in range(2):
         a[i] = (f[i] - C[i, 0] * rel0 - C[i, 1] * rel1 - C[i, 2] * rel2) / m[i]
     if m[2] > 0.0:
