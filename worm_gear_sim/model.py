@@ -245,9 +245,10 @@ def friction_coefficient(p, v_s, q):
         if av > 0.0:
             dmu = -0.5 * p[P_MU_DROP] * p[P_INV_SQRT_VS] * ex / sv
     if p[P_FRIC_SET_VALUED] != 0.0:
-        # set-valued law, slip branch: W_f = mu(|v_s|) |W_n| sgn(v_s); sgn(0) = 0 here (at
-        # zero sliding speed the stick force is a multiplier the integrator solves for)
-        if v_s == 0.0:
+        # set-valued law, slip branch: W_f = mu(|v_s|) |W_n| sgn(v_s).  Below the cusp
+        # velocity the contact counts as stuck and the friction as 0 here: the stick force
+        # is a multiplier the integrator solves for, the state alone does not fix it
+        if av < p[P_VCUSP]:
             return 0.0, 0.0
         sq = 1.0 if q >= 0.0 else -1.0
         sg = 1.0 if v_s > 0.0 else -1.0
