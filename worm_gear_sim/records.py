@@ -379,7 +379,8 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     Command: ``command_topic`` (default: ``worm_angle_reference``, else
     ``worm_angle_command``), of type std_msgs/Float64 (stamp = the bag's receive time) or
     sensor_msgs/JointState (the stamped reference: stamp = header.stamp, theta1 =
-    the position of ``joint_names[0]``, or position[0] without names).  Measured:
+    position[0]; ``name[0]``, when given, must be ``joint_names[0]``, else the message is
+    rejected and counted, as the node does).  Measured:
     ``joint_states_topic`` (default: ``measured_joint_states``, else ``joint_states``; ''
     reads none),
     sensor_msgs/JointState; theta2..theta4 by ``joint_names[1:4]`` (default
@@ -487,12 +488,11 @@ def _read_commands(reader: Any, topic: str, msgtype: str, worm_joint: str, where
             received.append(int(log_ns))
             continue
         names = list(msg.name)
-        idx = names.index(worm_joint) if worm_joint in names else (0 if not names else -1)
-        if idx < 0 or idx >= len(msg.position):
-            rejected += 1           # wrong joint name or empty position: the node rejects it
+        if len(msg.position) == 0 or (names and names[0] != worm_joint):
+            rejected += 1           # empty position or another joint: the node rejects it
             continue
         stamps.append(_stamp_ns(msg.header))
-        vals.append(float(msg.position[idx]))
+        vals.append(float(msg.position[0]))
         received.append(int(log_ns))
     return (np.array(stamps, dtype=np.int64), np.array(vals, dtype=float), rejected,
             np.array(received, dtype=np.int64))
