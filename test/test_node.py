@@ -558,7 +558,7 @@ def test_unaligned_commands_are_samples_at_their_reception_time(ros_harness, int
     np.testing.assert_allclose(vel[:, 1:], traj.omega, rtol=0, atol=1e-9)
     reference = np.array(ref_at_tick) if applied else traj.theta1
     np.testing.assert_allclose(h.positioning_error,
-                               traj.theta4 - reference * traj.output_ratio, rtol=0,
+                               traj.theta4 - reference * traj.output_per_input, rtol=0,
                                atol=1e-12)
     assert np.ptp(pos[:, 3]) > 1e-3                          # it moved
 

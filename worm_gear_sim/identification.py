@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Fit model parameters to measured records (issue 9); the live model check is in
+"""Fit model parameters to measured records; the live model check is in
 :mod:`worm_gear_sim.model_check`.
 
 Pure core (no rclpy, no plotting).  A *record* is one measured run of the drive: sample times
@@ -519,7 +519,7 @@ STRATEGIES: dict[str, dict[str, Any]] = {
     'windows': dict(frequency_start=False, growing_windows=True, n_starts=1),
     'frequency+windows': dict(frequency_start=True, growing_windows=True, n_starts=1),
     'multistart': dict(frequency_start=False, growing_windows=False, n_starts=8),
-    'robust': dict(frequency_start=True, growing_windows=True, n_starts=8),
+    'robust': dict(frequency_start=True, growing_windows=True, n_starts=4),
 }
 
 

@@ -78,7 +78,7 @@ class RampProfile(Profile):
 @dataclass(frozen=True)
 class TrapezoidalProfile(Profile):
     """Trapezoidal velocity: accelerate for ``accel_time``, cruise, decelerate; reaches
-    ``amplitude`` at t0 + duration (MODEL-NOTES default: 20 ms with 4 ms ramps)."""
+    ``amplitude`` at t0 + duration (the default of docs/model-notes.md: 20 ms with 4 ms ramps)."""
 
     amplitude: float
     duration: float

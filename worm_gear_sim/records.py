@@ -72,7 +72,8 @@ class Record:
     (absolute, int64) and ``command_values`` [rad] hold its raw samples in arrival order,
     invalid ones included, as a live node would have received them; ``t``/``theta1`` then
     hold the valid samples sorted by stamp (or the command interpolated at the measurement
-    stamps when a measured topic was read).  ``source`` says where everything came from.
+    stamps when a measured topic was read), and ``command_receive_ns`` the bag's receive
+    times of the raw samples.  ``source`` says where everything came from.
     """
 
     name: str
@@ -83,6 +84,7 @@ class Record:
     command_stamps_ns: np.ndarray | None = None
     command_values: np.ndarray | None = None
     source: dict[str, Any] = field(default_factory=dict)
+    command_receive_ns: np.ndarray | None = None
 
     @property
     def is_epoch(self) -> bool:
@@ -377,7 +379,8 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     ``worm_angle_command``), of type std_msgs/Float64 (stamp = the bag's receive time) or
     sensor_msgs/JointState (the stamped reference: stamp = header.stamp, theta1 =
     the position of ``joint_names[0]``, or position[0] without names).  Measured:
-    ``joint_states_topic`` (default: ``measured_joint_states``, else ``joint_states``),
+    ``joint_states_topic`` (default: ``measured_joint_states``, else ``joint_states``; ''
+    reads none),
     sensor_msgs/JointState; theta2..theta4 by ``joint_names[1:4]`` (default
     ``node.joint_names``), stamps from header.stamp (the receive time if every stamp is 0).
     With measurements, ``t`` is their stamps and ``theta1`` the command interpolated there
@@ -404,9 +407,10 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
         if topics[cmd_topic] not in (FLOAT64, JOINT_STATE):
             raise RecordError(f'{where}: command topic {cmd_topic} is {topics[cmd_topic]}; '
                               f'expected {FLOAT64} or {JOINT_STATE} (the stamped reference)')
-        meas_topic = _resolve_topic(topics, joint_states_topic, DEFAULT_MEASURED_TOPICS,
-                                    'measured JointState', '--joint-states-topic', where,
-                                    require_measured)
+        meas_topic = None if joint_states_topic == '' and not require_measured else \
+            _resolve_topic(topics, joint_states_topic, DEFAULT_MEASURED_TOPICS,
+                           'measured JointState', '--joint-states-topic', where,
+                           require_measured)
         if meas_topic is not None and topics[meas_topic] != JOINT_STATE:
             raise RecordError(f'{where}: measured topic {meas_topic} is {topics[meas_topic]}; '
                               f'expected {JOINT_STATE}')
@@ -415,7 +419,7 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
                 if meas_topic else None)
     finally:
         reader.close()
-    stamps, vals, n_rejected = cmd
+    stamps, vals, n_rejected, received = cmd
     src: dict[str, Any] = {'kind': 'bag', 'path': str(p), 'command_topic': cmd_topic,
                            'command_type': topics[cmd_topic],
                            'command_stamp': 'header.stamp' if topics[cmd_topic] == JOINT_STATE
@@ -435,7 +439,7 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
         if tc.size < min_samples:
             raise RecordError(f'{where}: {tc.size} valid command sample(s) on {cmd_topic}; '
                               f'a record needs at least {min_samples}')
-        return Record(rec_name, tc, yc, {}, t0_ns, stamps, vals, src)
+        return Record(rec_name, tc, yc, {}, t0_ns, stamps, vals, src, received)
     m_stamps, m_vals, m_info = meas
     src.update({'joint_states_topic': meas_topic, **m_info})
     keep = m_stamps >= t0_ns
@@ -449,7 +453,7 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     else:
         th1 = yc[np.clip(np.searchsorted(tc, t, side='right') - 1, 0, None)]
     measured = {k: v[keep] for k, v in m_vals.items()}
-    return Record(rec_name, t, th1, measured, t0_ns, stamps, vals, src)
+    return Record(rec_name, t, th1, measured, t0_ns, stamps, vals, src, received)
 
 
 def _valid_sorted(stamps: np.ndarray, vals: np.ndarray, t0_ns: int
@@ -465,18 +469,21 @@ def _valid_sorted(stamps: np.ndarray, vals: np.ndarray, t0_ns: int
 
 
 def _read_commands(reader: Any, topic: str, msgtype: str, worm_joint: str, where: str
-                   ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Raw command samples in bag order: (stamps [ns], values, messages without a value)."""
+                   ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+    """Raw command samples in bag order: (stamps [ns], values, messages without a value,
+    receive times [ns])."""
     ts = _typestore()
     conns = [c for c in reader.connections if c.topic == topic]
     stamps: list[int] = []
     vals: list[float] = []
+    received: list[int] = []
     rejected = 0
     for conn, log_ns, raw in reader.messages(connections=conns):
         msg = ts.deserialize_cdr(raw, conn.msgtype)
         if msgtype == FLOAT64:
             stamps.append(int(log_ns))
             vals.append(float(msg.data))
+            received.append(int(log_ns))
             continue
         names = list(msg.name)
         idx = names.index(worm_joint) if worm_joint in names else (0 if not names else -1)
@@ -485,7 +492,9 @@ def _read_commands(reader: Any, topic: str, msgtype: str, worm_joint: str, where
             continue
         stamps.append(_stamp_ns(msg.header))
         vals.append(float(msg.position[idx]))
-    return np.array(stamps, dtype=np.int64), np.array(vals, dtype=float), rejected
+        received.append(int(log_ns))
+    return (np.array(stamps, dtype=np.int64), np.array(vals, dtype=float), rejected,
+            np.array(received, dtype=np.int64))
 
 
 def _read_joint_states(reader: Any, topic: str, joints: Sequence[str], where: str

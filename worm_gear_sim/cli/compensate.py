@@ -152,11 +152,7 @@ def cmd_compensate(args: argparse.Namespace) -> int:
             print(f'plant detuned: {factors}')
         print(f'{"metric":16s} {"without":>12s} {"with":>12s} {"ratio":>9s}')
         for m in METRICS:
-            a, b = off.metrics[m], on.metrics[m]
-            unit = 's' if m == 'settling_time' else 'rad'
-            r = improvement(m, a, b)
-            rs = 'n/a' if math.isnan(r) else ('inf' if math.isinf(r) else f'{r:.3g}x')
-            print(f'{m:16s} {a:12.4g} {b:12.4g} {rs:>9s}  [{unit}]')
+            print(metric_row(m, off.metrics[m], on.metrics[m]))
         print(f'wrote {out}')
     if not args.no_plot:
         png = Path(args.plot) if args.plot else out.with_suffix('.png')
@@ -176,7 +172,7 @@ def write_csv(path: str | Path, off: Any, on: Any, header: str = '') -> Path:
     cols = {
         't[s]': t, 'theta1_ref[rad]': ref, 'delta[rad]': delta,
         'theta1_cmd[rad]': ref + delta,
-        'theta4_ref[rad]': ref * on.trajectory.output_ratio,
+        'theta4_ref[rad]': ref * on.trajectory.output_per_input,
         'theta4_uncompensated[rad]': off.trajectory.theta[:, 2],
         'theta4_compensated[rad]': on.trajectory.theta[:, 2],
         'error_uncompensated[rad]': off.error, 'error_compensated[rad]': on.error,
@@ -223,3 +219,20 @@ def plot_runs(off: Any, on: Any, path: str | Path, title: str = '') -> Path:
     p.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(p, dpi=100, format='png')
     return p
+
+
+def metric_row(metric: str, off: float, on: float) -> str:
+    """One row of the table: a settling time that never comes prints ``never``; the ratio
+    (:func:`improvement`) is ``-`` when neither run settles, ``settles`` / ``never`` when
+    only one does, ``n/a`` when both errors are below the resolution floor."""
+    unit = 's' if metric == 'settling_time' else 'rad'
+
+    def value(x: float) -> str:
+        return 'never' if metric == 'settling_time' and math.isinf(x) else f'{x:.4g}'
+    if metric == 'settling_time' and (math.isinf(off) or math.isinf(on)):
+        rs = '-' if math.isinf(off) and math.isinf(on) else \
+            ('settles' if math.isinf(off) else 'never')
+    else:
+        r = improvement(metric, off, on)
+        rs = 'n/a' if math.isnan(r) else ('inf' if math.isinf(r) else f'{r:.3g}x')
+    return f'{metric:16s} {value(off):>12s} {value(on):>12s} {rs:>9s}  [{unit}]'

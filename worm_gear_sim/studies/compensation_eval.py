@@ -138,9 +138,9 @@ def run_scenario(plant: Config, scenario: Scenario, compensator: Config | None,
         else np.zeros_like(x)
     traj = simulate(plant, SampledProfile(t, x + delta), t_end=scenario.t_end,
                     record_every=record_every, theta1_initial=float(x[0] + delta[0]))
-    ratio_out = traj.output_ratio
+    output_per_input = traj.output_per_input
     ref = np.interp(traj.t, t, x)
-    err = traj.theta[:, 2] - ref * ratio_out
+    err = traj.theta[:, 2] - ref * output_per_input
     mode_hz = float(modes(plant).frequencies_hz[0])
     command_end = scenario.move_end
     if compensator is not None:
@@ -255,7 +255,7 @@ def not_worse(metric: str, off: float, on: float, tolerance: float = 0.05) -> bo
 def detuning_cases() -> list[tuple[str, dict]]:
     """The plants of the robustness study: nominal, each group +-20 %, and the two corners
     that move the antenna mode most (soft teeth + heavy flywheel, stiff + light)."""
-    cases = [('nominal', {})]
+    cases: list[tuple[str, dict]] = [('nominal', {})]
     for g in DETUNINGS:
         for f in (0.8, 1.2):
             cases.append((f'{g} {f - 1:+.0%}', {g: f}))

@@ -124,7 +124,7 @@ def oscillation_metrics(traj: Trajectory, t_move: float, theta_eq: np.ndarray) -
     first, last = float(d4[:m].max()), float(d4[-m:].max())
     th1 = traj.theta1
     err2 = float(np.max(np.abs(traj.theta[:, 0] - th1)))
-    err4 = float(np.max(np.abs(traj.theta[:, 2] - th1 * traj.output_ratio)))
+    err4 = float(np.max(np.abs(traj.theta[:, 2] - th1 * traj.output_per_input)))
     return {
         'amp2': float(amp[0]), 'amp3': float(amp[1]), 'amp4': float(amp[2]),
         'half_pp2': float(0.5 * (hi[0] - lo[0])), 'half_pp4': float(0.5 * (hi[2] - lo[2])),
