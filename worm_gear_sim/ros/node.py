@@ -416,7 +416,7 @@ class WormGearSimNode(Node):
             n = self.rt.counters['rejected_' + r]
             self._warn(f'{topic}_{r}', f'rejected {topic} ({what}): {r}; {n} so far')
         for e in out.events:
-            if e.kind == 'stream_resumed':
+            if e.level == 'info':
                 self.get_logger().info(e.message)
             else:
                 self._warn(e.kind, e.message)
