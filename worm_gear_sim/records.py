@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -53,7 +53,7 @@ DEFAULT_MEASURED_TOPICS = ('measured_joint_states', 'joint_states')
 NODE_NAMESPACE = 'worm_gear_sim'                # the node's name: its ~/ topics live here
 FLOAT64 = 'std_msgs/msg/Float64'
 JOINT_STATE = 'sensor_msgs/msg/JointState'
-BAG_VERSION = 8                                 # rosbag2 format read by Humble..Kilted
+BAG_VERSION: Literal[8, 9] = 8          # rosbag2 metadata version (rosbags writes 8 or 9)
 
 
 class RecordError(ValueError):
@@ -97,14 +97,15 @@ class Record:
 
     def command_samples(self) -> tuple[np.ndarray, np.ndarray]:
         """The valid command samples sorted by time: (t [s] relative to t0_ns, theta1)."""
-        if self.command_stamps_ns is None:
+        if self.command_stamps_ns is None or self.command_values is None:
             return self.t, self.theta1
-        return _valid_sorted(self.command_stamps_ns, self.command_values, self.t0_ns)[:2]
+        t, v, _ = _valid_sorted(self.command_stamps_ns, self.command_values, self.t0_ns)
+        return t, v
 
     def command_stream(self) -> tuple[np.ndarray, np.ndarray]:
         """The command as received: (absolute stamps [ns] int64, values [rad]) in arrival
         order (a CSV's rows when the command did not come separately)."""
-        if self.command_stamps_ns is not None:
+        if self.command_stamps_ns is not None and self.command_values is not None:
             return self.command_stamps_ns, self.command_values
         return self.t0_ns + np.round(self.t * 1e9).astype(np.int64), self.theta1
 
@@ -378,7 +379,8 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     Command: ``command_topic`` (default: ``worm_angle_reference``, else
     ``worm_angle_command``), of type std_msgs/Float64 (stamp = the bag's receive time) or
     sensor_msgs/JointState (the stamped reference: stamp = header.stamp, theta1 =
-    the position of ``joint_names[0]``, or position[0] without names).  Measured:
+    position[0]; ``name[0]``, when given, must be ``joint_names[0]``, else the message is
+    rejected and counted, as the node does).  Measured:
     ``joint_states_topic`` (default: ``measured_joint_states``, else ``joint_states``; ''
     reads none),
     sensor_msgs/JointState; theta2..theta4 by ``joint_names[1:4]`` (default
@@ -486,12 +488,11 @@ def _read_commands(reader: Any, topic: str, msgtype: str, worm_joint: str, where
             received.append(int(log_ns))
             continue
         names = list(msg.name)
-        idx = names.index(worm_joint) if worm_joint in names else (0 if not names else -1)
-        if idx < 0 or idx >= len(msg.position):
-            rejected += 1           # wrong joint name or empty position: the node rejects it
+        if len(msg.position) == 0 or (names and names[0] != worm_joint):
+            rejected += 1           # empty position or another joint: the node rejects it
             continue
         stamps.append(_stamp_ns(msg.header))
-        vals.append(float(msg.position[idx]))
+        vals.append(float(msg.position[0]))
         received.append(int(log_ns))
     return (np.array(stamps, dtype=np.int64), np.array(vals, dtype=float), rejected,
             np.array(received, dtype=np.int64))
@@ -535,15 +536,15 @@ def _read_joint_states(reader: Any, topic: str, joints: Sequence[str], where: st
         raise RecordError(f'{where}: {topic}: {int((h == 0).sum())} of {h.size} messages have '
                           'a zero header.stamp; cannot place them in time')
     roles = dict(zip(joints, MEASURED_NAMES))
-    series = {}
+    series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for j in found:
         idx = np.array(per[j][0])
-        s, v = h[idx], np.array(per[j][1])
-        bad = ~np.isfinite(v)
+        pos = np.array(per[j][1])
+        bad = ~np.isfinite(pos)
         if bad.any():
             raise RecordError(f'{where}: {topic}: joint {j} has {int(bad.sum())} non-finite '
                               'position(s)')
-        series[j] = (s, v)
+        series[j] = (h[idx], pos)
     # one grid: the stamps carrying every found joint in the common span (exact in the usual
     # case of one message per stamp with all joints), sorted; duplicates: first kept
     grid = np.unique(np.concatenate([s for s, _ in series.values()]))
@@ -552,14 +553,14 @@ def _read_joint_states(reader: Any, topic: str, joints: Sequence[str], where: st
     grid = grid[(grid >= lo) & (grid <= hi)]
     out: dict[str, np.ndarray] = {}
     n_dup = 0
-    for j, (s, v) in series.items():
-        order = np.argsort(s, kind='stable')
-        s, v = s[order], v[order]
-        first = np.concatenate(([True], np.diff(s) > 0))
+    for j, (sj, pj) in series.items():
+        order = np.argsort(sj, kind='stable')
+        sj, pj = sj[order], pj[order]
+        first = np.concatenate(([True], np.diff(sj) > 0))
         n_dup = max(n_dup, int((~first).sum()))
-        s, v = s[first], v[first]
-        out[roles[j]] = np.interp(grid.astype(float), s.astype(float), v) \
-            if s.size != grid.size or np.any(s != grid) else v
+        sj, pj = sj[first], pj[first]
+        out[roles[j]] = np.interp(grid.astype(float), sj.astype(float), pj) \
+            if sj.size != grid.size or np.any(sj != grid) else pj
     info = {'measured_stamp': stamp_kind, 'measured_joints': {roles[j]: j for j in found},
             'malformed_joint_states': malformed, 'duplicate_measurement_stamps': n_dup}
     return grid, out, info

@@ -107,9 +107,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise CliError(f'--output must end in .csv, got {out}')
     stride, rate_text = _stride(args, cfg.integrator.time_step)
     note = ''
+    profile: Profile
     if cfg.input.profile == 'csv':
         rec = read_csv(cfg.input.csv_path, columns=_columns(args.column))
-        profile: Profile = SampledProfile(rec.t, rec.theta1, source=cfg.input.csv_path)
+        profile = SampledProfile(rec.t, rec.theta1, source=cfg.input.csv_path)
         say(args, f'input: {rec.describe()}')
         cols = ', '.join(f'{r} = {c!r}' for r, c in rec.source['columns'].items())
         say(args, f'columns: {cols}' + (f'; ignored: {", ".join(rec.source["ignored_columns"])}'
@@ -182,9 +183,8 @@ def _simulate_bag(args: argparse.Namespace) -> int:
                    joint_names=names)
     src = rec.source
     say(args, f'input: {rec.describe()}')
-    n_commands = 0 if rec.command_values is None else rec.command_values.size
     say(args, f'command: {src["command_topic"]} ({src["command_type"]}, time = '
-        f'{src["command_stamp"]}), {n_commands} samples')
+        f'{src["command_stamp"]}), {rec.command_stream()[1].size} samples')
     t0 = time.perf_counter()
     rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time)
     wall = time.perf_counter() - t0
