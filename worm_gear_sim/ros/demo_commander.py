@@ -293,7 +293,7 @@ class DemoCommander(Node):
         if interface not in ('stamped', 'float64'):
             raise ValueError(f'interface must be stamped or float64, got {interface!r}')
         self.cfg = config if config is not None else load_config()
-        self.ratio = derive(self.cfg).output_per_input
+        self.output_per_input = derive(self.cfg).output_per_input
         self.theta1 = command_pattern(pattern, self.cfg, move_period, slew_rate, slew_period)
         self.segments = pattern_segments(pattern, self.cfg, move_period, slew_period)
         self.tracker = MoveTracker(self.segments, float(modes(self.cfg).frequencies_hz[0]))
@@ -409,7 +409,7 @@ class DemoCommander(Node):
         t = self._pattern_time(msg.header.stamp)
         if t < 0.0:
             return                          # a prediction of the hold phase
-        e = msg.position[3] - self.ratio * float(self.theta1(t))
+        e = msg.position[3] - self.output_per_input * float(self.theta1(t))
         self._record(t, e)
 
     def _on_error(self, msg: Float64) -> None:
@@ -589,7 +589,8 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
         topic = REFERENCE_TOPIC if opts.interface == 'stamped' else COMMAND_TOPIC
         print(fit(f'demo: {opts.pattern} pattern, {node.resolve_topic_name(topic)} at '
                   f'{opts.rate:g} Hz'), file=out, flush=True)
-        print(fit(f'      antenna error e = theta4 - theta1 l_w/r_g (ratio 1:{1 / node.ratio:.4g})'
+        ratio = 1 / node.output_per_input
+        print(fit(f'      antenna error e = theta4 - theta1 l_w/r_g (ratio 1:{ratio:.4g})'
                   + ('' if tty else '; one line per move')), file=out, flush=True)
         t_start = time.monotonic()
         last_print = 0.0
