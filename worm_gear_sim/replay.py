@@ -123,7 +123,8 @@ class Replay:
 
 
 def replay(config: Config, record: Record, *, compensate: bool = True,
-           end_time: float | None = None, use_receive_clock: bool | None = None) -> Replay:
+           end_time: float | None = None, use_receive_clock: bool | None = None,
+           tick_stamps_ns: np.ndarray | None = None) -> Replay:
     """Feed ``record``'s command stream to a :class:`RealtimePredictor` as the node would.
 
     Stamped references: ``push(stamp, value, now_ns=receive time)`` in arrival order (the
@@ -131,7 +132,9 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
     ``use_receive_clock=False``), the node's slow timer emulated by ``hold`` at
     ``node.publish_rate_hz`` on the receive clock (it acts only when the stream pauses),
     ``finish`` at the end.  Float64 commands: ``push_command(receive time, value)`` and
-    ``tick`` every 1 / ``node.publish_rate_hz`` from the first command.  ``end_time`` [s
+    ``tick`` every 1 / ``node.publish_rate_hz`` from the first command, or at
+    ``tick_stamps_ns`` (the stamps of the live node's recorded joint_states: its ticks on
+    the recording's clock).  ``end_time`` [s
     after the first command]: stop feeding samples stamped later, or keep the held
     prediction going up to it after the last one (the stream paused)."""
     from .realtime import RealtimePredictor
@@ -189,17 +192,32 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
     else:
         info['input'] = 'float64'
         end = int(receive.max()) + period if stop_ns is None else stop_ns
-        tick = int(receive[0]) + period
+        if tick_stamps_ns is not None and len(tick_stamps_ns):
+            ticks = np.unique(np.asarray(tick_stamps_ns, dtype=np.int64)).tolist()
+            info['ticks'] = 'recorded joint_states stamps'
+            end = max(end, ticks[-1]) if stop_ns is None else end
+        else:
+            ticks = []
+            info['ticks'] = f'every {period} ns from the first command'
+        k = 0
+
+        def next_tick(after: int) -> int:
+            return ticks[k] if k < len(ticks) else (
+                max(after, ticks[-1] if ticks else int(receive[0])) + period)
+
+        tick = next_tick(int(receive[0]))
         for x, rx in zip(values.tolist(), receive.tolist()):
             if stop_ns is not None and rx > stop_ns:
                 break
             while tick <= rx:
                 collect(pred.tick(tick))
-                tick += period
+                k += 1
+                tick = next_tick(tick)
             collect(pred.push_command(rx, x))
         while tick <= end:
             collect(pred.tick(tick))
-            tick += period
+            k += 1
+            tick = next_tick(tick)
     if not preds:
         raise RecordError(f'{record.name}: the pipeline accepted no command sample '
                           f'({_rejections(pred.counters)})')

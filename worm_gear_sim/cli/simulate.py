@@ -185,8 +185,10 @@ def _simulate_bag(args: argparse.Namespace) -> int:
     say(args, f'input: {rec.describe()}')
     say(args, f'command: {src["command_topic"]} ({src["command_type"]}, time = '
         f'{src["command_stamp"]}), {rec.command_stream()[1].size} samples')
+    ticks = _recorded_ticks(args, names) if src['command_type'].endswith('Float64') else None
     t0 = time.perf_counter()
-    rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time)
+    rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time,
+                 tick_stamps_ns=ticks)
     wall = time.perf_counter() - t0
     c = rep.counters
     rejected = {k[9:]: v for k, v in c.items()
@@ -196,8 +198,8 @@ def _simulate_bag(args: argparse.Namespace) -> int:
         + (f'; rejected: {", ".join(f"{k} {v}" for k, v in rejected.items())}'
            if rejected else ''))
     if rep.info['input'] == 'float64':
-        say(args, 'note: Float64 commands carry no time; samples at the bag\'s receive time '
-            'and ticks every 1/node.publish_rate_hz: close to, not equal to, the live node')
+        say(args, 'note: Float64 commands carry no time; samples at the bag\'s receive time, '
+            f'ticks at the {rep.info["ticks"]}: close to, not equal to, the live node')
     if rep.info.get('compensation_error'):
         say(args, f'feed-forward unavailable: {rep.info["compensation_error"]}')
     for e in rep.events[:5]:
@@ -224,6 +226,20 @@ def _simulate_bag(args: argparse.Namespace) -> int:
         f'positioning error = {rep.positioning_error[-1]:.4e} rad')
     say(args, 'wrote ' + ', '.join(str(f) for f in files))
     return 0
+
+
+def _recorded_ticks(args: argparse.Namespace, names: tuple) -> Any:
+    """Stamps of the live node's joint_states in the bag (its ticks), or None."""
+    import numpy as np
+
+    from ..records import RecordError, read_bag
+    try:
+        live = read_bag(args.bag, command_topic=args.command_topic,
+                        joint_states_topic=args.joint_states_topic, joint_names=names,
+                        require_measured=True, min_samples=1)
+    except RecordError:
+        return None
+    return live.t0_ns + np.round(live.t * 1e9).astype(np.int64)
 
 
 def _plot_replay(rep: Any, png: Path) -> Path:
