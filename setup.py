@@ -51,7 +51,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'worm_gear_sim_node = worm_gear_sim.ros.node:main',
+            'worm_gear_sim_node = worm_gear_sim.ros.startup:node_main',
             'worm_gear_sim_demo = worm_gear_sim.ros.demo_commander:main',
             'worm-gear-sim = worm_gear_sim.cli:main',
         ],

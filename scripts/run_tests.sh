@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The whole test suite: set-up (idempotent), lint, then every test, on the PyPI wheels of
+# The whole test suite: set-up (idempotent), lint, types, then every test, on the PyPI wheels of
 # ROS_DISTRO (kilted, the default, in .venv; or jazzy, in .venv-jazzy):
 #   scripts/run_tests.sh                      # Kilted
 #   ROS_DISTRO=jazzy scripts/run_tests.sh     # Jazzy (LTS)
@@ -17,5 +17,7 @@ echo "[tests] ROS 2 $ROS_DISTRO ($RCLPY_DIST $("$VENV/bin/python" -c \
     "from importlib.metadata import version; print(version('$RCLPY_DIST'))"), $VENV)"
 echo "[tests] ruff check ."
 "$VENV/bin/ruff" check .
+echo "[tests] mypy (the core; configured in pyproject.toml)"
+"$VENV/bin/python" -m mypy
 echo "[tests] pytest"
 exec "$VENV/bin/python" -m pytest "$@"

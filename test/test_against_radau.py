@@ -6,7 +6,7 @@ linear and nonlinear mode, for the paper's 18-step move.
 
 Only the equations are shared (mesh_forces); the integration scheme, step control and
 Newton iteration are scipy's.  The 8.6 kHz worm mode needs a small Newmark step for a
-pointwise match (MODEL-NOTES): dt = 50 ns over the move and 5 ms of ringing."""
+pointwise match (docs/model-notes.md): dt = 50 ns over the move and 5 ms of ringing."""
 
 import numpy as np
 import pytest

@@ -159,7 +159,7 @@ def test_modes_outputs(tmp_path, capsys):
     assert status == 0
     header, rows = read_csv(tmp_path / 'm.csv')
     f = [float(r[header.index('undamped_hz')]) for r in rows]
-    assert f == pytest.approx([94.5, 1561, 8588], rel=0.01)   # MODEL-NOTES reference
+    assert f == pytest.approx([94.5, 1561, 8588], rel=0.01)   # docs/model-notes.md reference
     doc = json.loads((tmp_path / 'm.json').read_text())
     assert len(doc['modes']) == 3 and np.shape(doc['K']) == (3, 3)
     assert_png(tmp_path / 'm.png')
@@ -269,7 +269,7 @@ def test_run_failure_is_one_line(capsys, tmp_path, monkeypatch):
     def boom(*a, **k):
         raise simulation.SimulationError('integration stopped at t = 0.001 s: test')
     monkeypatch.setattr(simulation, 'simulate', boom)
-    monkeypatch.setattr(simulation, 'simulate_to_csv', boom)      # the streamed path
+    monkeypatch.setattr(simulation, 'simulate_to_csv', boom)
     status, _, err = run(capsys, 'simulate', '-o', tmp_path / 'x.csv')
     assert status == 1
     assert_one_line_error(status, err, 'simulation failed')

@@ -72,14 +72,15 @@ def test_huge_end_time_is_refused_up_front(tmp_path):
     t = time.monotonic()
     r = cli('simulate', '--end-time', '1e4', '-o', tmp_path / 'x.csv')
     assert time.monotonic() - t < 60          # no integration, no allocation of the run
-    one_line_error(r, '--end-time 10000 s', 'GB of CSV', '--max-csv-size', '--record-every')
+    one_line_error(r, '--end-time 10000 s', 'GB of CSV', '--max-csv-size', '--output-rate')
     assert not (tmp_path / 'x.csv').exists()
     one_line_error(cli('simulate', '--end-time', '1e300', '-o', tmp_path / 'x.csv'),
                    'input.end_time')          # beyond the declared range
     one_line_error(cli('simulate', '--end-time', '0.01', '--max-csv-size', '0',
                        '-o', tmp_path / 'x.csv'), '--max-csv-size')
     # the in-memory path (--npz needs every row) has its own memory limit
-    one_line_error(cli('simulate', '--end-time', '1e3', '--max-csv-size', '1e6', '--npz',
+    one_line_error(cli('simulate', '--end-time', '1e3', '--output-rate', '0',
+                       '--max-csv-size', '1e6', '--npz',
                        tmp_path / 'x.npz', '-o', tmp_path / 'x.csv'), '--npz', 'max_bytes',
                    '16 GB')
 
@@ -88,7 +89,7 @@ def test_long_run_streams_every_row(tmp_path):
     """A run longer than the plot's row budget: the CSV has every row, the summary says
     the plot/metrics used a thinned copy."""
     out = tmp_path / 'long.csv'
-    r = cli('simulate', '--end-time', '2.5', '-o', out, '--no-plot')
+    r = cli('simulate', '--end-time', '2.5', '--output-rate', '0', '-o', out, '--no-plot')
     assert r.returncode == 0, r.stderr
     rows = sum(1 for line in open(out) if not line.startswith('#')) - 1
     assert rows == 250001

@@ -131,7 +131,7 @@ def test_paper_direction_can_feed_energy():
 
 
 def test_modes_match_independent_reference():
-    """MODEL-NOTES: 94.5, 1561, 8588 Hz (frictionless, linear mesh, motor end held),
+    """docs/model-notes.md: 94.5, 1561, 8588 Hz (frictionless, linear mesh, motor end held),
     confirmed by an independent torsional FE package."""
     cfg = Config().replace({'mesh.stiffness_model': 'linear', 'friction.model': 'off'})
     m = modes(cfg)
@@ -141,7 +141,7 @@ def test_modes_match_independent_reference():
     assert abs(m.shapes[2, 0]) == 1.0 and abs(m.shapes[0, 2]) == 1.0
     K = linear_stiffness(pack_parameters(cfg))
     assert np.allclose(K, K.T)
-    # shaft inertia lumped on the worm moves the top mode (MODEL-NOTES: to ~3.6 kHz)
+    # shaft inertia lumped on the worm moves the top mode (docs/model-notes.md: to ~3.6 kHz)
     m2 = modes(cfg.replace({'shafts.worm_shaft_inertia_fraction': 1 / 3}))
     assert 3000 < m2.undamped_hz[2] < 4000
 

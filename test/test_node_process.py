@@ -143,6 +143,6 @@ def test_process_rejects_invalid_parameter_file(ros_subprocess_env, tmp_path):
                            '--params-file', str(bad)], cwd=ROOT, env=ros_subprocess_env,
                           capture_output=True, text=True, timeout=120)
     text = proc.stdout + proc.stderr
-    assert proc.returncode == 1, text
+    assert proc.returncode == 2, text
     assert 'friction.model' in text and 'coulomb' in text, text
     assert 'Traceback' not in text, text

@@ -2,27 +2,36 @@
 # Licensed under the Apache License, Version 2.0
 """worm_gear_sim: nonlinear dynamics of a worm and worm-gear drive (Chung & Shaw 2007).
 
-The computational core (this package minus ``node``) never imports rclpy.
+The computational core (this package minus ``ros/``) never imports rclpy.
 
     >>> from worm_gear_sim import load_config, simulate
     >>> traj = simulate(load_config())          # the paper's 18-step move, 0.5 s
     >>> traj.output_error[-1]                   # antenna error theta4 - theta1 l_w/r_g [rad]
+
+The names below are imported on first use (PEP 562): importing the package itself loads
+no numpy/scipy/numba, so the entry points (``python -m worm_gear_sim.node``) can install
+their signal handlers before the heavy imports start.
 """
 
-from .modal import ModalResult, damping_matrix, modes, static_equilibrium
-from .params import Config, ConfigError, Derived, default_config, derive, load_config
-from .profiles import (
-                       Profile,
-                       RampProfile,
-                       SampledProfile,
-                       SCurveProfile,
-                       StepProfile,
-                       TrapezoidalProfile,
-                       make_profile,
-)
-from .simulation import SimState, SimulationError, Simulator, Trajectory, simulate
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 __version__ = '0.1.0'
+
+#: public name -> submodule that defines it
+_EXPORTS: dict[str, str] = {
+    'ModalResult': 'modal', 'damping_matrix': 'modal', 'modes': 'modal',
+    'static_equilibrium': 'modal',
+    'Config': 'params', 'ConfigError': 'params', 'Derived': 'params',
+    'default_config': 'params', 'derive': 'params', 'load_config': 'params',
+    'Profile': 'profiles', 'RampProfile': 'profiles', 'SampledProfile': 'profiles',
+    'SCurveProfile': 'profiles', 'StepProfile': 'profiles', 'TrapezoidalProfile': 'profiles',
+    'make_profile': 'profiles',
+    'SimState': 'simulation', 'SimulationError': 'simulation', 'Simulator': 'simulation',
+    'Trajectory': 'simulation', 'simulate': 'simulation',
+}
 
 __all__ = [
     'Config', 'ConfigError', 'Derived', 'default_config', 'derive', 'load_config',
@@ -31,3 +40,30 @@ __all__ = [
     'SimulationError', 'simulate', 'modes', 'ModalResult', 'static_equilibrium',
     'damping_matrix', '__version__',
 ]
+
+if TYPE_CHECKING:  # static analysers see the eager imports
+    from .modal import ModalResult, damping_matrix, modes, static_equilibrium
+    from .params import Config, ConfigError, Derived, default_config, derive, load_config
+    from .profiles import (
+        Profile,
+        RampProfile,
+        SampledProfile,
+        SCurveProfile,
+        StepProfile,
+        TrapezoidalProfile,
+        make_profile,
+    )
+    from .simulation import SimState, SimulationError, Simulator, Trajectory, simulate
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    value = getattr(importlib.import_module(f'.{module}', __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -34,10 +34,11 @@ Design (computed from the NOMINAL model at construction / :meth:`Compensator.rec
    the y''' / y'''' terms (gear- and worm-body inertia, drag rate); they need a degree-6
    kernel and measure worse at a 1 kHz command rate, so they are off by default.
 
-``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one ``np.interp`` of the history
-at ~120 quadrature nodes, a small matrix-vector product and ~60 float operations (about
-40 us in CPython).  Structural damping (``damping.*``) is not in the inverse (zero by
-default; it only makes the drive ring less).
+``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one compiled kernel
+(:func:`compensation_kernel`: an interpolation walk over the history at ~120 quadrature
+nodes, the weights and the model inverse :func:`inverse_theta1`), about 2 us with the
+Python call (``benchmarks/bench_realtime.py``).  Structural damping (``damping.*``) is
+not in the inverse (zero by default; it only makes the drive ring less).
 
 Why no input shaper by default (see docs/compensation.md for the measurements): a
 lag-free filter (needed for constant-rate tracking) that contains a shaper one antenna
@@ -53,6 +54,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.interpolate import BSpline
 
 from .modal import modes
@@ -77,7 +79,7 @@ from .model import (
 from .params import Config
 
 __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_filter',
-           'feedforward_series', 'SHAPERS']
+           'feedforward_series', 'SHAPERS', 'compensation_kernel', 'inverse_theta1']
 
 SHAPERS = ('none', 'zv', 'zvd', 'ei')
 NODES_PER_KNOT = 24      # quadrature nodes per B-spline knot interval
@@ -252,45 +254,96 @@ def _enforce_moments(W: np.ndarray, tau: np.ndarray, lag_order: int) -> np.ndarr
 
 
 # ---- model inverse -------------------------------------------------------------------------
+@njit(cache=True, error_model='numpy')
+def inverse_theta1(p, y0, y1, y2, y3, y4, dynamic):
+    """Flat-output inverse of the nominal chain (packed parameters ``p``): the worm-shaft
+    input theta1 that makes theta4 = y(t), from y and its derivatives; ``dynamic`` keeps
+    the third and fourth derivative terms."""
+    Jw, Jg, J4 = p[P_JW], p[P_JG], p[P_J4]
+    Kw, Kg = p[P_KW], p[P_KG]
+    lw, rw, rg = p[P_LW], p[P_RW], p[P_RG]
+    sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
+    cout, Tload = p[P_COUT], p[P_TLOAD]
+    ratio = rg / lw                                       # theta1 per theta4
+    if not dynamic:
+        y3 = 0.0
+        y4 = 0.0
+    Ts = J4 * y2 + cout * y1 + Tload                      # gear-shaft torque, Eq. 6
+    th3 = y0 + Ts / Kg
+    th3_1 = y1 + (J4 * y3 + cout * y2) / Kg
+    th3_2 = y2 + (J4 * y4 + cout * y3) / Kg
+    if dynamic:
+        Tm = Jg * th3_2 + Ts
+    else:
+        Tm = (Jg + J4) * y2 + cout * y1 + Tload
+    # friction of the rigid sliding speed, flank from the sign of the mesh torque
+    th2_1 = th3_1 * ratio
+    v_s = rw * cl * th2_1 + rg * sl * th3_1
+    mu = friction_coefficient(p, v_s, Tm)[0]
+    A = cphi * sl + mu * cl
+    B = cphi * cl - mu * sl
+    Wn = Tm / (rg * B)                                    # Eq. 13 at the flat path
+    th2_rigid = th3 * ratio
+    kgws = mesh_compliance(p, th2_rigid, th3, mu)[0]      # Eq. 10, the model's own
+    q = Wn * kgws / cl                                    # Eq. 9
+    th2 = (q + rg * th3) / lw                             # Eq. 8
+    Tw = rw * A * Wn                                      # mesh torque on the worm
+    if dynamic:
+        Tw += Jw * th3_2 * ratio                          # worm-body inertia (rigid)
+    return th2 + Tw / Kw                                  # Eq. 11
+
+
+@njit(cache=True, error_model='numpy')
+def _interp_at(s, ht, hx, lo, hi, j):
+    """x(s) of the piecewise-linear history (ht, hx)[lo:hi] (held beyond its ends, as
+    np.interp), searching down from index j; returns (value, index)."""
+    while j > lo and ht[j] > s:
+        j -= 1
+    if s <= ht[lo]:
+        return hx[lo], lo
+    if j >= hi - 1:
+        return hx[hi - 1], hi - 1
+    return hx[j] + (hx[j + 1] - hx[j]) / (ht[j + 1] - ht[j]) * (s - ht[j]), j
+
+
+@njit(cache=True, error_model='numpy')
+def compensation_kernel(te, tau, W, ht, hx, lo, hi, p, out_per_in, quasi_static, dynamic,
+                        enabled, r):
+    """One evaluation of the compensator at time ``te`` (the compiled per-sample update):
+    r[m] = sum_k W[m, k] x(te - tau_k) (the filtered reference and its derivatives), then
+    the model inverse.  Returns (delta, x(te))."""
+    ref = _interp_at(te, ht, hx, lo, hi, hi - 1)[0]
+    if not enabled:
+        return 0.0, ref
+    nd = W.shape[0]
+    for m in range(nd):
+        r[m] = 0.0
+    j = hi - 1
+    for k in range(tau.size):           # tau increases: te - tau decreases
+        v, j = _interp_at(te - tau[k], ht, hx, lo, hi, j)
+        for m in range(nd):
+            r[m] += W[m, k] * v
+    if not quasi_static:
+        return r[0] - ref, ref          # shaping (filtering) only
+    c = out_per_in
+    if nd == 5:
+        th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, r[3] * c, r[4] * c, dynamic)
+    else:
+        th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, 0.0, 0.0, False)
+    return th1 - ref, ref
+
+
 class _Inverse:
     """Flat-output inverse of the nominal chain: theta1 needed for theta4 = y(t)."""
 
     def __init__(self, cfg: Config):
-        p = pack_parameters(cfg)
-        self.p = p
-        self.Jw, self.Jg, self.J4 = p[P_JW], p[P_JG], p[P_J4]
-        self.Kw, self.Kg = p[P_KW], p[P_KG]
-        self.lw, self.rw, self.rg = p[P_LW], p[P_RW], p[P_RG]
-        self.sl, self.cl, self.cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
-        self.cout, self.Tload = p[P_COUT], p[P_TLOAD]
-        self.ratio = self.rg / self.lw       # theta1 per theta4
+        self.p = pack_parameters(cfg)
+        self.ratio = self.p[P_RG] / self.p[P_LW]      # theta1 per theta4
 
     def theta1(self, y0: float, y1: float, y2: float, y3: float, y4: float,
                dynamic: bool) -> float:
         """theta1 making theta4 = y; ``dynamic`` keeps the y''' and y'''' terms."""
-        Kg, J4, Jg = self.Kg, self.J4, self.Jg
-        if not dynamic:
-            y3 = y4 = 0.0
-        Ts = J4 * y2 + self.cout * y1 + self.Tload            # gear-shaft torque, Eq. 6
-        th3 = y0 + Ts / Kg
-        th3_1 = y1 + (J4 * y3 + self.cout * y2) / Kg
-        th3_2 = y2 + (J4 * y4 + self.cout * y3) / Kg
-        Tm = Jg * th3_2 + Ts if dynamic else (Jg + J4) * y2 + self.cout * y1 + self.Tload
-        # friction of the rigid sliding speed, flank from the sign of the mesh torque
-        th2_1 = th3_1 * self.ratio
-        v_s = self.rw * self.cl * th2_1 + self.rg * self.sl * th3_1
-        mu, _ = friction_coefficient(self.p, v_s, Tm)
-        A = self.cphi * self.sl + mu * self.cl
-        B = self.cphi * self.cl - mu * self.sl
-        Wn = Tm / (self.rg * B)                               # Eq. 13 at the flat path
-        th2_rigid = th3 * self.ratio
-        kgws = mesh_compliance(self.p, th2_rigid, th3, mu)[0]   # Eq. 10, the model's own
-        q = Wn * kgws / self.cl                               # Eq. 9
-        th2 = (q + self.rg * th3) / self.lw                   # Eq. 8
-        Tw = self.rw * A * Wn                                 # mesh torque on the worm
-        if dynamic:
-            Tw += self.Jw * th3_2 * self.ratio                # worm-body inertia (rigid)
-        return th2 + Tw / self.Kw                             # Eq. 11
+        return float(inverse_theta1(self.p, y0, y1, y2, y3, y4, bool(dynamic)))
 
 
 # ---- the streaming compensator -------------------------------------------------------------
@@ -306,8 +359,7 @@ class Compensator:
     """
 
     def __init__(self, config: Config) -> None:
-        self._hist_t: list[float] = []
-        self._hist_x: list[float] = []
+        self._derivs = np.zeros(0)       # r, r', ... of the filtered reference (reset fills it)
         self.reconfigure(config)
         self.reset(0.0, 0.0)
 
@@ -340,18 +392,22 @@ class Compensator:
                                     n_deriv)
         self._tau = np.ascontiguousarray(self.filter.tau)
         self._W = np.ascontiguousarray(self.filter.weights)
+        if self._derivs.size != n_deriv:
+            self._derivs = np.zeros(n_deriv)
         self._n_deriv = n_deriv
         self._inv = _Inverse(config)
         self._span = self.filter.lag_span + self.preview
-        self._out_per_in = 1.0 / self._inv.ratio
+        self._output_per_input = 1.0 / self._inv.ratio
 
     # ---- streaming -------------------------------------------------------------------------
     def reset(self, theta1_ref: float, t: float) -> None:
         """Forget the history: the reference has rested at ``theta1_ref`` until ``t``."""
         if not (math.isfinite(theta1_ref) and math.isfinite(t)):
             raise ValueError('reset: theta1_ref and t must be finite')
-        self._hist_t = [float(t)]
-        self._hist_x = [float(theta1_ref)]
+        self._ht = np.empty(64)          # history: times and values, [lo, hi) in use
+        self._hx = np.empty(64)
+        self._ht[0], self._hx[0] = float(t), float(theta1_ref)
+        self._lo, self._hi = 0, 1
         self._last_delta = 0.0
         self._reference = float(theta1_ref)
         self._derivs = np.zeros(self._n_deriv)
@@ -361,45 +417,63 @@ class Compensator:
         """Add the sample (t, theta1_ref) and return the correction delta [rad] for time
         t - preview_time.  Times must not decrease (an equal time replaces the sample)."""
         t = float(t)
+        self.add_sample(t, theta1_ref)
+        te = t - self.preview
+        d = self.evaluate(te)
+        self.trim(te)
+        return d
+
+    def add_sample(self, t: float, theta1_ref: float) -> None:
+        """Append a sample to the history without evaluating (an equal time replaces the
+        last sample; times must not decrease)."""
+        t = float(t)
         x = float(theta1_ref)
         if not (math.isfinite(t) and math.isfinite(x)):
             raise ValueError('update: t and theta1_ref must be finite')
-        self._add_sample(t, x)
-        return self._evaluate(t - self.preview)
+        hi = self._hi
+        last = self._ht[hi - 1]
+        if t < last:
+            raise ValueError(f'update: time went backwards ({t!r} < {last!r})')
+        if t == last:
+            self._hx[hi - 1] = x
+            return
+        if hi == self._ht.size:          # full: compact, grow if still more than half used
+            lo = self._lo
+            n = hi - lo
+            size = self._ht.size * 2 if n > self._ht.size // 2 else self._ht.size
+            ht, hx = np.empty(size), np.empty(size)
+            ht[:n], hx[:n] = self._ht[lo:hi], self._hx[lo:hi]
+            self._ht, self._hx, self._lo, hi = ht, hx, 0, n
+        self._ht[hi] = t
+        self._hx[hi] = x
+        self._hi = hi + 1
 
-    def _add_sample(self, t: float, x: float) -> None:
-        ht, hx = self._hist_t, self._hist_x
-        if t < ht[-1]:
-            raise ValueError(f'update: time went backwards ({t!r} < {ht[-1]!r})')
-        if t == ht[-1]:
-            hx[-1] = x
-        else:
-            ht.append(t)
-            hx.append(x)
-        # drop samples older than needed (keep one before the window for interpolation)
-        t_old = t - self._span
-        while len(ht) > 2 and ht[1] <= t_old:
-            del ht[0]
-            del hx[0]
+    def evaluate(self, te: float) -> float:
+        """The correction for time ``te`` from the history so far (the reference at ``te``
+        becomes :attr:`reference`); any ``te`` not before the last :meth:`trim`."""
+        d, ref = compensation_kernel(float(te), self._tau, self._W, self._ht, self._hx,
+                                     self._lo, self._hi, self._inv.p, self._output_per_input,
+                                     self.quasi_static, self.dynamic, self.enabled,
+                                     self._derivs)
+        self._reference = ref
+        self._last_delta = d
+        return d
 
-    def _evaluate(self, te: float) -> float:
-        ht, hx = self._hist_t, self._hist_x
-        self._reference = float(np.interp(te, ht, hx))
-        if not self.enabled:
-            self._last_delta = 0.0
-            return 0.0
-        r = self._W @ np.interp(te - self._tau, ht, hx)
-        self._derivs = r
-        if self.quasi_static:
-            c = self._out_per_in
-            if self._n_deriv == 5:
-                th1 = self._inv.theta1(r[0] * c, r[1] * c, r[2] * c, r[3] * c, r[4] * c, True)
-            else:
-                th1 = self._inv.theta1(r[0] * c, r[1] * c, r[2] * c, 0.0, 0.0, False)
-        else:
-            th1 = float(r[0])            # shaping (filtering) only
-        self._last_delta = th1 - self._reference
-        return self._last_delta
+    def trim(self, te_min: float) -> None:
+        """Forget the samples no evaluation at a time >= ``te_min`` needs (one before the
+        filter window is kept for the interpolation)."""
+        t_old = te_min - float(self._tau[-1])
+        ht, lo, hi = self._ht, self._lo, self._hi
+        while hi - lo > 2 and ht[lo + 1] <= t_old:
+            lo += 1
+        self._lo = lo
+
+    def copy_history(self, other: Compensator) -> None:
+        """Take over the reference history and last outputs of ``other`` (a redesign that
+        keeps the stream)."""
+        self._ht, self._hx = other._ht.copy(), other._hx.copy()
+        self._lo, self._hi = other._lo, other._hi
+        self._last_delta, self._reference = other._last_delta, other._reference
 
     # ---- introspection ---------------------------------------------------------------------
     @property
@@ -427,33 +501,46 @@ class Compensator:
 
 
 def feedforward_series(config: Config, times, theta1_ref) -> np.ndarray:
-    """Stream a sampled reference through a fresh :class:`Compensator` (batch helper) and
-    return the correction for each sample time.
+    """The offline twin of the live pipeline: the correction for each sample of a sampled
+    reference, exactly as :class:`worm_gear_sim.realtime.RealtimePredictor` (the node's
+    pipeline) computes it from the same (time, value) pairs, whatever their arrival.
 
-    Without preview, sample i is streamed at its own time.  With a preview P the stream runs
-    P ahead (the sample at t_j + P is passed at t_j; past the end the reference holds its
-    last value) and the corrections, produced for t_j, are returned on the sample grid
-    (interpolated when P is not a multiple of the sample spacing)."""
-    t = np.asarray(times, float)
+    ``times``: strictly increasing, float seconds or integer nanoseconds (an integer
+    array, e.g. ROS stamps: keep them integer, a float of epoch seconds has only ~0.2 us
+    of resolution); only differences matter.  The reference is taken to rest at its first
+    value before the first sample and at its last value after the last one.  With
+    ``compensation.preview_time`` P the correction for sample t uses the samples up to
+    t + P (past the end: the rest).  A sample the pipeline would reject (non-finite,
+    ``node.max_command_abs``, a jump of more than ``node.max_command_jump``) raises
+    ValueError naming it."""
+    from .realtime import RealtimePredictor
     x = np.asarray(theta1_ref, float)
-    if t.ndim != 1 or x.shape != t.shape or t.size == 0:
+    t_in = np.asarray(times)
+    if t_in.ndim != 1 or x.shape != t_in.shape or t_in.size == 0:
         raise ValueError('times and theta1_ref must be equal-length 1-D arrays')
-    comp = Compensator(config)
-    comp.reset(float(x[0]), float(t[0]))
-    out = np.empty(t.size)
-    P = comp.preview
-    if P <= 0.0:
-        for i in range(t.size):
-            out[i] = comp.update(t[i], x[i])
-        return out
-    # samples after the end hold the last value, on the same spacing
-    dt = float(t[-1] - t[-2]) if t.size > 1 else 1e-3
-    n_extra = int(math.ceil(P / dt)) + 2
-    t_ext = np.concatenate((t, t[-1] + dt * np.arange(1, n_extra + 1)))
-    x_ext = np.concatenate((x, np.full(n_extra, x[-1])))
-    t_for = t_ext - P
-    d = np.empty(t_ext.size)
-    for j in range(t_ext.size):
-        d[j] = comp.update(t_ext[j], x_ext[j])
-    # before the first streamed correction the reference had rested: no correction yet
-    return np.interp(t, t_for, d, left=0.0)
+    if np.issubdtype(t_in.dtype, np.integer):
+        rel = t_in.astype(np.int64) - np.int64(t_in[0])
+    else:
+        t = t_in.astype(float)
+        if not np.all(np.isfinite(t)):
+            raise ValueError('times must be finite')
+        rel = np.round((t - t[0]) * 1e9).astype(np.int64)
+    if rel.size > 1 and not np.all(np.diff(rel) > 0):
+        i = int(np.argmax(np.diff(rel) <= 0)) + 1
+        raise ValueError(f'times must be strictly increasing (to the nanosecond): sample {i}')
+    origin = 1_000_000_000                     # stamps must be > 0: any origin will do
+    p = RealtimePredictor(config, simulate=False, base_ns=origin)
+    out = np.empty(x.size)
+    k = 0
+    for i in range(x.size):
+        o = p.push(origin + int(rel[i]), float(x[i]))
+        if o.rejected is not None:
+            raise ValueError(f'sample {i} (theta1_ref = {x[i]!r}) rejected: '
+                             f'{o.rejected.value}')
+        for c in o.corrections:
+            out[k] = c.delta
+            k += 1
+    for c in p.finish().corrections:
+        out[k] = c.delta
+        k += 1
+    return out

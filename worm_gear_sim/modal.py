@@ -10,9 +10,6 @@ import numpy as np
 import scipy.linalg as sla
 
 from .model import (
-    P_J4,
-    P_JG,
-    P_JW,
     forces,
     linear_stiffness,
     mass_matrix,
@@ -153,7 +150,3 @@ def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:
         z = zetas[:len(w)]
         C = C + M @ phi @ np.diag(2.0 * z * w) @ phi.T @ M
     return np.ascontiguousarray(C)
-
-
-def inertias(p: np.ndarray) -> tuple[float, float, float]:
-    return float(p[P_JW]), float(p[P_JG]), float(p[P_J4])

@@ -22,7 +22,7 @@ cos(pi/2 - lam) = sin(lam) and sin(pi/2 - lam) = cos(lam) are written out.  With
 tan(lam) = l_w / r_w the frictionless mesh force is conservative (r_w A = l_w B/cos..., the
 stiffness matrix is symmetric) with potential 0.5 k_Y q^2, k_Y = cos(phi_n) cos^2(lam)/KGWS0.
 
-Friction (Eq. 18 in SI, MODEL-NOTES): sliding speed along the thread
+Friction (Eq. 18 in SI, docs/model-notes.md): sliding speed along the thread
 v_s = r_w cos(lam) th2' + r_g sin(lam) th3'; mu(v) = mu_k + drop*exp(-sqrt(|v|/v_S));
 the effective signed coefficient is mu_eff = mu(|v_s|) tanh(v_s/v_eps) sgn(q), so that
 W_f = mu |W_n| sgn(v_s) always opposes sliding; ``direction: paper`` keeps mu_eff = mu(|v_s|).

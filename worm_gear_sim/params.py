@@ -287,6 +287,13 @@ class NodeSettings:
                                     'to the command')
     diagnostic_period: float = _f(1.0, 'Period of /diagnostics', 's', 0.01, 60.0,
                                   read_only=True)
+    residual_window: float = _f(1.0, 'Live model check: window of the RMS of measured - '
+                                'predicted (measured_joint_states)', 's', 0.0, 3600.0,
+                                lo_open=True, read_only=True)
+    residual_warn_rms: tuple = _f([1e-3, 1e-4, 1e-4], 'Live model check: /diagnostics turns '
+                                  'WARN when the windowed residual RMS of theta2, theta3 or '
+                                  'theta4 exceeds its entry', 'rad', 0.0, 1e3, lo_open=True,
+                                  length=3)
 
 
 @dataclass(frozen=True)
@@ -410,6 +417,16 @@ def value_kind(default: Any) -> str:
     raise TypeError(f'unsupported parameter default {default!r}')
 
 
+def _field_default(f: dataclasses.Field) -> Any:
+    """The default of a dataclass field (given, or made by its factory)."""
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    factory = f.default_factory
+    if not callable(factory):
+        raise TypeError(f'field {f.name} has no default')
+    return factory()
+
+
 def _coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
     """Type-check one value against its field's kind (:func:`value_kind`) and metadata."""
     kind = value_kind(default)
@@ -478,7 +495,7 @@ def validate(cfg: Config) -> None:
         obj = getattr(cfg, sec)
         for f in fields(obj):
             key = f'{sec}.{f.name}'
-            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+            default = _field_default(f)
             _coerce(key, getattr(obj, f.name), default, f.metadata)
     integ = cfg.integrator
     if not (2.0 * integ.newmark_beta >= integ.newmark_gamma - 1e-15):
@@ -537,7 +554,7 @@ def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>',
             if name not in names:
                 raise ConfigError(key, 'unknown parameter' + _suggest(key, known))
             f = names[name]
-            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+            default = _field_default(f)
             sec_kwargs[name] = _coerce(key, value, default, f.metadata)
         kwargs[sec] = cls(**sec_kwargs)
     cfg = Config(**kwargs)

@@ -127,6 +127,7 @@ CONFIRM_SAMPLES = 3          # agreeing candidates that confirm a jump or a new 
 CHAIN_MAX_GAP_NS = 50_000_000  # candidates further apart do not confirm each other
 RESTART_MIN_BACK_NS = 100_000_000  # a stamp this much older may start a new timeline
 CLOCK_TOLERANCE_NS = 1_000_000  # now_ns may step back this much without a restart
+INFO_EVENTS = ('started', 'stream_resumed')
 HOLD_EPS = 0.5e-9            # s: 'hold' steps just after the sample time (stamps are whole ns)
 
 
@@ -173,7 +174,7 @@ class Prediction:
     reference: float         # theta1_ref the positioning error is measured against [rad]
     positioning_error: float  # theta4 - reference l_w / r_g [rad] (~/positioning_error)
     worm_error: float        # theta2 - theta1 [rad] (~/worm_error)
-    held: bool = False       # a held prediction of a paused stream (or a tick's hold)
+    held: bool = False       # held: the stream is stale, the last command is held
 
     @property
     def position(self) -> tuple:
@@ -188,12 +189,13 @@ class Prediction:
 
 @dataclass(frozen=True, slots=True)
 class Event:
-    """Something the node should log once as a warning.  ``kind``: resync,
-    clock_restart, stream_stale, stream_resumed, overrun, simulation_error,
-    compensation_error, input_changed."""
+    """Something the node should log once.  ``kind``: started, stream_resumed (``level``
+    'info'); resync, clock_restart, stream_stale, overrun, simulation_error,
+    compensation_error, input_changed ('warn').  The counters say how often."""
 
     kind: str
     message: str
+    level: str = 'warn'
 
 
 @dataclass(slots=True)
@@ -228,40 +230,6 @@ COUNTER_NAMES = (
     'clock_restarts', 'stale_events', 'overruns', 'dropped_time_ns', 'steps',
     'simulation_errors', 'compensation_errors', 'reconfigurations', 'stream_relocks',
     'stream_outliers')
-
-
-class _StreamingCompensator(Compensator):
-    """The Compensator with its streaming split in three: add a sample, evaluate at any
-    time covered by the history, trim what no evaluation needs any more."""
-
-    def add_sample(self, t: float, x: float) -> None:
-        ht, hx = self._hist_t, self._hist_x
-        if t < ht[-1]:
-            raise ValueError(f'add_sample: time went backwards ({t!r} < {ht[-1]!r})')
-        if t == ht[-1]:
-            hx[-1] = x
-        else:
-            ht.append(t)
-            hx.append(x)
-
-    def evaluate(self, te: float) -> float:
-        return self._evaluate(te)
-
-    def trim(self, te_min: float) -> None:
-        """Drop samples no evaluation at te >= te_min needs (one before the window kept)."""
-        ht, hx = self._hist_t, self._hist_x
-        t_old = te_min - float(self._tau[-1])
-        n = 0
-        while len(ht) - n > 2 and ht[n + 1] <= t_old:
-            n += 1
-        if n:
-            del ht[:n]
-            del hx[:n]
-
-    def adopt(self, other: Compensator) -> None:
-        """Take over the reference history and outputs of ``other`` (a reconfiguration)."""
-        self._hist_t, self._hist_x = list(other._hist_t), list(other._hist_x)
-        self._last_delta, self._reference = other._last_delta, other._reference
 
 
 class RealtimePredictor:
@@ -300,7 +268,7 @@ class RealtimePredictor:
         self.confirm_samples = int(confirm_samples)
         self.compensation_error = ''
         self.last_error = ''
-        self._comp: _StreamingCompensator | None = None
+        self._comp: Compensator | None = None
         self.sim: Simulator | None = Simulator(config, 0.0, 0.0) if simulate else None
         if self.sim is not None:                      # compile / load the kernel now
             self.sim.advance_to(10 * self.sim.dt, 0.0)
@@ -319,7 +287,7 @@ class RealtimePredictor:
         if not self.compensate:
             return Prepared(config, None)
         try:
-            return Prepared(config, _StreamingCompensator(config))
+            return Prepared(config, Compensator(config))
         except Exception as exc:  # noqa: BLE001 - run uncompensated, say why
             return Prepared(config, None, f'{type(exc).__name__}: {exc}')
 
@@ -332,19 +300,19 @@ class RealtimePredictor:
         self._gap0_ns = int(round(STALE_PERIODS * self._period_ns))
         comp = prepared.compensator
         if comp is not None and self._comp is not None:
-            comp.adopt(self._comp)
+            comp.copy_history(self._comp)
         self._comp = comp
         self.compensation_error = prepared.error
         self.preview_ns = int(round(config.compensation.preview_time * 1e9))
         self._lead_ns = self.max_stamp_lead_ns + self.preview_ns
-        span = 0.0 if comp is None else float(comp._tau[-1]) + comp.preview
+        span = 0.0 if comp is None else comp.filter.lag_span + comp.preview
         self._rest_count = int(math.ceil(span * 1e9 / self._period_ns)) + 2
         self._max_jump = node.max_command_jump
         self._max_abs = node.max_command_abs
         self._max_catch_up = node.max_catch_up
         if self.sim is not None:
             self.sim.interpolation = node.command_interpolation
-            self._ratio = self.sim.derived.output_per_input
+            self._output_per_input = self.sim.derived.output_per_input
 
     def prepare(self, config: Config) -> Prepared:
         """Design for ``config`` off the real-time path (compensator design, a trial
@@ -427,6 +395,11 @@ class RealtimePredictor:
     def pending(self) -> int:
         """Samples whose correction waits for the preview."""
         return len(self._pending)
+
+    @property
+    def queued_commands(self) -> int:
+        """Float64 commands waiting for a tick."""
+        return len(self._queue)
 
     @property
     def compensator(self) -> Compensator | None:
@@ -671,8 +644,9 @@ class RealtimePredictor:
         self._stream.reset()
 
     def _event(self, out: Output, kind: str, message: str) -> None:
-        out.events.append(Event(kind, message))
-        if kind not in ('stream_resumed',):
+        level = 'info' if kind in INFO_EVENTS else 'warn'
+        out.events.append(Event(kind, message, level))
+        if level == 'warn':
             self.last_error = message
 
     # ---- internals: the sample path ----------------------------------------------------
@@ -681,6 +655,8 @@ class RealtimePredictor:
         c = self.counters
         if not self._started:
             self._start(ns, x, predict)
+            self._event(out, 'started', f'first reference sample {x:.9g} rad: simulation '
+                        'started at rest')
         elif ns - self._last_real_ns > self._gap_ns:     # a pause: the reference rested
             self._insert_rest(ns, out, predict)
         if self._stale:
@@ -826,7 +802,7 @@ class RealtimePredictor:
             except (SimulationError, ValueError) as exc:
                 self._simulation_failed(exc, t, out)
             self._drive_t = t
-        out.predictions.append(self._prediction(ns, True))
+        out.predictions.append(self._prediction(ns, self._stale))
 
     def _catch_up(self, t: float, out: Output) -> None:
         sim = self.sim
@@ -859,14 +835,9 @@ class RealtimePredictor:
             self._release(None, out, predict=False)
 
     def _prediction(self, ns: int, held: bool) -> Prediction:
-        sim = self.sim
-        st = sim.state
-        u, v = st.theta, st.omega
-        th1 = st.theta1
+        pos, vel, eff = self.sim.joint_state()
+        th1, th2, th4 = pos[0], pos[1], pos[3]
         ref = self._held_ref if self.apply_compensation else th1
         self.counters['predictions'] += 1
-        th2, th3, th4 = float(u[0]), float(u[1]), float(u[2])
-        return Prediction(ns, th1, st.theta1_dot, (th2, th3, th4),
-                          (float(v[0]), float(v[1]), float(v[2])),
-                          tuple(sim.joint_torques().tolist()), ref,
-                          th4 - ref * self._ratio, th2 - th1, held)
+        return Prediction(ns, th1, vel[0], pos[1:], vel[1:], eff, ref,
+                          th4 - ref * self._output_per_input, th2 - th1, held)

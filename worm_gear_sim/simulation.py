@@ -81,7 +81,7 @@ class Trajectory:
     omega: np.ndarray
     alpha: np.ndarray
     aux: np.ndarray          # (n, N_AUX): W_n, mu, cwkw, cgkg, v_s, F_X, F_Y, q
-    output_ratio: float      # l_w / r_g: rigid theta4 per theta1
+    output_per_input: float      # l_w / r_g: rigid theta4 per theta1
     profile: str = ''
     stats: dict = field(default_factory=dict)
 
@@ -100,7 +100,7 @@ class Trajectory:
     @property
     def output_error(self) -> np.ndarray:
         """theta4 - theta1 l_w / r_g [rad]: antenna positioning error."""
-        return self.theta[:, 2] - self.theta1 * self.output_ratio
+        return self.theta[:, 2] - self.theta1 * self.output_per_input
 
     def energy(self, config: Config) -> np.ndarray:
         """Kinetic + shaft torsion + mesh energy 0.5 k_Y q^2 [J] at every row."""
@@ -131,7 +131,7 @@ class Trajectory:
         return Trajectory(t=self.t[index], theta1=self.theta1[index],
                           theta1_dot=self.theta1_dot[index], theta=self.theta[index],
                           omega=self.omega[index], alpha=self.alpha[index],
-                          aux=self.aux[index], output_ratio=self.output_ratio,
+                          aux=self.aux[index], output_per_input=self.output_per_input,
                           profile=self.profile, stats=self.stats)
 
     @staticmethod
@@ -142,7 +142,12 @@ class Trajectory:
         last = parts[-1]
         return Trajectory(*(np.concatenate([getattr(t, n) for t in parts]) for n in (
             't', 'theta1', 'theta1_dot', 'theta', 'omega', 'alpha', 'aux')),
-            output_ratio=last.output_ratio, profile=last.profile, stats=last.stats)
+            output_per_input=last.output_per_input, profile=last.profile, stats=last.stats)
+
+
+#: CSV number format: t to 1 ns whatever the duration; every other column to 12
+#: significant digits (relative 5e-12: 0.1 rad to 5e-13 rad, 56 rad to 3e-10 rad)
+CSV_FORMAT = ['%.9f', '%.12g']
 
 
 class TrajectoryCsvWriter:
@@ -169,8 +174,9 @@ class TrajectoryCsvWriter:
             self._fh = open(self.path, 'w')
             self._fh.write(comment)
             self._fh.write(','.join(names) + '\n')
-        np.savetxt(self._fh, np.column_stack(list(cols.values())), delimiter=',',
-                   fmt='%.12g')
+        data = np.column_stack(list(cols.values()))
+        np.savetxt(self._fh, data, delimiter=',', fmt=CSV_FORMAT[:1] + CSV_FORMAT[1:] *
+                   (data.shape[1] - 1))
         self.rows_written += len(traj.t)
 
     def close(self) -> None:
@@ -329,11 +335,25 @@ class Simulator:
         """Shaft torques for JointState.effort [N m]: motor on worm shaft K_w (theta1 -
         theta2), mesh torque on the worm r_w F_X, on the gear r_g F_Y, gear shaft
         K_g (theta3 - theta4)."""
-        f = self.forces()
-        rw, rg = self.config.geometry.worm_pitch_radius, self.config.geometry.gear_pitch_radius
-        d = self.derived
-        return np.array([d.K_w * (self._theta1 - self._u[0]), rw * f['F_X'], rg * f['F_Y'],
-                         d.K_g * (self._u[1] - self._u[2])])
+        return np.array(self.joint_state()[2])
+
+    def joint_state(self) -> tuple[tuple, tuple, tuple]:
+        """The JointState fields at the current state, as tuples of floats: position
+        (theta1..theta4 [rad]), velocity (theta1_dot, omega2..omega4 [rad/s]) and effort
+        (:meth:`joint_torques` [N m]); one compiled force evaluation into reused buffers
+        (the real-time path publishes this for every sample)."""
+        buf = self.__dict__.get('_force_buf')
+        if buf is None:
+            buf = self._force_buf = (np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)),
+                                     np.zeros(N_AUX))
+        u, v, th1 = self._u, self._v, self._theta1
+        generalized_forces(self.p, u, v, th1, buf[0], buf[1], buf[2], buf[3])
+        aux = buf[3]
+        g, d = self.config.geometry, self.derived
+        u2, u3, u4 = float(u[0]), float(u[1]), float(u[2])
+        return ((th1, u2, u3, u4), (self._theta1_dot, float(v[0]), float(v[1]), float(v[2])),
+                (d.K_w * (th1 - u2), g.worm_pitch_radius * float(aux[AUX_FX]),
+                 g.gear_pitch_radius * float(aux[AUX_FY]), d.K_g * (u3 - u4)))
 
     def energy(self) -> float:
         return float(mechanical_energy(self.p, self._u, self._v, self._theta1))
@@ -445,7 +465,7 @@ class Simulator:
         self._cmd_t, self._cmd_value = self.t, self._theta1
         return Trajectory(t=t_rec[:row], theta1=th_rec[:row], theta1_dot=td_rec[:row],
                           theta=u_rec[:row], omega=v_rec[:row], alpha=a_rec[:row],
-                          aux=aux_rec[:row], output_ratio=float(self.p[P_RIGID3]),
+                          aux=aux_rec[:row], output_per_input=float(self.p[P_RIGID3]),
                           profile=profile.describe(), stats=self.stats)
 
     def iter_run(self, profile: Profile, t_end: float, record_every: int = 1,
@@ -464,7 +484,7 @@ class Simulator:
 
         def traj(arrs: tuple[np.ndarray, ...]) -> Trajectory:
             return Trajectory(t=arrs[0], theta1=arrs[1], theta1_dot=arrs[2], theta=arrs[3],
-                              omega=arrs[4], alpha=arrs[5], aux=arrs[6], output_ratio=ratio,
+                              omega=arrs[4], alpha=arrs[5], aux=arrs[6], output_per_input=ratio,
                               profile=desc, stats=self.stats)
 
         for m, fill in self._chunks(profile, n_total, stride, chunk_steps):

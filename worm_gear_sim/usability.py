@@ -3,7 +3,7 @@
 """Is a parameter set *usable*: the rules behind :func:`worm_gear_sim.params.check_usable`.
 
 Every field of a :class:`~worm_gear_sim.params.Config` can lie inside its declared range while
-the set as a whole cannot be simulated.  The causes found (issue 10) are structural, so they are
+the set as a whole cannot be simulated.  The causes found are structural, so they are
 written as rules on the derived quantities, each naming the parameters that set them:
 
 1. **Mesh stiffness over a cycle** (Eqs. 16-17).  Each tooth stiffness varies by a factor

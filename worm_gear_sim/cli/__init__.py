@@ -36,6 +36,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     'studies',       # experiment, sweep
     'modes',         # modes, params
     'compensate',    # compensate
+    'identify',      # identify
 )
 
 

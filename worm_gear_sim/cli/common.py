@@ -29,10 +29,10 @@ class CliError(Exception):
 class Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors become :class:`CliError` (one line, no usage dump)."""
 
-    def error(self, message: str):  # type: ignore[override]
+    def error(self, message: str):
         raise CliError(message, self.prog)
 
-    def exit(self, status: int = 0, message: str | None = None):  # type: ignore[override]
+    def exit(self, status: int = 0, message: str | None = None):
         if status:
             raise CliError((message or '').strip() or f'exit status {status}', self.prog)
         if message:

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..compensation import Compensator
 from ..config_io import resolve_config
-from ..profiles import make_profile
+from ..profiles import make_profile, motion_span
 from ..studies.compensation_eval import (
     DETUNINGS,
     METRICS,
@@ -103,8 +103,8 @@ def _scenario(args: argparse.Namespace, cfg):
         prof = make_profile(cfg.input)
         times = np.arange(0.0, t_end + 0.5 * period, period)
         x = prof.theta1(times)
-        moving = np.nonzero(np.diff(x))[0]
-        end = float(times[moving[-1] + 1]) if moving.size else 0.0
+        span = motion_span(times, x)
+        end = 0.0 if span is None else span[1]
         rate = np.diff(x) / np.diff(times)
         const = np.zeros(times.size, bool)
         const[1:-1] = (np.abs(np.diff(rate)) <= 1e-9 * (1.0 + np.abs(rate[1:]))) & \
@@ -152,11 +152,7 @@ def cmd_compensate(args: argparse.Namespace) -> int:
             print(f'plant detuned: {factors}')
         print(f'{"metric":16s} {"without":>12s} {"with":>12s} {"ratio":>9s}')
         for m in METRICS:
-            a, b = off.metrics[m], on.metrics[m]
-            unit = 's' if m == 'settling_time' else 'rad'
-            r = improvement(m, a, b)
-            rs = 'n/a' if math.isnan(r) else ('inf' if math.isinf(r) else f'{r:.3g}x')
-            print(f'{m:16s} {a:12.4g} {b:12.4g} {rs:>9s}  [{unit}]')
+            print(metric_row(m, off.metrics[m], on.metrics[m]))
         print(f'wrote {out}')
     if not args.no_plot:
         png = Path(args.plot) if args.plot else out.with_suffix('.png')
@@ -176,7 +172,7 @@ def write_csv(path: str | Path, off: Any, on: Any, header: str = '') -> Path:
     cols = {
         't[s]': t, 'theta1_ref[rad]': ref, 'delta[rad]': delta,
         'theta1_cmd[rad]': ref + delta,
-        'theta4_ref[rad]': ref * on.trajectory.output_ratio,
+        'theta4_ref[rad]': ref * on.trajectory.output_per_input,
         'theta4_uncompensated[rad]': off.trajectory.theta[:, 2],
         'theta4_compensated[rad]': on.trajectory.theta[:, 2],
         'error_uncompensated[rad]': off.error, 'error_compensated[rad]': on.error,
@@ -209,8 +205,8 @@ def plot_runs(off: Any, on: Any, path: str | Path, title: str = '') -> Path:
         a.grid(alpha=0.3)
     ax[0].set_title(title, fontsize=9)
     ax[0].legend(fontsize=8, loc='upper right')
-    t0 = float(sc.times[np.nonzero(np.diff(sc.theta1_ref))[0][0]]) if np.any(
-        np.diff(sc.theta1_ref)) else 0.0
+    span = motion_span(sc.times, sc.theta1_ref)
+    t0 = 0.0 if span is None else span[0]
     zoom = (max(0.0, t0 - 0.005), min(t[-1], sc.move_end + 0.06))
     ax[1].set_xlim(*zoom)
     ax[1].set_title('zoom on the move (dotted: end of the reference move)', fontsize=9)
@@ -223,3 +219,20 @@ def plot_runs(off: Any, on: Any, path: str | Path, title: str = '') -> Path:
     p.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(p, dpi=100, format='png')
     return p
+
+
+def metric_row(metric: str, off: float, on: float) -> str:
+    """One row of the table: a settling time that never comes prints ``never``; the ratio
+    (:func:`improvement`) is ``-`` when neither run settles, ``settles`` / ``never`` when
+    only one does, ``n/a`` when both errors are below the resolution floor."""
+    unit = 's' if metric == 'settling_time' else 'rad'
+
+    def value(x: float) -> str:
+        return 'never' if metric == 'settling_time' and math.isinf(x) else f'{x:.4g}'
+    if metric == 'settling_time' and (math.isinf(off) or math.isinf(on)):
+        rs = '-' if math.isinf(off) and math.isinf(on) else \
+            ('settles' if math.isinf(off) else 'never')
+    else:
+        r = improvement(metric, off, on)
+        rs = 'n/a' if math.isnan(r) else ('inf' if math.isinf(r) else f'{r:.3g}x')
+    return f'{metric:16s} {value(off):>12s} {value(on):>12s} {rs:>9s}  [{unit}]'

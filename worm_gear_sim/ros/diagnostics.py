@@ -16,7 +16,7 @@ from typing import Any
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-__all__ = ['OK', 'WARN', 'ERROR', 'STALE', 'status', 'array', 'level_name', 'values_of']
+__all__ = ['OK', 'WARN', 'ERROR', 'STALE', 'status', 'array', 'level_name']
 
 OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN
@@ -51,8 +51,3 @@ def array(stamp: Time, statuses: Iterable[DiagnosticStatus]) -> DiagnosticArray:
     msg.header.stamp = stamp
     msg.status = list(statuses)
     return msg
-
-
-def values_of(st: DiagnosticStatus) -> dict[str, str]:
-    """KeyValue list -> dict (for tests and the demo display)."""
-    return {kv.key: kv.value for kv in st.values}

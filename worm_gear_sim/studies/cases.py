@@ -98,6 +98,7 @@ CONSTANT_MU = (0.0, 0.05, 0.1, 0.145, 0.2, 0.3, 0.45)
 
 def paper_study(name: str, base: Config) -> Study:
     """The paper's Sec. 4 studies, by name (see :data:`PAPER_STUDIES`)."""
+    cases: Sequence[Case]
     if name == 'flywheel':
         cases = (Case(name, 'flywheel', 0.0, 'without', {'geometry.flywheel_enabled': False}),
                  Case(name, 'flywheel', 1.0, 'with', {'geometry.flywheel_enabled': True}))
@@ -113,12 +114,13 @@ def paper_study(name: str, base: Config) -> Study:
                      'flywheel diameter 2 R5 [m]', cases, paper_figure='Fig. 14',
                      note='flywheel length L5 = 0.03 m kept; J_4 grows as D^4')
     if name == 'module':
-        cases = []
+        module_cases: list[Case] = []
         for scaling, series in (('geometry', 'similar gear set (r_w r_g lead L2 L3 k ~ M)'),
                                 ('stiffness', 'tooth stiffness only (k ~ M)')):
             for m in MODULES:
-                cases.append(Case(name, series, m, f'M{m:g}', module_overrides(base, m, scaling)))
-        return Study(name, 'Module M1-M5 (paper Fig. 15)', 'module M [mm]', tuple(cases),
+                module_cases.append(Case(name, series, m, f'M{m:g}',
+                                         module_overrides(base, m, scaling)))
+        return Study(name, 'Module M1-M5 (paper Fig. 15)', 'module M [mm]', tuple(module_cases),
                      paper_figure='Fig. 15',
                      note='see module_overrides(): shafts, bearings and flywheel unchanged')
     if name == 'shear_modulus':
@@ -140,17 +142,18 @@ def paper_study(name: str, base: Config) -> Study:
     if name == 'friction':
         flat = base.to_flat_dict()
         mk, md = flat['friction.mu_kinetic'], flat['friction.mu_stribeck_drop']
-        cases = []
+        friction_cases: list[Case] = []
         for f in FRICTION_FACTORS:
-            cases.append(Case(name, 'Eq. 18 scaled', (mk + md) * f, f'Eq.18 x{f:g}',
-                              {'friction.model': 'stribeck', 'friction.mu_kinetic': mk * f,
-                               'friction.mu_stribeck_drop': md * f}))
+            friction_cases.append(Case(name, 'Eq. 18 scaled', (mk + md) * f, f'Eq.18 x{f:g}',
+                                       {'friction.model': 'stribeck',
+                                        'friction.mu_kinetic': mk * f,
+                                        'friction.mu_stribeck_drop': md * f}))
         for mu in CONSTANT_MU:
-            cases.append(Case(name, 'constant mu', mu, f'mu={mu:g}',
-                              {'friction.model': 'constant',
-                               'friction.constant_coefficient': mu}))
+            friction_cases.append(Case(name, 'constant mu', mu, f'mu={mu:g}',
+                                       {'friction.model': 'constant',
+                                        'friction.constant_coefficient': mu}))
         return Study(name, 'Friction coefficient (paper Fig. 18)',
-                     'friction coefficient at rest mu(0)', tuple(cases),
+                     'friction coefficient at rest mu(0)', tuple(friction_cases),
                      paper_figure='Fig. 18',
                      note='Eq. 18 scaled: mu_kinetic and mu_stribeck_drop times a factor; '
                           'x = mu(0) = factor x 0.1527')
@@ -172,6 +175,7 @@ def parse_values(text: str | None = None, range_spec: str | None = None,
         if not vals or any(v == '' for v in vals):
             raise ValueError(f'--values: empty entry in {text!r}')
         return vals
+    assert range_spec is not None
     parts = range_spec.split(':')
     if len(parts) != 3:
         raise ValueError(f'--range must be start:stop:num, got {range_spec!r}')

@@ -22,7 +22,7 @@ def experiment_cases() -> list[tuple[str, str, dict[str, Any]]]:
     """(model, lead convention, overrides) of the Sec. 3 comparison (Figs. 9-11): the
     nonlinear model (Eqs. 16-18) and the paper's linear case (c_w k_w 3.5e8, c_g k_g 2.5e8
     N/m, constant mu 0.145), in the kinematic and the paper lead convention."""
-    out = []
+    out: list[tuple[str, str, dict[str, Any]]] = []
     for conv in ('kinematic', 'paper'):
         out.append(('nonlinear', conv, {'geometry.lead_convention': conv}))
         out.append(('linear', conv, {'geometry.lead_convention': conv,

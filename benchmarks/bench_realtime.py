@@ -1,0 +1,190 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Per-sample cost of the real-time pipeline (no ROS): the compensator update, compiled
+against the former Python implementation side by side, and the whole
+``RealtimePredictor.push`` per stamped sample, with its parts.
+
+The stream is a 1 kHz stamped worm slew at 2 rad/s with reversals (epoch stamps, +-0.2 ms
+jitter), the default configuration plus a 5 N m antenna load.  Each figure is the minimum
+over ``--repeats`` runs of ``--samples`` samples (other jobs on a shared machine only add
+time); the load average is printed because absolute figures depend on it.
+
+* ``compensator``: ``Compensator.update`` (compiled: history in arrays, one numba kernel
+  for the interpolation walk, the quadrature and the model inverse) against
+  ``PythonCompensator`` below, the implementation before (history in lists, ``np.interp``
+  and a matrix-vector product, the inverse in Python calling the compiled friction and
+  compliance functions); both on the same stream, their corrections compared;
+* ``push``: ``RealtimePredictor.push`` per sample: validation, the compensator, 1 ms of
+  physics (100 Newmark steps), one Correction and one Prediction (with shaft torques),
+  for the plain, preview and compensation-applied settings; and its parts: the simulator's
+  ``advance_to`` for 1 ms alone and ``push`` with ``simulate=False`` (what
+  ``feedforward_series`` runs).
+
+    python benchmarks/bench_realtime.py
+    python benchmarks/bench_realtime.py --samples 5000 --repeats 9
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+from worm_gear_sim import Config
+from worm_gear_sim.compensation import Compensator
+from worm_gear_sim.model import (
+    P_COSL,
+    P_COSPHI,
+    P_COUT,
+    P_J4,
+    P_JG,
+    P_KG,
+    P_KW,
+    P_LW,
+    P_RG,
+    P_RW,
+    P_SINL,
+    P_TLOAD,
+    friction_coefficient,
+    mesh_compliance,
+)
+from worm_gear_sim.realtime import RealtimePredictor
+from worm_gear_sim.simulation import Simulator
+
+EPOCH = 1_700_000_000_000_000_000
+LOAD = {'load.output_torque': 5.0, 'load.output_viscous_coefficient': 2.0}
+
+
+class PythonCompensator:
+    """The per-sample update as it was before it was compiled (for the comparison only):
+    the same design (taken from a Compensator), Python lists and numpy calls per sample."""
+
+    def __init__(self, comp: Compensator) -> None:
+        self.c = comp
+        inv = comp._inv
+        self.p, self.ratio = inv.p, inv.ratio
+
+    def reset(self, x: float, t: float) -> None:
+        self.ht, self.hx = [t], [x]
+
+    def update(self, t: float, x: float) -> float:
+        ht, hx, c = self.ht, self.hx, self.c
+        if t == ht[-1]:
+            hx[-1] = x
+        else:
+            ht.append(t)
+            hx.append(x)
+        t_old = t - c.filter.lag_span - c.preview
+        while len(ht) > 2 and ht[1] <= t_old:
+            del ht[0]
+            del hx[0]
+        te = t - c.preview
+        ref = float(np.interp(te, ht, hx))
+        r = c._W @ np.interp(te - c._tau, ht, hx)
+        k = c._out_per_in
+        return self.theta1(r[0] * k, r[1] * k, r[2] * k) - ref
+
+    def theta1(self, y0: float, y1: float, y2: float) -> float:
+        p = self.p
+        Kg, J4, Jg, cout = p[P_KG], p[P_J4], p[P_JG], p[P_COUT]
+        rw, rg, lw, sl, cl = p[P_RW], p[P_RG], p[P_LW], p[P_SINL], p[P_COSL]
+        Ts = J4 * y2 + cout * y1 + p[P_TLOAD]
+        th3 = y0 + Ts / Kg
+        th3_1 = y1 + cout * y2 / Kg
+        Tm = (Jg + J4) * y2 + cout * y1 + p[P_TLOAD]
+        v_s = rw * cl * th3_1 * self.ratio + rg * sl * th3_1
+        mu, _ = friction_coefficient(p, v_s, Tm)
+        A = p[P_COSPHI] * sl + mu * cl
+        B = p[P_COSPHI] * cl - mu * sl
+        Wn = Tm / (rg * B)
+        kgws = mesh_compliance(p, th3 * self.ratio, th3, mu)[0]
+        th2 = (Wn * kgws / cl + rg * th3) / lw
+        return th2 + rw * A * Wn / p[P_KW]
+
+
+def slew(n: int, seed: int = 1) -> tuple[list[int], list[float]]:
+    rng = np.random.default_rng(seed)
+    st = EPOCH + np.arange(n, dtype=np.int64) * 1_000_000 + rng.integers(-200_000, 200_001, n)
+    t = (st - EPOCH) * 1e-9
+    tri = 2.0 * (0.25 - np.abs((t % 0.5) - 0.25))       # 2 rad/s, reversal every 250 ms
+    return st.tolist(), tri.tolist()
+
+
+def best(fn, repeats: int) -> float:
+    out = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        out = min(out, time.perf_counter() - t0)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--samples', type=int, default=2000)
+    ap.add_argument('--repeats', type=int, default=7)
+    args = ap.parse_args(argv)
+    n, rep = args.samples, args.repeats
+    cfg = Config().replace(LOAD)
+    st, x = slew(n)
+    t = [(s - st[0]) * 1e-9 for s in st]
+    print(f'load average {os.getloadavg()[0]:.2f} (1 min), {os.cpu_count()} cores; '
+          f'{n} samples, min of {rep} runs')
+
+    comp = Compensator(cfg)
+    old = PythonCompensator(comp)
+    comp.reset(x[0], t[0])
+    d_new = [comp.update(a, b) for a, b in zip(t, x)]
+    old.reset(x[0], t[0])
+    d_old = [old.update(a, b) for a, b in zip(t, x)]
+    diff = max(abs(a - b) for a, b in zip(d_new, d_old))
+
+    def run_new():
+        comp.reset(x[0], t[0])
+        for a, b in zip(t, x):
+            comp.update(a, b)
+
+    def run_old():
+        old.reset(x[0], t[0])
+        for a, b in zip(t, x):
+            old.update(a, b)
+
+    # interleaved so that both see the same load
+    t_new, t_old = math.inf, math.inf
+    for _ in range(rep):
+        t_old = min(t_old, best(run_old, 1))
+        t_new = min(t_new, best(run_new, 1))
+    print(f'compensator update: Python {t_old / n * 1e6:.2f} us, compiled '
+          f'{t_new / n * 1e6:.2f} us per sample: {t_old / t_new:.1f}x faster; '
+          f'largest difference of the corrections {diff:.1e} rad')
+
+    sim = Simulator(cfg, theta1=x[0])
+
+    def run_sim():
+        sim.reset(x[0], 0.0)
+        for a, b in zip(t, x):
+            sim.advance_to(a, b)
+
+    t_sim = best(run_sim, rep)
+    print(f'simulator advance_to, 1 ms (100 steps) alone: {t_sim / n * 1e6:.1f} us')
+
+    cases = [('push, corrections only (simulate=False)', cfg, dict(simulate=False)),
+             ('push (P = 0)', cfg, {}),
+             ('push (P = 2 ms)', cfg.replace({'compensation.preview_time': 0.002}), {}),
+             ('push (P = 0, compensation applied)', cfg, dict(apply_compensation=True))]
+    for name, c, kw in cases:
+        def run(c=c, kw=kw):
+            p = RealtimePredictor(c, **kw)
+            for s, v in zip(st, x):
+                p.push(s, v, now_ns=s)
+        t_p = best(run, rep)
+        print(f'{name:40s} {t_p / n * 1e6:7.1f} us per sample')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

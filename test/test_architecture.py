@@ -1,0 +1,180 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The import rules of docs/architecture.md, read from the package's source (AST, nothing is
+imported): the core never imports ROS, the ROS wing holds no physics, no import circles."""
+
+from __future__ import annotations
+
+import ast
+import graphlib
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / 'worm_gear_sim'
+ROOT = 'worm_gear_sim'
+WING = f'{ROOT}.ros'
+#: Entry shims for documented command lines (``python -m worm_gear_sim.node``): part of the wing.
+WING_SHIMS = {f'{ROOT}.node', f'{ROOT}.demo_commander'}
+#: Top-level packages of ROS 2 (client library, messages, launch); only the wing uses them.
+ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'rosgraph_msgs', 'builtin_interfaces', 'std_msgs',
+                'sensor_msgs', 'diagnostic_msgs', 'geometry_msgs', 'launch', 'launch_ros',
+                'ament_index_python', 'rosidl_runtime_py', 'rmw', 'unique_identifier_msgs'}
+#: The physics: equations (model), their integration (integrator) and compilation (numba).
+#: The wing gets the model's results through the core's modules, never from these.
+PHYSICS = {f'{ROOT}.model', f'{ROOT}.integrator', 'numba', 'scipy'}
+#: Imports deferred into a function that close a loop on purpose; everything else is acyclic.
+DEFERRED_BACK_EDGES = {
+    # Config.replace / config_from_mapping prove a parameter set usable by running the
+    # model on it (params -> usability -> simulation -> params).
+    (f'{ROOT}.params', f'{ROOT}.usability'),
+    # The start-up entry installs its signal handlers before importing the node (seconds of
+    # numpy/numba/rclpy imports); the node then calls back into start-up.
+    (f'{WING}.startup', f'{WING}.node'),
+    # compensation.feedforward_series, the offline twin, runs the real-time pipeline (which
+    # feeds the Compensator), so that live and offline corrections are one code path.
+    (f'{ROOT}.compensation', f'{ROOT}.realtime'),
+}
+
+
+@dataclass(frozen=True)
+class Import:
+    source: str        # importing module
+    target: str        # imported module (dotted; a package's module when it is one)
+    line: int
+    deferred: bool     # inside a function (runs when called, not at import)
+    names: tuple[str, ...] = ()
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(PACKAGE.parent).with_suffix('')
+    parts = list(rel.parts)
+    if parts[-1] == '__init__':
+        parts.pop()
+    return '.'.join(parts)
+
+
+def _is_module(dotted: str) -> bool:
+    rel = Path(*dotted.split('.'))
+    base = PACKAGE.parent / rel
+    return base.with_suffix('.py').is_file() or (base / '__init__.py').is_file()
+
+
+def _type_checking_block(node: ast.AST) -> bool:
+    return isinstance(node, ast.If) and 'TYPE_CHECKING' in ast.unparse(node.test)
+
+
+def _imports(path: Path) -> list[Import]:
+    module = _module_name(path)
+    is_pkg = path.name == '__init__.py'
+    tree = ast.parse(path.read_text(), str(path))
+    out: list[Import] = []
+
+    def visit(node: ast.AST, deferred: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            if _type_checking_block(child):
+                continue               # not executed: static analysers only
+            inner = deferred or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef,
+                                                    ast.Lambda))
+            if isinstance(child, ast.Import):
+                for a in child.names:
+                    out.append(Import(module, a.name, child.lineno, deferred))
+            elif isinstance(child, ast.ImportFrom):
+                if child.level:
+                    base = module.split('.')
+                    base = base[:len(base) - child.level + (1 if is_pkg else 0)]
+                    target = '.'.join(base + ([child.module] if child.module else []))
+                else:
+                    target = child.module or ''
+                names = tuple(a.name for a in child.names)
+                subs = [f'{target}.{n}' for n in names if _is_module(f'{target}.{n}')]
+                for s in subs:
+                    out.append(Import(module, s, child.lineno, deferred))
+                if len(subs) < len(names):
+                    out.append(Import(module, target, child.lineno, deferred, names))
+            visit(child, inner)
+
+    visit(tree, False)
+    return out
+
+
+def _all_imports() -> list[Import]:
+    return [i for p in sorted(PACKAGE.rglob('*.py')) for i in _imports(p)]
+
+
+def _in_wing(module: str) -> bool:
+    return module == WING or module.startswith(WING + '.') or module in WING_SHIMS
+
+
+def _internal(target: str) -> bool:
+    return target == ROOT or target.startswith(ROOT + '.')
+
+
+IMPORTS = _all_imports()
+
+
+def test_the_graph_is_read():
+    """The reader sees the imports it must judge (guards against a silent, empty graph)."""
+    sources = {i.source for i in IMPORTS}
+    assert {f'{ROOT}.simulation', f'{ROOT}.cli', f'{WING}.node'} <= sources
+    edges = {(i.source, i.target) for i in IMPORTS}
+    assert (f'{ROOT}.simulation', f'{ROOT}.integrator') in edges
+    assert (f'{ROOT}.params', f'{ROOT}.usability') in edges
+
+
+def test_core_never_imports_ros():
+    bad = [f'{i.source}:{i.line} imports {i.target}' for i in IMPORTS
+           if not _in_wing(i.source)
+           and (i.target.split('.')[0] in ROS_PACKAGES or _in_wing(i.target))]
+    assert not bad, 'the core must not import ROS:\n' + '\n'.join(bad)
+
+
+def test_ros_wing_holds_no_physics():
+    """The wing reaches the model only through the core's modules: no equations, no
+    integrator, no numba/scipy, no packed-parameter indices."""
+    bad = []
+    for i in IMPORTS:
+        if not _in_wing(i.source):
+            continue
+        root = i.target.split('.')[0]
+        if i.target in PHYSICS or root in PHYSICS:
+            bad.append(f'{i.source}:{i.line} imports {i.target}')
+        bad += [f'{i.source}:{i.line} takes {n} (packed layout) from {i.target}'
+                for n in i.names if re.fullmatch(r'P_[A-Z0-9_]+', n)]
+    assert not bad, 'physics in the ROS wing:\n' + '\n'.join(bad)
+
+
+def _cycle(edges: set[tuple[str, str]]) -> list[str]:
+    graph: dict[str, set[str]] = {}
+    for a, b in edges:
+        graph.setdefault(a, set()).add(b)
+    try:
+        tuple(graphlib.TopologicalSorter(graph).static_order())
+    except graphlib.CycleError as exc:
+        return list(exc.args[1])
+    return []
+
+
+@pytest.mark.parametrize('deferred', [False, True], ids=['at-import', 'with-deferred'])
+def test_no_import_circles(deferred):
+    """No circle among the package's modules: none at import time, and none through imports
+    deferred into functions either, except the back edges listed (each with its reason)."""
+    edges = {(i.source, i.target) for i in IMPORTS
+             if _internal(i.target) and i.target != i.source
+             and (deferred or not i.deferred)}
+    if deferred:
+        assert DEFERRED_BACK_EDGES <= edges, 'a listed back edge is gone: drop it from the list'
+        edges -= DEFERRED_BACK_EDGES
+    cycle = _cycle(edges)
+    assert not cycle, 'import circle: ' + ' -> '.join(cycle)
+
+
+def test_no_issue_numbers_in_the_package():
+    """Code explains itself; the tracker's numbers belong in commit messages."""
+    pattern = re.compile(r'\bissues? ?\d+(\.\d+)?', re.IGNORECASE)
+    bad = [f'{p.relative_to(PACKAGE.parent)}:{n}: {line.strip()}'
+           for p in sorted(PACKAGE.rglob('*.py'))
+           for n, line in enumerate(p.read_text().splitlines(), 1) if pattern.search(line)]
+    assert not bad, 'issue numbers in the package:\n' + '\n'.join(bad)

@@ -1,0 +1,242 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""``identify`` command: fit parameters of the model to measured records.
+
+    worm-gear-sim identify DATA [DATA ...] --fit KEY[,KEY...] -o FITTED.yaml
+                           [--config FILE] [--set KEY=VALUE] [--validate DATA [DATA ...]]
+                           [--bounds KEY=LO:HI] [--strategy NAME] [--starts N]
+                           [--scheduler ADDRESS | --workers N | --serial]
+
+Writes FITTED.yaml (the node's params-file layout: loadable by ``--ros-args --params-file``,
+``load_config()`` and every command), the JSON report FITTED.json and the PNG figures
+FITTED.png (and FITTED_validation.png).  A fit that is not trustworthy writes the report and
+the figures, no YAML (unless ``--force``), and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ..config_io import params_document, params_yaml_text
+from ..identification import (
+    MIN_SAMPLES,
+    STRATEGIES,
+    FitOptions,
+    IdentificationError,
+    check_record,
+    identify,
+    prediction_errors,
+)
+from ..params import Config
+from ..records import read_record
+from .common import CliError, add_config_options, config_from_args, say
+
+__all__ = ['register', 'cmd_identify', 'parse_bounds', 'write_params_yaml']
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``identify`` command to the subparsers."""
+    p = subparsers.add_parser(
+        'identify', help='fit model parameters to measured records (CSV / rosbag2)',
+        description='Fit numeric parameters of the model to one or several measured records '
+        'jointly (scipy least_squares; positive quantities in log scale, bounds from the '
+        'parameter metadata; frequency start, growing windows and multi-start on Dask). '
+        'Writes the fitted parameters as a ROS params file, a JSON report (estimates, 95 % '
+        'intervals, correlations, residual RMS) and PNG figures. See docs/identification.md.')
+    p.add_argument('data', nargs='+', metavar='DATA', help='records: CSV (columns t, theta1 '
+                   'and theta2/theta3/theta4 by header) or rosbag2 (directory, .db3, .mcap)')
+    p.add_argument('--fit', action='append', required=True, metavar='KEY[,KEY...]',
+                   help='parameters to fit, e.g. materials.gear_shaft_shear_modulus,'
+                   'damping.modal_damping_ratios[0] (repeatable)')
+    p.add_argument('--output', '-o', required=True, metavar='FITTED.yaml',
+                   help='fitted parameter file; the report goes beside it (.json, .png)')
+    add_config_options(p, end_time=False)
+    p.add_argument('--validate', nargs='+', default=[], metavar='DATA',
+                   help='held-out records: prediction error of the fitted model')
+    p.add_argument('--bounds', action='append', default=[], metavar='KEY=LO:HI',
+                   help='narrower bounds (and multi-start box) for a fitted key')
+    g = p.add_argument_group('search')
+    g.add_argument('--strategy', choices=list(STRATEGIES), default='robust',
+                   help='robust (default): frequency start + growing windows + multi-start; '
+                   'see docs/identification.md for the comparison')
+    g.add_argument('--starts', type=int, metavar='N', help='number of starts (multi-start)')
+    g.add_argument('--seed', type=int, default=0, help='seed of the multi-start points')
+    g.add_argument('--max-nfev', type=int, default=100, metavar='N',
+                   help='residual evaluations per local fit stage (default: %(default)s)')
+    e = p.add_argument_group('engine (multi-start)')
+    e.add_argument('--scheduler', metavar='ADDRESS', help='an existing Dask scheduler, '
+                   'e.g. tcp://host:8786')
+    e.add_argument('--workers', type=int, metavar='N', help='LocalCluster worker processes '
+                   '(default: all cores)')
+    e.add_argument('--serial', action='store_true', help='run every start in this process')
+    b = p.add_argument_group('rosbag2 records')
+    b.add_argument('--command-topic', metavar='TOPIC', help='theta1: std_msgs/Float64 or the '
+                   'stamped JointState reference (default: worm_angle_reference, else '
+                   'worm_angle_command)')
+    b.add_argument('--joint-states-topic', metavar='TOPIC', help='measured '
+                   'sensor_msgs/JointState (default: measured_joint_states, else joint_states)')
+    c = p.add_argument_group('CSV records')
+    c.add_argument('--column', action='append', default=[], metavar='ROLE=NAME',
+                   help='map a header name to a role (t, theta1..theta4), e.g. '
+                   'theta4=antenna_encoder (repeatable)')
+    p.add_argument('--force', action='store_true',
+                   help='write the YAML even if the fit is not trustworthy')
+    p.add_argument('--no-plot', action='store_true', help='skip the PNG figures')
+    p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    p.add_argument('--quiet', '-q', action='store_true', help='print errors only')
+    p.set_defaults(func=cmd_identify)
+
+
+def parse_bounds(items: Sequence[str]) -> dict[str, tuple[float, float]]:
+    """``['KEY=LO:HI', ...]`` -> {key: (lo, hi)}."""
+    out = {}
+    for item in items:
+        key, sep, rng = item.partition('=')
+        lo, sep2, hi = rng.partition(':')
+        try:
+            if not (sep and sep2):
+                raise ValueError
+            vals = (float(lo), float(hi))
+        except ValueError:
+            raise IdentificationError(f'--bounds {item!r}: expected KEY=LO:HI, e.g. '
+                                      'materials.flywheel_density=5000:12000') from None
+        if not all(math.isfinite(v) for v in vals):
+            raise IdentificationError(f'--bounds {item!r}: bounds must be finite')
+        out[key.strip()] = vals
+    return out
+
+
+def _read(paths: Sequence[str], args: argparse.Namespace, cfg: Config, what: str) -> list:
+    recs = []
+    for i, path in enumerate(paths):
+        rec = read_record(path, columns=_columns(args.column), command_topic=args.command_topic,
+                          joint_states_topic=args.joint_states_topic,
+                          joint_names=tuple(cfg.node.joint_names), require_measured=True,
+                          min_samples=MIN_SAMPLES)
+        try:
+            check_record(rec, i)
+        except IdentificationError as exc:
+            raise IdentificationError(f'{what} {path}: {exc}') from None
+        recs.append(rec)
+    return recs
+
+
+def _columns(items: Sequence[str]) -> dict[str, str] | None:
+    out = {}
+    for item in items:
+        role, sep, name = item.partition('=')
+        if not sep or not role.strip() or not name.strip():
+            raise IdentificationError(f'--column {item!r}: expected ROLE=NAME, e.g. '
+                                      'theta4=antenna_encoder')
+        out[role.strip()] = name.strip()
+    return out or None
+
+
+def _fmt_errors(rows: list[dict[str, Any]]) -> list[str]:
+    out = []
+    for row in rows:
+        for o, e in row.items():
+            if o == 'name':
+                continue
+            out.append(f'  {row["name"]}: {o} RMS {e["rms_rad"]:.4g} rad = '
+                       f'{100 * e["rel"]:.2f} % of its oscillation amplitude '
+                       f'{e["amplitude_rad"]:.4g} rad')
+    return out
+
+
+def write_params_yaml(cfg: Config, path: Path, header: Sequence[str]) -> None:
+    """The node's params file (every parameter, as ``params --format yaml``) with ``header``
+    as comments on top."""
+    Path(path).write_text(''.join(f'# {h}\n' for h in header)
+                          + params_yaml_text(params_document(cfg)))
+
+
+def cmd_identify(args: argparse.Namespace) -> int:
+    cfg = config_from_args(args)
+    keys = [k.strip() for item in args.fit for k in item.split(',') if k.strip()]
+    out = Path(args.output)
+    if out.suffix.lower() not in ('.yaml', '.yml'):
+        raise CliError(f'-o {out}: the fitted parameter file must end in .yaml')
+    if args.serial and args.scheduler:
+        raise CliError('--serial and --scheduler exclude each other')
+    if args.workers is not None and args.workers < 1:
+        raise CliError('--workers must be >= 1 (use --serial to run in this process)')
+    if args.starts is not None and args.starts < 1:
+        raise CliError('--starts must be >= 1')
+    if args.max_nfev < 2:
+        raise CliError('--max-nfev must be >= 2')
+    bounds = parse_bounds(args.bounds)
+    records = _read(args.data, args, cfg, 'DATA')
+    held = _read(args.validate, args, cfg, '--validate')
+    for r in records + held:
+        say(args, f'read {r.describe()}')
+    opt = FitOptions(strategy=args.strategy, n_starts=args.starts, seed=args.seed,
+                     max_nfev=args.max_nfev, workers=args.workers, scheduler=args.scheduler,
+                     serial=args.serial, progress=not (args.no_progress or args.quiet))
+    t0 = time.perf_counter()
+    res = identify(cfg, records, keys, bounds=bounds, options=opt)
+    wall = time.perf_counter() - t0
+    say(args, f'fitted {len(keys)} parameter(s) to {len(records)} record(s) in {wall:.1f} s '
+        f'({res.strategy["n_starts"]} start(s), strategy {args.strategy})')
+    say(args, res.table())
+    report = res.to_dict()
+    report.update(command=' '.join(getattr(args, '_argv', []) or []),
+                  data=[str(p) for p in args.data], validate=[str(p) for p in args.validate],
+                  output_yaml=None, base_config=args.config or 'package default')
+    if held:
+        v_before = prediction_errors(cfg, held)
+        v_after = prediction_errors(res.config, held)
+        report['validation'] = {'before': v_before, 'after': v_after}
+        say(args, 'held-out records, before the fit:')
+        say(args, '\n'.join(_fmt_errors(v_before)))
+        say(args, 'held-out records, fitted model:')
+        say(args, '\n'.join(_fmt_errors(v_after)))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    stem = out.with_suffix('')
+    figures = []
+    if not args.no_plot:
+        from ..identification_plot import plot_fit
+        figures.append(str(plot_fit(records, cfg, res.config, stem.with_suffix('.png'),
+                                    'identify: training records')))
+        if held:
+            figures.append(str(plot_fit(held, cfg, res.config,
+                                        Path(f'{stem}_validation.png'),
+                                        'identify: held-out records')))
+    report['figures'] = figures
+    json_path = stem.with_suffix('.json')
+    if res.trustworthy or args.force:
+        header = [f'worm_gear_sim parameters fitted by: worm-gear-sim {report["command"]}',
+                  f'data: {", ".join(report["data"])}',
+                  f'base: {report["base_config"]}; created {time.strftime("%Y-%m-%d %H:%M:%S")}']
+        for k, v, (lo, hi) in zip(res.keys, res.values, res.ci95):
+            header.append(f'{k} = {v:.9g}  (95 % interval {lo:.6g} .. {hi:.6g})')
+        if not res.trustworthy:
+            header.append('NOT TRUSTWORTHY (written with --force): ' + '; '.join(res.problems))
+        write_params_yaml(res.config, out, header)
+        report['output_yaml'] = str(out)
+    json_path.write_text(json.dumps(_jsonable(report), indent=2, allow_nan=True) + '\n')
+    say(args, f'wrote {json_path}' + (f', {out}' if report['output_yaml'] else '')
+        + (f', {", ".join(figures)}' if figures else ''))
+    if not res.trustworthy and not args.force:
+        raise CliError(f'fit not trustworthy: {res.problems[0]}; no YAML written (report: '
+                        f'{json_path}; --force writes it anyway)')
+    return 0
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if hasattr(obj, 'item'):
+        return _jsonable(obj.item())
+    return obj
+
