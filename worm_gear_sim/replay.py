@@ -30,6 +30,7 @@ from .records import (
     RecordError,
     read_bag,
     write_bag,
+    write_csv_columns,
 )
 
 __all__ = ['Replay', 'replay', 'compare_with_recorded', 'REPLAY_CSV_COLUMNS']
@@ -100,33 +101,25 @@ class Replay:
         significant digits) and, with corrections, ``<stem>_feedforward.csv`` (t,
         theta1_ref, delta, compensated)."""
         p = Path(path)
-        comment = f'# worm_gear_sim replay of {self.record.source.get("path", "")}\n' + \
-            f'# t0_ns: {self.t0_ns} (t = 0 on the recording\'s clock)\n' + \
-            ''.join(f'# {ln}\n' for ln in header_comment.splitlines())
+        comment = (f'worm_gear_sim replay of {self.record.source.get("path", "")}\n'
+                   f't0_ns: {self.t0_ns} (t = 0 on the recording\'s clock)\n' + header_comment)
         data = np.column_stack([self.t, self.position, self.velocity, self.effort,
                                 self.positioning_error, self.worm_error,
                                 self.held.astype(float)])
-        _write(p, comment, [f'{n} [{u}]' for n, u in REPLAY_CSV_COLUMNS], data,
-               ['%.9f'] + [f'%.{digits}g'] * 14 + ['%d'])
+        write_csv_columns(p, [f'{n} [{u}]' for n, u in REPLAY_CSV_COLUMNS], data,
+                          ['%.9f'] + [f'%.{digits}g'] * 14 + ['%d'], comment)
         files = [p]
         if self.correction_stamps_ns.size:
             q = p.with_name(p.stem + '_feedforward' + p.suffix)
             tc = (self.correction_stamps_ns - self.t0_ns) * 1e-9
-            _write(q, comment, ['t [s]', 'theta1_ref [rad]', 'delta [rad]',
-                                'compensated [rad]'],
-                   np.column_stack([tc, self.theta1_ref, self.delta, self.compensated]),
-                   ['%.9f'] + [f'%.{digits}g'] * 3)
+            write_csv_columns(q, ['t [s]', 'theta1_ref [rad]', 'delta [rad]',
+                                  'compensated [rad]'],
+                              np.column_stack([tc, self.theta1_ref, self.delta,
+                                               self.compensated]),
+                              ['%.9f'] + [f'%.{digits}g'] * 3, comment)
             files.append(q)
         return files
 
-
-def _write(path: Path, comment: str, names: list[str], data: np.ndarray,
-           fmt: list[str]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, 'w') as fh:
-        fh.write(comment)
-        fh.write(','.join(names) + '\n')
-        np.savetxt(fh, data, delimiter=',', fmt=fmt)
 
 
 def replay(config: Config, record: Record, *, compensate: bool = True,

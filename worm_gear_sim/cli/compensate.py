@@ -19,6 +19,7 @@ import numpy as np
 from ..compensation import Compensator
 from ..config_io import resolve_config
 from ..profiles import make_profile, motion_span
+from ..records import write_csv_columns
 from ..studies.compensation_eval import (
     DETUNINGS,
     METRICS,
@@ -177,14 +178,8 @@ def write_csv(path: str | Path, off: Any, on: Any, header: str = '') -> Path:
         'theta4_compensated[rad]': on.trajectory.theta[:, 2],
         'error_uncompensated[rad]': off.error, 'error_compensated[rad]': on.error,
     }
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    with open(p, 'w') as fh:
-        fh.write('# worm_gear_sim compensate\n')
-        fh.write(''.join(f'# {line}\n' for line in header.splitlines()))
-        fh.write(','.join(cols) + '\n')
-        np.savetxt(fh, np.column_stack(list(cols.values())), delimiter=',', fmt='%.12g')
-    return p
+    return write_csv_columns(path, list(cols), np.column_stack(list(cols.values())),
+                             comment='worm_gear_sim compensate\n' + header)
 
 
 def plot_runs(off: Any, on: Any, path: str | Path, title: str = '') -> Path:
