@@ -269,6 +269,7 @@ def test_run_failure_is_one_line(capsys, tmp_path, monkeypatch):
     def boom(*a, **k):
         raise simulation.SimulationError('integration stopped at t = 0.001 s: test')
     monkeypatch.setattr(simulation, 'simulate', boom)
+    monkeypatch.setattr(simulation, 'simulate_to_csv', boom)
     status, _, err = run(capsys, 'simulate', '-o', tmp_path / 'x.csv')
     assert status == 1
     assert_one_line_error(status, err, 'simulation failed')

@@ -90,3 +90,19 @@ def test_model_check_residuals_status_and_rejections():
     st = chk.status(0.06)
     assert st.values['samples'] == '2' and st.values['rejected_out_of_order'] == '1'
     assert chk.status(0.2).level == 'STALE'
+
+
+def test_model_check_with_nanosecond_stamps_and_clock_restart():
+    chk = ModelCheck(('w', 'g', 'a'), window=0.01, warn_threshold=1e-4)
+    base = 1_700_000_000_123_456_789               # epoch stamps: float seconds would lose us
+    with pytest.raises(ValueError, match='no prediction yet'):
+        chk.measured_ns(base, {'a': 0.0})
+    for k in range(50):
+        chk.predicted_ns(base + k * 1_000_000, [0.0, 0.0, 1e-3 * k])
+    joints, r = chk.measured_ns(base + 10_500_000, {'a': 10.5e-3 + 3e-5})
+    assert joints == ['a'] and r[0] == pytest.approx(3e-5, rel=1e-6)
+    assert chk.status_ns(base + 10_500_000).level == 'OK'
+    chk.predicted_ns(5_000_000, [0.0, 0.0, 0.0])   # /clock restarted near zero
+    assert chk.monitor.samples == 0 and chk.history.span() == (0.0, 0.0)
+    joints, r = chk.measured_ns(5_000_000, {'a': 2e-4})
+    assert r[0] == pytest.approx(2e-4) and chk.status_ns(5_000_000).level == 'WARN'

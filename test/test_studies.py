@@ -106,7 +106,7 @@ def _fake_trajectory(t, theta1, theta):
     n = t.size
     return Trajectory(t=t, theta1=theta1, theta1_dot=np.zeros(n), theta=theta,
                       omega=np.zeros((n, 3)), alpha=np.zeros((n, 3)), aux=np.zeros((n, 8)),
-                      output_ratio=1 / 56)
+                      output_per_input=1 / 56)
 
 
 def test_oscillation_metrics_window_and_definitions():

@@ -359,6 +359,7 @@ class Compensator:
     """
 
     def __init__(self, config: Config) -> None:
+        self._derivs = np.zeros(0)       # r, r', ... of the filtered reference (reset fills it)
         self.reconfigure(config)
         self.reset(0.0, 0.0)
 
@@ -391,12 +392,12 @@ class Compensator:
                                     n_deriv)
         self._tau = np.ascontiguousarray(self.filter.tau)
         self._W = np.ascontiguousarray(self.filter.weights)
-        if getattr(self, '_derivs', None) is not None and self._derivs.size != n_deriv:
+        if self._derivs.size != n_deriv:
             self._derivs = np.zeros(n_deriv)
         self._n_deriv = n_deriv
         self._inv = _Inverse(config)
         self._span = self.filter.lag_span + self.preview
-        self._out_per_in = 1.0 / self._inv.ratio
+        self._output_per_input = 1.0 / self._inv.ratio
 
     # ---- streaming -------------------------------------------------------------------------
     def reset(self, theta1_ref: float, t: float) -> None:
@@ -451,7 +452,7 @@ class Compensator:
         """The correction for time ``te`` from the history so far (the reference at ``te``
         becomes :attr:`reference`); any ``te`` not before the last :meth:`trim`."""
         d, ref = compensation_kernel(float(te), self._tau, self._W, self._ht, self._hx,
-                                     self._lo, self._hi, self._inv.p, self._out_per_in,
+                                     self._lo, self._hi, self._inv.p, self._output_per_input,
                                      self.quasi_static, self.dynamic, self.enabled,
                                      self._derivs)
         self._reference = ref

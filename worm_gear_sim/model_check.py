@@ -176,6 +176,42 @@ class ModelCheck:
         self.monitor = ResidualMonitor(self.joint_names, window, warn_threshold)
         self.history = PredictionHistory(history)
         self.rejections: dict[str, int] = {}
+        self._args = (window, warn_threshold, history)
+        self._base_ns: int | None = None
+
+    # ---- integer nanosecond stamps (ROS time), relative to the first one ------------------
+    def _seconds(self, stamp_ns: int) -> float:
+        if self._base_ns is None:
+            self._base_ns = int(stamp_ns)
+        return (int(stamp_ns) - self._base_ns) * 1e-9
+
+    def predicted_ns(self, stamp_ns: int, theta: Sequence[float]) -> None:
+        """:meth:`predicted` with a stamp in ns; a clock that jumps back by more than the
+        history (a restarted /clock) restarts the check."""
+        t = self._seconds(stamp_ns)
+        sp = self.history.span()
+        if sp is not None and t < sp[0]:
+            self.restart()
+            t = self._seconds(stamp_ns)
+        self.predicted(t, theta)
+
+    def measured_ns(self, stamp_ns: int, positions: Mapping[str, float]
+                    ) -> tuple[list[str], np.ndarray]:
+        """:meth:`measured` with a stamp in ns."""
+        if self._base_ns is None:
+            raise self._reject('outside_prediction', 'no prediction yet')
+        return self.measured(self._seconds(stamp_ns), positions)
+
+    def status_ns(self, now_ns: int | None) -> CheckStatus:
+        return self.status(None if now_ns is None or self._base_ns is None
+                           else self._seconds(now_ns))
+
+    def restart(self) -> None:
+        """Forget predictions, residuals and the time base (counters of rejections stay)."""
+        window, thr, history = self._args
+        self.monitor = ResidualMonitor(self.joint_names, window, thr)
+        self.history = PredictionHistory(history)
+        self._base_ns = None
 
     def predicted(self, t: float, theta: Sequence[float]) -> None:
         self.history.push(t, theta)

@@ -38,7 +38,7 @@ def plot_trajectory(traj: Any, path: str | Path, title: str = '') -> Path:
     """Angles, errors and mesh quantities of one run (simulate)."""
     fig, ax = _new(3, 1, (8.0, 8.5))
     t = traj.t
-    ratio = traj.output_ratio
+    ratio = traj.output_per_input
     a = ax[0, 0]
     a.plot(t, traj.theta1, 'k--', lw=1, label='theta1 (command)')
     a.plot(t, traj.theta2, lw=1, label='theta2 (worm)')

@@ -312,7 +312,7 @@ class RealtimePredictor:
         self._max_catch_up = node.max_catch_up
         if self.sim is not None:
             self.sim.interpolation = node.command_interpolation
-            self._ratio = self.sim.derived.output_per_input
+            self._output_per_input = self.sim.derived.output_per_input
 
     def prepare(self, config: Config) -> Prepared:
         """Design for ``config`` off the real-time path (compensator design, a trial
@@ -842,4 +842,4 @@ class RealtimePredictor:
         ref = self._held_ref if self.apply_compensation else th1
         self.counters['predictions'] += 1
         return Prediction(ns, th1, vel[0], pos[1:], vel[1:], eff, ref,
-                          th4 - ref * self._ratio, th2 - th1, held)
+                          th4 - ref * self._output_per_input, th2 - th1, held)

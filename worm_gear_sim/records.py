@@ -23,14 +23,15 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 __all__ = ['Record', 'RecordError', 'read_csv', 'read_bag', 'read_record', 'write_bag',
            'BagStream', 'prediction_streams', 'write_streams', 'bag_topics',
            'ANGLE_UNITS', 'TIME_UNITS', 'DEFAULT_COMMAND_TOPICS',
-           'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE', 'FLOAT64', 'JOINT_STATE']
+           'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE', 'FLOAT64', 'JOINT_STATE',
+           'write_csv_header', 'write_csv_columns']
 
 #: angle units accepted in a CSV header, factor to rad
 ANGLE_UNITS: dict[str, float] = {'rad': 1.0, 'mrad': 1e-3, 'urad': 1e-6, 'µrad': 1e-6,
@@ -53,7 +54,7 @@ DEFAULT_MEASURED_TOPICS = ('measured_joint_states', 'joint_states')
 NODE_NAMESPACE = 'worm_gear_sim'                # the node's name: its ~/ topics live here
 FLOAT64 = 'std_msgs/msg/Float64'
 JOINT_STATE = 'sensor_msgs/msg/JointState'
-BAG_VERSION = 8                                 # rosbag2 format read by Humble..Kilted
+BAG_VERSION: Literal[8, 9] = 8          # rosbag2 metadata version (rosbags writes 8 or 9)
 
 
 class RecordError(ValueError):
@@ -72,7 +73,8 @@ class Record:
     (absolute, int64) and ``command_values`` [rad] hold its raw samples in arrival order,
     invalid ones included, as a live node would have received them; ``t``/``theta1`` then
     hold the valid samples sorted by stamp (or the command interpolated at the measurement
-    stamps when a measured topic was read).  ``source`` says where everything came from.
+    stamps when a measured topic was read), and ``command_receive_ns`` the bag's receive
+    times of the raw samples.  ``source`` says where everything came from.
     """
 
     name: str
@@ -83,6 +85,7 @@ class Record:
     command_stamps_ns: np.ndarray | None = None
     command_values: np.ndarray | None = None
     source: dict[str, Any] = field(default_factory=dict)
+    command_receive_ns: np.ndarray | None = None
 
     @property
     def is_epoch(self) -> bool:
@@ -95,14 +98,15 @@ class Record:
 
     def command_samples(self) -> tuple[np.ndarray, np.ndarray]:
         """The valid command samples sorted by time: (t [s] relative to t0_ns, theta1)."""
-        if self.command_stamps_ns is None:
+        if self.command_stamps_ns is None or self.command_values is None:
             return self.t, self.theta1
-        return _valid_sorted(self.command_stamps_ns, self.command_values, self.t0_ns)[:2]
+        t, v, _ = _valid_sorted(self.command_stamps_ns, self.command_values, self.t0_ns)
+        return t, v
 
     def command_stream(self) -> tuple[np.ndarray, np.ndarray]:
         """The command as received: (absolute stamps [ns] int64, values [rad]) in arrival
         order (a CSV's rows when the command did not come separately)."""
-        if self.command_stamps_ns is not None:
+        if self.command_stamps_ns is not None and self.command_values is not None:
             return self.command_stamps_ns, self.command_values
         return self.t0_ns + np.round(self.t * 1e9).astype(np.int64), self.theta1
 
@@ -113,6 +117,25 @@ class Record:
                  f'; times shifted by -{self.t0_ns * 1e-9:.9g} s' if self.t0_ns else '')
         return (f'{self.name}: {self.t.size} samples over {self.duration:.6g} s, measured: '
                 f'{meas}{start}')
+
+
+def write_csv_header(fh: Any, names: Sequence[str], comment: str = '') -> None:
+    """The head of a numeric CSV: each line of ``comment`` as a ``# `` line, then the column
+    names (with their units, e.g. ``theta4[rad]``) on one line."""
+    fh.write(''.join(f'# {line}\n' for line in comment.splitlines()))
+    fh.write(','.join(names) + '\n')
+
+
+def write_csv_columns(path: str | Path, names: Sequence[str], data: np.ndarray,
+                      fmt: str | Sequence[str] = '%.12g', comment: str = '') -> Path:
+    """Numeric columns as CSV (``data``: one row per sample), with the head of
+    :func:`write_csv_header`; the parent directory is created."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    with open(p, 'w') as fh:
+        write_csv_header(fh, names, comment)
+        np.savetxt(fh, data, delimiter=',', fmt=fmt)
+    return p
 
 
 def iso_time(ns: int) -> str:
@@ -376,8 +399,10 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     Command: ``command_topic`` (default: ``worm_angle_reference``, else
     ``worm_angle_command``), of type std_msgs/Float64 (stamp = the bag's receive time) or
     sensor_msgs/JointState (the stamped reference: stamp = header.stamp, theta1 =
-    the position of ``joint_names[0]``, or position[0] without names).  Measured:
-    ``joint_states_topic`` (default: ``measured_joint_states``, else ``joint_states``),
+    position[0]; ``name[0]``, when given, must be ``joint_names[0]``, else the message is
+    rejected and counted, as the node does).  Measured:
+    ``joint_states_topic`` (default: ``measured_joint_states``, else ``joint_states``; ''
+    reads none),
     sensor_msgs/JointState; theta2..theta4 by ``joint_names[1:4]`` (default
     ``node.joint_names``), stamps from header.stamp (the receive time if every stamp is 0).
     With measurements, ``t`` is their stamps and ``theta1`` the command interpolated there
@@ -404,9 +429,10 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
         if topics[cmd_topic] not in (FLOAT64, JOINT_STATE):
             raise RecordError(f'{where}: command topic {cmd_topic} is {topics[cmd_topic]}; '
                               f'expected {FLOAT64} or {JOINT_STATE} (the stamped reference)')
-        meas_topic = _resolve_topic(topics, joint_states_topic, DEFAULT_MEASURED_TOPICS,
-                                    'measured JointState', '--joint-states-topic', where,
-                                    require_measured)
+        meas_topic = None if joint_states_topic == '' and not require_measured else \
+            _resolve_topic(topics, joint_states_topic, DEFAULT_MEASURED_TOPICS,
+                           'measured JointState', '--joint-states-topic', where,
+                           require_measured)
         if meas_topic is not None and topics[meas_topic] != JOINT_STATE:
             raise RecordError(f'{where}: measured topic {meas_topic} is {topics[meas_topic]}; '
                               f'expected {JOINT_STATE}')
@@ -415,7 +441,7 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
                 if meas_topic else None)
     finally:
         reader.close()
-    stamps, vals, n_rejected = cmd
+    stamps, vals, n_rejected, received = cmd
     src: dict[str, Any] = {'kind': 'bag', 'path': str(p), 'command_topic': cmd_topic,
                            'command_type': topics[cmd_topic],
                            'command_stamp': 'header.stamp' if topics[cmd_topic] == JOINT_STATE
@@ -435,7 +461,7 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
         if tc.size < min_samples:
             raise RecordError(f'{where}: {tc.size} valid command sample(s) on {cmd_topic}; '
                               f'a record needs at least {min_samples}')
-        return Record(rec_name, tc, yc, {}, t0_ns, stamps, vals, src)
+        return Record(rec_name, tc, yc, {}, t0_ns, stamps, vals, src, received)
     m_stamps, m_vals, m_info = meas
     src.update({'joint_states_topic': meas_topic, **m_info})
     keep = m_stamps >= t0_ns
@@ -449,7 +475,7 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     else:
         th1 = yc[np.clip(np.searchsorted(tc, t, side='right') - 1, 0, None)]
     measured = {k: v[keep] for k, v in m_vals.items()}
-    return Record(rec_name, t, th1, measured, t0_ns, stamps, vals, src)
+    return Record(rec_name, t, th1, measured, t0_ns, stamps, vals, src, received)
 
 
 def _valid_sorted(stamps: np.ndarray, vals: np.ndarray, t0_ns: int
@@ -465,27 +491,31 @@ def _valid_sorted(stamps: np.ndarray, vals: np.ndarray, t0_ns: int
 
 
 def _read_commands(reader: Any, topic: str, msgtype: str, worm_joint: str, where: str
-                   ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Raw command samples in bag order: (stamps [ns], values, messages without a value)."""
+                   ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray]:
+    """Raw command samples in bag order: (stamps [ns], values, messages without a value,
+    receive times [ns])."""
     ts = _typestore()
     conns = [c for c in reader.connections if c.topic == topic]
     stamps: list[int] = []
     vals: list[float] = []
+    received: list[int] = []
     rejected = 0
     for conn, log_ns, raw in reader.messages(connections=conns):
         msg = ts.deserialize_cdr(raw, conn.msgtype)
         if msgtype == FLOAT64:
             stamps.append(int(log_ns))
             vals.append(float(msg.data))
+            received.append(int(log_ns))
             continue
         names = list(msg.name)
-        idx = names.index(worm_joint) if worm_joint in names else (0 if not names else -1)
-        if idx < 0 or idx >= len(msg.position):
-            rejected += 1           # wrong joint name or empty position: the node rejects it
+        if len(msg.position) == 0 or (names and names[0] != worm_joint):
+            rejected += 1           # empty position or another joint: the node rejects it
             continue
         stamps.append(_stamp_ns(msg.header))
-        vals.append(float(msg.position[idx]))
-    return np.array(stamps, dtype=np.int64), np.array(vals, dtype=float), rejected
+        vals.append(float(msg.position[0]))
+        received.append(int(log_ns))
+    return (np.array(stamps, dtype=np.int64), np.array(vals, dtype=float), rejected,
+            np.array(received, dtype=np.int64))
 
 
 def _read_joint_states(reader: Any, topic: str, joints: Sequence[str], where: str
@@ -526,15 +556,15 @@ def _read_joint_states(reader: Any, topic: str, joints: Sequence[str], where: st
         raise RecordError(f'{where}: {topic}: {int((h == 0).sum())} of {h.size} messages have '
                           'a zero header.stamp; cannot place them in time')
     roles = dict(zip(joints, MEASURED_NAMES))
-    series = {}
+    series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for j in found:
         idx = np.array(per[j][0])
-        s, v = h[idx], np.array(per[j][1])
-        bad = ~np.isfinite(v)
+        pos = np.array(per[j][1])
+        bad = ~np.isfinite(pos)
         if bad.any():
             raise RecordError(f'{where}: {topic}: joint {j} has {int(bad.sum())} non-finite '
                               'position(s)')
-        series[j] = (s, v)
+        series[j] = (h[idx], pos)
     # one grid: the stamps carrying every found joint in the common span (exact in the usual
     # case of one message per stamp with all joints), sorted; duplicates: first kept
     grid = np.unique(np.concatenate([s for s, _ in series.values()]))
@@ -543,14 +573,14 @@ def _read_joint_states(reader: Any, topic: str, joints: Sequence[str], where: st
     grid = grid[(grid >= lo) & (grid <= hi)]
     out: dict[str, np.ndarray] = {}
     n_dup = 0
-    for j, (s, v) in series.items():
-        order = np.argsort(s, kind='stable')
-        s, v = s[order], v[order]
-        first = np.concatenate(([True], np.diff(s) > 0))
+    for j, (sj, pj) in series.items():
+        order = np.argsort(sj, kind='stable')
+        sj, pj = sj[order], pj[order]
+        first = np.concatenate(([True], np.diff(sj) > 0))
         n_dup = max(n_dup, int((~first).sum()))
-        s, v = s[first], v[first]
-        out[roles[j]] = np.interp(grid.astype(float), s.astype(float), v) \
-            if s.size != grid.size or np.any(s != grid) else v
+        sj, pj = sj[first], pj[first]
+        out[roles[j]] = np.interp(grid.astype(float), sj.astype(float), pj) \
+            if sj.size != grid.size or np.any(sj != grid) else pj
     info = {'measured_stamp': stamp_kind, 'measured_joints': {roles[j]: j for j in found},
             'malformed_joint_states': malformed, 'duplicate_measurement_stamps': n_dup}
     return grid, out, info

@@ -49,6 +49,7 @@ from .model import (
 )
 from .params import ANGLE_LIMIT, Config, check_usable, derive
 from .profiles import Profile, make_profile
+from .records import write_csv_header
 
 __all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate',
            'simulate_to_csv', 'TrajectoryCsvWriter', 'csv_bytes_estimate']
@@ -81,7 +82,7 @@ class Trajectory:
     omega: np.ndarray
     alpha: np.ndarray
     aux: np.ndarray          # (n, N_AUX): W_n, mu, cwkw, cgkg, v_s, F_X, F_Y, q
-    output_ratio: float      # l_w / r_g: rigid theta4 per theta1
+    output_per_input: float      # l_w / r_g: rigid theta4 per theta1
     profile: str = ''
     stats: dict = field(default_factory=dict)
 
@@ -100,7 +101,7 @@ class Trajectory:
     @property
     def output_error(self) -> np.ndarray:
         """theta4 - theta1 l_w / r_g [rad]: antenna positioning error."""
-        return self.theta[:, 2] - self.theta1 * self.output_ratio
+        return self.theta[:, 2] - self.theta1 * self.output_per_input
 
     def energy(self, config: Config) -> np.ndarray:
         """Kinetic + shaft torsion + mesh energy 0.5 k_Y q^2 [J] at every row."""
@@ -131,7 +132,7 @@ class Trajectory:
         return Trajectory(t=self.t[index], theta1=self.theta1[index],
                           theta1_dot=self.theta1_dot[index], theta=self.theta[index],
                           omega=self.omega[index], alpha=self.alpha[index],
-                          aux=self.aux[index], output_ratio=self.output_ratio,
+                          aux=self.aux[index], output_per_input=self.output_per_input,
                           profile=self.profile, stats=self.stats)
 
     @staticmethod
@@ -142,7 +143,12 @@ class Trajectory:
         last = parts[-1]
         return Trajectory(*(np.concatenate([getattr(t, n) for t in parts]) for n in (
             't', 'theta1', 'theta1_dot', 'theta', 'omega', 'alpha', 'aux')),
-            output_ratio=last.output_ratio, profile=last.profile, stats=last.stats)
+            output_per_input=last.output_per_input, profile=last.profile, stats=last.stats)
+
+
+#: CSV number format: t to 1 ns whatever the duration; every other column to 12
+#: significant digits (relative 5e-12: 0.1 rad to 5e-13 rad, 56 rad to 3e-10 rad)
+CSV_FORMAT = ['%.9f', '%.12g']
 
 
 class TrajectoryCsvWriter:
@@ -163,14 +169,12 @@ class TrajectoryCsvWriter:
                      'mu': '1', 'sliding_velocity': 'm/s', 'worm_tooth_stiffness': 'N/m',
                      'gear_tooth_stiffness': 'N/m', 'mesh_deflection': 'm'}
             names = [f'{k}[{_csv_unit(k, units)}]' for k in cols]
-            comment = f'# worm_gear_sim; profile: {traj.profile}\n'
-            if self.header_comment:
-                comment += ''.join(f'# {line}\n' for line in self.header_comment.splitlines())
             self._fh = open(self.path, 'w')
-            self._fh.write(comment)
-            self._fh.write(','.join(names) + '\n')
-        np.savetxt(self._fh, np.column_stack(list(cols.values())), delimiter=',',
-                   fmt='%.12g')
+            write_csv_header(self._fh, names, f'worm_gear_sim; profile: {traj.profile}\n'
+                             + self.header_comment)
+        data = np.column_stack(list(cols.values()))
+        np.savetxt(self._fh, data, delimiter=',', fmt=CSV_FORMAT[:1] + CSV_FORMAT[1:] *
+                   (data.shape[1] - 1))
         self.rows_written += len(traj.t)
 
     def close(self) -> None:
@@ -459,7 +463,7 @@ class Simulator:
         self._cmd_t, self._cmd_value = self.t, self._theta1
         return Trajectory(t=t_rec[:row], theta1=th_rec[:row], theta1_dot=td_rec[:row],
                           theta=u_rec[:row], omega=v_rec[:row], alpha=a_rec[:row],
-                          aux=aux_rec[:row], output_ratio=float(self.p[P_RIGID3]),
+                          aux=aux_rec[:row], output_per_input=float(self.p[P_RIGID3]),
                           profile=profile.describe(), stats=self.stats)
 
     def iter_run(self, profile: Profile, t_end: float, record_every: int = 1,
@@ -478,7 +482,7 @@ class Simulator:
 
         def traj(arrs: tuple[np.ndarray, ...]) -> Trajectory:
             return Trajectory(t=arrs[0], theta1=arrs[1], theta1_dot=arrs[2], theta=arrs[3],
-                              omega=arrs[4], alpha=arrs[5], aux=arrs[6], output_ratio=ratio,
+                              omega=arrs[4], alpha=arrs[5], aux=arrs[6], output_per_input=ratio,
                               profile=desc, stats=self.stats)
 
         for m, fill in self._chunks(profile, n_total, stride, chunk_steps):

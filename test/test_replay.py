@@ -1,0 +1,190 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""``simulate --bag``: a recorded command stream replays through the node's pipeline to
+the prediction the node computed live.  The 'live' run here feeds the pipeline exactly as
+the node's callbacks do (arrival order, jittered arrivals, bursts, its receive clock),
+independently of worm_gear_sim.replay; the bag is written with rosbags directly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from worm_gear_sim import load_config
+from worm_gear_sim.cli import main
+from worm_gear_sim.profiles import TrapezoidalProfile
+from worm_gear_sim.realtime import RealtimePredictor
+from worm_gear_sim.records import prediction_streams as streams_of
+from worm_gear_sim.records import read_bag, read_csv, write_streams
+from worm_gear_sim.replay import compare_with_recorded, replay
+
+TS = get_typestore(Stores.ROS2_KILTED)
+JS, F64 = 'sensor_msgs/msg/JointState', 'std_msgs/msg/Float64'
+EPOCH = 1_763_890_855_000_000_123
+JOINTS = ('worm_input_joint', 'worm_joint', 'worm_gear_joint', 'antenna_joint')
+
+
+def servo_stream(seed=3, n=80):
+    """The paper's move and a reversal, 1 kHz stamps on an epoch clock; arrivals 0.05-0.9
+    ms late, in bursts of up to 3 (a stamp never arrives before an earlier one)."""
+    rng = np.random.default_rng(seed)
+    move = TrapezoidalProfile(0.1130973, 0.02, 0.004, 0.005)
+    t = np.arange(n) * 1e-3
+    x = move.theta1(t) - 0.5 * move.theta1(t - 0.04)
+    stamps = EPOCH + np.round(t * 1e9).astype(np.int64)
+    rx = stamps + rng.integers(50_000, 900_000, n)
+    burst = rng.random(n) < 0.2
+    for i in np.flatnonzero(burst)[:-1]:
+        rx[i] = rx[i + 1]                       # held back, arrives with the next one
+    rx = np.maximum.accumulate(rx)
+    return stamps, x, rx
+
+
+def live_node(cfg, stamps, x, rx):
+    """What the node's callbacks do: push each sample at reception, a 1 kHz hold timer."""
+    p = RealtimePredictor(cfg)
+    preds = []
+    timer = int(rx[0])
+    for s, v, r in zip(stamps.tolist(), x.tolist(), rx.tolist()):
+        while timer <= r:
+            preds += p.hold(timer).predictions
+            timer += 1_000_000
+        preds += p.push(s, v, now_ns=r).predictions
+    return preds
+
+
+def record_bag(path, storage, stamps, x, rx, preds, stamped=True):
+    plugin = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}[storage]
+    Header, Time = TS.types['std_msgs/msg/Header'], TS.types['builtin_interfaces/msg/Time']
+    with Writer(path, version=9, storage_plugin=plugin) as w:
+        if stamped:
+            c = w.add_connection('/worm_angle_reference', JS, typestore=TS)
+            for s, v, r in zip(stamps.tolist(), x.tolist(), rx.tolist()):
+                msg = TS.types[JS](header=Header(stamp=Time(sec=s // 10**9,
+                                                            nanosec=s % 10**9), frame_id=''),
+                                   name=[JOINTS[0]], position=np.array([v]),
+                                   velocity=np.empty(0), effort=np.empty(0))
+                w.write(c, r, TS.serialize_cdr(msg, JS))
+        else:
+            c = w.add_connection('/worm_angle_command', F64, typestore=TS)
+            for v, r in zip(x.tolist(), rx.tolist()):
+                w.write(c, r, TS.serialize_cdr(TS.types[F64](data=v), F64))
+        # the node's live joint_states, as a recorder received them
+        js = TS.types[JS]
+        c2 = w.add_connection('/joint_states', JS, typestore=TS)
+        for p in preds:
+            s = p.stamp_ns
+            msg = js(header=Header(stamp=Time(sec=s // 10**9, nanosec=s % 10**9),
+                                   frame_id=''), name=list(JOINTS),
+                     position=np.array(p.position), velocity=np.array(p.velocity),
+                     effort=np.array(p.effort))
+            w.write(c2, s + 200_000, TS.serialize_cdr(msg, JS))
+    return path
+
+
+@pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
+def test_bag_replays_to_the_live_prediction(tmp_path, capsys, storage):
+    cfg = load_config()
+    stamps, x, rx = servo_stream()
+    live = live_node(cfg, stamps, x, rx)
+    assert len(live) == stamps.size and not any(p.held for p in live)
+    bag = record_bag(tmp_path / 'rec', storage, stamps, x, rx, live)
+    out = tmp_path / 'replay.csv'
+    status = main(['simulate', '--bag', str(bag), '-o', str(out), '--no-plot'])
+    stdout = capsys.readouterr().out
+    assert status == 0, stdout
+    line = next(ln for ln in stdout.splitlines() if 'max |replay - recorded /joint_states|' in ln)
+    assert float(line.split('= ')[1].split()[0]) <= 1e-9 and 'over 80 equal stamps' in line
+    # the prediction bag: stamped on the recording's clock, equal to the live node
+    pred = read_bag(tmp_path / 'replay_bag', command_topic='/worm_gear_sim/feedforward',
+                    joint_states_topic='joint_states', require_measured=True)
+    got_ns = pred.t0_ns + np.round(pred.t * 1e9).astype(np.int64)
+    live_ns = np.array([p.stamp_ns for p in live])
+    np.testing.assert_array_equal(got_ns, live_ns)
+    live_pos = np.array([p.position for p in live])
+    for k, name in enumerate(('theta2', 'theta3', 'theta4'), start=1):
+        assert np.max(np.abs(pred.measured[name] - live_pos[:, k])) <= 1e-9
+    # the antenna really moved and rang: the comparison is not between zeros
+    assert np.ptp(live_pos[:, 3]) > 1e-3
+    # the CSV beside it: same prediction, t relative to the first stamp
+    csv = read_csv(out)                       # the reader takes the writer's header
+    np.testing.assert_allclose(csv.t, (live_ns - EPOCH) * 1e-9, rtol=0, atol=1e-12)
+    assert np.max(np.abs(csv.measured['theta4'] - live_pos[:, 3])) <= 1e-9
+    assert f't0_ns: {EPOCH}' in out.read_text()
+    assert (tmp_path / 'replay_feedforward.csv').is_file()
+
+
+def test_replay_api_reports_agreement_and_float64_path(tmp_path):
+    cfg = load_config()
+    stamps, x, rx = servo_stream(seed=5)
+    live = live_node(cfg, stamps, x, rx)
+    bag = record_bag(tmp_path / 'rec', 'sqlite3', stamps, x, rx, live)
+    rep = replay(cfg, read_bag(bag))
+    assert rep.info['input'] == 'stamped' and rep.info['stamp_window']
+    cmp = compare_with_recorded(rep, bag)
+    assert cmp['stamps_compared'] == stamps.size and cmp['max_abs_diff'] <= 1e-9
+    # Float64: samples at the receive time, ticks at node.publish_rate_hz on that clock
+    bag2 = record_bag(tmp_path / 'rec64', 'mcap', stamps, x, rx, live, stamped=False)
+    rep2 = replay(cfg, read_bag(bag2))
+    assert rep2.info['input'] == 'float64'
+    p = RealtimePredictor(cfg)
+    ticks = []
+    tick = int(rx[0]) + 1_000_000
+    for v, r in zip(x.tolist(), rx.tolist()):
+        while tick <= r:
+            ticks += p.tick(tick).predictions
+            tick += 1_000_000
+        p.push_command(r, v)
+    while tick <= int(rx.max()) + 1_000_000:
+        ticks += p.tick(tick).predictions
+        tick += 1_000_000
+    assert [q.stamp_ns for q in ticks] == rep2.stamps_ns.tolist()
+    np.testing.assert_array_equal(np.array([q.position for q in ticks]), rep2.position)
+
+
+def test_simulate_bag_errors(tmp_path, capsys):
+    st = EPOCH + np.arange(5, dtype=np.int64) * 1_000_000
+    write_streams(tmp_path / 'only_js', streams_of(st, np.zeros((5, 4)), joint_names=JOINTS))
+    status = main(['simulate', '--bag', str(tmp_path / 'only_js'), '-o',
+                   str(tmp_path / 'o.csv'), '--no-plot'])
+    err = capsys.readouterr().err
+    assert status == 2 and 'no command topic' in err and '/joint_states' in err
+    assert 'Traceback' not in err
+    status = main(['simulate', '--bag', str(tmp_path / 'nope'), '-o', str(tmp_path / 'o.csv')])
+    assert status == 2 and 'bag not found' in capsys.readouterr().err
+    status = main(['simulate', '--bag', str(tmp_path / 'only_js'), '--csv', 'x.csv'])
+    assert status == 2
+
+
+def test_float64_replay_on_recorded_ticks(tmp_path, capsys):
+    """The live node's Float64 path ticks on its wall clock (jittered, a missed tick): the
+    replay ticks at the stamps of its recorded joint_states."""
+    cfg = load_config()
+    stamps, x, rx = servo_stream(seed=7)
+    rng = np.random.default_rng(8)
+    ticks = rx[0] + 1_000_000 * np.arange(1, 90) + rng.integers(-300_000, 300_000, 89)
+    ticks = np.delete(ticks, 30)                      # a missed tick
+    p = RealtimePredictor(cfg)
+    live = []
+    k = 0
+    for v, r in zip(x.tolist(), rx.tolist()):
+        while k < ticks.size and ticks[k] <= r:
+            live += p.tick(int(ticks[k])).predictions
+            k += 1
+        p.push_command(r, v)
+    for tk in ticks[k:].tolist():
+        live += p.tick(int(tk)).predictions
+    bag = record_bag(tmp_path / 'rec64', 'sqlite3', stamps, x, rx, live, stamped=False)
+    rep = replay(cfg, read_bag(bag), tick_stamps_ns=ticks)
+    assert rep.info['ticks'] == 'recorded joint_states stamps'
+    cmp = compare_with_recorded(rep, bag)
+    assert cmp['stamps_compared'] == len(live) and cmp['max_abs_diff'] == 0.0
+    grid = replay(cfg, read_bag(bag))                 # a regular grid instead: not the same
+    assert compare_with_recorded(grid, bag)['stamps_compared'] < len(live)
+    # the command line finds the recorded ticks itself
+    assert main(['simulate', '--bag', str(bag), '-o', str(tmp_path / 'r.csv'), '--no-plot']) == 0
+    out = capsys.readouterr().out
+    assert 'ticks at the recorded joint_states stamps' in out
+    assert '= 0.000e+00 rad' in out
