@@ -50,7 +50,7 @@ from scipy.optimize import least_squares
 from .modal import modes
 from .model import pack_parameters, rigid_motion_vector
 from .params import Config, ConfigError
-from .profiles import SampledProfile
+from .profiles import SampledProfile, motion_span
 from .records import Record
 from .simulation import SimulationError, Simulator
 from .studies import dominant_frequency
@@ -122,11 +122,8 @@ def check_record(rec: Any, index: int | None = None) -> None:
 def _motion_times(t: np.ndarray, th1: np.ndarray) -> tuple[float, float]:
     """First and last time at which the command changes (relative tolerance 1e-9 of its range
     or 1e-12 rad)."""
-    tol = max(1e-12, 1e-9 * float(np.ptp(th1)))
-    moving = np.flatnonzero(np.abs(np.diff(th1)) > tol)
-    if moving.size == 0:
-        return float(t[0]), float(t[0])
-    return float(t[moving[0]]), float(t[moving[-1] + 1])
+    span = motion_span(t, th1, tol=max(1e-12, 1e-9 * float(np.ptp(th1))))
+    return (float(t[0]), float(t[0])) if span is None else span
 
 
 def record_from_model(cfg: Config, profile: Any, t_end: float, sample_rate: float = 1e4,

@@ -30,7 +30,8 @@ import numpy as np
 __all__ = ['Record', 'RecordError', 'read_csv', 'read_bag', 'read_record', 'write_bag',
            'BagStream', 'prediction_streams', 'write_streams', 'bag_topics',
            'ANGLE_UNITS', 'TIME_UNITS', 'DEFAULT_COMMAND_TOPICS',
-           'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE', 'FLOAT64', 'JOINT_STATE']
+           'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE', 'FLOAT64', 'JOINT_STATE',
+           'write_csv_header', 'write_csv_columns']
 
 #: angle units accepted in a CSV header, factor to rad
 ANGLE_UNITS: dict[str, float] = {'rad': 1.0, 'mrad': 1e-3, 'urad': 1e-6, 'µrad': 1e-6,
@@ -116,6 +117,25 @@ class Record:
                  f'; times shifted by -{self.t0_ns * 1e-9:.9g} s' if self.t0_ns else '')
         return (f'{self.name}: {self.t.size} samples over {self.duration:.6g} s, measured: '
                 f'{meas}{start}')
+
+
+def write_csv_header(fh: Any, names: Sequence[str], comment: str = '') -> None:
+    """The head of a numeric CSV: each line of ``comment`` as a ``# `` line, then the column
+    names (with their units, e.g. ``theta4[rad]``) on one line."""
+    fh.write(''.join(f'# {line}\n' for line in comment.splitlines()))
+    fh.write(','.join(names) + '\n')
+
+
+def write_csv_columns(path: str | Path, names: Sequence[str], data: np.ndarray,
+                      fmt: str | Sequence[str] = '%.12g', comment: str = '') -> Path:
+    """Numeric columns as CSV (``data``: one row per sample), with the head of
+    :func:`write_csv_header`; the parent directory is created."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    with open(p, 'w') as fh:
+        write_csv_header(fh, names, comment)
+        np.savetxt(fh, data, delimiter=',', fmt=fmt)
+    return p
 
 
 def iso_time(ns: int) -> str:

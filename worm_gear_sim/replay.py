@@ -30,6 +30,7 @@ from .records import (
     RecordError,
     read_bag,
     write_bag,
+    write_csv_columns,
 )
 
 __all__ = ['Replay', 'replay', 'compare_with_recorded', 'REPLAY_CSV_COLUMNS']
@@ -100,37 +101,30 @@ class Replay:
         significant digits) and, with corrections, ``<stem>_feedforward.csv`` (t,
         theta1_ref, delta, compensated)."""
         p = Path(path)
-        comment = f'# worm_gear_sim replay of {self.record.source.get("path", "")}\n' + \
-            f'# t0_ns: {self.t0_ns} (t = 0 on the recording\'s clock)\n' + \
-            ''.join(f'# {ln}\n' for ln in header_comment.splitlines())
+        comment = (f'worm_gear_sim replay of {self.record.source.get("path", "")}\n'
+                   f't0_ns: {self.t0_ns} (t = 0 on the recording\'s clock)\n' + header_comment)
         data = np.column_stack([self.t, self.position, self.velocity, self.effort,
                                 self.positioning_error, self.worm_error,
                                 self.held.astype(float)])
-        _write(p, comment, [f'{n} [{u}]' for n, u in REPLAY_CSV_COLUMNS], data,
-               ['%.9f'] + [f'%.{digits}g'] * 14 + ['%d'])
+        write_csv_columns(p, [f'{n} [{u}]' for n, u in REPLAY_CSV_COLUMNS], data,
+                          ['%.9f'] + [f'%.{digits}g'] * 14 + ['%d'], comment)
         files = [p]
         if self.correction_stamps_ns.size:
             q = p.with_name(p.stem + '_feedforward' + p.suffix)
             tc = (self.correction_stamps_ns - self.t0_ns) * 1e-9
-            _write(q, comment, ['t [s]', 'theta1_ref [rad]', 'delta [rad]',
-                                'compensated [rad]'],
-                   np.column_stack([tc, self.theta1_ref, self.delta, self.compensated]),
-                   ['%.9f'] + [f'%.{digits}g'] * 3)
+            write_csv_columns(q, ['t [s]', 'theta1_ref [rad]', 'delta [rad]',
+                                  'compensated [rad]'],
+                              np.column_stack([tc, self.theta1_ref, self.delta,
+                                               self.compensated]),
+                              ['%.9f'] + [f'%.{digits}g'] * 3, comment)
             files.append(q)
         return files
 
 
-def _write(path: Path, comment: str, names: list[str], data: np.ndarray,
-           fmt: list[str]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, 'w') as fh:
-        fh.write(comment)
-        fh.write(','.join(names) + '\n')
-        np.savetxt(fh, data, delimiter=',', fmt=fmt)
-
 
 def replay(config: Config, record: Record, *, compensate: bool = True,
-           end_time: float | None = None, use_receive_clock: bool | None = None) -> Replay:
+           end_time: float | None = None, use_receive_clock: bool | None = None,
+           tick_stamps_ns: np.ndarray | None = None) -> Replay:
     """Feed ``record``'s command stream to a :class:`RealtimePredictor` as the node would.
 
     Stamped references: ``push(stamp, value, now_ns=receive time)`` in arrival order (the
@@ -138,7 +132,9 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
     ``use_receive_clock=False``), the node's slow timer emulated by ``hold`` at
     ``node.publish_rate_hz`` on the receive clock (it acts only when the stream pauses),
     ``finish`` at the end.  Float64 commands: ``push_command(receive time, value)`` and
-    ``tick`` every 1 / ``node.publish_rate_hz`` from the first command.  ``end_time`` [s
+    ``tick`` every 1 / ``node.publish_rate_hz`` from the first command, or at
+    ``tick_stamps_ns`` (the stamps of the live node's recorded joint_states: its ticks on
+    the recording's clock).  ``end_time`` [s
     after the first command]: stop feeding samples stamped later, or keep the held
     prediction going up to it after the last one (the stream paused)."""
     from .realtime import RealtimePredictor
@@ -196,17 +192,32 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
     else:
         info['input'] = 'float64'
         end = int(receive.max()) + period if stop_ns is None else stop_ns
-        tick = int(receive[0]) + period
+        if tick_stamps_ns is not None and len(tick_stamps_ns):
+            ticks = np.unique(np.asarray(tick_stamps_ns, dtype=np.int64)).tolist()
+            info['ticks'] = 'recorded joint_states stamps'
+            end = max(end, ticks[-1]) if stop_ns is None else end
+        else:
+            ticks = []
+            info['ticks'] = f'every {period} ns from the first command'
+        k = 0
+
+        def next_tick(after: int) -> int:
+            return ticks[k] if k < len(ticks) else (
+                max(after, ticks[-1] if ticks else int(receive[0])) + period)
+
+        tick = next_tick(int(receive[0]))
         for x, rx in zip(values.tolist(), receive.tolist()):
             if stop_ns is not None and rx > stop_ns:
                 break
             while tick <= rx:
                 collect(pred.tick(tick))
-                tick += period
+                k += 1
+                tick = next_tick(tick)
             collect(pred.push_command(rx, x))
         while tick <= end:
             collect(pred.tick(tick))
-            tick += period
+            k += 1
+            tick = next_tick(tick)
     if not preds:
         raise RecordError(f'{record.name}: the pipeline accepted no command sample '
                           f'({_rejections(pred.counters)})')

@@ -49,6 +49,7 @@ from .model import (
 )
 from .params import ANGLE_LIMIT, Config, check_usable, derive
 from .profiles import Profile, make_profile
+from .records import write_csv_header
 
 __all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate',
            'simulate_to_csv', 'TrajectoryCsvWriter', 'csv_bytes_estimate']
@@ -168,12 +169,9 @@ class TrajectoryCsvWriter:
                      'mu': '1', 'sliding_velocity': 'm/s', 'worm_tooth_stiffness': 'N/m',
                      'gear_tooth_stiffness': 'N/m', 'mesh_deflection': 'm'}
             names = [f'{k}[{_csv_unit(k, units)}]' for k in cols]
-            comment = f'# worm_gear_sim; profile: {traj.profile}\n'
-            if self.header_comment:
-                comment += ''.join(f'# {line}\n' for line in self.header_comment.splitlines())
             self._fh = open(self.path, 'w')
-            self._fh.write(comment)
-            self._fh.write(','.join(names) + '\n')
+            write_csv_header(self._fh, names, f'worm_gear_sim; profile: {traj.profile}\n'
+                             + self.header_comment)
         data = np.column_stack(list(cols.values()))
         np.savetxt(self._fh, data, delimiter=',', fmt=CSV_FORMAT[:1] + CSV_FORMAT[1:] *
                    (data.shape[1] - 1))

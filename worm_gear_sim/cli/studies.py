@@ -15,6 +15,7 @@ from typing import Any
 
 from ..config_io import params_document, params_json_dump, suggest, typed_value
 from ..params import Config, ConfigError
+from ..records import write_csv_columns
 from ..studies import PAPER_STUDIES
 from .common import CliError, add_config_options, config_from_args, fmt_table, say
 
@@ -105,9 +106,7 @@ def _write_traces(trajs: Mapping[str, Any], path: Path, every: int) -> None:
     for key, tr in trajs.items():
         cols[f'{key}:theta2-theta1'] = tr.worm_error[::every]
         cols[f'{key}:theta4-theta1*lw/rg'] = tr.output_error[::every]
-    with open(path, 'w') as fh:
-        fh.write(','.join(cols) + '\n')
-        np.savetxt(fh, np.column_stack(list(cols.values())), delimiter=',', fmt='%.12g')
+    write_csv_columns(path, list(cols), np.column_stack(list(cols.values())))
 
 
 # ---- sweep -----------------------------------------------------------------------------

@@ -70,6 +70,7 @@ LINE_WIDTH = 80                 # every line the demo prints fits 80 columns
 REFERENCE_DEPTH = 100           # reliable, keep last >= 100: every sample matters
 PAPER_LEAD = 0.05               # s of rest before the first paper move
 MAX_BURST = 200                 # samples published in one timer call after a stall
+HOLD_PERIOD_NS = 20_000_000     # the first sample is repeated every 20 ms until the node answers
 
 
 def command_pattern(name: str, cfg: Config, move_period: float = 0.5,
@@ -318,6 +319,7 @@ class DemoCommander(Node):
         self.last_move: MoveSummary | None = None
         self.new_moves: list[MoveSummary] = []
         self._last_hold = -math.inf
+        self._grid0: int | None = None      # stamp of the first sample sent
         reliable = QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         if interface == 'stamped':
             self.pub = self.create_publisher(JointState, REFERENCE_TOPIC, reliable)
@@ -351,11 +353,17 @@ class DemoCommander(Node):
             return
         if self.t0_ns is None:
             # Until the node answers, hold the first sample (it starts the simulation
-            # there), stamped now, 20 times a second.
-            if now - self._last_hold >= 50e6:
-                self._publish_ref(now, float(self.theta1(0.0)))
-                self._last_hold = now
-                self.held += 1
+            # there at rest) 50 times a second.  Every stamp lies on one grid of the
+            # sample period from the first one on: the node's time base and its dt steps
+            # then line up with the stream's, as in the offline run of the same samples.
+            if self._grid0 is None:
+                self._grid0 = now
+            if now - self._last_hold >= HOLD_PERIOD_NS:
+                stamp = self._grid0 + (now - self._grid0) // self.period_ns * self.period_ns
+                if stamp > self._last_hold:
+                    self._publish_ref(stamp, float(self.theta1(0.0)))
+                    self._last_hold = stamp
+                    self.held += 1
             return
         # every grid sample whose instant is at most preview + lead ahead, in stamp order
         horizon = now + int((self.preview + self.lead) * 1e9)
@@ -378,9 +386,13 @@ class DemoCommander(Node):
     def _start(self) -> None:
         now = self.get_clock().now().nanoseconds
         self.t0_mono = time.monotonic()
-        # the grid starts after the last held sample (stamps must increase)
-        self.t0_ns = max(now, int(self._last_hold) + self.period_ns) \
-            if self.interface == 'stamped' else now
+        if self.interface == 'stamped' and self._grid0 is not None:
+            # the stream starts on the hold samples' grid, after the last of them
+            k = -(-(now - self._grid0) // self.period_ns)
+            self.t0_ns = max(self._grid0 + k * self.period_ns,
+                             int(self._last_hold) + self.period_ns)
+        else:
+            self.t0_ns = now
 
     # -- what the node says --
     def _pattern_time(self, stamp: Any) -> float:
@@ -513,13 +525,8 @@ def _summary(node: DemoCommander, opts: argparse.Namespace, compensated: bool | 
             f'joint_states {node.n_js}')
         if node.latency_ns:
             ahead = np.asarray(node.latency_ns) * 1e-6
-            med, worst = np.percentile(ahead, 50), np.percentile(ahead, 1)
-            if worst >= 0.0:
-                say(f'  corrections arrived {med:.2f} ms (median), {worst:.2f} ms (1 %) '
-                    'before their instant')
-            else:
-                say(f'  corrections arrived {med:+.2f} ms (median), {worst:+.2f} ms (1 %) '
-                    'ahead of their instant: late')
+            say(f'  corrections came {np.percentile(ahead, 50):.2f} ms before their instant '
+                f'(median); 1 % less than {np.percentile(ahead, 1):.2f} ms')
     else:
         say(f'  commands {node.sent}, joint_states {node.n_js}, positioning errors '
             f'{node.n_err}')
@@ -553,7 +560,7 @@ def _summary(node: DemoCommander, opts: argparse.Namespace, compensated: bool | 
     if compensated is not None:
         ref = off[compensated]
         dev = max(abs(m.ringing - ref[m.index].ringing) for m in same)
-        say(f'  live vs offline ({label}): largest difference {dev * 1e6:.3f} urad')
+        say(f'  live vs offline ({label}): ringing differs by at most {dev:.1e} rad')
     if compensated and live > 0:
         say(f'  => ~/compensated_command applied: the antenna rings {o_off / live:.0f}x '
             'less than without')
