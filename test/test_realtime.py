@@ -539,3 +539,48 @@ def test_without_compensation_and_disabled_compensator():
     p = RealtimePredictor(Config().replace({'compensation.enabled': False, **LOADED}))
     outs = [p.push(EPOCH + k * MS, 0.01 * k) for k in range(10)]
     assert all(o.corrections[0].delta == 0.0 for o in outs)
+
+
+_values = st_.one_of(st_.floats(allow_nan=True, allow_infinity=True),
+                     st_.floats(-0.5, 0.5), st_.sampled_from([0.0, 3.0, -3.0, 1e5]))
+_ops = st_.lists(st_.tuples(st_.sampled_from(['push', 'hold', 'command', 'tick']),
+                            st_.one_of(st_.integers(-5 * MS, 5 * MS),  # stamp - now [ns]
+                                       st_.integers(-3 * 10**9, 3 * 10**9)),
+                            st_.one_of(st_.integers(0, 3 * MS),         # clock step [ns]
+                                       st_.integers(-10**10, 10**9)),
+                            _values), min_size=1, max_size=120)
+
+
+@given(ops=_ops, preview=st_.sampled_from([0.0, 0.002]),
+       applied=st_.booleans())
+@settings(max_examples=60, deadline=None)
+def test_any_input_sequence_keeps_the_pipeline_finite_and_counted(ops, preview, applied):
+    """Random mixes of stamped samples (any value, stamps and clocks going anywhere),
+    hold calls, Float64 commands and ticks: never an exception, every output finite, every
+    stamped sample either accepted or rejected with a counted reason."""
+    cfg = Config().replace({'compensation.preview_time': preview})
+    p = RealtimePredictor(cfg, apply_compensation=applied)
+    now = EPOCH
+    stamped = 0
+    for op, offset, step, value in ops:
+        now = max(now + step, 1)
+        if op == 'push':
+            stamped += 1
+            o = p.push(now + offset, value, now_ns=now)
+            assert o.accepted != (o.rejected is not None)
+        elif op == 'hold':
+            o = p.hold(now)
+        elif op == 'command':
+            o = p.push_command(now, value)
+        else:
+            o = p.tick(now)
+        for c in o.corrections:
+            assert math.isfinite(c.delta) and math.isfinite(c.compensated)
+        for q in o.predictions:
+            assert all(map(math.isfinite, (*q.position, *q.velocity, *q.effort,
+                                           q.positioning_error, q.worm_error)))
+    c = p.counters
+    assert c['samples_received'] == stamped
+    assert c['rejected_samples'] == sum(c['rejected_' + r.value] for r in Reject)
+    assert c['samples_accepted'] + c['rejected_samples'] >= stamped
+    assert all(isinstance(v, int) and v >= 0 for v in c.values())
