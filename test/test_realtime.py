@@ -496,8 +496,14 @@ def test_float64_jump_resync_and_sim_clock_restart():
     for k in range(4, 10):
         p.push_command(k * MS - 500, 3.0 + 1e-3 * k)
         assert p.tick(k * MS).predictions[-1].stamp_ns == k * MS
+    before = p.sim.t
+    assert p.push(10 * MS, math.nan, now_ns=10 * MS).rejected is Reject.NAN
+    assert p.sim.t == before and p.counters['rejected_nan'] == 1    # no switch on bad input
     o = p.push(10 * MS, 3.01, now_ns=10 * MS)
     assert o.accepted and kinds(o) == ['input_changed']
+    assert p.tick(11 * MS).predictions == [] and p.started        # no commands: no switch
+    o = p.push(11 * MS, 3.011, now_ns=11 * MS)
+    assert o.accepted and not kinds(o)
     assert p.counters['rejected_jump'] == 3
 
 
