@@ -89,6 +89,8 @@ Float64 path (``push_command`` + ``tick``; ``std_msgs/Float64`` ``worm_angle_com
     holds the last command up to the tick (or to the last corrected sample when a preview
     delays the applied compensation) and returns one prediction at that instant.  The
     first tick after the first command starts the simulation at rest at the newest command.
+    A merged sample re-emits its own correction; with a preview, corrections released
+    earlier whose window reached that sample keep the value they were computed with.
     The stream is stale after G without a command (no margin: tick stamps are never late).
     The pipeline serves one input at a time: a valid stamped sample after Float64 commands,
     or a tick with queued commands after stamped samples, restarts it on the other input
