@@ -269,3 +269,20 @@ def test_node_rejects_an_unusable_set_and_keeps_running(ros_harness):
     ticks = h.node.counters['ticks']
     assert h.spin_until(lambda: h.node.counters['ticks'] >= ticks + 5)
     assert h.node.config.mesh.worm_fit_b == pytest.approx(0.000656069)
+
+
+def test_modes_and_resync_refuse_absurd_inputs():
+    with pytest.raises(ValueError, match='theta1'):
+        modes(Config(), theta1=1e20)          # the mesh phase is meaningless there
+    with pytest.raises(ValueError, match='sliding_rate'):
+        modes(Config(), sliding_rate=float('nan'))
+    sim = Simulator(Config())
+    with pytest.raises(ValueError, match='resync'):
+        sim.resync(float('nan'))
+    assert sim.t == 0.0
+
+
+def test_cli_modes_at_an_absurd_angle_is_one_line():
+    r = _cli('modes', '--theta1', '1e20')
+    assert r.returncode == 2 and 'theta1' in r.stderr and 'Traceback' not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
