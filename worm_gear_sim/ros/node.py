@@ -315,12 +315,12 @@ class WormGearSimNode(Node):
             self._swap_prepared()
         pos = msg.position
         if len(pos) == 0:
-            self._reject_message('empty_position', 'worm_angle_reference without position')
+            self._reject_message('empty_position', 'no position[0]')
             return
         names = msg.name
         if len(names) and names[0] != self._worm_input_joint:
-            self._reject_message('wrong_joint', f'worm_angle_reference for joint '
-                                 f'{names[0]!r}; this node takes {self._worm_input_joint!r}')
+            self._reject_message('wrong_joint', f'joint {names[0]!r}; this node takes '
+                                 f'{self._worm_input_joint!r}')
             return
         st = msg.header.stamp
         stamp = st.sec * _NS + st.nanosec
@@ -332,7 +332,7 @@ class WormGearSimNode(Node):
 
     def _reject_message(self, reason: str, text: str) -> None:
         self.counters['rejected_' + reason] += 1
-        self._warn('reference_' + reason, f'rejected {text}; '
+        self._warn('reference_' + reason, f'rejected {REFERENCE_TOPIC}: {reason} ({text}); '
                    f'{self.counters["rejected_" + reason]} so far')
 
     def _enter_mode(self, mode: str) -> None:
