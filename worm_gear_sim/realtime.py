@@ -316,8 +316,10 @@ class RealtimePredictor:
 
     def prepare(self, config: Config) -> Prepared:
         """Design for ``config`` off the real-time path (compensator design, a trial
-        of the simulator's parameters).  Raises ValueError (ConfigError) if the simulator
-        cannot take it (``integrator.time_step`` changed, non-finite acceleration)."""
+        of the simulator's parameters; it only reads the pipeline, so another thread may
+        run it while samples flow).  Raises ValueError (ConfigError) if the simulator
+        cannot take it (``integrator.time_step`` changed, non-finite acceleration).  Every
+        other method belongs to one thread (the node's executor)."""
         if self.sim is not None:
             trial = copy.copy(self.sim)   # shallow: reconfigure only reads the state
             trial.reconfigure(config)
