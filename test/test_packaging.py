@@ -107,6 +107,27 @@ def test_colcon_install_layout_resolves_like_ros2_run(colcon_install, monkeypatc
     assert not (prefix / 'bin' / EXE).exists()       # setup.cfg puts scripts in lib/<pkg>
 
 
+
+def test_launch_file_installed_with_what_it_names(colcon_install):
+    """share/worm_gear_sim/launch/worm_gear_sim.launch.py is installed and every file and
+    executable it names (test_node_launch.py checks the names against setup.py) is where
+    `ros2 launch` will look for it."""
+    prefix = colcon_install / PKG
+    share = prefix / 'share' / PKG
+    launch = share / 'launch' / 'worm_gear_sim.launch.py'
+    assert launch.is_file()
+    text = launch.read_text()
+    assert text == (ROOT / 'launch' / 'worm_gear_sim.launch.py').read_text()
+    for exe in ('worm_gear_sim_node', 'worm_gear_sim_demo'):
+        assert f"'{exe}'" in text
+        path = prefix / 'lib' / PKG / exe
+        assert path.is_file() and os.access(path, os.X_OK), path
+    for rel in ('config/worm_gear_sim.yaml', 'urdf/worm_gear_drive.urdf'):
+        parts = rel.split('/')
+        assert f"os.path.join('{parts[0]}', '{parts[1]}')" in text, rel
+        assert (share / rel).is_file(), rel
+
+
 @pytest.mark.ros
 def test_installed_executable_publishes_joint_states(colcon_install, ros_dds_context,
                                                      ros_subprocess_env, tmp_path):

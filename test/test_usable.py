@@ -216,3 +216,21 @@ def test_advance_to_huge_span_is_refused_up_front():
     assert n == 200
     with pytest.raises(ValueError, match='max_steps'):
         sim.advance_to(1.0, 0.0, max_steps=200)
+
+
+@pytest.mark.parametrize('overrides, words', [
+    # accepted (the 2 ms trial passes) but the paper's move stops mid-run: the error names
+    # the parameter behind it
+    ({'friction.regularization_velocity': 1e-10}, ['friction.regularization_velocity',
+                                                   'near step']),
+    ({'geometry.gear_width': 6e-7}, ['not resolved', 'geometry.gear_width', 'omega dt']),
+])
+def test_integration_failure_names_the_likely_cause(overrides, words):
+    from worm_gear_sim.simulation import SimulationError
+    cfg = Config().replace(overrides)
+    with pytest.raises(SimulationError) as exc:
+        simulate(cfg, t_end=0.03)
+    msg = str(exc.value)
+    assert 'integration stopped at t =' in msg and 'likely cause' in msg
+    for w in words:
+        assert w in msg, (w, msg)

@@ -202,6 +202,15 @@ class ModelCheck:
             raise self._reject('outside_prediction', 'no prediction yet')
         return self.measured(self._seconds(stamp_ns), positions)
 
+    def measured_message_ns(self, stamp_ns: int, names: Sequence[str],
+                            positions: Sequence[float]) -> tuple[list[str], np.ndarray]:
+        """A JointState's names and positions (equal lengths, else rejected as
+        'malformed'), see :meth:`measured_ns`."""
+        if len(names) != len(positions):
+            raise self._reject('malformed', f'{len(names)} names but {len(positions)} '
+                               'positions')
+        return self.measured_ns(stamp_ns, dict(zip(names, positions)))
+
     def status_ns(self, now_ns: int | None) -> CheckStatus:
         return self.status(None if now_ns is None or self._base_ns is None
                            else self._seconds(now_ns))

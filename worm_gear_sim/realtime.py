@@ -89,7 +89,12 @@ Float64 path (``push_command`` + ``tick``; ``std_msgs/Float64`` ``worm_angle_com
     holds the last command up to the tick (or to the last corrected sample when a preview
     delays the applied compensation) and returns one prediction at that instant.  The
     first tick after the first command starts the simulation at rest at the newest command.
+    A merged sample re-emits its own correction; with a preview, corrections released
+    earlier whose window reached that sample keep the value they were computed with.
     The stream is stale after G without a command (no margin: tick stamps are never late).
+    The pipeline serves one input at a time: a valid stamped sample after Float64 commands,
+    or a tick with queued commands after stamped samples, restarts it on the other input
+    (event ``input_changed``); a tick without queued commands leaves a stamped stream alone.
 
 Catch-up
     The simulator never integrates more than ``node.max_catch_up`` seconds for one sample
@@ -423,9 +428,6 @@ class RealtimePredictor:
         x = float(theta1_ref)
         if now_ns is not None:
             self._check_clock(int(now_ns), out)
-        if self._mode == 'command':
-            self._restart(out, 'input_changed', 'stamped references after Float64 commands: '
-                          'the pipeline restarts on the stamped stream', drop=False)
         reason = self._value_reason(x)
         if reason is None:
             if stamp_ns <= 0:
@@ -434,7 +436,12 @@ class RealtimePredictor:
                 reason = Reject.TOO_OLD
             elif now_ns is not None and stamp_ns > now_ns + self._lead_ns:
                 reason = Reject.TOO_NEW
-            elif self._started and stamp_ns == self._last_ns:
+            elif self._mode == 'command':   # a valid sample: the stamped stream takes over
+                self._restart(out, 'input_changed', 'stamped references after Float64 '
+                              'commands: the pipeline restarts on the stamped stream',
+                              drop=False)
+        if reason is None:
+            if self._started and stamp_ns == self._last_ns:
                 reason = Reject.DUPLICATE
             elif self._started and stamp_ns < self._last_ns:
                 reason = Reject.OUT_OF_ORDER
@@ -546,6 +553,8 @@ class RealtimePredictor:
         now_ns = int(now_ns)
         self._check_clock(now_ns, out)
         if self._mode == 'stamped':
+            if not len(self._queue):
+                return out                   # the stamped stream is in use: nothing to do
             self._restart(out, 'input_changed', 'Float64 commands after stamped '
                           'references: the pipeline restarts on the commands', drop=False)
         c = self.counters

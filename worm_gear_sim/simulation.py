@@ -427,7 +427,10 @@ class Simulator:
         if status != STATUS_OK:
             what = 'non-finite state or command' if status == STATUS_NONFINITE else \
                 'Newton did not converge at the finest subdivision'
-            raise SimulationError(f'integration stopped at t = {self.t:.9g} s: {what}')
+            from .usability import diagnose
+            hint = diagnose(self.config)
+            raise SimulationError(f'integration stopped at t = {self.t:.9g} s: {what}'
+                                  + (f'; likely cause: {hint}' if hint else ''))
 
     # ---- batch ---------------------------------------------------------------------------
     def run(self, profile: Profile, t_end: float, record_every: int = 1,
