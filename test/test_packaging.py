@@ -202,7 +202,9 @@ def _imports(paths: list[Path]) -> set[str]:
                   ('importorskip', 'import_module') and node.args
                   and isinstance(node.args[0], ast.Constant)):
                 names.add(str(node.args[0].value).split('.')[0])
-    return {n for n in names if n not in sys.stdlib_module_names and n != PKG}
+    local = {p.stem for p in (ROOT / 'test').glob('*.py')}   # the tests' own helpers
+    return {n for n in names if n not in sys.stdlib_module_names and n != PKG
+            and n not in local}
 
 
 def _keys(modules: set[str]) -> set[str]:
