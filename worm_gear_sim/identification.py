@@ -695,14 +695,13 @@ class FitResult:
         return '\n'.join(lines)
 
 
-def _rms(problem: Problem, cfg: Config | None, x: np.ndarray | None = None
-         ) -> tuple[dict[str, float], list[dict[str, Any]]]:
+def _rms(problem: Problem, cfg: Config) -> tuple[dict[str, float], list[dict[str, Any]]]:
     """Pooled and per-record RMS of predicted - measured [rad] per output."""
     pooled: dict[str, list[np.ndarray]] = {o: [] for o in problem.outputs}
     per = []
     for r in problem.records:
         try:
-            pred = predict(cfg if cfg is not None else problem.config(x), r['rec'])
+            pred = predict(cfg, r['rec'])
         except (SimulationError, ValueError):
             pred = None
         row: dict[str, Any] = {'name': r['name']}

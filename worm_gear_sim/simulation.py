@@ -403,7 +403,8 @@ class Simulator:
 
     def resync(self, t: float) -> None:
         """Jump the simulated clock to ``t`` without integrating (dropped catch-up time)."""
-        self._t0 = float(t) - self._k * self.dt
+        t = _finite_scalar('resync: t', t, TIME_LIMIT, 's')
+        self._t0 = t - self._k * self.dt
         self._cmd_t = min(self._cmd_t, self.t)
 
     def _segment_value(self, done: int, theta1: float, slope: float,

@@ -96,6 +96,9 @@ REJECT_REASONS = tuple(r.value for r in Reject)          # the pipeline's (core)
 NODE_REJECT_REASONS = ('empty_position', 'wrong_joint')  # message-level, checked here
 LOG_THROTTLE_S = 2.0   # at most one log line per cause every 2 s (bursts of bad input)
 WATCH_PERIOD = 0.02    # s: the slow timer that notices a paused stamped stream
+# s: lateness allowed to a stamped sample before the stream is declared stale (held output,
+# rest samples): scheduling stalls of a loaded sender shorter than this change nothing
+STALE_MARGIN = 0.1
 SWAP_POLL_PERIOD = 0.002  # s: polls a parameter set being built in the worker thread
 _NS = 1_000_000_000
 
@@ -157,7 +160,8 @@ class WormGearSimNode(Node):
         self._types = {name: parameter_type(v) for name, v in values.items()}
         cfg = config_from_mapping(values, source='ROS parameters')
         self.config: Config = cfg
-        self.rt = RealtimePredictor(cfg, sim_time=self._clock.ros_time_is_active)
+        self.rt = RealtimePredictor(cfg, sim_time=self._clock.ros_time_is_active,
+                                    stale_margin=STALE_MARGIN)
         self._worm_input_joint = cfg.node.joint_names[0]
 
         self.counters: dict[str, Any] = dict(
