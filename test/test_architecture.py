@@ -30,6 +30,8 @@ DEFERRED_BACK_EDGES = {
     # Config.replace / config_from_mapping prove a parameter set usable by running the
     # model on it (params -> usability -> simulation -> params).
     (f'{ROOT}.params', f'{ROOT}.usability'),
+    # A failed integration names its likely cause (usability.diagnose) in the SimulationError.
+    (f'{ROOT}.simulation', f'{ROOT}.usability'),
     # The start-up entry installs its signal handlers before importing the node (seconds of
     # numpy/numba/rclpy imports); the node then calls back into start-up.
     (f'{WING}.startup', f'{WING}.node'),

@@ -187,18 +187,22 @@ def test_arrival_order_and_bursts_do_not_matter():
     assert p.counters['rejected_duplicate'] == p.counters['rejected_out_of_order']
 
 
-def test_predictions_equal_the_batch_simulator():
+@pytest.mark.parametrize('preview', [0.0, 0.002])
+def test_predictions_equal_the_batch_simulator(preview):
     """Predictions at each stamp equal Simulator.run of the same samples joined by
-    straight lines (the batch path), compensated or not."""
-    cfg = Config().replace(LOADED)
+    straight lines (the batch path), compensated or not; with a preview the compensated
+    prediction of stamp t comes with the sample for t + P."""
+    cfg = Config().replace({'compensation.preview_time': preview, **LOADED})
     rng = np.random.default_rng(4)
     st, x = slew(120, rng, jitter_ns=300_000)
     for applied in (False, True):
         p = RealtimePredictor(cfg, apply_compensation=applied)
-        outs = push_all(p, st, x)
+        outs = push_all(p, st, x, now_offset=-2 * MS)
         preds = [q for o in outs for q in o.predictions]
         cmd = np.array([c.compensated for o in outs for c in o.corrections]) if applied \
             else x
+        st, x = st[:len(preds)], x[:len(preds)]
+        assert [q.stamp_ns for q in preds] == st.tolist() and cmd.size == st.size
         t = (st - st[0]) * 1e-9
         sim = Simulator(cfg, theta1=float(cmd[0]))
         traj = sim.run(SampledProfile(t, cmd), t[-1], record_every=1)
