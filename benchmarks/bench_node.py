@@ -240,7 +240,7 @@ def stamped_main(args: argparse.Namespace) -> int:
             stderr=subprocess.PIPE, text=True)
     rclpy.init()
     probe = rclpy.create_node('bench_probe')
-    reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     pub_ref = probe.create_publisher(JointState, '/stamped/worm_angle_reference', reliable)
     pub_cmd = probe.create_publisher(Float64, '/float64/worm_angle_command', QoSProfile(depth=10))
     n_max = int((args.duration + args.warmup + 130.0) * 1000)
@@ -263,7 +263,7 @@ def stamped_main(args: argparse.Namespace) -> int:
         return cb
 
     probe.create_subscription(JointState, '/stamped/worm_gear_sim/compensated_command', on_cc,
-                              QoSProfile(depth=100))
+                              QoSProfile(depth=1000))
     probe.create_subscription(JointState, '/stamped/joint_states', counter('js_stamped'),
                               QoSProfile(depth=100))
     probe.create_subscription(JointState, '/float64/joint_states', counter('js_float64'),
