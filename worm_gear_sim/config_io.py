@@ -113,14 +113,12 @@ def params_document(cfg: Config) -> dict[str, Any]:
     """The fully resolved parameters: every config section plus a ``derived`` block
     (inertias, stiffnesses, lead per radian, ratio, mesh calibration, linear modes)."""
     from .modal import modes
-    from .model import P_GEAR_X0, P_WORM_X0, pack_parameters
+    from .model import contact_origins_deg
     doc: dict[str, Any] = {'format': PARAMS_FORMAT}
     doc.update(cfg.to_nested_dict())
     d = dataclasses.asdict(derive(cfg))
     d['output_per_input'] = derive(cfg).output_per_input
-    p = pack_parameters(cfg)
-    d['worm_contact_origin_deg'] = float(p[P_WORM_X0])
-    d['gear_contact_origin_deg'] = float(p[P_GEAR_X0])
+    d['worm_contact_origin_deg'], d['gear_contact_origin_deg'] = contact_origins_deg(cfg)
     try:
         d['natural_frequencies_hz'] = [float(f) for f in modes(cfg).undamped_hz]
     except Exception:  # noqa: BLE001 - informative only
