@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Soak benchmark: the node as a process at 1 kHz for a long time (issue 10).
+"""Soak benchmark: the node as a process at 1 kHz for a long time.
 
 Starts ``python -m worm_gear_sim.node --ros-args --params-file config/worm_gear_sim.yaml``
 as a child process and drives it from this process at ``--rate`` (1 kHz): a radar slew

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Property-based tests (issue 10): random command streams and random parameter sets inside
+"""Property-based tests: random command streams and random parameter sets inside
 the declared ranges give either a clear error naming the cause or a finite state; never NaN,
 never a raw numpy/math error, never a hang.
 

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Issue 10.8: long offline runs are refused up front when they would not fit in memory,
+"""Long offline runs are refused up front when they would not fit in memory,
 and stream in chunks with bounded memory (Simulator.iter_run, simulate_to_csv)."""
 
 import tracemalloc

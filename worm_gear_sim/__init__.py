@@ -2,7 +2,8 @@
 # Licensed under the Apache License, Version 2.0
 """worm_gear_sim: nonlinear dynamics of a worm and worm-gear drive (Chung & Shaw 2007).
 
-The computational core (this package minus ``ros/``) never imports rclpy.
+The computational core (this package minus ``ros/``) never imports rclpy; the layout and
+its import rules: docs/architecture.md.
 
     >>> from worm_gear_sim import load_config, simulate
     >>> traj = simulate(load_config())          # the paper's 18-step move, 0.5 s
@@ -31,6 +32,9 @@ _EXPORTS: dict[str, str] = {
     'make_profile': 'profiles',
     'SimState': 'simulation', 'SimulationError': 'simulation', 'Simulator': 'simulation',
     'Trajectory': 'simulation', 'simulate': 'simulation',
+    'Compensator': 'compensation', 'feedforward_series': 'compensation',
+    'RealtimePredictor': 'realtime',
+    'resolve_config': 'config_io', 'params_document': 'config_io',
 }
 
 __all__ = [
@@ -38,10 +42,13 @@ __all__ = [
     'Profile', 'StepProfile', 'RampProfile', 'TrapezoidalProfile', 'SCurveProfile',
     'SampledProfile', 'make_profile', 'Simulator', 'Trajectory', 'SimState',
     'SimulationError', 'simulate', 'modes', 'ModalResult', 'static_equilibrium',
-    'damping_matrix', '__version__',
+    'damping_matrix', 'Compensator', 'feedforward_series', 'RealtimePredictor',
+    'resolve_config', 'params_document', '__version__',
 ]
 
 if TYPE_CHECKING:  # static analysers see the eager imports
+    from .compensation import Compensator, feedforward_series
+    from .config_io import params_document, resolve_config
     from .modal import ModalResult, damping_matrix, modes, static_equilibrium
     from .params import Config, ConfigError, Derived, default_config, derive, load_config
     from .profiles import (
@@ -53,6 +60,7 @@ if TYPE_CHECKING:  # static analysers see the eager imports
         TrapezoidalProfile,
         make_profile,
     )
+    from .realtime import RealtimePredictor
     from .simulation import SimState, SimulationError, Simulator, Trajectory, simulate
 
 
