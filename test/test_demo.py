@@ -12,7 +12,6 @@ import math
 import os
 import re
 import select
-import signal
 import subprocess
 import sys
 import time
@@ -20,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import start_logged, stop_and_read
 
 pytest.importorskip('rclpy')
 
@@ -133,24 +133,9 @@ def test_lines_fit_80_columns():
 
 # ---- the demo and the node as processes ----------------------------------------------------
 def _start_node(env: dict[str, str], log_path: Path, *extra: str) -> tuple:
-    log = open(log_path, 'w+')
-    proc = subprocess.Popen([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
-                             '--params-file', str(CONFIG), '--log-level', 'warn', *extra],
-                            cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
-    return proc, log
-
-
-def _stop_node(proc: subprocess.Popen, log) -> tuple[int, str]:
-    proc.send_signal(signal.SIGTERM)
-    try:
-        rc = proc.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        rc = proc.wait()
-    log.seek(0)
-    text = log.read()
-    log.close()
-    return rc, text
+    return start_logged([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
+                         '--params-file', str(CONFIG), '--log-level', 'warn', *extra],
+                        env, log_path)
 
 
 def _demo(node: subprocess.Popen, env: dict[str, str], *args: str,
@@ -176,7 +161,7 @@ def test_demo_float64_one_line_per_move(ros_subprocess_env, tmp_path):
     try:
         demo = _demo(node, ros_subprocess_env, '--interface', 'float64', '--duration', '2')
     finally:
-        node_rc, node_text = _stop_node(node, log)
+        node_rc, node_text = stop_and_read(node, log)
     out = demo.stdout + demo.stderr
     assert demo.returncode == 0, out + node_text
     lines = demo.stdout.splitlines()
@@ -224,7 +209,7 @@ def test_demo_on_a_terminal_is_one_updating_line(ros_subprocess_env, tmp_path):
         rc = demo.wait(timeout=30)
     finally:
         os.close(master)
-        node_rc, node_text = _stop_node(node, log)
+        node_rc, node_text = stop_and_read(node, log)
     text = b''.join(chunks).decode(errors='replace').replace('\r\n', '\n')
     assert rc == 0, text + node_text
     head, sep, rest = text.partition('\r')          # banner, then the status line

@@ -155,6 +155,13 @@ def pack_parameters(cfg: Config) -> np.ndarray:
     return p
 
 
+def contact_origins_deg(cfg: Config) -> tuple[float, float]:
+    """The calibrated origins x0 of the worm and gear contact positions of Eqs. 16-17 [deg]
+    (cycle means equal to the linear tooth stiffnesses; see docs/model-notes.md)."""
+    p = pack_parameters(cfg)
+    return float(p[P_WORM_X0]), float(p[P_GEAR_X0])
+
+
 # ---- Eqs. 16-17: tooth stiffness over the mesh cycle ----------------------------------------
 @njit(cache=True, error_model='numpy')
 def tooth_stiffness(p, theta2, theta3):

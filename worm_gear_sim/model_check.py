@@ -18,6 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ['ResidualMonitor', 'PredictionHistory', 'ModelCheck', 'CheckStatus',
            'MEASURED_JOINTS']
@@ -53,7 +54,7 @@ class ResidualMonitor:
         self.rejected = 0
         self.last_t = -math.inf
 
-    def update(self, t: float, measured: Sequence[float], predicted: Sequence[float]
+    def update(self, t: float, measured: npt.ArrayLike, predicted: npt.ArrayLike
                ) -> np.ndarray:
         m = np.asarray(measured, float)
         p = np.asarray(predicted, float)

@@ -89,6 +89,8 @@ Float64 path (``push_command`` + ``tick``; ``std_msgs/Float64`` ``worm_angle_com
     holds the last command up to the tick (or to the last corrected sample when a preview
     delays the applied compensation) and returns one prediction at that instant.  The
     first tick after the first command starts the simulation at rest at the newest command.
+    A merged sample re-emits its own correction; with a preview, corrections released
+    earlier whose window reached that sample keep the value they were computed with.
     The stream is stale after G without a command (no margin: tick stamps are never late).
     The pipeline serves one input at a time: a valid stamped sample after Float64 commands,
     or a tick with queued commands after stamped samples, restarts it on the other input
@@ -363,6 +365,7 @@ class RealtimePredictor:
         self._chain: list[tuple[int, float]] = []
         self._stale = False
         self._drive_t = -math.inf                # last command time given to the simulator
+        self._t_start = math.nan                 # time of the first sample [s]
         self._held = 0.0                         # command the simulator holds [rad]
         self._held_ref = 0.0                     # reference of that command [rad]
         self._delta = 0.0                        # last correction [rad]
@@ -699,6 +702,7 @@ class RealtimePredictor:
         if self.sim is not None:
             self.sim.reset(self._held, t)
             self._drive_t = t
+        self._t_start = t
         self._started = True
         self._last_ns = ns
         if not self._mode:
@@ -784,6 +788,16 @@ class RealtimePredictor:
         if t < self._drive_t:           # already integrated past it: applies from there
             self.counters['late_for_simulation'] += 1
             t = self._drive_t
+        if t == self._t_start and sim.t == t:
+            # the first sample's own command (e.g. its correction, once a preview allowed
+            # it): the drive has not moved yet, so it starts at rest there
+            try:
+                sim.reset(cmd, t)
+            except ValueError as exc:  # pragma: no cover - cmd is finite
+                self._simulation_failed(exc, t, out)
+            if predict:
+                out.predictions.append(self._prediction(ns, False))
+            return
         self._catch_up(t, out)
         try:
             if sim.interpolation == 'hold':   # the grid point at or after t takes cmd

@@ -403,7 +403,8 @@ class Simulator:
 
     def resync(self, t: float) -> None:
         """Jump the simulated clock to ``t`` without integrating (dropped catch-up time)."""
-        self._t0 = float(t) - self._k * self.dt
+        t = _finite_scalar('resync: t', t, TIME_LIMIT, 's')
+        self._t0 = t - self._k * self.dt
         self._cmd_t = min(self._cmd_t, self.t)
 
     def _segment_value(self, done: int, theta1: float, slope: float,
@@ -427,7 +428,10 @@ class Simulator:
         if status != STATUS_OK:
             what = 'non-finite state or command' if status == STATUS_NONFINITE else \
                 'Newton did not converge at the finest subdivision'
-            raise SimulationError(f'integration stopped at t = {self.t:.9g} s: {what}')
+            from .usability import diagnose
+            hint = diagnose(self.config)
+            raise SimulationError(f'integration stopped at t = {self.t:.9g} s: {what}'
+                                  + (f'; likely cause: {hint}' if hint else ''))
 
     # ---- batch ---------------------------------------------------------------------------
     def run(self, profile: Profile, t_end: float, record_every: int = 1,
