@@ -246,7 +246,7 @@ def _stamped_run(env: dict[str, str], tmp_path: Path, node_args: tuple, demo_arg
         try:
             demo = _demo(node, env, '--interface', 'stamped', *demo_args)
         finally:
-            node_rc, node_text = _stop_node(node, log)
+            node_rc, node_text = stop_and_read(node, log)
         out = demo.stdout + demo.stderr
         assert demo.returncode == 0, out + node_text
         assert node_rc == 0 and 'Traceback' not in node_text, node_text
