@@ -258,7 +258,7 @@ def _stamped_run(env: dict[str, str], tmp_path: Path, node_args: tuple, demo_arg
 
 @pytest.mark.ros
 def test_demo_stamped_with_feedforward_shows_its_benefit(ros_subprocess_env, tmp_path):
-    """The servo bridge of issue 8.6 with the feed-forward applied: the live antenna error
+    """The servo bridge (stamped mode) with the feed-forward applied: the live antenna error
     after each move is a small fraction of the model's without feed-forward (same moves,
     offline), and equals the offline compensated run (the stamped pipeline does not depend
     on arrival times)."""
