@@ -115,7 +115,7 @@ def test_preview_correction_published_when_t_plus_p_arrived(ros_harness):
     stream(h, stamps[:100], values[:100], rng)
     assert h.spin_until(lambda: len(h.compensated) == 100 - 10)
     assert stamp_ns(h.compensated[-1]) == stamps[89]   # stamp 89 ms waits for 99 ms
-    stream(h, stamps[100:], values[100:], rng)     # bursts below the queue depth 100
+    stream(h, stamps[100:], values[100:], rng)     # bursts of <= 30
     assert h.spin_until(lambda: len(h.compensated) == n - 10)
     h.spin_for(0.05)
     assert len(h.compensated) == n - 10                 # the last P still waits
@@ -140,14 +140,14 @@ def test_pause_holds_the_prediction_and_resume_keeps_the_offline_answer(ros_harn
     stream(h, a, values[:150], rng)
     assert h.spin_until(lambda: len(h.compensated) == 145)
     n_js = len(h.joint_states)
-    for k in range(1, 101):                          # 100 ms of /clock, no samples
+    for k in range(1, 181):                          # 180 ms of /clock, no samples
         h.set_clock(int(a[-1] + k * MS))
         h.spin_for(0.003)
     assert h.spin_until(lambda: h.node.rt.stale)
     held = h.joint_states[n_js:]
-    assert len(held) >= 30                          # at publish_rate_hz once stale
+    assert len(held) >= 30          # at publish_rate_hz once stale (G + STALE_MARGIN)
     held_stamps = [stamp_ns(m) for m in held]
-    assert held_stamps == sorted(held_stamps) and held_stamps[-1] <= a[-1] + 100 * MS
+    assert held_stamps == sorted(held_stamps) and held_stamps[-1] <= a[-1] + 180 * MS
     assert held_stamps[0] > a[-1]
     assert len(h.compensated) == 150                 # the preview-delayed ones released
     statuses = {s.name: s for s in h.node.diagnostic_statuses()}

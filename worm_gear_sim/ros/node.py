@@ -10,7 +10,7 @@ pipeline drives :class:`~worm_gear_sim.simulation.Simulator` and the feed-forwar
 
 Interface (SI units, rad; relative, remappable names; docs/node.md):
 
-* ``worm_angle_reference`` (in, sensor_msgs/JointState, reliable, keep last 100): stamped
+* ``worm_angle_reference`` (in, sensor_msgs/JointState, reliable, keep last 1000): stamped
   reference samples, ``header.stamp`` = the instant the sample applies (may be in the
   future: a preview), ``position[0]`` = theta1_ref; ``name[0]``, when given, must be the
   worm input joint (``node.joint_names[0]``).  Event-driven: each sample is processed in
@@ -22,6 +22,12 @@ Interface (SI units, rad; relative, remappable names; docs/node.md):
   while this path is in use (``RealtimePredictor.push_command`` / ``tick``);
 * ``joint_states`` (out, JointState theta1..theta4, rates, shaft torques), stamped with the
   instant it predicts, plus ``~/positioning_error`` and ``~/worm_error``;
+* ``measured_joint_states`` (in, optional, JointState from the drive's encoders, names of
+  ``node.joint_names``, sensor data QoS): the live model check
+  (:class:`~worm_gear_sim.model_check.ModelCheck`) publishes ``~/prediction_residual``
+  (JointState, the measurement's stamp, measured - predicted per measured joint) and a
+  ``model check`` status on /diagnostics that turns WARN when a joint's residual RMS over
+  ``node.residual_window`` exceeds its ``node.residual_warn_rms``;
 * ``/diagnostics``: counters of the pipeline and of this node, stale-stream status;
 * every model parameter is a declared ROS parameter (dotted names of
   :meth:`Config.to_flat_dict`), validated by the core (:meth:`Config.replace`, which proves
@@ -59,8 +65,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from ..command_timing import COMMAND_QUEUE_LENGTH, CommandQueue, StreamClock
+from ..model_check import ModelCheck
 from ..params import NODE_NAME, SECTIONS, Config, ConfigError, config_from_mapping, load_config
-from ..params import _suggest as suggest_name
+from ..params import suggest as suggest_name
 from ..realtime import STALE_PERIODS, Output, Prediction, RealtimePredictor, Reject
 from . import diagnostics as diag
 from . import startup
@@ -82,12 +89,17 @@ __all__ = ['WormGearSimNode', 'LogThrottle', 'main', 'file_defaults', 'make_exec
 
 COMMAND_TOPIC = 'worm_angle_command'
 REFERENCE_TOPIC = 'worm_angle_reference'
-REFERENCE_DEPTH = 100        # every sample matters to the filter: reliable, keep last 100
+REFERENCE_DEPTH = 1000   # every sample matters to the filter: reliable, keep last 1000 (1 s
+#                          at 1 kHz: a stalled executor loses none)
 JOINT_STATES_TOPIC = 'joint_states'
+MEASURED_TOPIC = 'measured_joint_states'
 REJECT_REASONS = tuple(r.value for r in Reject)          # the pipeline's (core) reasons
 NODE_REJECT_REASONS = ('empty_position', 'wrong_joint')  # message-level, checked here
 LOG_THROTTLE_S = 2.0   # at most one log line per cause every 2 s (bursts of bad input)
 WATCH_PERIOD = 0.02    # s: the slow timer that notices a paused stamped stream
+# s: lateness allowed to a stamped sample before the stream is declared stale (held output,
+# rest samples): scheduling stalls of a loaded sender shorter than this change nothing
+STALE_MARGIN = 0.1
 SWAP_POLL_PERIOD = 0.002  # s: polls a parameter set being built in the worker thread
 _NS = 1_000_000_000
 
@@ -149,7 +161,8 @@ class WormGearSimNode(Node):
         self._types = {name: parameter_type(v) for name, v in values.items()}
         cfg = config_from_mapping(values, source='ROS parameters')
         self.config: Config = cfg
-        self.rt = RealtimePredictor(cfg, sim_time=self._clock.ros_time_is_active)
+        self.rt = RealtimePredictor(cfg, sim_time=self._clock.ros_time_is_active,
+                                    stale_margin=STALE_MARGIN)
         self._worm_input_joint = cfg.node.joint_names[0]
 
         self.counters: dict[str, Any] = dict(
@@ -161,6 +174,7 @@ class WormGearSimNode(Node):
         self._window: dict[str, Any] = {}
         self._mode = ''                          # 'stamped' | 'command' once input came
         self._last_mono_ns = 0
+        self._last_watch_ns = 0
         self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
         self._window = self._window_start()
 
@@ -187,6 +201,13 @@ class WormGearSimNode(Node):
         self._sub_cmd = self.create_subscription(
             Float64, COMMAND_TOPIC, self._on_command, qos_profile_sensor_data,
             qos_overriding_options=overrides())
+        self._check = ModelCheck(cfg.node.joint_names[1:], cfg.node.residual_window,
+                                 cfg.node.residual_warn_rms)
+        self._pub_res = self.create_publisher(JointState, '~/prediction_residual', qos_state)
+        self._sub_meas = self.create_subscription(
+            JointState, MEASURED_TOPIC, self._on_measured, qos_profile_sensor_data,
+            qos_overriding_options=overrides())
+        self._res = JointState()
         self._sub_ref = self.create_subscription(
             JointState, REFERENCE_TOPIC, self._on_reference,
             QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
@@ -348,11 +369,17 @@ class WormGearSimNode(Node):
             self._tick_timer.reset()
 
     def _on_watch(self) -> None:
-        """Slow timer of the stamped path: notices a paused stream (held output starts)."""
+        """Slow timer of the stamped path: notices a paused stream (held output starts).
+        After a stall of this node itself (the watch came late) it waits one more period:
+        the samples queued meanwhile must be taken first, or they would be found stale."""
         if self._building is not None:
             self._swap_prepared()
+        now = self._clock.now().nanoseconds          # the timer's own clock
+        last, self._last_watch_ns = self._last_watch_ns, now
+        if now - last > 2 * WATCH_PERIOD * _NS:
+            return
         if self._hold_timer.is_canceled():
-            self._handle(self.rt.hold(self._clock.now().nanoseconds), '', 0)
+            self._handle(self.rt.hold(now), '', 0)
 
     def _on_hold(self) -> None:
         """At node.publish_rate_hz while the stamped stream is stale: the held prediction."""
@@ -426,6 +453,9 @@ class WormGearSimNode(Node):
             self._publish_corrections(out.corrections)
         preds = out.predictions
         if preds:
+            check = self._check
+            for p in preds:
+                check.predicted_ns(p.stamp_ns if stamp_ns is None else stamp_ns, p.theta)
             if self._pub_js.get_subscription_count() or \
                     self._pub_err.get_subscription_count() or \
                     self._pub_worm.get_subscription_count():
@@ -440,6 +470,26 @@ class WormGearSimNode(Node):
                     hold.reset()
             elif not hold.is_canceled():
                 hold.cancel()
+
+    def _on_measured(self, msg: JointState) -> None:
+        """Encoder angles: residual measured - predicted at the message's stamp (the
+        reception time if unstamped) on ~/prediction_residual; the model check rejects and
+        counts bad samples."""
+        st = msg.header.stamp
+        stamp = st.sec * _NS + st.nanosec
+        if stamp == 0:
+            stamp = self._clock.now().nanoseconds
+        try:
+            joints, residual = self._check.measured_message_ns(stamp, msg.name, msg.position)
+        except ValueError as exc:
+            self._warn('measured_rejected', f'rejected {MEASURED_TOPIC}: {exc}')
+            return
+        if self._pub_res.get_subscription_count():
+            r = self._res
+            r.header.stamp.sec, r.header.stamp.nanosec = divmod(stamp, _NS)
+            r.name = joints
+            r.position = residual.tolist()
+            self._pub_res.publish(r)
 
     def _publish_corrections(self, corrections: list) -> None:
         """Stamped path: ~/compensated_command and ~/feedforward for each correction."""
@@ -623,7 +673,14 @@ class WormGearSimNode(Node):
             diag.status(name, 'feedforward', ff_level,
                         'ok' if ff_level == diag.OK else (rt.compensation_error or
                                                           'compensation errors'), ff_vals, hw),
+            self._check_status(name, hw),
         ]
+
+    def _check_status(self, name: str, hw: str) -> diag.DiagnosticStatus:
+        """The live model check (measured_joint_states vs the prediction)."""
+        st = self._check.status_ns(self._clock.now().nanoseconds)
+        level = {'OK': diag.OK, 'WARN': diag.WARN, 'STALE': diag.STALE}[st.level]
+        return diag.status(name, 'model check', level, st.message, st.values, hw)
 
     def publish_diagnostics(self) -> None:
         if self._building is not None:
