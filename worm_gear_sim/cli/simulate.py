@@ -231,8 +231,13 @@ def _simulate_bag(args: argparse.Namespace) -> int:
     say(args, f'input: {rec.describe()}')
     say(args, f'command: {src["command_topic"]} ({src["command_type"]}, time = '
         f'{src["command_stamp"]}), {rec.command_stream()[1].size} samples')
-    recorded = _recorded_stamps(args, names)
+    recorded, early = _recorded_stamps(args, names)
     float64 = src['command_type'].endswith('Float64')
+    if early:
+        say(args, f'warning: {early} recorded {args.joint_states_topic} message(s) precede the '
+            'first recorded command: the bag misses the start of the stream (start recording '
+            'before the servo streams), so the replay, which starts at rest at the first '
+            'recorded sample, cannot equal the live node')
     t0 = time.perf_counter()
     rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time,
                  tick_stamps_ns=recorded if float64 else None,
@@ -285,7 +290,7 @@ def _simulate_bag(args: argparse.Namespace) -> int:
 
 def _recorded_stamps(args: argparse.Namespace, names: tuple) -> Any:
     """Stamps of the live node's joint_states in the bag (its ticks, its held
-    predictions), or None."""
+    predictions) or None, and how many of them precede the first recorded command."""
     import numpy as np
 
     from ..records import RecordError, read_bag
@@ -294,8 +299,9 @@ def _recorded_stamps(args: argparse.Namespace, names: tuple) -> Any:
                         joint_states_topic=args.joint_states_topic, joint_names=names,
                         require_measured=True, min_samples=1)
     except RecordError:
-        return None
-    return live.t0_ns + np.round(live.t * 1e9).astype(np.int64)
+        return None, 0
+    return (live.t0_ns + np.round(live.t * 1e9).astype(np.int64),
+            int(live.source.get('measurements_before_first_command', 0)))
 
 
 def _plot_replay(rep: Any, png: Path) -> Path:
