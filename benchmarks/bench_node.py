@@ -14,7 +14,7 @@ Starts ``python -m worm_gear_sim.node --ros-args --params-file config/worm_gear_
 * command -> JointState latency: from publishing command i to receiving the first
   JointState whose theta1 shows it (both times on this process' monotonic clock).
 
-Targets (issue 3): <= 0.15 core, <= 0.1 % missed ticks over 60 s, latency p99 <= 1.5 ms.
+Targets: <= 0.15 core, <= 0.1 % missed ticks over 60 s, latency p99 <= 1.5 ms.
 ``--breakdown`` adds in-process per-tick costs (no DDS) to show what bounds the CPU figure.
 ``--feedforward`` subscribes to ``~/feedforward`` (so the node computes it) and reports its
 noise: each command is the slew at its publish time (the probe's 1 kHz timer, not

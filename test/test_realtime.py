@@ -256,7 +256,7 @@ def test_bad_samples_are_rejected_counted_and_leave_the_state(value, stamp, now,
 
 
 def test_a_real_jump_is_confirmed_and_resynchronised():
-    """Issue 10.4: a servo that really moves 3 rad is followed after 3 agreeing samples
+    """A servo that really moves 3 rad is followed after 3 agreeing samples
     (counted, one event); a single spike stays rejected."""
     p = RealtimePredictor(Config())
     ns = EPOCH
@@ -282,7 +282,7 @@ def test_a_real_jump_is_confirmed_and_resynchronised():
 
 
 def test_clock_restart_reinitialises():
-    """Issue 10.3: /clock restarts near 0 (use_sim_time, a looping bag): the pipeline
+    """/clock restarts near 0 (use_sim_time, a looping bag): the pipeline
     restarts on the new timeline at once (event, counter) instead of going silent."""
     p = RealtimePredictor(Config())
     t = 1000 * 10**9
@@ -343,7 +343,7 @@ def test_pause_hold_and_resume_keep_the_offline_answer():
 
 
 def test_catch_up_below_the_tick_period_is_a_config_error():
-    """Issue 10.7: node.max_catch_up below the tick period is refused, naming the key."""
+    """node.max_catch_up below the tick period is refused, naming the key."""
     with pytest.raises(ConfigError, match='node.max_catch_up'):
         Config().replace({'node.max_catch_up': 0.0005})
     cfg = Config().replace({'node.max_catch_up': 0.001})
