@@ -30,6 +30,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
     # Only setuptools here, as in the ROS template: pkg_resources-style wrappers check these
     # at `ros2 run`, and apt-installed numpy/scipy carry no pip metadata.  The PyPI ROS wheels

@@ -100,6 +100,10 @@ class RosHarness:
         self.Float64, self.Clock = Float64, Clock
         self.cmd_pub = self.probe.create_publisher(Float64, 'worm_angle_command',
                                                    QoSProfile(depth=100))
+        self.JointState = JointState
+        self.ref_pub = self.probe.create_publisher(JointState, 'worm_angle_reference',
+                                                   QoSProfile(depth=1000))
+        self.compensated: list[Any] = []
         self.clock_pub = self.probe.create_publisher(Clock, '/clock', QoSProfile(depth=10))
         self.joint_states: list[Any] = []
         self.positioning_error: list[float] = []
@@ -115,6 +119,8 @@ class RosHarness:
         self.ff_sub = p.create_subscription(Float64, '/worm_gear_sim/feedforward',
                                             lambda m: self.feedforward.append(m.data), 1000)
         p.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
+        p.create_subscription(JointState, '/worm_gear_sim/compensated_command',
+                              self.compensated.append, 1000)
         self.clock_ns = 0
         assert self.spin_until(lambda: self.cmd_pub.get_subscription_count() > 0
                                and self.node.count_publishers('/clock') > 0), \
@@ -137,9 +143,54 @@ class RosHarness:
     # ---- driving ------------------------------------------------------------------------
     def command(self, value: float, timeout: float = 5.0) -> bool:
         """Publish one command and wait until the node has processed it."""
-        n = self.node.counters['commands_received']
+        c = self.node.rt.counters
+        n = c['commands_received']
         self.cmd_pub.publish(self.Float64(data=float(value)))
-        return self.spin_until(lambda: self.node.counters['commands_received'] > n, timeout)
+        return self.spin_until(lambda: c['commands_received'] > n, timeout)
+
+    def reference_msg(self, stamp_ns: int, value: float | None,
+                      name: str | None = 'worm_input_joint') -> Any:
+        from builtin_interfaces.msg import Time
+        msg = self.JointState()
+        msg.header.stamp = Time(sec=int(stamp_ns // 10**9), nanosec=int(stamp_ns % 10**9))
+        if name is not None:
+            msg.name = [name]
+        if value is not None:
+            msg.position = [float(value)]
+        return msg
+
+    def references_seen(self) -> int:
+        """Stamped messages the node has processed (accepted or rejected)."""
+        return self.node.rt.counters['samples_received'] + sum(
+            v for k, v in self.node.counters.items()
+            if k in ('rejected_empty_position', 'rejected_wrong_joint'))
+
+    def reference(self, stamp_ns: int, value: float | None,
+                  name: str | None = 'worm_input_joint', timeout: float = 5.0) -> bool:
+        """Publish one stamped reference sample and wait until the node has processed it."""
+        n = self.references_seen()
+        self.ref_pub.publish(self.reference_msg(stamp_ns, value, name))
+        return self.spin_until(lambda: self.references_seen() > n, timeout)
+
+    def references(self, samples, timeout: float = 20.0) -> bool:
+        """Publish several (stamp_ns, value) samples at once (a burst), wait for all."""
+        n = self.references_seen()
+        k = 0
+        for ns, v in samples:
+            self.ref_pub.publish(self.reference_msg(ns, v))
+            k += 1
+        return self.spin_until(lambda: self.references_seen() >= n + k, timeout)
+
+    def counters(self) -> dict[str, Any]:
+        """The pipeline's counters merged with the node's own."""
+        return {**self.node.rt.counters, **self.node.counters}
+
+    def set_parameters(self, params: list[Any], timeout: float = 10.0) -> list[Any]:
+        """node.set_parameters, then spin until an accepted set is swapped into the
+        pipeline (it is prepared in a worker thread)."""
+        res = self.node.set_parameters(params)
+        assert self.spin_until(lambda: not self.node.parameters_pending, timeout)
+        return res
 
     def set_clock(self, ns: int) -> None:
         from builtin_interfaces.msg import Time
@@ -159,7 +210,7 @@ class RosHarness:
             return s.sec * 10**9 + s.nanosec == ns and len(self.positioning_error) == n \
                 and len(self.worm_error) == n and \
                 (self.node.compensator is None or self.ff_sub is None or
-                 len(self.feedforward) == n)
+                 len(self.feedforward) >= n)
         return self.spin_until(stamped, timeout)
 
     def wait_clock(self, ns: int, timeout: float = 5.0) -> bool:

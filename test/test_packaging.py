@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import start_logged, stop_and_read
 
 from worm_gear_sim.params import load_config
 
@@ -106,6 +107,27 @@ def test_colcon_install_layout_resolves_like_ros2_run(colcon_install, monkeypatc
     assert not (prefix / 'bin' / EXE).exists()       # setup.cfg puts scripts in lib/<pkg>
 
 
+
+def test_launch_file_installed_with_what_it_names(colcon_install):
+    """share/worm_gear_sim/launch/worm_gear_sim.launch.py is installed and every file and
+    executable it names (test_node_launch.py checks the names against setup.py) is where
+    `ros2 launch` will look for it."""
+    prefix = colcon_install / PKG
+    share = prefix / 'share' / PKG
+    launch = share / 'launch' / 'worm_gear_sim.launch.py'
+    assert launch.is_file()
+    text = launch.read_text()
+    assert text == (ROOT / 'launch' / 'worm_gear_sim.launch.py').read_text()
+    for exe in ('worm_gear_sim_node', 'worm_gear_sim_demo'):
+        assert f"'{exe}'" in text
+        path = prefix / 'lib' / PKG / exe
+        assert path.is_file() and os.access(path, os.X_OK), path
+    for rel in ('config/worm_gear_sim.yaml', 'urdf/worm_gear_drive.urdf'):
+        parts = rel.split('/')
+        assert f"os.path.join('{parts[0]}', '{parts[1]}')" in text, rel
+        assert (share / rel).is_file(), rel
+
+
 @pytest.mark.ros
 def test_installed_executable_publishes_joint_states(colcon_install, ros_dds_context,
                                                      ros_subprocess_env, tmp_path):
@@ -117,9 +139,8 @@ def test_installed_executable_publishes_joint_states(colcon_install, ros_dds_con
     exe = prefix / 'lib' / PKG / EXE
     cfg = prefix / 'share' / PKG / 'config' / 'worm_gear_sim.yaml'
     env = _ros_env(colcon_install, ros_subprocess_env)
-    log = open(tmp_path / 'node.log', 'w+')
-    proc = subprocess.Popen([str(exe), '--ros-args', '--params-file', str(cfg)],
-                            cwd=tmp_path, env=env, stdout=log, stderr=subprocess.STDOUT)
+    proc, log = start_logged([str(exe), '--ros-args', '--params-file', str(cfg)], env,
+                             tmp_path / 'node.log', cwd=tmp_path)
     node = rclpy.create_node('packaging_probe', context=ros_dds_context)
     ex = SingleThreadedExecutor(context=ros_dds_context)
     ex.add_node(node)
@@ -134,16 +155,7 @@ def test_installed_executable_publishes_joint_states(colcon_install, ros_dds_con
     finally:
         ex.shutdown()
         node.destroy_node()
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-        try:
-            rc = proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            rc = proc.wait()
-        log.seek(0)
-        text = log.read()
-        log.close()
+        rc, text = stop_and_read(proc, log, signal.SIGINT)
     assert len(got) >= 5, f'no JointState from the installed executable (rc {rc}):\n{text}'
     assert got[-1].position[0] == pytest.approx(0.1)
     assert all(math.isfinite(x) for x in got[-1].position)
@@ -190,7 +202,9 @@ def _imports(paths: list[Path]) -> set[str]:
                   ('importorskip', 'import_module') and node.args
                   and isinstance(node.args[0], ast.Constant)):
                 names.add(str(node.args[0].value).split('.')[0])
-    return {n for n in names if n not in sys.stdlib_module_names and n != PKG}
+    local = {p.stem for p in (ROOT / 'test').glob('*.py')}   # the tests' own helpers
+    return {n for n in names if n not in sys.stdlib_module_names and n != PKG
+            and n not in local}
 
 
 def _keys(modules: set[str]) -> set[str]:

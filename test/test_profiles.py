@@ -90,3 +90,13 @@ def test_bad_csv_is_a_clear_error(tmp_path, content, words):
     with pytest.raises(ConfigError) as exc:
         Config().replace({'input.profile': 'csv'})
     assert exc.value.key == 'input.csv_path'
+
+
+def test_motion_span_of_sampled_commands():
+    from worm_gear_sim.profiles import motion_span
+    t = np.arange(8) * 0.5
+    assert motion_span(t, np.zeros(8)) is None
+    assert motion_span(t, [0, 0, 1, 2, 2, 2, 2, 2]) == (0.5, 1.5)
+    assert motion_span(t, [0, 1, 0, 0, 0, 0, 0, 0]) == (0.0, 1.0)      # out and back
+    assert motion_span(t, [0, 0, 0, 0, 0, 0, 0, 3]) == (3.0, 3.5)      # last sample moves
+    assert motion_span(t, [0, 1e-9, 0, 0, 0, 5, 5, 5], tol=1e-6) == (2.0, 2.5)

@@ -187,18 +187,22 @@ def test_arrival_order_and_bursts_do_not_matter():
     assert p.counters['rejected_duplicate'] == p.counters['rejected_out_of_order']
 
 
-def test_predictions_equal_the_batch_simulator():
+@pytest.mark.parametrize('preview', [0.0, 0.002])
+def test_predictions_equal_the_batch_simulator(preview):
     """Predictions at each stamp equal Simulator.run of the same samples joined by
-    straight lines (the batch path), compensated or not."""
-    cfg = Config().replace(LOADED)
+    straight lines (the batch path), compensated or not; with a preview the compensated
+    prediction of stamp t comes with the sample for t + P."""
+    cfg = Config().replace({'compensation.preview_time': preview, **LOADED})
     rng = np.random.default_rng(4)
     st, x = slew(120, rng, jitter_ns=300_000)
     for applied in (False, True):
         p = RealtimePredictor(cfg, apply_compensation=applied)
-        outs = push_all(p, st, x)
+        outs = push_all(p, st, x, now_offset=-2 * MS)
         preds = [q for o in outs for q in o.predictions]
         cmd = np.array([c.compensated for o in outs for c in o.corrections]) if applied \
             else x
+        st, x = st[:len(preds)], x[:len(preds)]
+        assert [q.stamp_ns for q in preds] == st.tolist() and cmd.size == st.size
         t = (st - st[0]) * 1e-9
         sim = Simulator(cfg, theta1=float(cmd[0]))
         traj = sim.run(SampledProfile(t, cmd), t[-1], record_every=1)
@@ -252,7 +256,7 @@ def test_bad_samples_are_rejected_counted_and_leave_the_state(value, stamp, now,
 
 
 def test_a_real_jump_is_confirmed_and_resynchronised():
-    """Issue 10.4: a servo that really moves 3 rad is followed after 3 agreeing samples
+    """A servo that really moves 3 rad is followed after 3 agreeing samples
     (counted, one event); a single spike stays rejected."""
     p = RealtimePredictor(Config())
     ns = EPOCH
@@ -278,7 +282,7 @@ def test_a_real_jump_is_confirmed_and_resynchronised():
 
 
 def test_clock_restart_reinitialises():
-    """Issue 10.3: /clock restarts near 0 (use_sim_time, a looping bag): the pipeline
+    """/clock restarts near 0 (use_sim_time, a looping bag): the pipeline
     restarts on the new timeline at once (event, counter) instead of going silent."""
     p = RealtimePredictor(Config())
     t = 1000 * 10**9
@@ -339,7 +343,7 @@ def test_pause_hold_and_resume_keep_the_offline_answer():
 
 
 def test_catch_up_below_the_tick_period_is_a_config_error():
-    """Issue 10.7: node.max_catch_up below the tick period is refused, naming the key."""
+    """node.max_catch_up below the tick period is refused, naming the key."""
     with pytest.raises(ConfigError, match='node.max_catch_up'):
         Config().replace({'node.max_catch_up': 0.0005})
     cfg = Config().replace({'node.max_catch_up': 0.001})
@@ -496,8 +500,14 @@ def test_float64_jump_resync_and_sim_clock_restart():
     for k in range(4, 10):
         p.push_command(k * MS - 500, 3.0 + 1e-3 * k)
         assert p.tick(k * MS).predictions[-1].stamp_ns == k * MS
+    before = p.sim.t
+    assert p.push(10 * MS, math.nan, now_ns=10 * MS).rejected is Reject.NAN
+    assert p.sim.t == before and p.counters['rejected_nan'] == 1    # no switch on bad input
     o = p.push(10 * MS, 3.01, now_ns=10 * MS)
     assert o.accepted and kinds(o) == ['input_changed']
+    assert p.tick(11 * MS).predictions == [] and p.started        # no commands: no switch
+    o = p.push(11 * MS, 3.011, now_ns=11 * MS)
+    assert o.accepted and not kinds(o)
     assert p.counters['rejected_jump'] == 3
 
 
@@ -539,3 +549,89 @@ def test_without_compensation_and_disabled_compensator():
     p = RealtimePredictor(Config().replace({'compensation.enabled': False, **LOADED}))
     outs = [p.push(EPOCH + k * MS, 0.01 * k) for k in range(10)]
     assert all(o.corrections[0].delta == 0.0 for o in outs)
+
+
+_values = st_.one_of(st_.floats(allow_nan=True, allow_infinity=True),
+                     st_.floats(-0.5, 0.5), st_.sampled_from([0.0, 3.0, -3.0, 1e5]))
+_ops = st_.lists(st_.tuples(st_.sampled_from(['push', 'hold', 'command', 'tick']),
+                            st_.one_of(st_.integers(-5 * MS, 5 * MS),  # stamp - now [ns]
+                                       st_.integers(-3 * 10**9, 3 * 10**9)),
+                            st_.one_of(st_.integers(0, 3 * MS),         # clock step [ns]
+                                       st_.integers(-10**10, 10**9)),
+                            _values), min_size=1, max_size=120)
+
+
+@given(ops=_ops, preview=st_.sampled_from([0.0, 0.002]),
+       applied=st_.booleans())
+@settings(max_examples=60, deadline=None)
+def test_any_input_sequence_keeps_the_pipeline_finite_and_counted(ops, preview, applied):
+    """Random mixes of stamped samples (any value, stamps and clocks going anywhere),
+    hold calls, Float64 commands and ticks: never an exception, every output finite, every
+    stamped sample either accepted or rejected with a counted reason."""
+    cfg = Config().replace({'compensation.preview_time': preview})
+    p = RealtimePredictor(cfg, apply_compensation=applied)
+    now = EPOCH
+    stamped = 0
+    for op, offset, step, value in ops:
+        now = max(now + step, 1)
+        if op == 'push':
+            stamped += 1
+            o = p.push(now + offset, value, now_ns=now)
+            assert o.accepted != (o.rejected is not None)
+        elif op == 'hold':
+            o = p.hold(now)
+        elif op == 'command':
+            o = p.push_command(now, value)
+        else:
+            o = p.tick(now)
+        for c in o.corrections:
+            assert math.isfinite(c.delta) and math.isfinite(c.compensated)
+        for q in o.predictions:
+            assert all(map(math.isfinite, (*q.position, *q.velocity, *q.effort,
+                                           q.positioning_error, q.worm_error)))
+    c = p.counters
+    assert c['samples_received'] == stamped
+    assert c['rejected_samples'] == sum(c['rejected_' + r.value] for r in Reject)
+    assert c['samples_accepted'] + c['rejected_samples'] >= stamped
+    assert all(isinstance(v, int) and v >= 0 for v in c.values())
+
+
+@given(seed=st_.integers(0, 2**32 - 1), preview_us=st_.sampled_from([0, 2000]),
+       timing=st_.sampled_from(['clock', 'tick', 'reception', 'stream']))
+@settings(max_examples=20, deadline=None)
+def test_float64_path_equals_the_twin_of_its_samples(seed, preview_us, timing):
+    """The Float64 path: whatever timing turned the commands into samples (0, 1 or 2 per
+    tick), the corrections equal feedforward_series of the (stamp, value) samples it fed
+    (the newest value of a merged stamp); with a preview, merged samples also change
+    corrections released before the merge (the only exception)."""
+    rng = np.random.default_rng(seed)
+    cfg = Config().replace({'compensation.preview_time': preview_us * 1e-6,
+                            'node.command_timing': 'tick' if timing == 'clock' else timing})
+    p = RealtimePredictor(cfg, sim_time=timing == 'clock')
+    n = 120
+    recv = np.sort(np.arange(1, n + 1) * MS + 400_000 + rng.integers(-300_000, 300_000, n))
+    vals = np.cumsum(rng.normal(0, 2e-3, n))
+    p.push_command(0, 0.0)
+    got = {}
+    for o in (p.tick(0),):
+        got.update({c.stamp_ns: (c.theta1_ref, c.delta) for c in o.corrections})
+    i = 0
+    for k in range(1, n + 3):
+        while i < n and recv[i] <= k * MS:
+            assert p.push_command(int(recv[i]), float(vals[i])).accepted
+            i += 1
+        o = p.tick(k * MS)
+        assert not kinds(o)
+        got.update({c.stamp_ns: (c.theta1_ref, c.delta) for c in o.corrections})
+    got.update({c.stamp_ns: (c.theta1_ref, c.delta) for c in p.finish().corrections})
+    stamps = np.array(sorted(got))
+    x = [got[s][0] for s in stamps.tolist()]
+    twin = feedforward_series(cfg, stamps, x)
+    dev = np.abs(np.array([got[s][1] for s in stamps.tolist()]) - twin)
+    assert stamps.size > n // 2
+    if preview_us and p.counters['merged_samples']:
+        # a merge (stream timing: an early command takes the previous sample's time)
+        # changes a value that corrections already released within the preview had used
+        assert timing == 'stream' and np.sum(dev > 1e-9) <= 3 * p.counters['merged_samples']
+    else:
+        assert np.max(dev) <= 1e-9

@@ -225,7 +225,7 @@ def test_bag_command_and_measured(tmp_path, storage, stamped):
 
 
 def test_bag_stamped_reference_raw_stream_and_rejections(tmp_path):
-    # out-of-order arrival, a duplicate stamp, a wrong joint name, an empty position, NaN
+    # out-of-order arrival, a duplicate stamp, wrong joint names, an empty position, NaN
     m = [('/ns/worm_angle_reference', JS, EPOCH + 10, joint_state(EPOCH, [], [0.0])),
          ('/ns/worm_angle_reference', JS, EPOCH + 20, joint_state(EPOCH + 2000, [], [0.2])),
          ('/ns/worm_angle_reference', JS, EPOCH + 30, joint_state(EPOCH + 1000, [], [0.1])),
@@ -235,10 +235,12 @@ def test_bag_stamped_reference_raw_stream_and_rejections(tmp_path):
          ('/ns/worm_angle_reference', JS, EPOCH + 70,
           joint_state(EPOCH + 4000, [JOINTS[0]], [math.nan])),
          ('/ns/worm_angle_reference', JS, EPOCH + 80,
-          joint_state(EPOCH + 5000, ['other', JOINTS[0]], [7.0, 0.3]))]
+          joint_state(EPOCH + 5000, ['other', JOINTS[0]], [7.0, 0.3])),   # name[0] wrong
+         ('/ns/worm_angle_reference', JS, EPOCH + 90,
+          joint_state(EPOCH + 5000, [JOINTS[0], 'other'], [0.3, 7.0]))]
     r = read_bag(make_bag(tmp_path / 'b', 'mcap', m))      # namespaced topic found
     assert r.source['command_topic'] == '/ns/worm_angle_reference'
-    assert r.source['rejected_commands'] == 2 and r.source['non_finite_commands'] == 1
+    assert r.source['rejected_commands'] == 3 and r.source['non_finite_commands'] == 1
     assert r.source['duplicate_command_stamps'] == 1 and r.measured == {}
     # raw stream in arrival order (what a node received), sorted valid samples in t/theta1
     assert list(r.command_stream()[0] - EPOCH) == [0, 2000, 1000, 1000, 4000, 5000]

@@ -156,3 +156,35 @@ def test_simulate_bag_errors(tmp_path, capsys):
     assert status == 2 and 'bag not found' in capsys.readouterr().err
     status = main(['simulate', '--bag', str(tmp_path / 'only_js'), '--csv', 'x.csv'])
     assert status == 2
+
+
+def test_float64_replay_on_recorded_ticks(tmp_path, capsys):
+    """The live node's Float64 path ticks on its wall clock (jittered, a missed tick): the
+    replay ticks at the stamps of its recorded joint_states."""
+    cfg = load_config()
+    stamps, x, rx = servo_stream(seed=7)
+    rng = np.random.default_rng(8)
+    ticks = rx[0] + 1_000_000 * np.arange(1, 90) + rng.integers(-300_000, 300_000, 89)
+    ticks = np.delete(ticks, 30)                      # a missed tick
+    p = RealtimePredictor(cfg)
+    live = []
+    k = 0
+    for v, r in zip(x.tolist(), rx.tolist()):
+        while k < ticks.size and ticks[k] <= r:
+            live += p.tick(int(ticks[k])).predictions
+            k += 1
+        p.push_command(r, v)
+    for tk in ticks[k:].tolist():
+        live += p.tick(int(tk)).predictions
+    bag = record_bag(tmp_path / 'rec64', 'sqlite3', stamps, x, rx, live, stamped=False)
+    rep = replay(cfg, read_bag(bag), tick_stamps_ns=ticks)
+    assert rep.info['ticks'] == 'recorded joint_states stamps'
+    cmp = compare_with_recorded(rep, bag)
+    assert cmp['stamps_compared'] == len(live) and cmp['max_abs_diff'] == 0.0
+    grid = replay(cfg, read_bag(bag))                 # a regular grid instead: not the same
+    assert compare_with_recorded(grid, bag)['stamps_compared'] < len(live)
+    # the command line finds the recorded ticks itself
+    assert main(['simulate', '--bag', str(bag), '-o', str(tmp_path / 'r.csv'), '--no-plot']) == 0
+    out = capsys.readouterr().out
+    assert 'ticks at the recorded joint_states stamps' in out
+    assert '= 0.000e+00 rad' in out

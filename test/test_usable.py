@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Issue 10.1 / 10.10: a parameter set is proven usable before it is accepted (API, config
+"""A parameter set is proven usable before it is accepted (API, config
 files, CLI), and absurd states or commands give a clear ValueError, never a NaN state."""
 
 import math
@@ -151,7 +151,7 @@ def test_cli_names_the_key_in_one_line_exit_2(setting, key, tmp_path):
     assert 'Traceback' not in r.stderr and 'Singular matrix' not in r.stderr
 
 
-# ---- issue 10.10: absurd initial states and commands -------------------------------------
+# ---- absurd initial states and commands ----------------------------------------------------
 @pytest.mark.parametrize('theta1', [1e20, -1e20, float('nan'), float('inf'), 2 * ANGLE_LIMIT])
 def test_absurd_initial_command_is_a_value_error(theta1):
     with pytest.raises(ValueError, match='theta1'):
@@ -220,3 +220,73 @@ def test_advance_to_huge_span_is_refused_up_front():
     assert n == 200
     with pytest.raises(ValueError, match='max_steps'):
         sim.advance_to(1.0, 0.0, max_steps=200)
+
+
+@pytest.mark.parametrize('overrides, words', [
+    # accepted (the 2 ms trial passes) but the paper's move stops mid-run: the error names
+    # the parameter behind it
+    ({'friction.regularization_velocity': 1e-10}, ['friction.regularization_velocity',
+                                                   'near step']),
+    ({'geometry.gear_width': 6e-7}, ['not resolved', 'geometry.gear_width', 'omega dt']),
+])
+def test_integration_failure_names_the_likely_cause(overrides, words):
+    from worm_gear_sim.simulation import SimulationError
+    cfg = Config().replace(overrides)
+    with pytest.raises(SimulationError) as exc:
+        simulate(cfg, t_end=0.03)
+    msg = str(exc.value)
+    assert 'integration stopped at t =' in msg and 'likely cause' in msg
+    for w in words:
+        assert w in msg, (w, msg)
+
+
+# ---- the node (as a user hits it: -p at start-up, the parameter service) -------------------
+@pytest.mark.parametrize('param, key', [
+    ('mesh.worm_fit_b:=0.5', 'mesh.worm_fit_b'),
+    ('mesh.worm_tooth_stiffness_multiplier:=1e-12', 'mesh.worm_tooth_stiffness_multiplier'),
+])
+def test_node_start_up_with_an_unusable_value_is_one_line_exit_2(param, key,
+                                                                  ros_subprocess_env):
+    pytest.importorskip('rclpy')
+    proc = subprocess.run([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
+                           '-p', param], cwd=REPO, env=ros_subprocess_env,
+                          capture_output=True, text=True, timeout=120)
+    text = (proc.stdout + proc.stderr).strip()
+    assert proc.returncode == 2, text
+    assert 'Traceback' not in text and 'Singular matrix' not in text, text
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    assert len(lines) == 1 and key in lines[0], text
+
+
+def test_node_rejects_an_unusable_set_and_keeps_running(ros_harness):
+    """Over the parameter service: rejected with the reason naming the key, the state
+    untouched, and the next commands still integrate (it used to end the node)."""
+    from rclpy.parameter import Parameter
+    h = ros_harness(sim_time=False)
+    assert h.command(0.0)
+    assert h.spin_until(lambda: h.node.counters['ticks'] >= 5)
+    res = h.set_parameters([Parameter('mesh.worm_fit_b', value=0.5)])
+    assert not res[0].successful and 'mesh.worm_fit_b' in res[0].reason, res
+    assert h.node.get_parameter('mesh.worm_fit_b').value == pytest.approx(0.000656069)
+    for k in range(1, 6):
+        assert h.command(0.001 * k)
+    ticks = h.node.counters['ticks']
+    assert h.spin_until(lambda: h.node.counters['ticks'] >= ticks + 5)
+    assert h.node.config.mesh.worm_fit_b == pytest.approx(0.000656069)
+
+
+def test_modes_and_resync_refuse_absurd_inputs():
+    with pytest.raises(ValueError, match='theta1'):
+        modes(Config(), theta1=1e20)          # the mesh phase is meaningless there
+    with pytest.raises(ValueError, match='sliding_rate'):
+        modes(Config(), sliding_rate=float('nan'))
+    sim = Simulator(Config())
+    with pytest.raises(ValueError, match='resync'):
+        sim.resync(float('nan'))
+    assert sim.t == 0.0
+
+
+def test_cli_modes_at_an_absurd_angle_is_one_line():
+    r = _cli('modes', '--theta1', '1e20')
+    assert r.returncode == 2 and 'theta1' in r.stderr and 'Traceback' not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr

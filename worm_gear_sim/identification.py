@@ -49,8 +49,8 @@ from scipy.optimize import least_squares
 
 from .modal import modes
 from .model import pack_parameters, rigid_motion_vector
-from .params import Config, ConfigError
-from .profiles import SampledProfile
+from .params import Config, ConfigError, suggest
+from .profiles import SampledProfile, motion_span
 from .records import Record
 from .simulation import SimulationError, Simulator
 from .studies import dominant_frequency
@@ -122,11 +122,8 @@ def check_record(rec: Any, index: int | None = None) -> None:
 def _motion_times(t: np.ndarray, th1: np.ndarray) -> tuple[float, float]:
     """First and last time at which the command changes (relative tolerance 1e-9 of its range
     or 1e-12 rad)."""
-    tol = max(1e-12, 1e-9 * float(np.ptp(th1)))
-    moving = np.flatnonzero(np.abs(np.diff(th1)) > tol)
-    if moving.size == 0:
-        return float(t[0]), float(t[0])
-    return float(t[moving[0]]), float(t[moving[-1] + 1])
+    span = motion_span(t, th1, tol=max(1e-12, 1e-9 * float(np.ptp(th1))))
+    return (float(t[0]), float(t[0])) if span is None else span
 
 
 def record_from_model(cfg: Config, profile: Any, t_end: float, sample_rate: float = 1e4,
@@ -209,10 +206,7 @@ def fit_parameters(base: Config, keys: Sequence[str],
         m = _KEY_RE.match(key)
         path, idx = (m.group(1), m.group(2)) if m else (key, None)
         if path not in flat:
-            import difflib
-            close = difflib.get_close_matches(path, list(flat), n=1, cutoff=0.6)
-            hint = f' (did you mean {close[0]}?)' if close else ''
-            raise IdentificationError(f'--fit {key}: unknown parameter{hint}')
+            raise IdentificationError(f'--fit {key}: unknown parameter' + suggest(path, flat))
         sec = path.split('.', 1)[0]
         value = flat[path]
         md = meta[path]
@@ -698,14 +692,13 @@ class FitResult:
         return '\n'.join(lines)
 
 
-def _rms(problem: Problem, cfg: Config | None, x: np.ndarray | None = None
-         ) -> tuple[dict[str, float], list[dict[str, Any]]]:
+def _rms(problem: Problem, cfg: Config) -> tuple[dict[str, float], list[dict[str, Any]]]:
     """Pooled and per-record RMS of predicted - measured [rad] per output."""
     pooled: dict[str, list[np.ndarray]] = {o: [] for o in problem.outputs}
     per = []
     for r in problem.records:
         try:
-            pred = predict(cfg if cfg is not None else problem.config(x), r['rec'])
+            pred = predict(cfg, r['rec'])
         except (SimulationError, ValueError):
             pred = None
         row: dict[str, Any] = {'name': r['name']}

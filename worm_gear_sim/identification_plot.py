@@ -36,7 +36,7 @@ def plot_fit(records: Sequence[Any], before: Config, after: Config, path: str | 
     ax = fig.subplots(nrow, ncol, squeeze=False, sharex='col')
     rigid = rigid_motion_vector(pack_parameters(after))
     for c, rec in enumerate(recs):
-        preds = {}
+        preds: dict[str, dict[str, np.ndarray] | None] = {}
         for label, cfg in (('before', before), ('after', after)):
             try:
                 preds[label] = predict(cfg, rec)
@@ -55,11 +55,11 @@ def plot_fit(records: Sequence[Any], before: Config, after: Config, path: str | 
             a.plot(t, meas - ref, color='k', lw=0.8, label='measured')
             for label, style in (('before', dict(color='C3', lw=0.8, ls='--')),
                                  ('after', dict(color='C0', lw=0.9))):
-                p = preds[label]
-                if p is None:
+                pr = preds[label]
+                if pr is None:
                     continue
-                a.plot(t, p[o] - ref, label=f'predicted, {label} the fit', **style)
-                e = p[o] - meas
+                a.plot(t, pr[o] - ref, label=f'predicted, {label} the fit', **style)
+                e = pr[o] - meas
                 rms = float(np.sqrt(np.mean(e ** 2)))
                 b.plot(t, e, label=f'{label}: RMS {rms:.3g} rad', **style)
             a.set_ylabel(f'{o} - theta1 u [rad]', fontsize=8)
@@ -72,7 +72,7 @@ def plot_fit(records: Sequence[Any], before: Config, after: Config, path: str | 
         ax[-1, c].set_xlabel('t [s]')
     if title:
         fig.suptitle(title, fontsize=10)
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(p, dpi=100, format='png')
-    return p
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100, format='png')
+    return out

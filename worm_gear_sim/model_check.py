@@ -18,6 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ['ResidualMonitor', 'PredictionHistory', 'ModelCheck', 'CheckStatus',
            'MEASURED_JOINTS']
@@ -53,7 +54,7 @@ class ResidualMonitor:
         self.rejected = 0
         self.last_t = -math.inf
 
-    def update(self, t: float, measured: Sequence[float], predicted: Sequence[float]
+    def update(self, t: float, measured: npt.ArrayLike, predicted: npt.ArrayLike
                ) -> np.ndarray:
         m = np.asarray(measured, float)
         p = np.asarray(predicted, float)
@@ -201,6 +202,15 @@ class ModelCheck:
         if self._base_ns is None:
             raise self._reject('outside_prediction', 'no prediction yet')
         return self.measured(self._seconds(stamp_ns), positions)
+
+    def measured_message_ns(self, stamp_ns: int, names: Sequence[str],
+                            positions: Sequence[float]) -> tuple[list[str], np.ndarray]:
+        """A JointState's names and positions (equal lengths, else rejected as
+        'malformed'), see :meth:`measured_ns`."""
+        if len(names) != len(positions):
+            raise self._reject('malformed', f'{len(names)} names but {len(positions)} '
+                               'positions')
+        return self.measured_ns(stamp_ns, dict(zip(names, positions)))
 
     def status_ns(self, now_ns: int | None) -> CheckStatus:
         return self.status(None if now_ns is None or self._base_ns is None

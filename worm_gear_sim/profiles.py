@@ -13,7 +13,20 @@ import numpy as np
 from .params import ConfigError, InputProfile
 
 __all__ = ['Profile', 'StepProfile', 'RampProfile', 'TrapezoidalProfile', 'SCurveProfile',
-           'SampledProfile', 'make_profile']
+           'SampledProfile', 'make_profile', 'motion_span']
+
+
+def motion_span(times: np.ndarray, values: np.ndarray,
+                tol: float = 0.0) -> tuple[float, float] | None:
+    """When a sampled command moves: (time of the last sample before its first change, time
+    of the sample that ends its last change); the values are constant before the first and
+    after the second.  A change is a step between samples larger than ``tol``.  None when
+    the command never moves."""
+    moving = np.flatnonzero(np.abs(np.diff(np.asarray(values, float))) > tol)
+    if moving.size == 0:
+        return None
+    t = np.asarray(times, float)
+    return float(t[moving[0]]), float(t[moving[-1] + 1])
 
 
 class Profile:

@@ -89,7 +89,12 @@ Float64 path (``push_command`` + ``tick``; ``std_msgs/Float64`` ``worm_angle_com
     holds the last command up to the tick (or to the last corrected sample when a preview
     delays the applied compensation) and returns one prediction at that instant.  The
     first tick after the first command starts the simulation at rest at the newest command.
+    A merged sample re-emits its own correction; with a preview, corrections released
+    earlier whose window reached that sample keep the value they were computed with.
     The stream is stale after G without a command (no margin: tick stamps are never late).
+    The pipeline serves one input at a time: a valid stamped sample after Float64 commands,
+    or a tick with queued commands after stamped samples, restarts it on the other input
+    (event ``input_changed``); a tick without queued commands leaves a stamped stream alone.
 
 Catch-up
     The simulator never integrates more than ``node.max_catch_up`` seconds for one sample
@@ -316,8 +321,10 @@ class RealtimePredictor:
 
     def prepare(self, config: Config) -> Prepared:
         """Design for ``config`` off the real-time path (compensator design, a trial
-        of the simulator's parameters).  Raises ValueError (ConfigError) if the simulator
-        cannot take it (``integrator.time_step`` changed, non-finite acceleration)."""
+        of the simulator's parameters; it only reads the pipeline, so another thread may
+        run it while samples flow).  Raises ValueError (ConfigError) if the simulator
+        cannot take it (``integrator.time_step`` changed, non-finite acceleration).  Every
+        other method belongs to one thread (the node's executor)."""
         if self.sim is not None:
             trial = copy.copy(self.sim)   # shallow: reconfigure only reads the state
             trial.reconfigure(config)
@@ -358,6 +365,7 @@ class RealtimePredictor:
         self._chain: list[tuple[int, float]] = []
         self._stale = False
         self._drive_t = -math.inf                # last command time given to the simulator
+        self._t_start = math.nan                 # time of the first sample [s]
         self._held = 0.0                         # command the simulator holds [rad]
         self._held_ref = 0.0                     # reference of that command [rad]
         self._delta = 0.0                        # last correction [rad]
@@ -421,9 +429,6 @@ class RealtimePredictor:
         x = float(theta1_ref)
         if now_ns is not None:
             self._check_clock(int(now_ns), out)
-        if self._mode == 'command':
-            self._restart(out, 'input_changed', 'stamped references after Float64 commands: '
-                          'the pipeline restarts on the stamped stream', drop=False)
         reason = self._value_reason(x)
         if reason is None:
             if stamp_ns <= 0:
@@ -432,7 +437,12 @@ class RealtimePredictor:
                 reason = Reject.TOO_OLD
             elif now_ns is not None and stamp_ns > now_ns + self._lead_ns:
                 reason = Reject.TOO_NEW
-            elif self._started and stamp_ns == self._last_ns:
+            elif self._mode == 'command':   # a valid sample: the stamped stream takes over
+                self._restart(out, 'input_changed', 'stamped references after Float64 '
+                              'commands: the pipeline restarts on the stamped stream',
+                              drop=False)
+        if reason is None:
+            if self._started and stamp_ns == self._last_ns:
                 reason = Reject.DUPLICATE
             elif self._started and stamp_ns < self._last_ns:
                 reason = Reject.OUT_OF_ORDER
@@ -544,6 +554,8 @@ class RealtimePredictor:
         now_ns = int(now_ns)
         self._check_clock(now_ns, out)
         if self._mode == 'stamped':
+            if not len(self._queue):
+                return out                   # the stamped stream is in use: nothing to do
             self._restart(out, 'input_changed', 'Float64 commands after stamped '
                           'references: the pipeline restarts on the commands', drop=False)
         c = self.counters
@@ -690,6 +702,7 @@ class RealtimePredictor:
         if self.sim is not None:
             self.sim.reset(self._held, t)
             self._drive_t = t
+        self._t_start = t
         self._started = True
         self._last_ns = ns
         if not self._mode:
@@ -775,6 +788,16 @@ class RealtimePredictor:
         if t < self._drive_t:           # already integrated past it: applies from there
             self.counters['late_for_simulation'] += 1
             t = self._drive_t
+        if t == self._t_start and sim.t == t:
+            # the first sample's own command (e.g. its correction, once a preview allowed
+            # it): the drive has not moved yet, so it starts at rest there
+            try:
+                sim.reset(cmd, t)
+            except ValueError as exc:  # pragma: no cover - cmd is finite
+                self._simulation_failed(exc, t, out)
+            if predict:
+                out.predictions.append(self._prediction(ns, False))
+            return
         self._catch_up(t, out)
         try:
             if sim.interpolation == 'hold':   # the grid point at or after t takes cmd

@@ -30,7 +30,8 @@ import numpy as np
 __all__ = ['Record', 'RecordError', 'read_csv', 'read_bag', 'read_record', 'write_bag',
            'BagStream', 'prediction_streams', 'write_streams', 'bag_topics',
            'ANGLE_UNITS', 'TIME_UNITS', 'DEFAULT_COMMAND_TOPICS',
-           'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE', 'FLOAT64', 'JOINT_STATE']
+           'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE', 'FLOAT64', 'JOINT_STATE',
+           'write_csv_header', 'write_csv_columns']
 
 #: angle units accepted in a CSV header, factor to rad
 ANGLE_UNITS: dict[str, float] = {'rad': 1.0, 'mrad': 1e-3, 'urad': 1e-6, 'µrad': 1e-6,
@@ -116,6 +117,25 @@ class Record:
                  f'; times shifted by -{self.t0_ns * 1e-9:.9g} s' if self.t0_ns else '')
         return (f'{self.name}: {self.t.size} samples over {self.duration:.6g} s, measured: '
                 f'{meas}{start}')
+
+
+def write_csv_header(fh: Any, names: Sequence[str], comment: str = '') -> None:
+    """The head of a numeric CSV: each line of ``comment`` as a ``# `` line, then the column
+    names (with their units, e.g. ``theta4[rad]``) on one line."""
+    fh.write(''.join(f'# {line}\n' for line in comment.splitlines()))
+    fh.write(','.join(names) + '\n')
+
+
+def write_csv_columns(path: str | Path, names: Sequence[str], data: np.ndarray,
+                      fmt: str | Sequence[str] = '%.12g', comment: str = '') -> Path:
+    """Numeric columns as CSV (``data``: one row per sample), with the head of
+    :func:`write_csv_header`; the parent directory is created."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    with open(p, 'w') as fh:
+        write_csv_header(fh, names, comment)
+        np.savetxt(fh, data, delimiter=',', fmt=fmt)
+    return p
 
 
 def iso_time(ns: int) -> str:
@@ -379,7 +399,8 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     Command: ``command_topic`` (default: ``worm_angle_reference``, else
     ``worm_angle_command``), of type std_msgs/Float64 (stamp = the bag's receive time) or
     sensor_msgs/JointState (the stamped reference: stamp = header.stamp, theta1 =
-    the position of ``joint_names[0]``, or position[0] without names).  Measured:
+    position[0]; ``name[0]``, when given, must be ``joint_names[0]``, else the message is
+    rejected and counted, as the node does).  Measured:
     ``joint_states_topic`` (default: ``measured_joint_states``, else ``joint_states``; ''
     reads none),
     sensor_msgs/JointState; theta2..theta4 by ``joint_names[1:4]`` (default
@@ -487,12 +508,11 @@ def _read_commands(reader: Any, topic: str, msgtype: str, worm_joint: str, where
             received.append(int(log_ns))
             continue
         names = list(msg.name)
-        idx = names.index(worm_joint) if worm_joint in names else (0 if not names else -1)
-        if idx < 0 or idx >= len(msg.position):
-            rejected += 1           # wrong joint name or empty position: the node rejects it
+        if len(msg.position) == 0 or (names and names[0] != worm_joint):
+            rejected += 1           # empty position or another joint: the node rejects it
             continue
         stamps.append(_stamp_ns(msg.header))
-        vals.append(float(msg.position[idx]))
+        vals.append(float(msg.position[0]))
         received.append(int(log_ns))
     return (np.array(stamps, dtype=np.int64), np.array(vals, dtype=float), rejected,
             np.array(received, dtype=np.int64))

@@ -30,6 +30,7 @@ from .records import (
     RecordError,
     read_bag,
     write_bag,
+    write_csv_columns,
 )
 
 __all__ = ['Replay', 'replay', 'compare_with_recorded', 'REPLAY_CSV_COLUMNS']
@@ -37,6 +38,8 @@ __all__ = ['Replay', 'replay', 'compare_with_recorded', 'REPLAY_CSV_COLUMNS']
 #: receive time and stamp further apart than this (median): the stamps are on another
 #: clock (sim time, a servo's clock), so the pipeline's stamp window is not applied
 CLOCK_AGREEMENT_NS = 1_000_000_000
+#: how much earlier than the node the recorder may have received a sample
+RECEIVE_SKEW_NS = 1_000_000
 
 REPLAY_CSV_COLUMNS = (
     ('t', 's'), ('theta1', 'rad'), ('theta2', 'rad'), ('theta3', 'rad'), ('theta4', 'rad'),
@@ -100,45 +103,42 @@ class Replay:
         significant digits) and, with corrections, ``<stem>_feedforward.csv`` (t,
         theta1_ref, delta, compensated)."""
         p = Path(path)
-        comment = f'# worm_gear_sim replay of {self.record.source.get("path", "")}\n' + \
-            f'# t0_ns: {self.t0_ns} (t = 0 on the recording\'s clock)\n' + \
-            ''.join(f'# {ln}\n' for ln in header_comment.splitlines())
+        comment = (f'worm_gear_sim replay of {self.record.source.get("path", "")}\n'
+                   f't0_ns: {self.t0_ns} (t = 0 on the recording\'s clock)\n' + header_comment)
         data = np.column_stack([self.t, self.position, self.velocity, self.effort,
                                 self.positioning_error, self.worm_error,
                                 self.held.astype(float)])
-        _write(p, comment, [f'{n} [{u}]' for n, u in REPLAY_CSV_COLUMNS], data,
-               ['%.9f'] + [f'%.{digits}g'] * 14 + ['%d'])
+        write_csv_columns(p, [f'{n} [{u}]' for n, u in REPLAY_CSV_COLUMNS], data,
+                          ['%.9f'] + [f'%.{digits}g'] * 14 + ['%d'], comment)
         files = [p]
         if self.correction_stamps_ns.size:
             q = p.with_name(p.stem + '_feedforward' + p.suffix)
             tc = (self.correction_stamps_ns - self.t0_ns) * 1e-9
-            _write(q, comment, ['t [s]', 'theta1_ref [rad]', 'delta [rad]',
-                                'compensated [rad]'],
-                   np.column_stack([tc, self.theta1_ref, self.delta, self.compensated]),
-                   ['%.9f'] + [f'%.{digits}g'] * 3)
+            write_csv_columns(q, ['t [s]', 'theta1_ref [rad]', 'delta [rad]',
+                                  'compensated [rad]'],
+                              np.column_stack([tc, self.theta1_ref, self.delta,
+                                               self.compensated]),
+                              ['%.9f'] + [f'%.{digits}g'] * 3, comment)
             files.append(q)
         return files
 
 
-def _write(path: Path, comment: str, names: list[str], data: np.ndarray,
-           fmt: list[str]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, 'w') as fh:
-        fh.write(comment)
-        fh.write(','.join(names) + '\n')
-        np.savetxt(fh, data, delimiter=',', fmt=fmt)
-
 
 def replay(config: Config, record: Record, *, compensate: bool = True,
-           end_time: float | None = None, use_receive_clock: bool | None = None) -> Replay:
+           end_time: float | None = None, use_receive_clock: bool | None = None,
+           tick_stamps_ns: np.ndarray | None = None,
+           hold_stamps_ns: np.ndarray | None = None) -> Replay:
     """Feed ``record``'s command stream to a :class:`RealtimePredictor` as the node would.
 
     Stamped references: ``push(stamp, value, now_ns=receive time)`` in arrival order (the
     stamp window is skipped when the receive times are on another clock, or with
-    ``use_receive_clock=False``), the node's slow timer emulated by ``hold`` at
-    ``node.publish_rate_hz`` on the receive clock (it acts only when the stream pauses),
+    ``use_receive_clock=False``), ``hold`` (the node's timer; it acts only when the stream
+    pauses) at ``hold_stamps_ns`` (the stamps of the node's recorded held predictions:
+    when its timer fired) or else every 1 / ``node.publish_rate_hz`` on the receive clock,
     ``finish`` at the end.  Float64 commands: ``push_command(receive time, value)`` and
-    ``tick`` every 1 / ``node.publish_rate_hz`` from the first command.  ``end_time`` [s
+    ``tick`` every 1 / ``node.publish_rate_hz`` from the first command, or at
+    ``tick_stamps_ns`` (the stamps of the live node's recorded joint_states: its ticks on
+    the recording's clock).  ``end_time`` [s
     after the first command]: stop feeding samples stamped later, or keep the held
     prediction going up to it after the last one (the stream paused)."""
     from .realtime import RealtimePredictor
@@ -172,41 +172,72 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
             if ok.any() else False
         use_now = same if use_receive_clock is None else bool(use_receive_clock)
         info['stamp_window'] = use_now
-        next_hold = int(receive[0]) + period if use_now else None
+        holds: list[int] = []
+        skew = 0
+        if hold_stamps_ns is not None:
+            # a recorded held prediction proves the stream was still stale in the node: it
+            # came before the node took the next sample, even if the recorder received
+            # that sample a little earlier (two subscribers, one executor)
+            skew = RECEIVE_SKEW_NS
+            holds = np.unique(np.asarray(hold_stamps_ns, dtype=np.int64)).tolist()
+            info['holds'] = f'{len(holds)} given instants'
+        elif use_now:
+            holds = list(range(int(receive[0]) + period, int(receive.max()) + 1, period))
+            info['holds'] = f'every {period} ns on the receive clock'
+        else:
+            info['holds'] = 'none (stamps and receive times on different clocks)'
+        k = 0
         last_rx = int(receive[0])
         for s, x, rx in zip(stamps.tolist(), values.tolist(), receive.tolist()):
             if stop_ns is not None and s > stop_ns:
                 continue
-            if next_hold is not None:
-                while next_hold <= rx:
-                    collect(pred.hold(next_hold))
-                    next_hold += period
+            while k < len(holds) and holds[k] <= rx + skew:
+                collect(pred.hold(holds[k]))
+                k += 1
             collect(pred.push(s, x, now_ns=rx if use_now else None))
             last_rx = max(last_rx, rx)
-        if stop_ns is not None and pred.started:
-            # the stream paused after its last sample: the node's timer keeps publishing
-            # the held prediction, stamped with its clock (the receive clock when it
-            # agrees with the stamps)
-            offset = last_rx - pred.last_stamp_ns if use_now else 0
-            h = pred.last_stamp_ns + period
-            while h <= stop_ns:
-                collect(pred.hold(h + offset))
+        # after the last sample: the node's timer keeps publishing the held prediction,
+        # stamped with its clock (the receive clock when it agrees with the stamps)
+        offset = last_rx - pred.last_stamp_ns if use_now else 0
+        until = None if stop_ns is None else stop_ns + offset
+        for h in holds[k:]:
+            if until is None or h <= until:
+                collect(pred.hold(h))
+        if until is not None and pred.started:
+            h = max(pred.last_stamp_ns + offset, holds[-1] if holds else 0) + period
+            while h <= until:
+                collect(pred.hold(h))
                 h += period
         collect(pred.finish())
     else:
         info['input'] = 'float64'
         end = int(receive.max()) + period if stop_ns is None else stop_ns
-        tick = int(receive[0]) + period
+        if tick_stamps_ns is not None and len(tick_stamps_ns):
+            ticks = np.unique(np.asarray(tick_stamps_ns, dtype=np.int64)).tolist()
+            info['ticks'] = 'recorded joint_states stamps'
+            end = max(end, ticks[-1]) if stop_ns is None else end
+        else:
+            ticks = []
+            info['ticks'] = f'every {period} ns from the first command'
+        k = 0
+
+        def next_tick(after: int) -> int:
+            return ticks[k] if k < len(ticks) else (
+                max(after, ticks[-1] if ticks else int(receive[0])) + period)
+
+        tick = next_tick(int(receive[0]))
         for x, rx in zip(values.tolist(), receive.tolist()):
             if stop_ns is not None and rx > stop_ns:
                 break
             while tick <= rx:
                 collect(pred.tick(tick))
-                tick += period
+                k += 1
+                tick = next_tick(tick)
             collect(pred.push_command(rx, x))
         while tick <= end:
             collect(pred.tick(tick))
-            tick += period
+            k += 1
+            tick = next_tick(tick)
     if not preds:
         raise RecordError(f'{record.name}: the pipeline accepted no command sample '
                           f'({_rejections(pred.counters)})')

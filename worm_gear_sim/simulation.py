@@ -51,15 +51,16 @@ from .model import (
     AUX_WN,
     N_AUX,
     P_FRIC_SET_VALUED,
-    P_RIGID3,
     energy_series,
     generalized_forces,
     mechanical_energy,
     mesh_forces_mu,
     pack_parameters,
+    rigid_motion_vector,
 )
 from .params import ANGLE_LIMIT, Config, check_usable, derive
 from .profiles import Profile, make_profile
+from .records import write_csv_header
 
 __all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate',
            'simulate_to_csv', 'TrajectoryCsvWriter', 'csv_bytes_estimate', 'ring_down']
@@ -179,12 +180,9 @@ class TrajectoryCsvWriter:
                      'mu': '1', 'sliding_velocity': 'm/s', 'worm_tooth_stiffness': 'N/m',
                      'gear_tooth_stiffness': 'N/m', 'mesh_deflection': 'm'}
             names = [f'{k}[{_csv_unit(k, units)}]' for k in cols]
-            comment = f'# worm_gear_sim; profile: {traj.profile}\n'
-            if self.header_comment:
-                comment += ''.join(f'# {line}\n' for line in self.header_comment.splitlines())
             self._fh = open(self.path, 'w')
-            self._fh.write(comment)
-            self._fh.write(','.join(names) + '\n')
+            write_csv_header(self._fh, names, f'worm_gear_sim; profile: {traj.profile}\n'
+                             + self.header_comment)
         data = np.column_stack(list(cols.values()))
         np.savetxt(self._fh, data, delimiter=',', fmt=CSV_FORMAT[:1] + CSV_FORMAT[1:] *
                    (data.shape[1] - 1))
@@ -433,7 +431,8 @@ class Simulator:
 
     def resync(self, t: float) -> None:
         """Jump the simulated clock to ``t`` without integrating (dropped catch-up time)."""
-        self._t0 = float(t) - self._k * self.dt
+        t = _finite_scalar('resync: t', t, TIME_LIMIT, 's')
+        self._t0 = t - self._k * self.dt
         self._cmd_t = min(self._cmd_t, self.t)
 
     def _segment_value(self, done: int, theta1: float, slope: float,
@@ -457,7 +456,10 @@ class Simulator:
         if status != STATUS_OK:
             what = 'non-finite state or command' if status == STATUS_NONFINITE else \
                 'Newton did not converge at the finest subdivision'
-            raise SimulationError(f'integration stopped at t = {self.t:.9g} s: {what}')
+            from .usability import diagnose
+            hint = diagnose(self.config)
+            raise SimulationError(f'integration stopped at t = {self.t:.9g} s: {what}'
+                                  + (f'; likely cause: {hint}' if hint else ''))
 
     # ---- batch ---------------------------------------------------------------------------
     def run(self, profile: Profile, t_end: float, record_every: int = 1,
@@ -493,7 +495,8 @@ class Simulator:
         self._cmd_t, self._cmd_value = self.t, self._theta1
         return Trajectory(t=t_rec[:row], theta1=th_rec[:row], theta1_dot=td_rec[:row],
                           theta=u_rec[:row], omega=v_rec[:row], alpha=a_rec[:row],
-                          aux=aux_rec[:row], output_per_input=float(self.p[P_RIGID3]),
+                          aux=aux_rec[:row],
+                          output_per_input=float(rigid_motion_vector(self.p)[2]),
                           profile=profile.describe(), stats=self.stats)
 
     def iter_run(self, profile: Profile, t_end: float, record_every: int = 1,
@@ -504,7 +507,7 @@ class Simulator:
         bit.  Stopping the iteration early leaves the simulator at the last chunk's end."""
         n_total, stride = self._plan(t_end, record_every)
         first = True
-        desc, ratio = profile.describe(), float(self.p[P_RIGID3])
+        desc, ratio = profile.describe(), float(rigid_motion_vector(self.p)[2])
 
         def make(rows: int) -> tuple[np.ndarray, ...]:
             return (np.empty(rows), np.empty(rows), np.empty(rows), np.empty((rows, 3)),

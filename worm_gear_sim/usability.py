@@ -26,7 +26,7 @@ written as rules on the derived quantities, each naming the parameters that set 
    modes alone are allowed: the average-acceleration step is unconditionally stable, and
    the paper's shear-modulus study runs at omega dt = 5.4.
 
-Cost: see :func:`check_usable` (measured in ``benchmarks/bench_soak.py --usable``); it is pure,
+Cost: ``python benchmarks/bench_usable.py`` (about a millisecond per new set); it is pure,
 allocation-light and thread-safe, so the node's parameter bridge can run it off the real-time
 path.
 """
@@ -34,13 +34,14 @@ path.
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Iterable, Sequence
 
 import numpy as np
 
 from .params import ANGLE_LIMIT, Config, ConfigError
 
-__all__ = ['check_usable', 'SPRING_RATIO_MIN', 'OMEGA_DT_MAX', 'TRIAL_TIME']
+__all__ = ['check_usable', 'diagnose', 'SPRING_RATIO_MIN', 'OMEGA_DT_MAX', 'TRIAL_TIME']
 
 #: Two springs on one body: the smaller must be at least this share of the larger (it keeps
 #: 7 significant digits in their sum).
@@ -92,13 +93,15 @@ def check_usable(cfg: Config, changed: Iterable[str] | None = None) -> None:
     except (ArithmeticError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
         raise _blame(cfg, keys, (), f'not computable ({type(exc).__name__}: {exc})') \
             from None
-    if len(_USABLE) >= _CACHE_SIZE:
-        _USABLE.pop(next(iter(_USABLE)), None)
-    _USABLE[cfg] = True
+    with _LOCK:                             # the node's worker thread and its executor
+        if len(_USABLE) >= _CACHE_SIZE:
+            _USABLE.pop(next(iter(_USABLE)), None)
+        _USABLE[cfg] = True
 
 
 _CACHE_SIZE = 512
 _USABLE: dict[Config, bool] = {}
+_LOCK = threading.Lock()
 
 
 def _differs_from_defaults(cfg: Config) -> tuple[str, ...]:
@@ -231,21 +234,54 @@ def _check(cfg: Config, changed: Sequence[str]) -> None:
         raise _trial_failure(cfg, changed, m, str(exc)) from None
 
 
+def _unresolved_mode(cfg: Config, m) -> tuple[str, tuple[str, ...]] | None:
+    """(text, inertia keys) when the highest mode is beyond the step's Nyquist limit."""
+    dt = cfg.integrator.time_step
+    i = int(np.argmax(m.undamped_hz))
+    wdt = 2.0 * math.pi * float(m.undamped_hz[i]) * dt
+    if wdt <= OMEGA_DT_MAX:
+        return None
+    body = int(np.argmax(np.abs(m.shapes[:, i])))
+    names = ('worm', 'gear', 'antenna')
+    return (f'the highest mode ({m.undamped_hz[i]:.4g} Hz, mostly the {names[body]}) is not '
+            f'resolved by integrator.time_step = {dt:g} s (omega dt = {wdt:.3g} > pi); reduce '
+            f'the time step below {OMEGA_DT_MAX / (2 * math.pi * m.undamped_hz[i]):.3g} s or '
+            f'check the {names[body]} inertia', _INERTIA[body])
+
+
 def _trial_failure(cfg: Config, changed: Sequence[str], m, what: str) -> ConfigError:
     """The trial move failed: name the unresolved mode if there is one (the usual cause:
     a tiny inertia or a huge stiffness puts a mode far above the step's Nyquist limit, where
     the implicit step exists but Newton cannot follow the nonlinear mesh), else the keys."""
     why = f'a {TRIAL_TIME * 1e3:g} ms trial move of {TRIAL_ANGLE:g} rad fails ({what})'
-    dt = cfg.integrator.time_step
-    i = int(np.argmax(m.undamped_hz))
-    wdt = 2.0 * math.pi * float(m.undamped_hz[i]) * dt
-    if wdt > OMEGA_DT_MAX:
-        body = int(np.argmax(np.abs(m.shapes[:, i])))
-        names = ('worm', 'gear', 'antenna')
-        return _blame(cfg, changed, ('integrator.time_step',) + _INERTIA[body],
-                      f'{why}: the highest mode ({m.undamped_hz[i]:.4g} Hz, mostly the '
-                      f'{names[body]}) is not resolved by integrator.time_step = {dt:g} s '
-                      f'(omega dt = {wdt:.3g} > pi); reduce the time step below '
-                      f'{OMEGA_DT_MAX / (2 * math.pi * m.undamped_hz[i]):.3g} s or check '
-                      f'the {names[body]} inertia')
+    hit = _unresolved_mode(cfg, m)
+    if hit:
+        return _blame(cfg, changed, ('integrator.time_step',) + hit[1], f'{why}: {hit[0]}')
     return _blame(cfg, changed, (), why)
+
+
+def diagnose(cfg: Config) -> str:
+    """Likely cause of an integration failure with a usable ``cfg``, as text naming the
+    parameters ('' if none is known): an unresolved mode, a friction regularisation far
+    below the sliding-speed change of one substep, the keys that differ from the defaults.
+    Used in the message of :class:`~worm_gear_sim.simulation.SimulationError`."""
+    try:
+        with np.errstate(all='ignore'):
+            from .modal import modes
+            hit = _unresolved_mode(cfg, modes(cfg, include_damping=False))
+    except Exception:  # noqa: BLE001 - a hint only
+        hit = None
+    parts = [hit[0] + f' ({", ".join(hit[1])})'] if hit else []
+    fr, integ = cfg.friction, cfg.integrator
+    # measured on the paper's move at dt = 10 us: runs at v_eps = 1e-8 m/s, stops at 3e-9
+    if fr.model != 'off' and fr.regularization_velocity < 1e-8:
+        parts.append(f'friction.regularization_velocity = {fr.regularization_velocity:g} m/s '
+                     'makes the friction law a near step that Newton cannot follow '
+                     f'even at dt / 2^{integ.max_subdivision_level}; 1e-4 m/s is the default')
+    changed = _differs_from_defaults(cfg)
+    if not parts and changed:
+        flat = cfg.to_flat_dict()
+        parts.append('parameters changed from the defaults: '
+                     + ', '.join(f'{k} = {flat[k]!r}' for k in changed[:6])
+                     + (' ...' if len(changed) > 6 else ''))
+    return '; '.join(parts)

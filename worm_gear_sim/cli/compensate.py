@@ -18,7 +18,8 @@ import numpy as np
 
 from ..compensation import Compensator
 from ..config_io import resolve_config
-from ..profiles import make_profile
+from ..profiles import make_profile, motion_span
+from ..records import write_csv_columns
 from ..studies.compensation_eval import (
     DETUNINGS,
     METRICS,
@@ -103,8 +104,8 @@ def _scenario(args: argparse.Namespace, cfg):
         prof = make_profile(cfg.input)
         times = np.arange(0.0, t_end + 0.5 * period, period)
         x = prof.theta1(times)
-        moving = np.nonzero(np.diff(x))[0]
-        end = float(times[moving[-1] + 1]) if moving.size else 0.0
+        span = motion_span(times, x)
+        end = 0.0 if span is None else span[1]
         rate = np.diff(x) / np.diff(times)
         const = np.zeros(times.size, bool)
         const[1:-1] = (np.abs(np.diff(rate)) <= 1e-9 * (1.0 + np.abs(rate[1:]))) & \
@@ -177,14 +178,8 @@ def write_csv(path: str | Path, off: Any, on: Any, header: str = '') -> Path:
         'theta4_compensated[rad]': on.trajectory.theta[:, 2],
         'error_uncompensated[rad]': off.error, 'error_compensated[rad]': on.error,
     }
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    with open(p, 'w') as fh:
-        fh.write('# worm_gear_sim compensate\n')
-        fh.write(''.join(f'# {line}\n' for line in header.splitlines()))
-        fh.write(','.join(cols) + '\n')
-        np.savetxt(fh, np.column_stack(list(cols.values())), delimiter=',', fmt='%.12g')
-    return p
+    return write_csv_columns(path, list(cols), np.column_stack(list(cols.values())),
+                             comment='worm_gear_sim compensate\n' + header)
 
 
 def plot_runs(off: Any, on: Any, path: str | Path, title: str = '') -> Path:
@@ -205,8 +200,8 @@ def plot_runs(off: Any, on: Any, path: str | Path, title: str = '') -> Path:
         a.grid(alpha=0.3)
     ax[0].set_title(title, fontsize=9)
     ax[0].legend(fontsize=8, loc='upper right')
-    t0 = float(sc.times[np.nonzero(np.diff(sc.theta1_ref))[0][0]]) if np.any(
-        np.diff(sc.theta1_ref)) else 0.0
+    span = motion_span(sc.times, sc.theta1_ref)
+    t0 = 0.0 if span is None else span[0]
     zoom = (max(0.0, t0 - 0.005), min(t[-1], sc.move_end + 0.06))
     ax[1].set_xlim(*zoom)
     ax[1].set_title('zoom on the move (dotted: end of the reference move)', fontsize=9)

@@ -14,6 +14,7 @@ from typing import Any
 from .common import CliError, add_config_options, config_from_args, header, say
 
 DEFAULT_OUTPUT_RATE = 10_000.0   # Hz: resolves the 94.5 Hz and 1.56 kHz modes, ~1/10 the size
+MAX_CSV_GB = 2.0                 # default --max-csv-size [GB]
 
 
 def register(sub: Any) -> None:
@@ -47,6 +48,10 @@ def register(sub: Any) -> None:
                       'every integration step); modes above HZ/2 alias in the CSV')
     rate.add_argument('--record-every', type=int, default=None, metavar='N',
                       help='keep every N-th integration step instead (1 = every step)')
+    p.add_argument('--max-csv-size', type=float, default=MAX_CSV_GB, metavar='GB',
+                   help='refuse runs whose CSV would exceed this size (default: '
+                   '%(default)s GB); the CSV is written in chunks, memory stays bounded '
+                   'whatever the duration (except with --npz)')
     g = p.add_argument_group('bags (--bag)')
     g.add_argument('--command-topic', metavar='TOPIC', help='command topic (default: '
                    'worm_angle_reference, else worm_angle_command)')
@@ -91,6 +96,40 @@ def _stride(args: argparse.Namespace, dt: float) -> tuple[int, str]:
     return n, f'{1 / (n * dt):g} Hz (every {n} steps; --output-rate 0 for every step)'
 
 
+def check_output_size(dt: float, t_end: float, stride: int, out: Path, max_gb: float,
+                      in_memory: bool = False) -> int:
+    """Up-front check of a run's CSV size against ``max_gb``, of its memory when every row
+    is kept (``in_memory``: --npz) and of the free disk space; returns the number of rows.
+    Raises CliError naming the estimate and the ways out."""
+    import shutil
+
+    from ..simulation import ROW_BYTES, RUN_MEMORY_LIMIT, csv_bytes_estimate
+    if not max_gb > 0:
+        raise CliError(f'--max-csv-size must be > 0 GB, got {max_gb:g}')
+    steps = int(math.floor(t_end / dt + 1e-9))
+    rows = steps // stride + 1
+    size = csv_bytes_estimate(rows)
+    ways = 'lower --output-rate, shorten --end-time, or raise --max-csv-size'
+    if size > max_gb * 1e9:
+        raise CliError(f'--end-time {t_end:g} s at dt = {dt:g} s, every {stride} step(s): '
+                       f'{rows:.4g} rows, ~{size / 1e9:.3g} GB of CSV (and ~'
+                       f'{steps * 3e-7 / 60:.3g} min of computation), above --max-csv-size '
+                       f'{max_gb:g} GB: {ways}')
+    if in_memory and rows * ROW_BYTES > RUN_MEMORY_LIMIT:
+        raise CliError(f'--npz keeps every row in memory: {rows:.4g} rows need '
+                       f'{rows * ROW_BYTES / 1e9:.3g} GB, above the in-memory limit '
+                       f'(max_bytes) of {RUN_MEMORY_LIMIT / 1e9:g} GB: drop --npz (the CSV '
+                       'is streamed), lower --output-rate or shorten --end-time')
+    probe = out.parent if str(out.parent) else Path('.')
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    free = shutil.disk_usage(probe).free
+    if size > free:
+        raise CliError(f'{rows:.4g} rows need ~{size / 1e9:.3g} GB of CSV, only '
+                       f'{free / 1e9:.3g} GB free in {probe}: {ways}')
+    return rows
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     if args.bag:
         return _simulate_bag(args)
@@ -125,6 +164,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     else:
         profile = make_profile(cfg.input)
         t_end = cfg.input.end_time
+    rows = check_output_size(cfg.integrator.time_step, t_end, stride, out, args.max_csv_size,
+                             in_memory=bool(args.npz))
     t0 = time.perf_counter()
     out.parent.mkdir(parents=True, exist_ok=True)
     if args.npz:
@@ -156,6 +197,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 f'rings at {m["freq4_hz"]:.2f} Hz')
     except ValueError:
         pass
+    if len(traj.t) < rows:
+        say(args, f'{rows} rows in the CSV; plot and metrics from {len(traj.t)} of them '
+            '(every k-th row)')
     say(args, f'final errors: theta2 - theta1 = {traj.worm_error[-1]:.4e} rad, '
         f'theta4 - theta1 l_w/r_g = {traj.output_error[-1]:.4e} rad')
     say(args, 'wrote ' + ', '.join(str(f) for f in files))
@@ -164,6 +208,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def _simulate_bag(args: argparse.Namespace) -> int:
     """Replay a bag's command stream through the node's pipeline (worm_gear_sim.replay)."""
+    import numpy as np
+
     from ..records import read_bag
     from ..replay import compare_with_recorded, replay
     if args.column:
@@ -185,8 +231,24 @@ def _simulate_bag(args: argparse.Namespace) -> int:
     say(args, f'input: {rec.describe()}')
     say(args, f'command: {src["command_topic"]} ({src["command_type"]}, time = '
         f'{src["command_stamp"]}), {rec.command_stream()[1].size} samples')
+    recorded, early = _recorded_stamps(args, names)
+    float64 = src['command_type'].endswith('Float64')
+    if early:
+        say(args, f'warning: {early} recorded {args.joint_states_topic} message(s) precede the '
+            'first recorded command: the bag misses the start of the stream (start recording '
+            'before the servo streams), so the replay, which starts at rest at the first '
+            'recorded sample, cannot equal the live node')
     t0 = time.perf_counter()
-    rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time)
+    rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time,
+                 tick_stamps_ns=recorded if float64 else None,
+                 hold_stamps_ns=() if recorded is not None and not float64 else None)
+    if recorded is not None and not float64:
+        # the node's held predictions (a paused stream) are the recorded stamps that the
+        # samples alone do not produce: replay again with its timer firing there
+        held = np.setdiff1d(recorded, rep.stamps_ns)
+        if held.size:
+            rep = replay(cfg, rec, compensate=not args.no_feedforward,
+                         end_time=args.end_time, hold_stamps_ns=held)
     wall = time.perf_counter() - t0
     c = rep.counters
     rejected = {k[9:]: v for k, v in c.items()
@@ -196,8 +258,8 @@ def _simulate_bag(args: argparse.Namespace) -> int:
         + (f'; rejected: {", ".join(f"{k} {v}" for k, v in rejected.items())}'
            if rejected else ''))
     if rep.info['input'] == 'float64':
-        say(args, 'note: Float64 commands carry no time; samples at the bag\'s receive time '
-            'and ticks every 1/node.publish_rate_hz: close to, not equal to, the live node')
+        say(args, 'note: Float64 commands carry no time; samples at the bag\'s receive time, '
+            f'ticks at the {rep.info["ticks"]}: close to, not equal to, the live node')
     if rep.info.get('compensation_error'):
         say(args, f'feed-forward unavailable: {rep.info["compensation_error"]}')
     for e in rep.events[:5]:
@@ -224,6 +286,22 @@ def _simulate_bag(args: argparse.Namespace) -> int:
         f'positioning error = {rep.positioning_error[-1]:.4e} rad')
     say(args, 'wrote ' + ', '.join(str(f) for f in files))
     return 0
+
+
+def _recorded_stamps(args: argparse.Namespace, names: tuple) -> Any:
+    """Stamps of the live node's joint_states in the bag (its ticks, its held
+    predictions) or None, and how many of them precede the first recorded command."""
+    import numpy as np
+
+    from ..records import RecordError, read_bag
+    try:
+        live = read_bag(args.bag, command_topic=args.command_topic,
+                        joint_states_topic=args.joint_states_topic, joint_names=names,
+                        require_measured=True, min_samples=1)
+    except RecordError:
+        return None, 0
+    return (live.t0_ns + np.round(live.t * 1e9).astype(np.int64),
+            int(live.source.get('measurements_before_first_command', 0)))
 
 
 def _plot_replay(rep: Any, png: Path) -> Path:

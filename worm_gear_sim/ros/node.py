@@ -2,24 +2,37 @@
 # Licensed under the Apache License, Version 2.0
 """ROS 2 node ``worm_gear_sim``: the worm-gear model running in real time beside a servo.
 
-A thin adapter around the core: every number it publishes comes from
-:class:`~worm_gear_sim.simulation.Simulator`, :func:`~worm_gear_sim.params.derive` and the
-feed-forward :class:`~worm_gear_sim.compensation.Compensator`; there is no physics here.
+An I/O shell around the core's real-time pipeline
+:class:`~worm_gear_sim.realtime.RealtimePredictor`: this module holds only topics, QoS,
+parameters, timers and diagnostics; every number it publishes comes from the core (the
+pipeline drives :class:`~worm_gear_sim.simulation.Simulator` and the feed-forward
+:class:`~worm_gear_sim.compensation.Compensator`).
 
-Interface (SI units, rad; relative, remappable names):
+Interface (SI units, rad; relative, remappable names; docs/node.md):
 
-* subscribes ``worm_angle_command`` (std_msgs/Float64, theta1 [rad]); sensor-data QoS
-  (best effort, keep last 5) by default, overridable by ``qos_overrides.*`` parameters;
-* publishes ``joint_states`` (sensor_msgs/JointState: theta1..theta4, rates, shaft torques),
-  ``~/positioning_error`` (theta4 - theta1 l_w/r_g), ``~/worm_error`` (theta2 - theta1),
-  ``~/feedforward`` (correction to add to theta1) and ``/diagnostics``;
+* ``worm_angle_reference`` (in, sensor_msgs/JointState, reliable, keep last 1000): stamped
+  reference samples, ``header.stamp`` = the instant the sample applies (may be in the
+  future: a preview), ``position[0]`` = theta1_ref; ``name[0]``, when given, must be the
+  worm input joint (``node.joint_names[0]``).  Event-driven: each sample is processed in
+  its callback (``RealtimePredictor.push``); a slow timer only watches for a paused stream.
+* ``~/compensated_command`` (out, JointState, same stamp, theta1_ref + delta) and
+  ``~/feedforward`` (std_msgs/Float64, delta), one per accepted stamped sample;
+* ``worm_angle_command`` (in, std_msgs/Float64): unstamped commands, sampled as
+  ``node.command_timing`` says by a tick timer at ``node.publish_rate_hz``, which runs only
+  while this path is in use (``RealtimePredictor.push_command`` / ``tick``);
+* ``joint_states`` (out, JointState theta1..theta4, rates, shaft torques), stamped with the
+  instant it predicts, plus ``~/positioning_error`` and ``~/worm_error``;
+* ``measured_joint_states`` (in, optional, JointState from the drive's encoders, names of
+  ``node.joint_names``, sensor data QoS): the live model check
+  (:class:`~worm_gear_sim.model_check.ModelCheck`) publishes ``~/prediction_residual``
+  (JointState, the measurement's stamp, measured - predicted per measured joint) and a
+  ``model check`` status on /diagnostics that turns WARN when a joint's residual RMS over
+  ``node.residual_window`` exceeds its ``node.residual_warn_rms``;
+* ``/diagnostics``: counters of the pipeline and of this node, stale-stream status;
 * every model parameter is a declared ROS parameter (dotted names of
-  :meth:`Config.to_flat_dict`), validated at run time by :meth:`Config.replace`.
-
-Each accepted command is a sample of the reference at its reception time (the /clock
-reading with ``use_sim_time``; on the wall clock as ``node.command_timing`` says); each tick
-feeds the samples received since the previous one, in time order, to the compensator and
-the simulator, and holds the last one up to the tick (docs/node.md, "Timing").
+  :meth:`Config.to_flat_dict`), validated by the core (:meth:`Config.replace`, which proves
+  the set usable); the new pipeline is prepared in a worker thread and swapped in on the
+  executor thread.
 
 Run ``worm_gear_sim_node --ros-args --params-file config/worm_gear_sim.yaml`` (or
 ``python -m worm_gear_sim.node ...``); ``--executor single_threaded`` overrides the
@@ -29,32 +42,33 @@ Run ``worm_gear_sim_node --ros-args --params-file config/worm_gear_sim.yaml`` (o
 from __future__ import annotations
 
 import argparse
-import collections
-import copy
+import concurrent.futures
 import gc
 import inspect
-import math
 import sys
 import time
 from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from ..command_timing import COMMAND_QUEUE_LENGTH, CommandQueue, StreamClock
+from ..model_check import ModelCheck
 from ..params import NODE_NAME, SECTIONS, Config, ConfigError, config_from_mapping, load_config
-from ..params import _suggest as suggest_name
-from ..simulation import SimulationError, Simulator
+from ..params import suggest as suggest_name
+from ..realtime import STALE_PERIODS, Output, Prediction, RealtimePredictor, Reject
 from . import diagnostics as diag
 from . import startup
 from .params_bridge import (
@@ -66,30 +80,28 @@ from .params_bridge import (
     to_core_value,
 )
 
-try:  # the node must work (and say so) without the compensator
-    from ..compensation import Compensator
-    COMPENSATION_IMPORT_ERROR: str = ''
-except ImportError as _exc:  # pragma: no cover - depends on the checkout
-    Compensator = None  # type: ignore[assignment,misc]
-    COMPENSATION_IMPORT_ERROR = f'{type(_exc).__name__}: {_exc}'
-
-__all__ = ['WormGearSimNode', 'LogThrottle', 'CommandQueue', 'main', 'file_defaults',
-           'make_executor', 'spin_until_shutdown', 'COMMAND_TOPIC', 'JOINT_STATES_TOPIC',
-           'REJECT_REASONS', 'COMMAND_QUEUE_LENGTH', 'STALE_PERIODS', 'StreamClock']
-
 RCLError = _rclpy_impl.RCLError          # RCLInvalidROSArgsError derives from it
 
+__all__ = ['WormGearSimNode', 'LogThrottle', 'main', 'file_defaults', 'make_executor',
+           'spin_until_shutdown', 'COMMAND_TOPIC', 'REFERENCE_TOPIC', 'REFERENCE_DEPTH',
+           'JOINT_STATES_TOPIC', 'REJECT_REASONS', 'NODE_REJECT_REASONS', 'WATCH_PERIOD',
+           'CommandQueue', 'StreamClock', 'COMMAND_QUEUE_LENGTH', 'STALE_PERIODS']
+
 COMMAND_TOPIC = 'worm_angle_command'
+REFERENCE_TOPIC = 'worm_angle_reference'
+REFERENCE_DEPTH = 1000   # every sample matters to the filter: reliable, keep last 1000 (1 s
+#                          at 1 kHz: a stalled executor loses none)
 JOINT_STATES_TOPIC = 'joint_states'
-REJECT_REASONS = ('nan', 'inf', 'out_of_range', 'jump')
-LOG_THROTTLE_S = 2.0  # at most one log line per cause every 2 s (bursts of bad input)
-COMMAND_QUEUE_LENGTH = 16  # accepted commands kept between two ticks (the oldest dropped)
-STALE_PERIODS = 3.5  # no command for this many tick periods: the reference is taken as resting
-STALE_MAX_INTERVAL = 0.05  # s: sample intervals longer than this are pauses, not a rate
-HOLD_EPS = 0.5e-9  # s: 'hold' steps just after the sample time (stamps are whole ns)
-STREAM_GAIN = 0.02  # steady alpha of the stream clock (a memory of about 50 samples)
-STREAM_WINDOW = 0.35  # periods: a stamp further from its grid slot is an outlier
-STREAM_OUTLIER_RATE = 0.3  # re-lock when the outlier rate (1/8 smoothing) exceeds this
+MEASURED_TOPIC = 'measured_joint_states'
+REJECT_REASONS = tuple(r.value for r in Reject)          # the pipeline's (core) reasons
+NODE_REJECT_REASONS = ('empty_position', 'wrong_joint')  # message-level, checked here
+LOG_THROTTLE_S = 2.0   # at most one log line per cause every 2 s (bursts of bad input)
+WATCH_PERIOD = 0.02    # s: the slow timer that notices a paused stamped stream
+# s: lateness allowed to a stamped sample before the stream is declared stale (held output,
+# rest samples): scheduling stalls of a loaded sender shorter than this change nothing
+STALE_MARGIN = 0.1
+SWAP_POLL_PERIOD = 0.002  # s: polls a parameter set being built in the worker thread
+_NS = 1_000_000_000
 
 
 class LogThrottle:
@@ -113,156 +125,6 @@ class LogThrottle:
         return f'{text} [{held} more like this held back]' if held else text
 
 
-class StreamClock:
-    """The time grid of a steady command stream, recovered from its reception stamps.
-
-    A servo computes its commands on a regular grid; they reach the node's callback after
-    a varying delay (DDS and executor latency: p10 ~100 us, p90 ~280 us on the
-    development VM), which would reach the feed-forward as time jitter of the samples.  An
-    alpha-beta tracker follows the grid's phase and period: each stamp is assigned the
-    nearest grid slot after the previous sample (missed commands skip slots) and its
-    deviation from the slot corrects phase and period, with least-squares gains while it
-    acquires (exact for the first two stamps), then ``gain`` (critically damped).  A
-    stamp further than ``window`` periods from its slot is an outlier and does not
-    correct the tracker: a late one (a delayed callback) is placed on its slot, an early
-    one (commands that queued up behind a stall, or a faster stream) on the previous
-    sample's time, so that it replaces that sample's value (CommandQueue and Compensator
-    merge equal times).  An outlier rate above ``max_outlier_rate`` (exponentially
-    smoothed over ~8 stamps: three outliers in a row, or a new rate or phase) or a pause
-    longer than ``max_period_ns`` re-lock: the stamp is taken as it is,
-    with its interval as the period guess (if shorter than ``max_period_ns``).  The output
-    never decreases while tracking and lags the grid by the mean delay (a constant); a
-    stream at an integer fraction of the rate keeps the period (it skips slots).
-    """
-
-    def __init__(self, period_ns: float, gain: float = STREAM_GAIN,
-                 window: float = STREAM_WINDOW, max_outlier_rate: float = STREAM_OUTLIER_RATE,
-                 max_period_ns: float = 5e7) -> None:
-        if not (0.0 < gain <= 1.0 and 0.0 < window < 0.5 and period_ns > 0.0
-                and 0.0 < max_outlier_rate < 1.0):
-            raise ValueError('StreamClock: need period_ns > 0, 0 < gain <= 1, '
-                             '0 < window < 0.5, 0 < max_outlier_rate < 1')
-        self.gain, self.window = float(gain), float(window)
-        self.max_outlier_rate = float(max_outlier_rate)
-        self.beta = gain * gain / (2.0 - gain)
-        self.period0, self.max_period = float(period_ns), float(max_period_ns)
-        self.relocks = 0
-        self.outliers = 0                     # outliers placed on their slot, in all
-        self.reset()
-
-    def reset(self) -> None:
-        self.period = self.period0            # estimated stream period [ns]
-        self._t: float | None = None          # last output [ns]
-        self._raw: int | None = None          # last reception stamp [ns]
-        self._k = 0                           # stamps since the last (re)lock
-        self._rate = 0.0                      # smoothed outlier rate
-
-    def __call__(self, ns: int) -> int:
-        """The sample time [ns] for a command received at ``ns``."""
-        prev, self._raw = self._raw, ns
-        t = self._t
-        if t is not None and ns - t <= self.max_period:
-            m = max(1, round((ns - t) / self.period))        # grid slots since the last
-            pred = t + m * self.period
-            e = ns - pred
-            if abs(e) <= self.window * self.period:
-                self._rate *= 0.875
-                self._k += 1
-                k = self._k
-                self._t = pred + max(2.0 * (2 * k - 1) / (k * (k + 1)), self.gain) * e
-                self.period += max(6.0 / (k * (k + 1)), self.beta) * e / m
-                return int(round(self._t))
-            self._rate += 0.125 * (1.0 - self._rate)
-            if self._rate <= self.max_outlier_rate:
-                self.outliers += 1
-                if e > 0.0:               # late (a delayed callback): on its slot
-                    self._t = pred
-                # early (a stalled stream catching up, a faster one): on the previous
-                # sample's time, whose value it replaces (CommandQueue / Compensator merge)
-                return int(round(self._t))
-        if t is not None:
-            self.relocks += 1
-        if prev is not None and 0 < ns - prev <= self.max_period:
-            self.period = float(ns - prev)
-        self._t = float(ns)
-        self._k = 1
-        self._rate = 0.0
-        return ns
-
-
-class CommandQueue:
-    """Accepted commands with their reception stamps, waiting for the next tick.
-
-    ``push`` is O(1); at most ``maxlen`` samples are kept (on overflow the OLDEST is
-    dropped and counted in :attr:`dropped`).  :meth:`take` turns them into the samples of
-    one tick: times (ns on the node's time base) strictly increasing in (last tick, tick].
-    """
-
-    def __init__(self, maxlen: int = COMMAND_QUEUE_LENGTH) -> None:
-        self._q: collections.deque = collections.deque(maxlen=maxlen)
-        self.dropped = 0          # lost to overflow
-        self.merged = 0           # stamp not after the previous sample: value replaced it
-        self.restamped = 0        # stamp not after the previous tick: placed later
-
-    def __len__(self) -> int:
-        return len(self._q)
-
-    def push(self, base: str, ns: int, value: float) -> None:
-        if len(self._q) == self._q.maxlen:
-            self.dropped += 1
-        self._q.append((base, ns, value))
-
-    def clear(self) -> int:
-        """Forget the queued samples; returns how many there were."""
-        n = len(self._q)
-        self._q.clear()
-        return n
-
-    def take(self, base: str, last_ns: int, tick_ns: int, restamp: bool = True
-             ) -> list[tuple[int, float]]:
-        """The samples of the tick at ``tick_ns`` (previous tick at ``last_ns``):
-        ``[(ns, value)]`` in reception order with strictly increasing times.
-
-        * a stamp after the tick stays queued for a later tick, and so does every sample
-          received after it;
-        * a stamp not after the previous sample's is merged with it (same time, newest
-          value): never a zero or negative time step;
-        * ``restamp`` (``use_sim_time``): a stamp not after the previous tick (received
-          after that tick but before /clock moved on, or a stamp on another time base)
-          cannot act in the past: the sample takes the next time the node knows, that of
-          the next sample (which supersedes it) or, if none follows, the tick.  Without
-          ``restamp`` such a stamp is kept (smoothed stream times; the caller clamps what
-          the simulator has already integrated).
-        """
-        out: list[tuple[int, float]] = []
-        late: float | None = None
-        q = self._q
-        while q:
-            b, ns, v = q[0]
-            if b != base:
-                ns = last_ns
-            elif ns > tick_ns:
-                break
-            q.popleft()
-            if out:
-                if ns <= out[-1][0]:
-                    out[-1] = (out[-1][0], v)
-                    self.merged += 1
-                else:
-                    out.append((ns, v))
-            elif restamp and ns <= last_ns:
-                self.restamped += 1
-                if late is not None:
-                    self.merged += 1
-                late = v
-            else:
-                if late is not None:
-                    self.merged += 1
-                    late = None
-                out.append((ns, v))
-        if late is not None:
-            out.append((tick_ns, late))
-        return out
 
 
 def file_defaults() -> Config:
@@ -274,13 +136,20 @@ def file_defaults() -> Config:
         return Config()
 
 
+def _timer_signature(fn: Any) -> Any:
+    # The EventsExecutor calls inspect.signature() on every timer callback (to decide on
+    # passing TimerInfo); a ready-made signature makes that O(1) (~20 us a call less).
+    fn.__signature__ = inspect.Signature()
+    return fn
+
+
 class WormGearSimNode(Node):
     """Real-time worm-gear prediction; see the module docstring for the interface.
 
     ``defaults`` sets the declaration defaults (``--params-file`` and ``parameter_overrides``
     still win); other keyword arguments (``context``, ``parameter_overrides``, ``cli_args``,
     ``namespace``) go to :class:`rclpy.node.Node`.  Raises :class:`ConfigError` when the
-    declared values do not form a valid configuration.
+    declared values do not form a usable configuration or name an unknown parameter.
     """
 
     def __init__(self, node_name: str = NODE_NAME, *, defaults: Config | None = None,
@@ -292,64 +161,65 @@ class WormGearSimNode(Node):
         self._types = {name: parameter_type(v) for name, v in values.items()}
         cfg = config_from_mapping(values, source='ROS parameters')
         self.config: Config = cfg
-        self.sim = Simulator(cfg, theta1=0.0, t0=0.0)
-        self._warm_up()
-        self.output_per_input = self.sim.derived.output_per_input
-
-        # --- command input state -----------------------------------------------------------
-        self._cmd: float | None = None           # latest accepted command theta1_ref [rad]
-        self._queue = CommandQueue()             # accepted commands with reception stamps
-        self._stream = StreamClock(1e9 / cfg.node.publish_rate_hz)   # wall-clock stamps
-        self._started = False
-        self._origin_ns = 0                      # clock reading at t = 0 of the simulator
-        self._time_base = ''                     # 'sim' or 'wall' (monotonic)
-        self._last_t = 0.0                       # relative time of the last tick [s]
-        self._last_ns = 0                        # clock reading of the last tick
-        self._last_mono_ns = 0
-        self._ref = 0.0                          # last reference sample fed [rad]
-        self._ref_now = 0.0                      # reference the last correction applies to
-        self._held = 0.0                         # command the simulator holds [rad]
-        self._sample_t = 0.0                     # time of the last reference sample [s]
-        self._sample_dt = 0.0                    # interval between the last two samples [s]
-        self._comp_t = 0.0                       # time of the compensator's last sample [s]
-        self._comp_dirty = False                 # redesigned: re-evaluate without a sample
-        self._delta = 0.0                        # last good feed-forward correction [rad]
-        self._comp_idle = False                  # compensator paused (no consumer)
-        self._pending_config: Config | None = None
+        self.rt = RealtimePredictor(cfg, sim_time=self._clock.ros_time_is_active,
+                                    stale_margin=STALE_MARGIN)
+        self._worm_input_joint = cfg.node.joint_names[0]
 
         self.counters: dict[str, Any] = dict(
-            commands_received=0, commands_used=0, commands_superseded=0, commands_dropped=0,
-            commands_merged=0, commands_restamped=0, max_commands_per_tick=0,
-            rejected_commands=0, **{f'rejected_{r}': 0 for r in REJECT_REASONS},
-            ticks=0, missed_ticks=0, overruns=0, dropped_time=0.0, clock_backwards=0,
-            simulation_errors=0, compensation_errors=0, rejected_parameter_sets=0,
-            accepted_parameter_sets=0, steps=0, max_steps_per_tick=0)
+            **{f'rejected_{r}': 0 for r in NODE_REJECT_REASONS},
+            ticks=0, missed_ticks=0, held_predictions=0, rejected_parameter_sets=0,
+            accepted_parameter_sets=0, parameter_build_errors=0)
         self.last_error = ''
         self._throttle = LogThrottle(LOG_THROTTLE_S)
-        self._window = self._new_window()
+        self._window: dict[str, Any] = {}
+        self._mode = ''                          # 'stamped' | 'command' once input came
+        self._last_mono_ns = 0
+        self._last_watch_ns = 0
+        self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
+        self._window = self._window_start()
 
-        # --- feed-forward --------------------------------------------------------------
-        self.compensator = None
-        self.compensation_error = COMPENSATION_IMPORT_ERROR
-        self._make_compensator(cfg)
+        # --- parameter sets: validated on the parameter service, built in a worker ------
+        self._evaluated: tuple[tuple, str, Config | None] | None = None
+        self._accepted: Config | None = None
+        self._builder = concurrent.futures.ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix='worm_gear_sim_params')
+        self._building: concurrent.futures.Future | None = None
 
         # --- ROS interfaces --------------------------------------------------------------
         qos_state = QoSProfile(depth=10)
-        overrides = QoSOverridingOptions.with_default_policies()
+        overrides = QoSOverridingOptions.with_default_policies
         self._pub_js = self.create_publisher(JointState, JOINT_STATES_TOPIC, qos_state,
-                                             qos_overriding_options=overrides)
+                                             qos_overriding_options=overrides())
         self._pub_err = self.create_publisher(Float64, '~/positioning_error', qos_state)
         self._pub_worm = self.create_publisher(Float64, '~/worm_error', qos_state)
-        self._pub_ff = self.create_publisher(Float64, '~/feedforward', qos_state)
+        self._pub_ff = self.create_publisher(Float64, '~/feedforward',
+                                             QoSProfile(depth=REFERENCE_DEPTH))
+        self._pub_cc = self.create_publisher(JointState, '~/compensated_command',
+                                             QoSProfile(depth=REFERENCE_DEPTH),
+                                             qos_overriding_options=overrides())
         self._pub_diag = self.create_publisher(diag.DiagnosticArray, '/diagnostics', 1)
-        self._sub = self.create_subscription(
+        self._sub_cmd = self.create_subscription(
             Float64, COMMAND_TOPIC, self._on_command, qos_profile_sensor_data,
-            qos_overriding_options=QoSOverridingOptions.with_default_policies())
+            qos_overriding_options=overrides())
+        self._check = ModelCheck(cfg.node.joint_names[1:], cfg.node.residual_window,
+                                 cfg.node.residual_warn_rms)
+        self._pub_res = self.create_publisher(JointState, '~/prediction_residual', qos_state)
+        self._sub_meas = self.create_subscription(
+            JointState, MEASURED_TOPIC, self._on_measured, qos_profile_sensor_data,
+            qos_overriding_options=overrides())
+        self._res = JointState()
+        self._sub_ref = self.create_subscription(
+            JointState, REFERENCE_TOPIC, self._on_reference,
+            QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
+            qos_overriding_options=overrides())
 
+        # pre-built messages: a sample only rewrites their fields
         self._js = JointState()
         self._js.name = list(cfg.node.joint_names)
+        self._cc = JointState()
+        self._cc.name = [self._worm_input_joint]
+        self._cc.position = [0.0]
         self._f_err, self._f_worm, self._f_ff = Float64(), Float64(), Float64()
-        self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
 
         self._check_overrides()
 
@@ -357,20 +227,45 @@ class WormGearSimNode(Node):
         self.add_on_set_parameters_callback(self._on_set)
         self.add_post_set_parameters_callback(self._post_set)
 
-        self._timer = self.create_timer(1.0 / cfg.node.publish_rate_hz,
-                                        self._guard(self._on_tick))
+        # Timers: the tick runs only on the Float64 path, the held output only while the
+        # stamped stream is stale; the watch is slow.  They start cancelled.
+        period = 1.0 / cfg.node.publish_rate_hz
+        self._tick_timer = self.create_timer(period, self._guard(self._on_tick))
+        self._hold_timer = self.create_timer(period, self._guard(self._on_hold))
+        self._watch_timer = self.create_timer(WATCH_PERIOD, self._guard(self._on_watch))
+        # polls a parameter build on the steady clock (also under use_sim_time); the
+        # EventsExecutor of the wheels supports no guard conditions
+        self._swap_timer = self.create_timer(SWAP_POLL_PERIOD, self._guard(self._swap_prepared),
+                                             clock=Clock(clock_type=ClockType.STEADY_TIME))
+        for t in (self._tick_timer, self._hold_timer, self._watch_timer, self._swap_timer):
+            t.cancel()
         self._diag_timer = self.create_timer(cfg.node.diagnostic_period,
                                              self._guard(self.publish_diagnostics))
         self.get_logger().info(
             f'ready: dt = {self.sim.dt:g} s, {cfg.node.publish_rate_hz:g} Hz, ratio '
-            f'1:{1.0 / self.output_per_input:.6g}; '
-            f'waiting for {self.resolve_topic_name(COMMAND_TOPIC)}')
-        if self.compensator is None:
+            f'1:{1.0 / self.sim.derived.output_per_input:.6g}; waiting for '
+            f'{self.resolve_topic_name(REFERENCE_TOPIC)} (stamped) or '
+            f'{self.resolve_topic_name(COMMAND_TOPIC)}')
+        if self.rt.compensator is None:
             self.get_logger().error(
-                f'feed-forward unavailable ({self.compensation_error}); ~/feedforward is not '
-                'published and the prediction is uncompensated')
+                f'feed-forward unavailable ({self.rt.compensation_error}); no corrections')
 
-    # ---- helpers -----------------------------------------------------------------------
+    # ---- read-only views (tests, diagnostics) --------------------------------------------
+    @property
+    def sim(self) -> Any:
+        """The pipeline's Simulator."""
+        return self.rt.sim
+
+    @property
+    def compensator(self) -> Any:
+        return self.rt.compensator
+
+    @property
+    def parameters_pending(self) -> bool:
+        """An accepted parameter set is still being built (not swapped in yet)."""
+        return self._building is not None
+
+    # ---- helpers -------------------------------------------------------------------------
     def _check_overrides(self) -> None:
         """Parameters given to this node (params file, ``-p``, ``parameter_overrides``) that
         it does not declare: a misspelt model or QoS key raises :class:`ConfigError` naming
@@ -402,52 +297,27 @@ class WormGearSimNode(Node):
             except Exception:
                 if context.ok():
                     raise
-        # The EventsExecutor calls inspect.signature() on every timer callback (to decide on
-        # passing TimerInfo); a ready-made signature makes that O(1) (~20 us a tick less).
-        guarded.__signature__ = inspect.Signature()  # type: ignore[attr-defined]
-        return guarded
-
-    def _warm_up(self) -> None:
-        """Run the compiled kernel once so the first tick pays no load/compile time."""
-        self.sim.advance_to(10 * self.sim.dt, 0.0)
-        self.sim.reset(0.0, 0.0)
+        return _timer_signature(guarded)
 
     @staticmethod
     def _new_window() -> dict[str, Any]:
-        return dict(wall_ns=time.monotonic_ns(), busy_ns=0, max_busy_ns=0, sim_time=0.0,
-                    ticks=0, steps=0, overruns=0, errors=0)
+        return dict(wall_ns=time.monotonic_ns(), busy_ns=0, max_busy_ns=0, calls=0,
+                    errors=0)
 
-    def _make_compensator(self, cfg: Config) -> None:
-        if Compensator is None:
-            self.compensator = None
-            return
-        try:
-            self.compensator = Compensator(cfg)
-            self.compensation_error = ''
-        except Exception as exc:  # noqa: BLE001 - any failure: keep running uncompensated
-            self.compensator = None
-            self.compensation_error = f'{type(exc).__name__}: {exc}'
-            self.get_logger().error(f'compensator could not be built: {self.compensation_error}')
+    def _window_start(self) -> dict[str, Any]:
+        w = self._new_window()
+        w['sim_t'] = self.rt.sim.t
+        w['steps'] = self.rt.counters['steps']
+        w['predictions'] = self.rt.counters['predictions']
+        return w
 
-    def _redesign_compensator(self, cfg: Config) -> None:
-        """New plant or compensation settings: redesign, keeping the reference history when
-        the compensator can (``reconfigure``), else rebuild and restart it at the command."""
-        comp = self.compensator
-        if comp is not None and hasattr(comp, 'reconfigure'):
-            try:
-                comp.reconfigure(cfg)
-                self._comp_dirty = True
-                return
-            except Exception as exc:  # noqa: BLE001 - fall back to a fresh compensator
-                self._compensation_failed(exc)
-        self._make_compensator(cfg)
-        self._comp_dirty = True
-        if self.compensator is not None and self._started:
-            try:
-                self.compensator.reset(self._ref, self._last_t)
-                self._comp_t = self._last_t
-            except Exception as exc:  # noqa: BLE001
-                self._compensation_failed(exc)
+    def _busy(self, t0: int) -> None:
+        busy = time.thread_time_ns() - t0
+        w = self._window
+        w['busy_ns'] += busy
+        w['calls'] += 1
+        if busy > w['max_busy_ns']:
+            w['max_busy_ns'] = busy
 
     def _warn(self, cause: str, text: str) -> None:
         """Log ``text`` at most once per LOG_THROTTLE_S for each ``cause`` (a command
@@ -457,313 +327,230 @@ class WormGearSimNode(Node):
         if line:
             self.get_logger().warning(line)
 
-    # ---- command input ---------------------------------------------------------------
-    def _on_command(self, msg: Float64) -> None:
-        """O(1): validate, stamp and queue the command (a sample of theta1_ref at its
-        reception time: the /clock reading with use_sim_time, else the monotonic clock as
-        node.command_timing says); the physics runs only in the tick."""
-        c = self.counters
-        c['commands_received'] += 1
-        v = msg.data
-        reason = ''
-        if math.isnan(v):
-            reason = 'nan'
-        elif math.isinf(v):
-            reason = 'inf'
-        elif abs(v) > self.config.node.max_command_abs:
-            reason = 'out_of_range'
-        elif self._cmd is not None and abs(v - self._cmd) > self.config.node.max_command_jump:
-            reason = 'jump'
-        if reason:
-            c['rejected_commands'] += 1
-            c['rejected_' + reason] += 1
-            limit = {'out_of_range': f' (|theta1| > node.max_command_abs = '
-                                     f'{self.config.node.max_command_abs:g} rad)',
-                     'jump': f' (|change| > node.max_command_jump = '
-                             f'{self.config.node.max_command_jump:g} rad from {self._cmd!r})'
-                     }.get(reason, '')
-            self._warn('command_' + reason, f'rejected worm_angle_command {v!r}: {reason}{limit}; '
-                       f'{c["rejected_commands"]} rejected so far')
+    # ---- stamped references (event-driven) -----------------------------------------------
+    def _on_reference(self, msg: JointState) -> None:
+        """One stamped sample: validated, pushed through the pipeline, its correction(s)
+        and prediction(s) published, all in this callback."""
+        t0 = time.thread_time_ns()
+        if self._building is not None:
+            self._swap_prepared()
+        pos = msg.position
+        if len(pos) == 0:
+            self._reject_message('empty_position', 'no position[0]')
             return
-        self._cmd = v
-        clock = self._clock
-        if clock.ros_time_is_active:
-            self._queue.push('sim', clock.now().nanoseconds, v)
-        else:
-            timing = self.config.node.command_timing
-            if timing == 'reception':
-                self._queue.push('wall', self._monotonic_ns(), v)
-            elif timing == 'stream':
-                self._queue.push('wall', self._stream(self._monotonic_ns()), v)
-            else:               # 'tick': no time of its own, restamped to the next tick
-                self._queue.push('wall', self._last_ns, v)
+        names = msg.name
+        if len(names) and names[0] != self._worm_input_joint:
+            self._reject_message('wrong_joint', f'joint {names[0]!r}; this node takes '
+                                 f'{self._worm_input_joint!r}')
+            return
+        st = msg.header.stamp
+        stamp = st.sec * _NS + st.nanosec
+        if self._mode != 'stamped':
+            self._enter_mode('stamped')
+        x = pos[0]
+        out = self.rt.push(stamp, x, now_ns=self._clock.now().nanoseconds)
+        self._handle(out, REFERENCE_TOPIC, stamp, value=x)
+        self._busy(t0)
 
-    # ---- the tick ---------------------------------------------------------------------
-    def _now(self) -> tuple[str, int, Any]:
-        """(time base, nanoseconds on that base, ROS stamp)."""
+    def _reject_message(self, reason: str, text: str) -> None:
+        self.counters['rejected_' + reason] += 1
+        self._warn('reference_' + reason, f'rejected {REFERENCE_TOPIC}: {reason} ({text}); '
+                   f'{self.counters["rejected_" + reason]} so far')
+
+    def _enter_mode(self, mode: str) -> None:
+        """Start the timers of an input path, stop those of the other."""
+        self._mode = mode
+        if mode == 'stamped':
+            self._tick_timer.cancel()
+            self._watch_timer.reset()
+        else:
+            self._watch_timer.cancel()
+            self._hold_timer.cancel()
+            self._last_mono_ns = 0
+            self._tick_timer.reset()
+
+    def _on_watch(self) -> None:
+        """Slow timer of the stamped path: notices a paused stream (held output starts).
+        After a stall of this node itself (the watch came late) it waits one more period:
+        the samples queued meanwhile must be taken first, or they would be found stale."""
+        if self._building is not None:
+            self._swap_prepared()
+        now = self._clock.now().nanoseconds          # the timer's own clock
+        last, self._last_watch_ns = self._last_watch_ns, now
+        if now - last > 2 * WATCH_PERIOD * _NS:
+            return
+        if self._hold_timer.is_canceled():
+            self._handle(self.rt.hold(now), '', 0)
+
+    def _on_hold(self) -> None:
+        """At node.publish_rate_hz while the stamped stream is stale: the held prediction."""
+        t0 = time.thread_time_ns()
+        self._handle(self.rt.hold(self._clock.now().nanoseconds), '', 0)
+        self._busy(t0)
+
+    # ---- Float64 commands (tick-sampled) ---------------------------------------------------
+    def _on_command(self, msg: Float64) -> None:
+        """O(1): validate and queue the command (RealtimePredictor.push_command) with its
+        reception time: the /clock reading with use_sim_time, else the monotonic clock."""
+        t0 = time.thread_time_ns()
         clock = self._clock
-        now = clock.now()
-        if clock.ros_time_is_active:
-            return 'sim', now.nanoseconds, now
-        return 'wall', self._monotonic_ns(), now
+        sim_time = clock.ros_time_is_active
+        rt = self.rt
+        if sim_time != rt.sim_time:                 # use_sim_time toggled: start afresh
+            rt.sim_time = sim_time
+            rt.reset()
+        if self._mode != 'command':
+            self._enter_mode('command')
+        now = clock.now().nanoseconds if sim_time else self._monotonic_ns()
+        self._handle(rt.push_command(now, msg.data), COMMAND_TOPIC, 0, value=msg.data)
+        self._busy(t0)
 
     def _on_tick(self) -> None:
-        busy0 = time.thread_time_ns()
-        base, ns, stamp = self._now()
-        if not self._started:
-            if self._cmd is None:
-                return
-            samples = self._start(base, ns)
+        t0 = time.thread_time_ns()
+        if self._building is not None:
+            self._swap_prepared()
+        rt = self.rt
+        stamp = self._clock.now()
+        if rt.sim_time:
+            now = stamp.nanoseconds
         else:
-            samples = None
-            if base != self._time_base:  # use_sim_time toggled: re-anchor, integrate nothing
-                self._origin_ns = ns - int(round(self._last_t * 1e9))
-                self._last_ns = ns
-                self._time_base = base
-        t = (ns - self._origin_ns) * 1e-9
-        if t <= self._last_t and self.counters['ticks']:
-            if t < self._last_t:
-                self.counters['clock_backwards'] += 1
-                self._warn('clock_backwards', f'clock went backwards ({self._last_t:.9f} s '
-                           f'-> {t:.9f} s since start); tick ignored, state kept')
-            return                      # no time has passed: nothing new to publish
-        if base == 'wall':
-            self._count_missed(ns)
-        c = self.counters
-        if samples is None:
-            samples = self._take_samples(base, ns)
-        drives = self._feedforward(t, samples)
-        steps = self._advance(t, drives)
-        self._last_t = t
-        self._last_ns = ns
-        applied = self.config.node.compensation_applied and self.compensator is not None
-        self._publish(stamp, self._ref_now if applied else None, self._delta)
-        w = self._window
-        w['ticks'] += 1
-        w['steps'] += steps
-        busy = time.thread_time_ns() - busy0
-        w['busy_ns'] += busy
-        if busy > w['max_busy_ns']:
-            w['max_busy_ns'] = busy
-        c['ticks'] += 1
-        c['steps'] += steps
-        if steps > c['max_steps_per_tick']:
-            c['max_steps_per_tick'] = steps
+            now = self._monotonic_ns()
+            if self._last_mono_ns:
+                missed = (now - self._last_mono_ns + self._period_ns // 2) \
+                    // self._period_ns - 1
+                if missed > 0:
+                    self.counters['missed_ticks'] += missed
+            self._last_mono_ns = now
+        out = rt.tick(now)
+        if out.predictions or out.corrections or out.events:
+            self.counters['ticks'] += 1
+            # on the wall clock the pipeline runs on the monotonic clock: the JointState
+            # carries the ROS time of the tick
+            self._handle(out, '', 0, stamp_ns=None if rt.sim_time else stamp.nanoseconds)
+            if rt.compensator is not None and self._pub_ff.get_subscription_count():
+                self._f_ff.data = rt.last_delta   # the correction of the newest sample
+                self._pub_ff.publish(self._f_ff)
+        self._busy(t0)
 
-    def _take_samples(self, base: str, ns: int) -> list[tuple[int, float]]:
-        """This tick's command samples (see :meth:`CommandQueue.take`), counted."""
-        q, c = self._queue, self.counters
-        samples = q.take(base, self._last_ns, ns,
-                         restamp=base == 'sim' or self.config.node.command_timing == 'tick')
-        c['commands_used'] += len(samples)
-        if len(samples) > c['max_commands_per_tick']:
-            c['max_commands_per_tick'] = len(samples)
-        c['commands_dropped'], c['commands_merged'] = q.dropped, q.merged
-        c['commands_restamped'] = q.restamped
-        c['commands_superseded'] = q.dropped + q.merged
-        return samples
-
-    def _start(self, base: str, ns: int) -> list[tuple[int, float]]:
-        """First tick: start at rest at the latest command, which is the sample at t = 0
-        (earlier queued commands are superseded by it)."""
-        self._time_base = base
-        self._origin_ns = ns
-        self._last_t = 0.0
-        self._last_ns = ns
-        q = self._queue
-        q.merged += max(q.clear() - 1, 0)
-        self.counters['commands_used'] += 1
-        self.counters['commands_superseded'] = q.dropped + q.merged
-        self.counters['commands_merged'] = q.merged
-        self.sim.reset(self._cmd, 0.0)
-        self._ref = self._ref_now = self._held = self._cmd
-        self._sample_t = self._comp_t = 0.0
-        self._sample_dt = 0.0
-        if self.compensator is not None:
-            try:
-                self.compensator.reset(self._cmd, 0.0)
-            except Exception as exc:  # noqa: BLE001
-                self._compensation_failed(exc)
-        self._started = True
-        self.get_logger().info(f'first command {self._cmd:.9g} rad: simulation started '
-                               f'({base} time)')
-        return [(ns, self._cmd)]
-
-    def _count_missed(self, mono: int) -> None:
-        """Wall time: periods lost between this tick and the previous one."""
-        if self._last_mono_ns:
-            gap = mono - self._last_mono_ns
-            missed = int((gap + self._period_ns // 2) // self._period_ns) - 1
-            if missed > 0:
-                self.counters['missed_ticks'] += missed
-        self._last_mono_ns = mono
-
-    def _feedforward(self, t: float, samples: list[tuple[int, float]]
-                     ) -> list[tuple[float, float]]:
-        """Feed the samples, in time order, to the compensator; returns the simulator's
-        command samples [(t_i, theta1_i)]: theta1_ref, or theta1_ref + delta when
-        ``node.compensation_applied``.
-
-        With ``compensation.preview_time`` P the servo streams its reference P ahead:
-        delta is for t_i - P and so is the reference it is added to
-        (``Compensator.reference``).  The compensator sees the samples only (joined by
-        straight lines), not the simulator's hold up to the tick.  Without a new sample it
-        is updated only when redesigned (re-evaluated at its last sample) or when the
-        stream has stopped (no sample for STALE_PERIODS tick periods, or for twice the last
-        sample interval if that is longer): the reference then rests, a sample at the
-        tick."""
-        origin = self._origin_ns
-        comp = self.compensator
-        applied = self.config.node.compensation_applied and comp is not None
-        if comp is not None and not (applied or self._pub_ff.get_subscription_count()):
-            self._comp_idle = True       # nobody uses it: save its cost (tens of us a tick)
-            comp = None
-        ok = comp is not None
-        if ok and self._comp_idle:       # consumers are back: restart from the reference
-            try:
-                comp.reset(self._ref, self._last_t)
-                self._comp_t = self._last_t
-                self._comp_idle = False
-            except Exception as exc:  # noqa: BLE001
-                self._compensation_failed(exc)
-                ok = False
-        drives: list[tuple[float, float]] = []
-        after_ns = self._last_ns + 1 if self.counters['ticks'] else origin
-        for ns, v in samples:
-            ti = (ns - origin) * 1e-9
-            if ti > self._sample_t:
-                self._sample_dt = ti - self._sample_t
-            self._sample_t = ti
-            self._ref = self._ref_now = v
-            if ok:   # a smoothed stream time may precede the compensator's last sample
-                ok = self._update_compensator(comp, max(ti, self._comp_t), v)
-            drive = self._ref_now + self._delta if applied else v
-            # ... or the previous tick, up to which the simulator has already integrated
-            ts = ti if ns >= after_ns else (after_ns - origin) * 1e-9
-            if drives and ts <= drives[-1][0]:
-                drives[-1] = (drives[-1][0], drive)
+    # ---- output ----------------------------------------------------------------------------
+    def _handle(self, out: Output, topic: str, stamp: int, value: float | None = None,
+                stamp_ns: int | None = None) -> None:
+        """Log what the pipeline reported and publish its corrections and predictions.
+        ``stamp_ns``: publish the predictions with this stamp instead of their own."""
+        if out.rejected is not None:
+            r = out.rejected.value
+            what = f'stamp {stamp} ns, value {value!r}' if topic == REFERENCE_TOPIC \
+                else f'value {value!r}'
+            n = self.rt.counters['rejected_' + r]
+            self._warn(f'{topic}_{r}', f'rejected {topic} ({what}): {r}; {n} so far')
+        for e in out.events:
+            if e.level == 'info':
+                self.get_logger().info(e.message)
             else:
-                drives.append((ts, drive))
-        if not samples and ok:
-            stale = max(STALE_PERIODS * self._period_ns * 1e-9,
-                        2.0 * min(self._sample_dt, STALE_MAX_INTERVAL))
-            if t - self._comp_t > stale:             # the stream stopped: reference rests
-                t_eval = t
-            elif self._comp_dirty:                   # redesigned: same sample, new design
-                t_eval = self._comp_t
-            else:
-                return drives
-            if self._update_compensator(comp, t_eval, self._ref) and applied:
-                drives.append((t, self._ref_now + self._delta))
-        return drives
+                self._warn(e.kind, e.message)
+                if e.kind == 'simulation_error':
+                    self._window['errors'] += 1
+        if out.corrections and self._mode == 'stamped':
+            self._publish_corrections(out.corrections)
+        preds = out.predictions
+        if preds:
+            check = self._check
+            for p in preds:
+                check.predicted_ns(p.stamp_ns if stamp_ns is None else stamp_ns, p.theta)
+            if self._pub_js.get_subscription_count() or \
+                    self._pub_err.get_subscription_count() or \
+                    self._pub_worm.get_subscription_count():
+                for p in preds:
+                    self._publish_prediction(p, p.stamp_ns if stamp_ns is None else stamp_ns)
+            if preds[-1].held and self._mode == 'stamped':
+                self.counters['held_predictions'] += len(preds)
+        if self._mode == 'stamped':
+            hold = self._hold_timer
+            if out.stale:
+                if hold.is_canceled():
+                    hold.reset()
+            elif not hold.is_canceled():
+                hold.cancel()
 
-    def _update_compensator(self, comp: Any, t: float, ref: float) -> bool:
-        """One Compensator.update; on failure keep the last good correction."""
+    def _on_measured(self, msg: JointState) -> None:
+        """Encoder angles: residual measured - predicted at the message's stamp (the
+        reception time if unstamped) on ~/prediction_residual; the model check rejects and
+        counts bad samples."""
+        st = msg.header.stamp
+        stamp = st.sec * _NS + st.nanosec
+        if stamp == 0:
+            stamp = self._clock.now().nanoseconds
         try:
-            d = float(comp.update(t, ref))
-            r = float(getattr(comp, 'reference', ref))
-            if not (math.isfinite(d) and math.isfinite(r)):
-                raise ValueError(f'non-finite correction {d!r}')
-        except Exception as exc:  # noqa: BLE001 - a compensator bug must not stop the node
-            self._compensation_failed(exc)
-            return False
-        self._comp_t = t
-        self._comp_dirty = False
-        self._delta, self._ref_now = d, r
-        return True
+            joints, residual = self._check.measured_message_ns(stamp, msg.name, msg.position)
+        except ValueError as exc:
+            self._warn('measured_rejected', f'rejected {MEASURED_TOPIC}: {exc}')
+            return
+        if self._pub_res.get_subscription_count():
+            r = self._res
+            r.header.stamp.sec, r.header.stamp.nanosec = divmod(stamp, _NS)
+            r.name = joints
+            r.position = residual.tolist()
+            self._pub_res.publish(r)
 
-    def _compensation_failed(self, exc: Exception) -> None:
-        self.counters['compensation_errors'] += 1
-        self._warn('compensation', f'feed-forward failed ({type(exc).__name__}: {exc}); '
-                   f'keeping the last correction {self._delta:.3g} rad')
+    def _publish_corrections(self, corrections: list) -> None:
+        """Stamped path: ~/compensated_command and ~/feedforward for each correction."""
+        cc, ff = self._cc, self._f_ff
+        pub_cc = self._pub_cc.get_subscription_count()
+        pub_ff = self._pub_ff.get_subscription_count()
+        for c in corrections:
+            if pub_cc:
+                cc.header.stamp.sec, cc.header.stamp.nanosec = divmod(c.stamp_ns, _NS)
+                cc.position[0] = c.theta1_ref + c.delta
+                self._pub_cc.publish(cc)
+            if pub_ff:
+                ff.data = c.delta
+                self._pub_ff.publish(ff)
 
-    def _advance(self, t: float, drives: list[tuple[float, float]]) -> int:
-        """Integrate up to the tick time ``t`` through the command samples ``drives``
-        [(t_i, theta1_i)], then hold the last command up to ``t``.  ``linear``: theta1
-        moves linearly from the previous sample (or the hold point at the previous tick)
-        to each sample; ``hold``: theta1 steps to each sample at its time (the first dt
-        grid point at or after it)."""
-        sim = self.sim
-        behind = t - sim.t
-        cap = self.config.node.max_catch_up
-        if behind > cap:
-            sim.resync(t - cap)   # samples before t - cap are only registered, not integrated
-            self.counters['overruns'] += 1
-            self.counters['dropped_time'] += behind - cap
-            self._window['overruns'] += 1
-            self._warn('overrun', f'{behind:.4g} s behind: integrated the last {cap:g} s '
-                       '(node.max_catch_up) and dropped the rest')
-        t_before = sim.t
-        held = self._held
-        if drives:
-            self._held = drives[-1][1]
-        steps = 0
-        try:
-            if sim.interpolation == 'hold':
-                for ti, di in drives:
-                    steps += sim.advance_to(ti - HOLD_EPS, held)
-                    held = di
-            else:
-                for ti, di in drives:
-                    steps += sim.advance_to(ti, di)
-                    held = di
-            steps += sim.advance_to(t, held)
-        except (SimulationError, ValueError) as exc:
-            self.counters['simulation_errors'] += 1
-            self._window['errors'] += 1
-            self._warn('simulation', f'simulation error: {exc}; keeping the last good state '
-                       f'(t = {sim.t:.6f} s) and continuing from t = {t:.6f} s')
-            sim.resync(t)
-        self._window['sim_time'] += sim.t - t_before
-        return steps
-
-    def _publish(self, stamp: Any, ref: float | None, delta: float) -> None:
-        st = self.sim.state
-        th, om = st.theta, st.omega
+    def _publish_prediction(self, p: Prediction, stamp_ns: int) -> None:
         js = self._js
-        js.header.stamp = stamp.to_msg()
-        js.position = [st.theta1, float(th[0]), float(th[1]), float(th[2])]
-        js.velocity = [st.theta1_dot, float(om[0]), float(om[1]), float(om[2])]
-        js.effort = self.sim.joint_torques().tolist()
-        if self._pub_js.get_subscription_count():   # publishing to nobody still costs
+        if self._pub_js.get_subscription_count():
+            js.header.stamp.sec, js.header.stamp.nanosec = divmod(stamp_ns, _NS)
+            js.position = p.position
+            js.velocity = p.velocity
+            js.effort = p.effort
             self._pub_js.publish(js)
-        # Uncompensated: the reference is the simulated command itself (exactly the batch
-        # Trajectory.output_error); compensated: the servo's reference theta1_ref.
-        reference = st.theta1 if ref is None else ref
         if self._pub_err.get_subscription_count():
-            self._f_err.data = float(th[2]) - reference * self.output_per_input
+            self._f_err.data = p.positioning_error
             self._pub_err.publish(self._f_err)
         if self._pub_worm.get_subscription_count():
-            self._f_worm.data = float(th[0]) - st.theta1
+            self._f_worm.data = p.worm_error
             self._pub_worm.publish(self._f_worm)
-        if self.compensator is not None and self._pub_ff.get_subscription_count():
-            self._f_ff.data = delta
-            self._pub_ff.publish(self._f_ff)
 
-    # ---- parameters ----------------------------------------------------------------------
+    # ---- parameters --------------------------------------------------------------------------
     def _evaluate(self, params: list[Parameter]) -> tuple[str, Config | None]:
-        """('', candidate) if the model parameters in ``params`` form a valid set, else
+        """('', candidate) if the model parameters in ``params`` form a usable set, else
         (reason, None).  Non-model parameters (qos_overrides, use_sim_time) are left to
-        rclpy."""
+        rclpy.  The result of the last call is remembered (pre-set and on-set callbacks
+        see the same list)."""
+        key = tuple((p.name, p.type_, repr(p.value)) for p in params)
+        if self._evaluated is not None and self._evaluated[0] == key:
+            return self._evaluated[1], self._evaluated[2]
         overrides = {}
+        reason = ''
         for p in params:
             if not is_model_parameter(p.name):
                 continue
             if self.describe_parameter(p.name).read_only:
-                return f'{p.name} is read-only (structural); restart the node to change it', None
+                reason = f'{p.name} is read-only (structural); restart the node to change it'
+                break
             if p.type_.value != self._types[p.name]:
-                return (f'{p.name}: wrong type {p.type_.name}, expected '
-                        f'{Parameter.Type(self._types[p.name]).name}'), None
+                reason = (f'{p.name}: wrong type {p.type_.name}, expected '
+                          f'{Parameter.Type(self._types[p.name]).name}')
+                break
             overrides[p.name] = to_core_value(p.value)
-        if not overrides:
-            return '', None
-        try:
-            candidate = self.config.replace(overrides)
-            trial = copy.copy(self.sim)     # shallow: reconfigure() only reads the state
-            trial.reconfigure(candidate)
-        except (ConfigError, ValueError) as exc:
-            return str(exc), None
-        return '', candidate
+        candidate = None
+        if not reason and overrides:
+            try:    # the core's validation: types, ranges, cross-field, usable (check_usable)
+                candidate = self.config.replace(overrides)
+            except (ConfigError, ValueError) as exc:
+                reason = str(exc)
+        self._evaluated = (key, reason, candidate)
+        return reason, candidate
 
     def _pre_set(self, params: list[Parameter]) -> list[Parameter]:
         """Accept integers for doubles, and count/log every rejected set (descriptor checks
@@ -778,99 +565,133 @@ class WormGearSimNode(Node):
 
     def _on_set(self, params: list[Parameter]) -> SetParametersResult:
         reason, candidate = self._evaluate(params)
+        self._evaluated = None
         if reason:
             return SetParametersResult(successful=False, reason=reason)
-        self._pending_config = candidate
+        self._accepted = candidate
         return SetParametersResult(successful=True)
 
     def _post_set(self, params: list[Parameter]) -> None:
-        cfg, self._pending_config = self._pending_config, None
+        """Accepted: the new pipeline configuration (compensator design, the simulator's
+        trial) is prepared in a worker thread; :meth:`_swap_prepared` swaps it in on the
+        executor thread (guard condition), between two samples."""
+        cfg, self._accepted = self._accepted, None
         if cfg is None:
             return
-        try:
-            self.sim.reconfigure(cfg)
-        except ValueError as exc:  # pragma: no cover - _evaluate ran the same call
-            self._warn('parameters', f'could not apply parameters: {exc}')
-            return
-        self.sim.interpolation = cfg.node.command_interpolation
-        if cfg.node.command_timing != self.config.node.command_timing:
-            self._stream.reset()
-        self.output_per_input = self.sim.derived.output_per_input
-        old = self.config
         self.config = cfg
         self.counters['accepted_parameter_sets'] += 1
-        before = old.to_flat_dict()
-        if Compensator is not None and any(
-                before[k] != v for k, v in cfg.to_flat_dict().items()
-                if not k.startswith('input.') and k not in ('node.compensation_applied',
-                                                             'node.command_timing')):
-            self._redesign_compensator(cfg)
+        self._building = self._builder.submit(self.rt.prepare, cfg)
+        self._swap_timer.reset()
         names = ', '.join(p.name for p in params if is_model_parameter(p.name))
-        self.get_logger().info(f'parameters applied: {names}')
+        self.get_logger().info(f'parameters accepted: {names}')
 
-    # ---- diagnostics -------------------------------------------------------------------
+    def _swap_prepared(self) -> None:
+        fut = self._building
+        if fut is None or not fut.done():
+            return
+        self._building = None
+        self._swap_timer.cancel()
+        try:
+            prepared = fut.result()
+            if prepared.config is self.config:   # else a newer set superseded it
+                self.rt.reconfigure(prepared)
+        except (ConfigError, ValueError) as exc:
+            self.counters['parameter_build_errors'] += 1
+            self._warn('parameters', f'could not apply parameters: {exc}')
+
+    # ---- diagnostics -------------------------------------------------------------------------
     def diagnostic_statuses(self) -> list[diag.DiagnosticStatus]:
         """The statuses of /diagnostics (resets the per-window figures)."""
-        w, self._window = self._window, self._new_window()
-        wall = max(1e-9, (self._window['wall_ns'] - w['wall_ns']) * 1e-9)
-        c = self.counters
-        st = self.sim.stats
+        w, self._window = self._window, self._window_start()
+        now = self._window
+        wall = max(1e-9, (now['wall_ns'] - w['wall_ns']) * 1e-9)
+        rt, c, rc = self.rt, self.counters, self.rt.counters
+        steps = now['steps'] - w['steps']
+        n_pred = now['predictions'] - w['predictions']
+        sim = rt.sim
+        st = sim.stats
         name, hw = self.get_name(), 'worm_gear_sim'
-        if not self._started:
-            level, msg = diag.WARN, f'waiting for the first {COMMAND_TOPIC}'
+        if not rt.started:
+            level, msg = diag.WARN, (f'waiting for the first {REFERENCE_TOPIC} or '
+                                     f'{COMMAND_TOPIC}')
         elif w['errors']:
-            level, msg = diag.ERROR, f'{w["errors"]} simulation error(s): {self.last_error}'
-        elif w['overruns']:
-            level, msg = diag.WARN, f'{w["overruns"]} overrun(s): catch-up capped'
+            level, msg = diag.ERROR, f'{w["errors"]} simulation error(s): {rt.last_error}'
+        elif rt.stale:
+            level, msg = diag.WARN, ('input stream stale: the reference rests at its last '
+                                     'value; publishing the held prediction')
         else:
             level, msg = diag.OK, 'running'
         sim_vals = {
-            'time_base': self._time_base or 'none', 'simulated_time_s': self.sim.t,
-            'real_time_factor': w['sim_time'] / wall,
+            'input': self._mode or 'none', 'time_base': 'sim' if rt.sim_time else 'wall',
+            'simulated_time_s': sim.t, 'stale': rt.stale,
+            'real_time_factor': (now['sim_t'] - w['sim_t']) / wall,
+            'steps_per_prediction': steps / n_pred if n_pred else 0.0,
             'compute_load': w['busy_ns'] * 1e-9 / wall,
-            'max_tick_cpu_ms': w['max_busy_ns'] * 1e-6,
-            'steps_per_tick': w['steps'] / w['ticks'] if w['ticks'] else 0.0,
-            'max_steps_per_tick': c['max_steps_per_tick'], 'ticks': c['ticks'],
-            'missed_ticks': c['missed_ticks'], 'overruns': c['overruns'],
-            'dropped_time_s': c['dropped_time'], 'clock_backwards': c['clock_backwards'],
+            'max_callback_cpu_ms': w['max_busy_ns'] * 1e-6, 'callbacks': w['calls'],
+            'ticks': c['ticks'], 'missed_ticks': c['missed_ticks'],
+            'held_predictions': c['held_predictions'],
             'newton_subdivisions': st['subdivision_events'], 'newton_substeps': st['substeps'],
             'max_newton_solves_per_step': st['max_solves_per_step'],
-            'simulation_errors': c['simulation_errors'], 'last_error': self.last_error,
+            **{k: rc[k] for k in ('predictions', 'steps', 'overruns', 'dropped_time_ns',
+                                  'resyncs', 'clock_restarts', 'stale_events',
+                                  'late_for_simulation', 'simulation_errors')},
+            'last_error': rt.last_error,
         }
-        rejected = c['rejected_commands'] + c['rejected_parameter_sets']
-        in_level = diag.WARN if rejected else diag.OK
-        in_vals = {k: c[k] for k in (
-            'commands_received', 'commands_used', 'commands_superseded', 'commands_dropped',
-            'commands_merged', 'commands_restamped', 'max_commands_per_tick',
-            'rejected_commands',
-            *(f'rejected_{r}' for r in REJECT_REASONS), 'rejected_parameter_sets',
-            'accepted_parameter_sets')}
+        node_rejects = sum(c[f'rejected_{r}'] for r in NODE_REJECT_REASONS)
+        rejected = rc['rejected_samples'] + node_rejects + c['rejected_parameter_sets']
+        in_vals = {k: rc[k] for k in (
+            'samples_received', 'samples_accepted', 'rejected_samples',
+            *(f'rejected_{r}' for r in REJECT_REASONS),
+            'commands_received', 'commands_used', 'commands_merged', 'commands_restamped',
+            'commands_dropped', 'merged_samples', 'rest_samples', 'stream_relocks',
+            'stream_outliers', 'reconfigurations')}
+        in_vals.update({f'rejected_{r}': c[f'rejected_{r}'] for r in NODE_REJECT_REASONS})
+        in_vals.update({k: c[k] for k in ('rejected_parameter_sets', 'accepted_parameter_sets',
+                                          'parameter_build_errors')})
         in_vals['command_timing'] = self.config.node.command_timing
-        in_vals['stream_period_ms'] = self._stream.period * 1e-6
-        in_vals['stream_relocks'] = self._stream.relocks
-        in_vals['stream_outliers'] = self._stream.outliers
-        in_vals['last_command'] = 'none' if self._cmd is None else repr(self._cmd)
+        in_vals['stale_after_ms'] = rt.stale_after_ns * 1e-6
+        in_vals['last_stamp_ns'] = rt.last_stamp_ns
         in_vals['last_error'] = self.last_error
-        ff_level = diag.OK if self.compensator is not None and not c['compensation_errors'] \
+        in_level = diag.WARN if (rejected or rt.stale) else diag.OK
+        in_msg = ', '.join(m for m in (
+            f'{rejected} rejected input(s)' if rejected else '',
+            'stream stale' if rt.stale else '') if m) or 'ok'
+        comp = rt.compensator
+        ff_level = diag.OK if comp is not None and not rc['compensation_errors'] \
             else diag.ERROR
-        ff_vals = {'available': self.compensator is not None,
-                   'computed': self.compensator is not None and not self._comp_idle,
-                   'applied_to_prediction': self.config.node.compensation_applied,
-                   'last_correction_rad': self._delta,
-                   'compensation_errors': c['compensation_errors'],
-                   'error': self.compensation_error}
+        ff_vals = {'available': comp is not None,
+                   'applied_to_prediction': rt.apply_compensation,
+                   'preview_time_s': rt.preview_ns * 1e-9,
+                   'pending_corrections': rt.pending,
+                   'corrections': rc['corrections'],
+                   'corrections_dropped': rc['corrections_dropped'],
+                   'last_correction_rad': rt.last_delta,
+                   'compensation_errors': rc['compensation_errors'],
+                   'error': rt.compensation_error}
         return [
             diag.status(name, 'simulation', level, msg, sim_vals, hw),
-            diag.status(name, 'inputs', in_level,
-                        f'{rejected} rejected input(s)' if rejected else 'ok', in_vals, hw),
+            diag.status(name, 'inputs', in_level, in_msg, in_vals, hw),
             diag.status(name, 'feedforward', ff_level,
-                        'ok' if ff_level == diag.OK else (self.compensation_error or
+                        'ok' if ff_level == diag.OK else (rt.compensation_error or
                                                           'compensation errors'), ff_vals, hw),
+            self._check_status(name, hw),
         ]
 
+    def _check_status(self, name: str, hw: str) -> diag.DiagnosticStatus:
+        """The live model check (measured_joint_states vs the prediction)."""
+        st = self._check.status_ns(self._clock.now().nanoseconds)
+        level = {'OK': diag.OK, 'WARN': diag.WARN, 'STALE': diag.STALE}[st.level]
+        return diag.status(name, 'model check', level, st.message, st.values, hw)
+
     def publish_diagnostics(self) -> None:
+        if self._building is not None:
+            self._swap_prepared()
         self._pub_diag.publish(diag.array(self._clock.now().to_msg(),
                                           self.diagnostic_statuses()))
+
+    def destroy_node(self) -> None:
+        self._builder.shutdown(wait=False, cancel_futures=True)
+        super().destroy_node()
 
 
 def make_executor(kind: str, context: Any = None) -> Any:

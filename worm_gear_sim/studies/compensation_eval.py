@@ -16,7 +16,7 @@ import numpy as np
 from ..compensation import feedforward_series
 from ..modal import modes
 from ..params import Config, derive
-from ..profiles import SampledProfile
+from ..profiles import SampledProfile, TrapezoidalProfile, motion_span
 from ..simulation import simulate
 
 __all__ = ['Scenario', 'paper_step_scenario', 'radar_slew_scenario', 'run_scenario',
@@ -55,10 +55,16 @@ def _command_period(cfg: Config) -> float:
     return 1.0 / cfg.node.publish_rate_hz
 
 
+def _sample_times(t_end: float, period: float) -> np.ndarray:
+    """The servo's sample instants 0, period, ... up to t_end."""
+    return np.arange(0.0, t_end + 0.5 * period, period)
+
+
 def _piecewise_accel_profile(t0: float, segments, period: float, t_total: float):
     """Worm angle from (duration, acceleration) segments starting at rest at t0, sampled
-    every ``period``; returns (times, theta1, rate-change instants)."""
-    times = np.arange(0.0, t_total + 0.5 * period, period)
+    every ``period``; returns (times, theta1, rate-change instants).  For moves that are not
+    a symmetric trapezoid (the slew's reversal); the paper's move is a TrapezoidalProfile."""
+    times = _sample_times(t_total, period)
     th = np.zeros_like(times)
     knots = [t0]
     pos, vel, t = 0.0, 0.0, t0
@@ -79,16 +85,17 @@ def _piecewise_accel_profile(t0: float, segments, period: float, t_total: float)
 
 def paper_step_scenario(cfg: Config, start: float = 0.01, t_end: float = 0.5,
                         period: float | None = None) -> Scenario:
-    """The paper's 18-step move (trapezoidal rate: input.target_angle in input.move_time
-    with input.accel_time ramps, 0.1131 rad in 20 ms with 4 ms ramps by default), sampled
-    every ``period`` (default: the node's command period, 1 / node.publish_rate_hz)."""
+    """The paper's 18-step move (:class:`~worm_gear_sim.profiles.TrapezoidalProfile`:
+    input.target_angle in input.move_time with input.accel_time ramps, 0.1131 rad in 20 ms
+    with 4 ms ramps by default) from ``start``, sampled every ``period`` (default: the node's
+    command period, 1 / node.publish_rate_hz)."""
     period = _command_period(cfg) if period is None else period
     inp = cfg.input
     T, ta, A = inp.move_time, inp.accel_time, inp.target_angle
-    w = A / (T - ta)
-    segs = [(ta, w / ta), (T - 2 * ta, 0.0), (ta, -w / ta)]
-    times, th, knots = _piecewise_accel_profile(start, segs, period, t_end)
-    return Scenario('paper_18_step', times, th, knots[-1], ((knots[1], knots[2]),),
+    move = TrapezoidalProfile(A, T, ta, t0=start)
+    times = _sample_times(t_end, period)
+    return Scenario('paper_18_step', times, move.theta1(times), start + T,
+                    ((start + ta, start + T - ta),),
                     f'18-step move {A:.6g} rad in {T * 1e3:g} ms ({ta * 1e3:g} ms ramps) '
                     f'from t = {start * 1e3:g} ms')
 
@@ -144,9 +151,9 @@ def run_scenario(plant: Config, scenario: Scenario, compensator: Config | None,
     mode_hz = float(modes(plant).frequencies_hz[0])
     command_end = scenario.move_end
     if compensator is not None:
-        moving = np.nonzero(np.abs(np.diff(x + delta)) > 0.0)[0]
-        if moving.size:
-            command_end = float(t[moving[-1] + 1])
+        span = motion_span(t, x + delta)
+        if span is not None:
+            command_end = span[1]
     return CompensationRun(scenario, delta, traj, err,
                            move_metrics(traj.t, err, scenario, mode_hz, command_end))
 

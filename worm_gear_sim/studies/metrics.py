@@ -34,7 +34,7 @@ import numpy as np
 
 from ..modal import static_equilibrium
 from ..params import Config
-from ..profiles import Profile, SampledProfile
+from ..profiles import Profile, SampledProfile, motion_span
 from ..simulation import Trajectory
 
 __all__ = ['METRIC_COLUMNS', 'move_end_time', 'equilibrium', 'oscillation_metrics',
@@ -45,11 +45,8 @@ def move_end_time(cfg: Config, profile: Profile | None = None) -> float:
     """Time after which theta1 stays constant (see module docstring)."""
     inp = cfg.input
     if isinstance(profile, SampledProfile):
-        v = profile.values
-        changed = np.nonzero(v != v[-1])[0]
-        if changed.size == 0:
-            return float(profile.times[0])
-        return float(profile.times[changed[-1] + 1])
+        span = motion_span(profile.times, profile.values)
+        return float(profile.times[0]) if span is None else span[1]
     if inp.profile == 'step':
         return inp.start_time
     return inp.start_time + inp.move_time
