@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Benchmark of the compiled Newmark-Newton kernel (issue 2).
+"""Benchmark of the compiled Newmark-Newton kernel.
 
 Prints, in one run:
   * ns/step of the kernel on the paper's 18-step move (0.5 s) at dt = 10 us and 25 us,

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Identification benchmark (issue 9): robustness of the search strategies and fit time.
+"""Identification benchmark: robustness of the search strategies and fit time.
 
 Test drives differ from the defaults; two are model VARIANTS (Table 1 lead angle, constant
 friction, the sawtooth contact mapping and another mesh phase; linear tooth stiffness and soft

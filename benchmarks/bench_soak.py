@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Soak benchmark: the node as a process at 1 kHz for a long time (issue 10).
+"""Soak benchmark: the node as a process at 1 kHz for a long time.
 
 Starts ``python -m worm_gear_sim.node --ros-args --params-file config/worm_gear_sim.yaml``
 as a child process and drives it from this process at ``--rate`` (1 kHz): a radar slew
@@ -88,6 +88,9 @@ def main(argv: list[str] | None = None) -> int:
                     help='alternate: seconds per input path [60]')
     ap.add_argument('--param-period', type=float, default=10.0,
                     help='seconds between parameter sets (0: none) [10]')
+    ap.add_argument('--node-log', metavar='FILE',
+                    help='write the node\'s warnings (stderr, --log-level warn) to FILE; '
+                    'default: errors only')
     ap.add_argument('--domain-id', type=int,
                     default=int(os.environ.get('ROS_DOMAIN_ID', '44') or 44),
                     help='ROS domain of the node and the probe [$ROS_DOMAIN_ID, else 44]')
@@ -107,9 +110,11 @@ def main(argv: list[str] | None = None) -> int:
 
     load0 = os.getloadavg()
     node_cmd = [sys.executable, '-m', 'worm_gear_sim.node', '--ros-args', '--params-file',
-                str(ROOT / 'config' / 'worm_gear_sim.yaml'), '--log-level', 'error']
+                str(ROOT / 'config' / 'worm_gear_sim.yaml'), '--log-level',
+                'warn' if args.node_log else 'error']
+    log_fh = open(args.node_log, 'w') if args.node_log else None
     proc = subprocess.Popen(node_cmd, cwd=ROOT, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=log_fh or subprocess.PIPE, text=True)
     rclpy.init()
     probe = rclpy.create_node('soak_probe')
     pub_cmd = probe.create_publisher(Float64, 'worm_angle_command', QoSProfile(depth=10))
@@ -225,6 +230,9 @@ def main(argv: list[str] | None = None) -> int:
         except subprocess.TimeoutExpired:
             proc.kill()
             _, err = proc.communicate()
+        err = err or ''
+        if log_fh:
+            log_fh.close()
         ex.shutdown()
         probe.destroy_node()
         rclpy.try_shutdown()

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Evaluate the feed-forward compensation (issue 5) on the nonlinear model with friction.
+"""Evaluate the feed-forward compensation on the nonlinear model with friction.
 
 Scenarios (worm_gear_sim.studies.compensation_eval): the paper's 18-step move (no load,
 as the paper) and

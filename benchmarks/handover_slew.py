@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""The tooth hand-over in a slew: sawtooth against cosine contact mapping (issue 12.2).
+"""The tooth hand-over in a slew: sawtooth against cosine contact mapping.
 
 A steady radar slew under load (antenna 0.2 rad/s = worm 11.2 rad/s, 5 N m wind torque and
 0.5 N m s/rad drag on the antenna, 5 % modal damping so that the start transient dies out)

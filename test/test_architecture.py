@@ -30,6 +30,8 @@ DEFERRED_BACK_EDGES = {
     # Config.replace / config_from_mapping prove a parameter set usable by running the
     # model on it (params -> usability -> simulation -> params).
     (f'{ROOT}.params', f'{ROOT}.usability'),
+    # A failed integration names its likely cause (usability.diagnose) in the SimulationError.
+    (f'{ROOT}.simulation', f'{ROOT}.usability'),
     # The start-up entry installs its signal handlers before importing the node (seconds of
     # numpy/numba/rclpy imports); the node then calls back into start-up.
     (f'{WING}.startup', f'{WING}.node'),
@@ -171,10 +173,33 @@ def test_no_import_circles(deferred):
     assert not cycle, 'import circle: ' + ' -> '.join(cycle)
 
 
-def test_no_issue_numbers_in_the_package():
+def test_no_issue_numbers_in_the_code():
     """Code explains itself; the tracker's numbers belong in commit messages."""
     pattern = re.compile(r'\bissues? ?\d+(\.\d+)?', re.IGNORECASE)
-    bad = [f'{p.relative_to(PACKAGE.parent)}:{n}: {line.strip()}'
-           for p in sorted(PACKAGE.rglob('*.py'))
+    root = PACKAGE.parent
+    files = [p for d in (PACKAGE, root / 'test', root / 'benchmarks', root / 'launch')
+             for p in sorted(d.rglob('*.py'))] + sorted((root / 'scripts').glob('*'))
+    bad = [f'{p.relative_to(root)}:{n}: {line.strip()}' for p in files if p.is_file()
            for n, line in enumerate(p.read_text().splitlines(), 1) if pattern.search(line)]
-    assert not bad, 'issue numbers in the package:\n' + '\n'.join(bad)
+    assert not bad, 'issue numbers in the code:\n' + '\n'.join(bad)
+
+
+#: Modules that read the kernel's packed parameter vector by index, besides model and
+#: integrator that define and use it.
+PACKED_LAYOUT_READERS = {
+    # usability's rules check the calibrated tooth-stiffness constants of Eqs. 16-17 and the
+    # spring chain on the very vector the kernel will integrate
+    f'{ROOT}.usability',
+}
+
+
+def test_packed_layout_is_private_to_the_model():
+    """Outside model and integrator, modules pass the packed vector to the model's functions
+    and read quantities by name (Config, Derived, rigid_motion_vector, contact_origins_deg),
+    never by a P_* index."""
+    owners = {f'{ROOT}.model', f'{ROOT}.integrator'} | PACKED_LAYOUT_READERS
+    bad = [f'{i.source}:{i.line} takes {n} from {i.target}' for i in IMPORTS
+           if i.source not in owners for n in i.names if re.fullmatch(r'P_[A-Z0-9_]+', n)]
+    assert not bad, 'packed-layout indices outside the model:\n' + '\n'.join(bad)
+    readers = {i.source for i in IMPORTS for n in i.names if re.fullmatch(r'P_[A-Z0-9_]+', n)}
+    assert PACKED_LAYOUT_READERS <= readers, 'a listed reader no longer reads: drop it'

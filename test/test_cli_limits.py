@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Issue 10 items 6 and 8 as a user hits them: the CLI as a subprocess.
+"""Limits as a user hits them: the CLI as a subprocess.
 
 6: ``--set`` of list parameters (the documented ``damping.modal_damping_ratios=0.01,0,0``,
 ``node.joint_names``) works and bad lists give one line naming the key.

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""``simulate --csv`` is honest about its input (issue 13.2) and sizes its output: every
+"""``simulate --csv`` is honest about its input and sizes its output: every
 case that used to run silently wrong now gives the right run or a one-line error."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Issue 5 targets, asserted on deterministic simulations of the nonlinear model.
+"""The compensator's targets, asserted on deterministic simulations of the nonlinear model.
 
 18-step move (no load, as the paper) and radar slew (RADAR_LOAD) with the reference
 streamed at 1 kHz; plants nominal and detuned +-20 % (tooth stiffness, friction, flywheel

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Identification (issue 9): recovery of known parameters, held-out prediction on a model
+"""Identification: recovery of known parameters, held-out prediction on a model
 variant, robustness against the plain local fit, reports, bad input, live residual monitor.
 
 Test data come from the model at HEAD with changed parameters, plus encoder quantisation and

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Live model check core (issue 9.2): windowed residual RMS, WARN threshold, prediction
+"""Live model check core: windowed residual RMS, WARN threshold, prediction
 history interpolation, rejected samples."""
 
 from __future__ import annotations

@@ -323,7 +323,7 @@ def test_command_burst_costs_one_tick_of_physics(ros_harness):
 
 
 def test_sim_clock_restart_reinitialises(ros_harness):
-    """/clock restarting near 0 (a simulator reset, a looping bag; issue 10.3): the node
+    """/clock restarting near 0 (a simulator reset, a looping bag): the node
     re-initialises (counted, warned) and keeps predicting on the new timeline, instead of
     going silent until the clock passes the old time."""
     h = ros_harness()

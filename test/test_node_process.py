@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import start_logged, stop_and_read
 
 pytest.importorskip('rclpy')
 
@@ -66,30 +67,6 @@ class Probe:
         self.node.destroy_node()
 
 
-def start(args: list[str], env: dict[str, str], tmp_path: Path) -> tuple:
-    out = open(tmp_path / 'stdout.txt', 'w+')
-    err = open(tmp_path / 'stderr.txt', 'w+')
-    proc = subprocess.Popen(args, cwd=ROOT, env=env, stdout=out, stderr=err)
-    return proc, out, err
-
-
-def stop(proc, sig: int, out, err, timeout: float = 30.0) -> tuple[int, str]:
-    if proc.poll() is None:
-        proc.send_signal(sig)
-    try:
-        rc = proc.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-        rc = None
-    out.seek(0)
-    err.seek(0)
-    text = out.read() + err.read()
-    out.close()
-    err.close()
-    return rc, text
-
-
 def node_args(*extra: str) -> list[str]:
     return [sys.executable, '-m', 'worm_gear_sim.node', *extra, '--ros-args',
             '--params-file', str(CONFIG)]
@@ -101,14 +78,15 @@ def test_process_talks_over_dds_and_exits_cleanly(ros_dds_context, ros_subproces
                                                   tmp_path, sig, executor):
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient
-    proc, out, err = start(node_args('--executor', executor), ros_subprocess_env, tmp_path)
+    proc, log = start_logged(node_args('--executor', executor), ros_subprocess_env,
+                             tmp_path / 'node.log')
     probe = Probe(ros_dds_context)
     try:
         slew = lambda t: 0.2 * math.sin(2.0 * math.pi * t)  # noqa: E731
         ok = probe.stream_until(lambda: len(probe.joint_states) >= 20, proc, START_TIMEOUT,
                                 slew)
         if not ok:
-            rc, text = stop(proc, signal.SIGINT, out, err)
+            rc, text = stop_and_read(proc, log, signal.SIGINT)
             pytest.fail(f'no JointState from the node process (rc {rc}):\n{text}')
         js = probe.joint_states[-1]
         assert list(js.name) == ['worm_input_joint', 'worm_joint', 'worm_gear_joint',
@@ -129,7 +107,7 @@ def test_process_talks_over_dds_and_exits_cleanly(ros_dds_context, ros_subproces
         assert probe.stream_until(lambda: len(probe.joint_states) >= n + 10, proc, 30.0)
     finally:
         probe.close()
-        rc, text = stop(proc, sig, out, err)
+        rc, text = stop_and_read(proc, log, sig)
     assert rc == 0, text
     assert 'Traceback' not in text, text
     assert f'spinning with the {executor} executor' in text

@@ -115,7 +115,7 @@ def test_preview_correction_published_when_t_plus_p_arrived(ros_harness):
     stream(h, stamps[:100], values[:100], rng)
     assert h.spin_until(lambda: len(h.compensated) == 100 - 10)
     assert stamp_ns(h.compensated[-1]) == stamps[89]   # stamp 89 ms waits for 99 ms
-    stream(h, stamps[100:], values[100:], rng)     # bursts below the queue depth 100
+    stream(h, stamps[100:], values[100:], rng)     # bursts of <= 30
     assert h.spin_until(lambda: len(h.compensated) == n - 10)
     h.spin_for(0.05)
     assert len(h.compensated) == n - 10                 # the last P still waits

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""What the CLI prints for numbers at their limits (issue 13.5): an undamped model's damping
+"""What the CLI prints for numbers at their limits: an undamped model's damping
 ratios are the eigen-solver's round-off and are clean zeros; real damping still prints."""
 
 from __future__ import annotations

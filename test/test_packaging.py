@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import start_logged, stop_and_read
 
 from worm_gear_sim.params import load_config
 
@@ -138,9 +139,8 @@ def test_installed_executable_publishes_joint_states(colcon_install, ros_dds_con
     exe = prefix / 'lib' / PKG / EXE
     cfg = prefix / 'share' / PKG / 'config' / 'worm_gear_sim.yaml'
     env = _ros_env(colcon_install, ros_subprocess_env)
-    log = open(tmp_path / 'node.log', 'w+')
-    proc = subprocess.Popen([str(exe), '--ros-args', '--params-file', str(cfg)],
-                            cwd=tmp_path, env=env, stdout=log, stderr=subprocess.STDOUT)
+    proc, log = start_logged([str(exe), '--ros-args', '--params-file', str(cfg)], env,
+                             tmp_path / 'node.log', cwd=tmp_path)
     node = rclpy.create_node('packaging_probe', context=ros_dds_context)
     ex = SingleThreadedExecutor(context=ros_dds_context)
     ex.add_node(node)
@@ -155,16 +155,7 @@ def test_installed_executable_publishes_joint_states(colcon_install, ros_dds_con
     finally:
         ex.shutdown()
         node.destroy_node()
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-        try:
-            rc = proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            rc = proc.wait()
-        log.seek(0)
-        text = log.read()
-        log.close()
+        rc, text = stop_and_read(proc, log, signal.SIGINT)
     assert len(got) >= 5, f'no JointState from the installed executable (rc {rc}):\n{text}'
     assert got[-1].position[0] == pytest.approx(0.1)
     assert all(math.isfinite(x) for x in got[-1].position)
@@ -211,7 +202,9 @@ def _imports(paths: list[Path]) -> set[str]:
                   ('importorskip', 'import_module') and node.args
                   and isinstance(node.args[0], ast.Constant)):
                 names.add(str(node.args[0].value).split('.')[0])
-    return {n for n in names if n not in sys.stdlib_module_names and n != PKG}
+    local = {p.stem for p in (ROOT / 'test').glob('*.py')}   # the tests' own helpers
+    return {n for n in names if n not in sys.stdlib_module_names and n != PKG
+            and n not in local}
 
 
 def _keys(modules: set[str]) -> set[str]:

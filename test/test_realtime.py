@@ -187,18 +187,22 @@ def test_arrival_order_and_bursts_do_not_matter():
     assert p.counters['rejected_duplicate'] == p.counters['rejected_out_of_order']
 
 
-def test_predictions_equal_the_batch_simulator():
+@pytest.mark.parametrize('preview', [0.0, 0.002])
+def test_predictions_equal_the_batch_simulator(preview):
     """Predictions at each stamp equal Simulator.run of the same samples joined by
-    straight lines (the batch path), compensated or not."""
-    cfg = Config().replace(LOADED)
+    straight lines (the batch path), compensated or not; with a preview the compensated
+    prediction of stamp t comes with the sample for t + P."""
+    cfg = Config().replace({'compensation.preview_time': preview, **LOADED})
     rng = np.random.default_rng(4)
     st, x = slew(120, rng, jitter_ns=300_000)
     for applied in (False, True):
         p = RealtimePredictor(cfg, apply_compensation=applied)
-        outs = push_all(p, st, x)
+        outs = push_all(p, st, x, now_offset=-2 * MS)
         preds = [q for o in outs for q in o.predictions]
         cmd = np.array([c.compensated for o in outs for c in o.corrections]) if applied \
             else x
+        st, x = st[:len(preds)], x[:len(preds)]
+        assert [q.stamp_ns for q in preds] == st.tolist() and cmd.size == st.size
         t = (st - st[0]) * 1e-9
         sim = Simulator(cfg, theta1=float(cmd[0]))
         traj = sim.run(SampledProfile(t, cmd), t[-1], record_every=1)
@@ -252,7 +256,7 @@ def test_bad_samples_are_rejected_counted_and_leave_the_state(value, stamp, now,
 
 
 def test_a_real_jump_is_confirmed_and_resynchronised():
-    """Issue 10.4: a servo that really moves 3 rad is followed after 3 agreeing samples
+    """A servo that really moves 3 rad is followed after 3 agreeing samples
     (counted, one event); a single spike stays rejected."""
     p = RealtimePredictor(Config())
     ns = EPOCH
@@ -278,7 +282,7 @@ def test_a_real_jump_is_confirmed_and_resynchronised():
 
 
 def test_clock_restart_reinitialises():
-    """Issue 10.3: /clock restarts near 0 (use_sim_time, a looping bag): the pipeline
+    """/clock restarts near 0 (use_sim_time, a looping bag): the pipeline
     restarts on the new timeline at once (event, counter) instead of going silent."""
     p = RealtimePredictor(Config())
     t = 1000 * 10**9
@@ -339,7 +343,7 @@ def test_pause_hold_and_resume_keep_the_offline_answer():
 
 
 def test_catch_up_below_the_tick_period_is_a_config_error():
-    """Issue 10.7: node.max_catch_up below the tick period is refused, naming the key."""
+    """node.max_catch_up below the tick period is refused, naming the key."""
     with pytest.raises(ConfigError, match='node.max_catch_up'):
         Config().replace({'node.max_catch_up': 0.0005})
     cfg = Config().replace({'node.max_catch_up': 0.001})

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Issue 10.1 / 10.10: a parameter set is proven usable before it is accepted (API, config
+"""A parameter set is proven usable before it is accepted (API, config
 files, CLI), and absurd states or commands give a clear ValueError, never a NaN state."""
 
 import math
@@ -147,7 +147,7 @@ def test_cli_names_the_key_in_one_line_exit_2(setting, key, tmp_path):
     assert 'Traceback' not in r.stderr and 'Singular matrix' not in r.stderr
 
 
-# ---- issue 10.10: absurd initial states and commands -------------------------------------
+# ---- absurd initial states and commands ----------------------------------------------------
 @pytest.mark.parametrize('theta1', [1e20, -1e20, float('nan'), float('inf'), 2 * ANGLE_LIMIT])
 def test_absurd_initial_command_is_a_value_error(theta1):
     with pytest.raises(ValueError, match='theta1'):
@@ -236,7 +236,7 @@ def test_integration_failure_names_the_likely_cause(overrides, words):
         assert w in msg, (w, msg)
 
 
-# ---- the node (issue 10.1 as a user hits it: -p at start-up, the parameter service) -------
+# ---- the node (as a user hits it: -p at start-up, the parameter service) -------------------
 @pytest.mark.parametrize('param, key', [
     ('mesh.worm_fit_b:=0.5', 'mesh.worm_fit_b'),
     ('mesh.worm_tooth_stiffness_multiplier:=1e-12', 'mesh.worm_tooth_stiffness_multiplier'),
@@ -269,3 +269,20 @@ def test_node_rejects_an_unusable_set_and_keeps_running(ros_harness):
     ticks = h.node.counters['ticks']
     assert h.spin_until(lambda: h.node.counters['ticks'] >= ticks + 5)
     assert h.node.config.mesh.worm_fit_b == pytest.approx(0.000656069)
+
+
+def test_modes_and_resync_refuse_absurd_inputs():
+    with pytest.raises(ValueError, match='theta1'):
+        modes(Config(), theta1=1e20)          # the mesh phase is meaningless there
+    with pytest.raises(ValueError, match='sliding_rate'):
+        modes(Config(), sliding_rate=float('nan'))
+    sim = Simulator(Config())
+    with pytest.raises(ValueError, match='resync'):
+        sim.resync(float('nan'))
+    assert sim.t == 0.0
+
+
+def test_cli_modes_at_an_absurd_angle_is_one_line():
+    r = _cli('modes', '--theta1', '1e20')
+    assert r.returncode == 2 and 'theta1' in r.stderr and 'Traceback' not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr

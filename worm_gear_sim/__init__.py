@@ -2,7 +2,8 @@
 # Licensed under the Apache License, Version 2.0
 """worm_gear_sim: nonlinear dynamics of a worm and worm-gear drive (Chung & Shaw 2007).
 
-The computational core (this package minus ``ros/``) never imports rclpy.
+The computational core (this package minus ``ros/``) never imports rclpy; the layout and
+its import rules: docs/architecture.md.
 
     >>> from worm_gear_sim import load_config, simulate
     >>> traj = simulate(load_config())          # the paper's 18-step move, 0.5 s
@@ -26,24 +27,40 @@ _EXPORTS: dict[str, str] = {
     'static_equilibrium': 'modal',
     'Config': 'params', 'ConfigError': 'params', 'Derived': 'params',
     'default_config': 'params', 'derive': 'params', 'load_config': 'params',
+    'check_usable': 'params',
     'Profile': 'profiles', 'RampProfile': 'profiles', 'SampledProfile': 'profiles',
     'SCurveProfile': 'profiles', 'StepProfile': 'profiles', 'TrapezoidalProfile': 'profiles',
     'make_profile': 'profiles',
     'SimState': 'simulation', 'SimulationError': 'simulation', 'Simulator': 'simulation',
-    'Trajectory': 'simulation', 'simulate': 'simulation',
+    'Trajectory': 'simulation', 'simulate': 'simulation', 'simulate_to_csv': 'simulation',
+    'Compensator': 'compensation', 'feedforward_series': 'compensation',
+    'RealtimePredictor': 'realtime',
+    'resolve_config': 'config_io', 'params_document': 'config_io',
 }
 
 __all__ = [
     'Config', 'ConfigError', 'Derived', 'default_config', 'derive', 'load_config',
-    'Profile', 'StepProfile', 'RampProfile', 'TrapezoidalProfile', 'SCurveProfile',
-    'SampledProfile', 'make_profile', 'Simulator', 'Trajectory', 'SimState',
+    'check_usable', 'simulate_to_csv', 'Profile', 'StepProfile', 'RampProfile',
+    'TrapezoidalProfile', 'SCurveProfile', 'SampledProfile', 'make_profile', 'Simulator',
+    'Trajectory', 'SimState',
     'SimulationError', 'simulate', 'modes', 'ModalResult', 'static_equilibrium',
-    'damping_matrix', '__version__',
+    'damping_matrix', 'Compensator', 'feedforward_series', 'RealtimePredictor',
+    'resolve_config', 'params_document', '__version__',
 ]
 
 if TYPE_CHECKING:  # static analysers see the eager imports
+    from .compensation import Compensator, feedforward_series
+    from .config_io import params_document, resolve_config
     from .modal import ModalResult, damping_matrix, modes, static_equilibrium
-    from .params import Config, ConfigError, Derived, default_config, derive, load_config
+    from .params import (
+        Config,
+        ConfigError,
+        Derived,
+        check_usable,
+        default_config,
+        derive,
+        load_config,
+    )
     from .profiles import (
         Profile,
         RampProfile,
@@ -53,7 +70,15 @@ if TYPE_CHECKING:  # static analysers see the eager imports
         TrapezoidalProfile,
         make_profile,
     )
-    from .simulation import SimState, SimulationError, Simulator, Trajectory, simulate
+    from .realtime import RealtimePredictor
+    from .simulation import (
+        SimState,
+        SimulationError,
+        Simulator,
+        Trajectory,
+        simulate,
+        simulate_to_csv,
+    )
 
 
 def __getattr__(name: str) -> Any:

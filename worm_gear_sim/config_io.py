@@ -17,7 +17,6 @@ Errors are :class:`~worm_gear_sim.params.ConfigError` naming the parameter.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
 import math
 from collections.abc import Mapping, Sequence
@@ -26,7 +25,15 @@ from typing import Any
 
 import yaml
 
-from .params import Config, ConfigError, config_from_mapping, derive, load_config, value_kind
+from .params import (
+    Config,
+    ConfigError,
+    config_from_mapping,
+    derive,
+    load_config,
+    suggest,
+    value_kind,
+)
 
 __all__ = ['PARAMS_FORMAT', 'typed_value', 'parse_set', 'check_key', 'params_document',
            'load_params_json', 'load_any_config', 'resolve_config', 'params_json_dump',
@@ -37,12 +44,6 @@ _RESERVED_JSON_KEYS = ('format', 'derived')
 
 _TRUE = ('true', 'yes', 'on', '1')
 _FALSE = ('false', 'no', 'off', '0')
-
-
-def suggest(key: str, known: Sequence[str]) -> str:
-    """`` (did you mean x?)`` for a mistyped key, or ''."""
-    close = difflib.get_close_matches(key, list(known), n=1, cutoff=0.6)
-    return f' (did you mean {close[0]}?)' if close else ''
 
 
 def check_key(key: str) -> Any:
@@ -113,14 +114,12 @@ def params_document(cfg: Config) -> dict[str, Any]:
     """The fully resolved parameters: every config section plus a ``derived`` block
     (inertias, stiffnesses, lead per radian, ratio, mesh calibration, linear modes)."""
     from .modal import modes
-    from .model import P_GEAR_X0, P_WORM_X0, pack_parameters
+    from .model import contact_origins_deg
     doc: dict[str, Any] = {'format': PARAMS_FORMAT}
     doc.update(cfg.to_nested_dict())
     d = dataclasses.asdict(derive(cfg))
     d['output_per_input'] = derive(cfg).output_per_input
-    p = pack_parameters(cfg)
-    d['worm_contact_origin_deg'] = float(p[P_WORM_X0])
-    d['gear_contact_origin_deg'] = float(p[P_GEAR_X0])
+    d['worm_contact_origin_deg'], d['gear_contact_origin_deg'] = contact_origins_deg(cfg)
     try:
         d['natural_frequencies_hz'] = [float(f) for f in modes(cfg).undamped_hz]
     except Exception:  # noqa: BLE001 - informative only

@@ -49,7 +49,7 @@ from scipy.optimize import least_squares
 
 from .modal import modes
 from .model import pack_parameters, rigid_motion_vector
-from .params import Config, ConfigError
+from .params import Config, ConfigError, suggest
 from .profiles import SampledProfile, motion_span
 from .records import Record
 from .simulation import SimulationError, Simulator
@@ -206,10 +206,7 @@ def fit_parameters(base: Config, keys: Sequence[str],
         m = _KEY_RE.match(key)
         path, idx = (m.group(1), m.group(2)) if m else (key, None)
         if path not in flat:
-            import difflib
-            close = difflib.get_close_matches(path, list(flat), n=1, cutoff=0.6)
-            hint = f' (did you mean {close[0]}?)' if close else ''
-            raise IdentificationError(f'--fit {key}: unknown parameter{hint}')
+            raise IdentificationError(f'--fit {key}: unknown parameter' + suggest(path, flat))
         sec = path.split('.', 1)[0]
         value = flat[path]
         md = meta[path]

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +17,7 @@ from .model import (
     pack_parameters,
     rigid_motion_vector,
 )
-from .params import Config
+from .params import ANGLE_LIMIT, Config
 
 __all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix']
 
@@ -70,6 +71,10 @@ def modes(cfg: Config, theta1: float = 0.0, sliding_rate: float = 0.0,
     friction terms are linearised there (at rest, tanh makes friction act like viscous
     damping of slope mu/v_eps).
     """
+    for name, x, limit in (('theta1', theta1, ANGLE_LIMIT), ('sliding_rate', sliding_rate,
+                                                            1e6)):
+        if not (math.isfinite(float(x)) and abs(float(x)) <= limit):
+            raise ValueError(f'modes: {name} = {x!r} must be finite and within +-{limit:g}')
     p = pack_parameters(cfg)
     u = static_equilibrium(p, theta1)
     v = rigid_motion_vector(p) * sliding_rate

@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -29,6 +29,7 @@ import yaml
 __all__ = [
     'ConfigError', 'Config', 'Derived', 'derive', 'load_config', 'config_from_mapping',
     'default_config', 'default_config_path', 'NODE_NAME', 'check_usable', 'ANGLE_LIMIT',
+    'suggest', 'value_kind', 'VALUE_KINDS',
 ]
 
 NODE_NAME = 'worm_gear_sim'
@@ -376,7 +377,7 @@ class Config:
         for key, value in changes.items():
             sec, _, name = key.partition('.')
             if sec not in nested or name not in nested[sec]:
-                raise ConfigError(key, 'unknown parameter' + _suggest(key, self.to_flat_dict()))
+                raise ConfigError(key, 'unknown parameter' + suggest(key, self.to_flat_dict()))
             nested[sec][name] = value
         cfg = config_from_mapping(nested, source='overrides', usable=False)
         check_usable(cfg, changed=[k for k in changes])
@@ -392,7 +393,8 @@ class Config:
         return out
 
 
-def _suggest(key: str, known: Mapping[str, Any]) -> str:
+def suggest(key: str, known: Iterable[str]) -> str:
+    """`` (did you mean x?)`` for a mistyped name among ``known``, or ''."""
     close = difflib.get_close_matches(key, list(known), n=1, cutoff=0.6)
     return f' (did you mean {close[0]}?)' if close else ''
 
@@ -539,20 +541,20 @@ def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>',
         elif isinstance(value, Mapping):
             nested.setdefault(key, {}).update(value)
         else:
-            raise ConfigError(key, 'unknown parameter' + _suggest(key, SECTIONS)
+            raise ConfigError(key, 'unknown parameter' + suggest(key, SECTIONS)
                               + f' (top level holds the sections {", ".join(SECTIONS)})')
     known = Config.metadata()
     kwargs = {}
     for sec, values in nested.items():
         if sec not in SECTIONS:
-            raise ConfigError(sec, 'unknown section' + _suggest(sec, SECTIONS))
+            raise ConfigError(sec, 'unknown section' + suggest(sec, SECTIONS))
         cls = SECTIONS[sec]
         names = {f.name: f for f in fields(cls)}
         sec_kwargs = {}
         for name, value in values.items():
             key = f'{sec}.{name}'
             if name not in names:
-                raise ConfigError(key, 'unknown parameter' + _suggest(key, known))
+                raise ConfigError(key, 'unknown parameter' + suggest(key, known))
             f = names[name]
             default = _field_default(f)
             sec_kwargs[name] = _coerce(key, value, default, f.metadata)

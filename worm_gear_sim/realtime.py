@@ -365,6 +365,7 @@ class RealtimePredictor:
         self._chain: list[tuple[int, float]] = []
         self._stale = False
         self._drive_t = -math.inf                # last command time given to the simulator
+        self._t_start = math.nan                 # time of the first sample [s]
         self._held = 0.0                         # command the simulator holds [rad]
         self._held_ref = 0.0                     # reference of that command [rad]
         self._delta = 0.0                        # last correction [rad]
@@ -701,6 +702,7 @@ class RealtimePredictor:
         if self.sim is not None:
             self.sim.reset(self._held, t)
             self._drive_t = t
+        self._t_start = t
         self._started = True
         self._last_ns = ns
         if not self._mode:
@@ -786,6 +788,16 @@ class RealtimePredictor:
         if t < self._drive_t:           # already integrated past it: applies from there
             self.counters['late_for_simulation'] += 1
             t = self._drive_t
+        if t == self._t_start and sim.t == t:
+            # the first sample's own command (e.g. its correction, once a preview allowed
+            # it): the drive has not moved yet, so it starts at rest there
+            try:
+                sim.reset(cmd, t)
+            except ValueError as exc:  # pragma: no cover - cmd is finite
+                self._simulation_failed(exc, t, out)
+            if predict:
+                out.predictions.append(self._prediction(ns, False))
+            return
         self._catch_up(t, out)
         try:
             if sim.interpolation == 'hold':   # the grid point at or after t takes cmd

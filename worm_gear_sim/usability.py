@@ -34,6 +34,7 @@ path.
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Iterable, Sequence
 
 import numpy as np
@@ -92,13 +93,15 @@ def check_usable(cfg: Config, changed: Iterable[str] | None = None) -> None:
     except (ArithmeticError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
         raise _blame(cfg, keys, (), f'not computable ({type(exc).__name__}: {exc})') \
             from None
-    if len(_USABLE) >= _CACHE_SIZE:
-        _USABLE.pop(next(iter(_USABLE)), None)
-    _USABLE[cfg] = True
+    with _LOCK:                             # the node's worker thread and its executor
+        if len(_USABLE) >= _CACHE_SIZE:
+            _USABLE.pop(next(iter(_USABLE)), None)
+        _USABLE[cfg] = True
 
 
 _CACHE_SIZE = 512
 _USABLE: dict[Config, bool] = {}
+_LOCK = threading.Lock()
 
 
 def _differs_from_defaults(cfg: Config) -> tuple[str, ...]:

@@ -13,8 +13,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ..config_io import params_document, params_json_dump, suggest, typed_value
-from ..params import Config, ConfigError
+from ..config_io import check_key, params_document, params_json_dump, typed_value
+from ..params import Config
 from ..records import write_csv_columns
 from ..studies import PAPER_STUDIES
 from .common import CliError, add_config_options, config_from_args, fmt_table, say
@@ -123,18 +123,15 @@ def _sweep_studies(args: argparse.Namespace, cfg: Config) -> list:
     studies = []
     if args.param:
         paths = [s.strip() for s in args.param.split(',') if s.strip()]
-        defaults = cfg.to_flat_dict()
-        for pth in paths:
-            if pth not in defaults:
-                raise ConfigError(pth, 'unknown parameter' + suggest(pth, list(defaults)))
+        defaults = {pth: check_key(pth) for pth in paths}
         try:
             raw = parse_values(args.values, args.range, args.log)
         except ValueError as exc:
             raise CliError(str(exc)) from None
-        values = [typed_value(paths[0], r, Config().to_flat_dict()[paths[0]]) for r in raw]
+        values = [typed_value(paths[0], r, defaults[paths[0]]) for r in raw]
         for pth in paths[1:]:
             for r in raw:
-                typed_value(pth, r, Config().to_flat_dict()[pth])
+                typed_value(pth, r, defaults[pth])
         studies.append(param_study(paths, values, labels=raw, name=args.name or 'custom'))
     elif args.values or args.range:
         raise CliError('--values/--range need --param PATH')
@@ -161,15 +158,13 @@ def _with_compare(study, spec: str, cfg: Config):
     from ..studies import COMPARE_SEP, Case
     key, sep, vals = spec.partition('=')
     key = key.strip()
-    defaults = Config().to_flat_dict()
     if not sep or not vals.strip():
         raise CliError(f'--compare {spec!r}: expected KEY=V1,V2,...')
-    if key not in defaults:
-        raise ConfigError(key, 'unknown parameter' + suggest(key, list(defaults)))
+    default = check_key(key)
     raws = [v.strip() for v in vals.split(',') if v.strip()]
     cases = []
     for raw in raws:
-        v = typed_value(key, raw, defaults[key])
+        v = typed_value(key, raw, default)
         for c in study.cases:
             if key in c.overrides:
                 raise CliError(f'--compare {key}: the {study.name} study sets it itself')

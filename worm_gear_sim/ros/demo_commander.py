@@ -5,7 +5,7 @@ error live and sums it up move by move.
 
 Two interfaces to the node (``--interface``):
 
-* ``stamped``: behaves like a tracking servo.  Each reference sample is a
+* ``stamped`` (default): behaves like a tracking servo.  Each reference sample is a
   ``sensor_msgs/JointState`` on ``worm_angle_reference`` whose ``header.stamp`` is the
   instant it applies (samples on an exact ``--rate`` grid, streamed ahead by the node's
   ``compensation.preview_time`` (``--preview``) plus ``--lead``, so that each correction
@@ -14,7 +14,7 @@ Two interfaces to the node (``--interface``):
   ``~/compensated_command`` (theta1_ref + delta for the same stamp: what a servo would
   command) and its ``joint_states``, stamped with the instant they predict, from which the
   live residual e = theta4 - theta1_ref(stamp) l_w/r_g is computed here, sample by sample.
-* ``float64`` (default): the simple interface, ``worm_angle_command`` (std_msgs/Float64) at
+* ``float64``: the simple interface, ``worm_angle_command`` (std_msgs/Float64) at
   ``--rate``; the error is the node's ``~/positioning_error``, timed on arrival.
 
 Patterns (built from the core's profiles; no physics here): ``paper``, the paper's 18-step
@@ -67,9 +67,10 @@ __all__ = ['DemoCommander', 'MOVE_HEADER', 'MoveSummary', 'MoveTracker', 'comman
 REFERENCE_TOPIC = 'worm_angle_reference'
 COMMAND_TOPIC = 'worm_angle_command'
 LINE_WIDTH = 80                 # every line the demo prints fits 80 columns
-REFERENCE_DEPTH = 100           # reliable, keep last >= 100: every sample matters
+REFERENCE_DEPTH = 1000          # reliable, keep last 1000 as the node: every sample matters
 PAPER_LEAD = 0.05               # s of rest before the first paper move
-MAX_BURST = 200                 # samples published in one timer call after a stall
+MAX_BURST = 100                 # samples per timer call after a stall (the node queues 1000)
+NODE_WAIT_S = 10.0              # stamped: wait for the node's /diagnostics at most this long
 HOLD_PERIOD_NS = 20_000_000     # the first sample is repeated every 20 ms until the node answers
 
 
@@ -216,7 +217,8 @@ def offline_moves(cfg: Config, theta1: Callable[[Any], np.ndarray], seg: Segment
     into the same moves as the live trace."""
     times = np.arange(0.0, t_end + 0.5 / rate, 1.0 / rate)
     x = np.asarray(theta1(times), float)
-    sc = Scenario(name='demo', times=times, theta1_ref=x, move_end=t_end, constant_rate=())
+    sc = Scenario(name='demo', times=times, theta1_ref=x, move_end=float(times[0]),
+                  constant_rate=())          # run_scenario's own metrics are not used
     record = max(1, int(round(1.0 / (rate * cfg.integrator.time_step))))
     run = run_scenario(cfg, sc, cfg if compensated else None, record_every=record)
     tracker = MoveTracker(seg, float(modes(cfg).frequencies_hz[0]))
@@ -296,7 +298,9 @@ class DemoCommander(Node):
         self.output_per_input = derive(self.cfg).output_per_input
         self.theta1 = command_pattern(pattern, self.cfg, move_period, slew_rate, slew_period)
         self.segments = pattern_segments(pattern, self.cfg, move_period, slew_period)
-        self.tracker = MoveTracker(self.segments, float(modes(self.cfg).frequencies_hz[0]))
+        # float64: samples timed on arrival, which a busy machine delays by tens of ms
+        self.tracker = MoveTracker(self.segments, float(modes(self.cfg).frequencies_hz[0]),
+                                   max_gap=0.02 if interface == 'stamped' else 0.1)
         self.tracker.use_commands = False   # until the node says its feed-forward is applied
         self.pattern, self.interface, self.rate = pattern, interface, rate
         self.preview = preview              # s: the node's preview: stream this far ahead
@@ -320,6 +324,8 @@ class DemoCommander(Node):
         self.new_moves: list[MoveSummary] = []
         self._last_hold = -math.inf
         self._grid0: int | None = None      # stamp of the first sample sent
+        self.node_alive = False             # the node's /diagnostics seen: it is spinning
+        self._created = time.monotonic()
         reliable = QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         if interface == 'stamped':
             self.pub = self.create_publisher(JointState, REFERENCE_TOPIC, reliable)
@@ -352,6 +358,8 @@ class DemoCommander(Node):
                 self.sent += 1
             return
         if self.t0_ns is None:
+            if not self.node_alive and time.monotonic() - self._created < NODE_WAIT_S:
+                return      # samples queued while the node starts up would be stale
             # Until the node answers, hold the first sample (it starts the simulation
             # there at rest) 50 times a second.  Every stamp lies on one grid of the
             # sample period from the first one on: the node's time base and its dt steps
@@ -439,6 +447,8 @@ class DemoCommander(Node):
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for s in msg.status:
+            if s.name.startswith(f'{self.target}:'):
+                self.node_alive = True
             if s.name.endswith(': simulation'):
                 self.diag = {kv.key: kv.value for kv in s.values}
 
@@ -473,19 +483,19 @@ def node_parameters(node: Node, ex: Any, target: str, names: list[str],
 def _parse(argv: list[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog='demo_commander', description=__doc__.split('\n\n')[0])
     ap.add_argument('--pattern', choices=('paper', 'slew'), default='paper')
-    ap.add_argument('--interface', choices=('stamped', 'float64'), default='float64',
-                    help='stamped: worm_angle_reference + ~/compensated_command; '
-                         'float64: worm_angle_command (default)')
+    ap.add_argument('--interface', choices=('stamped', 'float64'), default='stamped',
+                    help='stamped: worm_angle_reference + ~/compensated_command (default); '
+                         'float64: worm_angle_command')
     ap.add_argument('--duration', type=float, default=20.0,
                     help='seconds of streaming after the node answers [20]')
     ap.add_argument('--rate', type=float, default=1000.0, help='reference rate [Hz] (1000)')
     ap.add_argument('--preview', type=float, default=None,
                     help='stamped: stream this many seconds ahead [default: the node\'s '
                          'compensation.preview_time]')
-    ap.add_argument('--lead', type=float, default=0.02,
+    ap.add_argument('--lead', type=float, default=0.05,
                     help='stamped: stream this much further ahead, so that each correction '
-                         'arrives before its instant and a late timer of this process does '
-                         'not stall the stream [0.02 s]')
+                         'arrives before its instant and a late timer of this process (a '
+                         'loaded machine) does not pause the stream [0.05 s]')
     ap.add_argument('--move-period', type=float, default=0.5,
                     help='paper: seconds between moves [0.5]')
     ap.add_argument('--slew-rate', type=float, default=2.0,
@@ -525,8 +535,8 @@ def _summary(node: DemoCommander, opts: argparse.Namespace, compensated: bool | 
             f'joint_states {node.n_js}')
         if node.latency_ns:
             ahead = np.asarray(node.latency_ns) * 1e-6
-            say(f'  corrections came {np.percentile(ahead, 50):.2f} ms before their instant '
-                f'(median); 1 % less than {np.percentile(ahead, 1):.2f} ms')
+            say(f'  corrections arrived {np.percentile(ahead, 50):.2f} ms before their instant '
+                f'(median), 1 % < {np.percentile(ahead, 1):.2f} ms')
     else:
         say(f'  commands {node.sent}, joint_states {node.n_js}, positioning errors '
             f'{node.n_err}')

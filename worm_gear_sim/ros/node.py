@@ -10,7 +10,7 @@ pipeline drives :class:`~worm_gear_sim.simulation.Simulator` and the feed-forwar
 
 Interface (SI units, rad; relative, remappable names; docs/node.md):
 
-* ``worm_angle_reference`` (in, sensor_msgs/JointState, reliable, keep last 100): stamped
+* ``worm_angle_reference`` (in, sensor_msgs/JointState, reliable, keep last 1000): stamped
   reference samples, ``header.stamp`` = the instant the sample applies (may be in the
   future: a preview), ``position[0]`` = theta1_ref; ``name[0]``, when given, must be the
   worm input joint (``node.joint_names[0]``).  Event-driven: each sample is processed in
@@ -67,7 +67,7 @@ from std_msgs.msg import Float64
 from ..command_timing import COMMAND_QUEUE_LENGTH, CommandQueue, StreamClock
 from ..model_check import ModelCheck
 from ..params import NODE_NAME, SECTIONS, Config, ConfigError, config_from_mapping, load_config
-from ..params import _suggest as suggest_name
+from ..params import suggest as suggest_name
 from ..realtime import STALE_PERIODS, Output, Prediction, RealtimePredictor, Reject
 from . import diagnostics as diag
 from . import startup
@@ -89,7 +89,8 @@ __all__ = ['WormGearSimNode', 'LogThrottle', 'main', 'file_defaults', 'make_exec
 
 COMMAND_TOPIC = 'worm_angle_command'
 REFERENCE_TOPIC = 'worm_angle_reference'
-REFERENCE_DEPTH = 100        # every sample matters to the filter: reliable, keep last 100
+REFERENCE_DEPTH = 1000   # every sample matters to the filter: reliable, keep last 1000 (1 s
+#                          at 1 kHz: a stalled executor loses none)
 JOINT_STATES_TOPIC = 'joint_states'
 MEASURED_TOPIC = 'measured_joint_states'
 REJECT_REASONS = tuple(r.value for r in Reject)          # the pipeline's (core) reasons
@@ -173,6 +174,7 @@ class WormGearSimNode(Node):
         self._window: dict[str, Any] = {}
         self._mode = ''                          # 'stamped' | 'command' once input came
         self._last_mono_ns = 0
+        self._last_watch_ns = 0
         self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
         self._window = self._window_start()
 
@@ -345,8 +347,9 @@ class WormGearSimNode(Node):
         stamp = st.sec * _NS + st.nanosec
         if self._mode != 'stamped':
             self._enter_mode('stamped')
-        out = self.rt.push(stamp, pos[0], now_ns=self._clock.now().nanoseconds)
-        self._handle(out, REFERENCE_TOPIC, stamp)
+        x = pos[0]
+        out = self.rt.push(stamp, x, now_ns=self._clock.now().nanoseconds)
+        self._handle(out, REFERENCE_TOPIC, stamp, value=x)
         self._busy(t0)
 
     def _reject_message(self, reason: str, text: str) -> None:
@@ -367,11 +370,17 @@ class WormGearSimNode(Node):
             self._tick_timer.reset()
 
     def _on_watch(self) -> None:
-        """Slow timer of the stamped path: notices a paused stream (held output starts)."""
+        """Slow timer of the stamped path: notices a paused stream (held output starts).
+        After a stall of this node itself (the watch came late) it waits one more period:
+        the samples queued meanwhile must be taken first, or they would be found stale."""
         if self._building is not None:
             self._swap_prepared()
+        now = self._clock.now().nanoseconds          # the timer's own clock
+        last, self._last_watch_ns = self._last_watch_ns, now
+        if now - last > 2 * WATCH_PERIOD * _NS:
+            return
         if self._hold_timer.is_canceled():
-            self._handle(self.rt.hold(self._clock.now().nanoseconds), '', 0)
+            self._handle(self.rt.hold(now), '', 0)
 
     def _on_hold(self) -> None:
         """At node.publish_rate_hz while the stamped stream is stale: the held prediction."""
