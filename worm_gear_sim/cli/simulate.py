@@ -271,6 +271,11 @@ def _simulate_bag(args: argparse.Namespace) -> int:
         say(args, f'max |replay - recorded {cmp["topic"]}| = {cmp["max_abs_diff"]:.3e} rad '
             f'(theta2..theta4) over {cmp["stamps_compared"]} equal stamps '
             f'({cmp["live_stamps"]} recorded, {cmp["replay_stamps"]} replayed)')
+        if cmp['replay_only'] or cmp['recorded_only']:
+            say(args, f'warning: {cmp["replay_only"]} replayed prediction(s) inside the '
+                f'recorded span were not recorded and {cmp["recorded_only"]} recorded '
+                'one(s) were not replayed: the node did not take every sample of the bag '
+                '(its queue overflowed: a loaded machine), or the recorder lost messages')
     elif cmp:
         say(args, f'the bag\'s {cmp["topic"]} has no stamp in common with the replay: '
             'not compared')
