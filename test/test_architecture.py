@@ -182,3 +182,24 @@ def test_no_issue_numbers_in_the_code():
     bad = [f'{p.relative_to(root)}:{n}: {line.strip()}' for p in files if p.is_file()
            for n, line in enumerate(p.read_text().splitlines(), 1) if pattern.search(line)]
     assert not bad, 'issue numbers in the code:\n' + '\n'.join(bad)
+
+
+#: Modules that read the kernel's packed parameter vector by index, besides model and
+#: integrator that define and use it.
+PACKED_LAYOUT_READERS = {
+    # usability's rules check the calibrated tooth-stiffness constants of Eqs. 16-17 and the
+    # spring chain on the very vector the kernel will integrate
+    f'{ROOT}.usability',
+}
+
+
+def test_packed_layout_is_private_to_the_model():
+    """Outside model and integrator, modules pass the packed vector to the model's functions
+    and read quantities by name (Config, Derived, rigid_motion_vector, contact_origins_deg),
+    never by a P_* index."""
+    owners = {f'{ROOT}.model', f'{ROOT}.integrator'} | PACKED_LAYOUT_READERS
+    bad = [f'{i.source}:{i.line} takes {n} from {i.target}' for i in IMPORTS
+           if i.source not in owners for n in i.names if re.fullmatch(r'P_[A-Z0-9_]+', n)]
+    assert not bad, 'packed-layout indices outside the model:\n' + '\n'.join(bad)
+    readers = {i.source for i in IMPORTS for n in i.names if re.fullmatch(r'P_[A-Z0-9_]+', n)}
+    assert PACKED_LAYOUT_READERS <= readers, 'a listed reader no longer reads: drop it'

@@ -39,6 +39,11 @@ from worm_gear_sim.studies.compensation_eval import SETTLE_TOLERANCE  # noqa: E4
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config' / 'worm_gear_sim.yaml'
 MODE_HZ = 94.51
+# The uncompensated stamped test streams at 250 Hz (the demo's default is 1 kHz): the same
+# stamped path, a quarter of the messages, so that a machine busy with other work keeps up.
+# The feed-forward is designed for the 1 kHz command period (at 250 Hz it makes the ringing
+# worse, 817 urad against 242 urad without, measured): its test streams at 1 kHz.
+LIGHT = ('--rate', '250')
 
 
 def test_demo_patterns():
@@ -220,3 +225,71 @@ def test_demo_on_a_terminal_is_one_updating_line(ros_subprocess_env, tmp_path):
     assert node_rc == 0, node_text
 
 
+
+
+
+def _numbers(pattern: str, text: str) -> tuple[float, ...]:
+    m = re.search(pattern, text)
+    assert m, text
+    return tuple(float(g) for g in m.groups())
+
+
+def _stamped_run(env: dict[str, str], tmp_path: Path, node_args: tuple, demo_args: tuple
+                 ) -> tuple[str, str]:
+    """Node + stamped demo; returns (demo stdout+stderr, node log).  The stamped results
+    do not depend on timing unless the stream was interrupted: this process or the node
+    starved of CPU for longer than the lead (a machine busy with other work), so that the
+    node saw a paused stream.  The demo shows that as unanswered references or moves with
+    gaps; then the run is repeated once, and the test skipped if it happens again."""
+    for attempt in (1, 2):
+        node, log = _start_node(env, tmp_path / f'node{attempt}.log', *node_args)
+        try:
+            demo = _demo(node, env, '--interface', 'stamped', *demo_args)
+        finally:
+            node_rc, node_text = stop_and_read(node, log)
+        out = demo.stdout + demo.stderr
+        assert demo.returncode == 0, out + node_text
+        assert node_rc == 0 and 'Traceback' not in node_text, node_text
+        sent, answered = _numbers(r'references (\d+), compensated commands (\d+)', out)
+        if answered >= sent - 60 and 'moves with gaps' not in out:
+            return out, node_text
+    pytest.skip(f'the stream was interrupted twice (machine too busy): {out}')
+
+
+@pytest.mark.ros
+def test_demo_stamped_with_feedforward_shows_its_benefit(ros_subprocess_env, tmp_path):
+    """The servo bridge (stamped mode) with the feed-forward applied: the live antenna error
+    after each move is a small fraction of the model's without feed-forward (same moves,
+    offline), and equals the offline compensated run (the stamped pipeline does not depend
+    on arrival times)."""
+    out, _ = _stamped_run(ros_subprocess_env, tmp_path,
+                          ('-p', 'node.compensation_applied:=true'), ('--duration', '2.5'))
+    assert all(len(ln) <= LINE_WIDTH for ln in out.splitlines()), out
+    assert 'feed-forward applied' in out, out
+    n, live, _ = _numbers(r'(\d+) moves with feed-forward: ringing median ([0-9.]+), '
+                          r'max ([0-9.]+) urad', out)
+    assert n >= 3, out
+    without, with_ff = _numbers(r'offline, same moves: ringing ([0-9.]+) urad without, '
+                                r'([0-9.]+) with feed-forward', out)
+    assert without > 50.0                   # urad: the paper move rings the antenna
+    assert live < 0.1 * without, out        # the benefit the compensated mode claims
+    assert with_ff < 0.1 * without
+    (dev,) = _numbers(r'live vs offline \(with feed-forward\): ringing differs by at most '
+                      r'([0-9.e+-]+) rad', out)
+    assert dev < 0.5e-6, out
+    assert '=> ~/compensated_command applied' in out
+
+
+@pytest.mark.ros
+def test_demo_stamped_slew_matches_the_offline_model(ros_subprocess_env, tmp_path):
+    out, _ = _stamped_run(ros_subprocess_env, tmp_path, (),
+                          ('--pattern', 'slew', '--slew-period', '0.5', '--duration', '2.2',
+                           *LIGHT))
+    legs = [ln for ln in out.splitlines() if re.match(r' +\d+ (up|down) ', ln)]
+    assert len(legs) >= 3, out
+    for leg in legs:                        # t, peak, ringing, rms
+        assert len(re.findall(r"\d+\.\d\d", leg)) == 4, leg
+    assert 'feed-forward not applied' in out, out
+    (dev,) = _numbers(r'live vs offline \(without feed-forward\): ringing differs by at '
+                      r'most ([0-9.e+-]+) rad', out)
+    assert dev < 0.5e-6, out

@@ -36,9 +36,9 @@ Design (computed from the NOMINAL model at construction / :meth:`Compensator.rec
 
 ``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one compiled kernel
 (:func:`compensation_kernel`: an interpolation walk over the history at ~120 quadrature
-nodes, the weights and the model inverse :func:`inverse_theta1`), about 2 us with the
-Python call (``benchmarks/bench_realtime.py``).  Structural damping (``damping.*``) is
-not in the inverse (zero by default; it only makes the drive ring less).
+nodes, the weights and the model inverse :func:`worm_gear_sim.model.inverse_theta1`), about
+2 us with the Python call (``benchmarks/bench_realtime.py``).  Structural damping
+(``damping.*``) is not in the inverse (zero by default; it only makes the drive ring less).
 
 Why no input shaper by default (see docs/compensation.md for the measurements): a
 lag-free filter (needed for constant-rate tracking) that contains a shaper one antenna
@@ -58,28 +58,11 @@ from numba import njit
 from scipy.interpolate import BSpline
 
 from .modal import modes
-from .model import (
-    P_COSL,
-    P_COSPHI,
-    P_COUT,
-    P_J4,
-    P_JG,
-    P_JW,
-    P_KG,
-    P_KW,
-    P_LW,
-    P_RG,
-    P_RW,
-    P_SINL,
-    P_TLOAD,
-    friction_coefficient,
-    mesh_compliance,
-    pack_parameters,
-)
-from .params import Config
+from .model import inverse_theta1, pack_parameters
+from .params import Config, derive
 
 __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_filter',
-           'feedforward_series', 'SHAPERS', 'compensation_kernel', 'inverse_theta1']
+           'feedforward_series', 'SHAPERS', 'compensation_kernel']
 
 SHAPERS = ('none', 'zv', 'zvd', 'ei')
 NODES_PER_KNOT = 24      # quadrature nodes per B-spline knot interval
@@ -253,46 +236,6 @@ def _enforce_moments(W: np.ndarray, tau: np.ndarray, lag_order: int) -> np.ndarr
     return W
 
 
-# ---- model inverse -------------------------------------------------------------------------
-@njit(cache=True, error_model='numpy')
-def inverse_theta1(p, y0, y1, y2, y3, y4, dynamic):
-    """Flat-output inverse of the nominal chain (packed parameters ``p``): the worm-shaft
-    input theta1 that makes theta4 = y(t), from y and its derivatives; ``dynamic`` keeps
-    the third and fourth derivative terms."""
-    Jw, Jg, J4 = p[P_JW], p[P_JG], p[P_J4]
-    Kw, Kg = p[P_KW], p[P_KG]
-    lw, rw, rg = p[P_LW], p[P_RW], p[P_RG]
-    sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
-    cout, Tload = p[P_COUT], p[P_TLOAD]
-    ratio = rg / lw                                       # theta1 per theta4
-    if not dynamic:
-        y3 = 0.0
-        y4 = 0.0
-    Ts = J4 * y2 + cout * y1 + Tload                      # gear-shaft torque, Eq. 6
-    th3 = y0 + Ts / Kg
-    th3_1 = y1 + (J4 * y3 + cout * y2) / Kg
-    th3_2 = y2 + (J4 * y4 + cout * y3) / Kg
-    if dynamic:
-        Tm = Jg * th3_2 + Ts
-    else:
-        Tm = (Jg + J4) * y2 + cout * y1 + Tload
-    # friction of the rigid sliding speed, flank from the sign of the mesh torque
-    th2_1 = th3_1 * ratio
-    v_s = rw * cl * th2_1 + rg * sl * th3_1
-    mu = friction_coefficient(p, v_s, Tm)[0]
-    A = cphi * sl + mu * cl
-    B = cphi * cl - mu * sl
-    Wn = Tm / (rg * B)                                    # Eq. 13 at the flat path
-    th2_rigid = th3 * ratio
-    kgws = mesh_compliance(p, th2_rigid, th3, mu)[0]      # Eq. 10, the model's own
-    q = Wn * kgws / cl                                    # Eq. 9
-    th2 = (q + rg * th3) / lw                             # Eq. 8
-    Tw = rw * A * Wn                                      # mesh torque on the worm
-    if dynamic:
-        Tw += Jw * th3_2 * ratio                          # worm-body inertia (rigid)
-    return th2 + Tw / Kw                                  # Eq. 11
-
-
 @njit(cache=True, error_model='numpy')
 def _interp_at(s, ht, hx, lo, hi, j):
     """x(s) of the piecewise-linear history (ht, hx)[lo:hi] (held beyond its ends, as
@@ -338,7 +281,7 @@ class _Inverse:
 
     def __init__(self, cfg: Config):
         self.p = pack_parameters(cfg)
-        self.ratio = self.p[P_RG] / self.p[P_LW]      # theta1 per theta4
+        self.ratio = derive(cfg).ratio                # r_g / l_w: theta1 per theta4
 
     def theta1(self, y0: float, y1: float, y2: float, y3: float, y4: float,
                dynamic: bool) -> float:

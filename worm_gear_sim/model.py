@@ -372,3 +372,43 @@ def forces(p: np.ndarray, u, v, theta1: float):
                        Q, dQdu, dQdv, aux)
     names = ('W_n', 'mu', 'cwkw', 'cgkg', 'v_s', 'F_X', 'F_Y', 'q')
     return Q, dQdu, dQdv, dict(zip(names, aux))
+
+
+# ---- the inverse: theta1 that makes theta4 follow a path (feed-forward compensation) --------
+@njit(cache=True, error_model='numpy')
+def inverse_theta1(p, y0, y1, y2, y3, y4, dynamic):
+    """Flat-output inverse of the nominal chain (packed parameters ``p``): the worm-shaft
+    input theta1 that makes theta4 = y(t), from y and its derivatives; ``dynamic`` keeps
+    the third and fourth derivative terms."""
+    Jw, Jg, J4 = p[P_JW], p[P_JG], p[P_J4]
+    Kw, Kg = p[P_KW], p[P_KG]
+    lw, rw, rg = p[P_LW], p[P_RW], p[P_RG]
+    sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
+    cout, Tload = p[P_COUT], p[P_TLOAD]
+    ratio = rg / lw                                       # theta1 per theta4
+    if not dynamic:
+        y3 = 0.0
+        y4 = 0.0
+    Ts = J4 * y2 + cout * y1 + Tload                      # gear-shaft torque, Eq. 6
+    th3 = y0 + Ts / Kg
+    th3_1 = y1 + (J4 * y3 + cout * y2) / Kg
+    th3_2 = y2 + (J4 * y4 + cout * y3) / Kg
+    if dynamic:
+        Tm = Jg * th3_2 + Ts
+    else:
+        Tm = (Jg + J4) * y2 + cout * y1 + Tload
+    # friction of the rigid sliding speed, flank from the sign of the mesh torque
+    th2_1 = th3_1 * ratio
+    v_s = rw * cl * th2_1 + rg * sl * th3_1
+    mu = friction_coefficient(p, v_s, Tm)[0]
+    A = cphi * sl + mu * cl
+    B = cphi * cl - mu * sl
+    Wn = Tm / (rg * B)                                    # Eq. 13 at the flat path
+    th2_rigid = th3 * ratio
+    kgws = mesh_compliance(p, th2_rigid, th3, mu)[0]      # Eq. 10, the model's own
+    q = Wn * kgws / cl                                    # Eq. 9
+    th2 = (q + rg * th3) / lw                             # Eq. 8
+    Tw = rw * A * Wn                                      # mesh torque on the worm
+    if dynamic:
+        Tw += Jw * th3_2 * ratio                          # worm-body inertia (rigid)
+    return th2 + Tw / Kw                                  # Eq. 11

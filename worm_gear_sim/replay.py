@@ -38,6 +38,8 @@ __all__ = ['Replay', 'replay', 'compare_with_recorded', 'REPLAY_CSV_COLUMNS']
 #: receive time and stamp further apart than this (median): the stamps are on another
 #: clock (sim time, a servo's clock), so the pipeline's stamp window is not applied
 CLOCK_AGREEMENT_NS = 1_000_000_000
+#: how much earlier than the node the recorder may have received a sample
+RECEIVE_SKEW_NS = 1_000_000
 
 REPLAY_CSV_COLUMNS = (
     ('t', 's'), ('theta1', 'rad'), ('theta2', 'rad'), ('theta3', 'rad'), ('theta4', 'rad'),
@@ -124,13 +126,15 @@ class Replay:
 
 def replay(config: Config, record: Record, *, compensate: bool = True,
            end_time: float | None = None, use_receive_clock: bool | None = None,
-           tick_stamps_ns: np.ndarray | None = None) -> Replay:
+           tick_stamps_ns: np.ndarray | None = None,
+           hold_stamps_ns: np.ndarray | None = None) -> Replay:
     """Feed ``record``'s command stream to a :class:`RealtimePredictor` as the node would.
 
     Stamped references: ``push(stamp, value, now_ns=receive time)`` in arrival order (the
     stamp window is skipped when the receive times are on another clock, or with
-    ``use_receive_clock=False``), the node's slow timer emulated by ``hold`` at
-    ``node.publish_rate_hz`` on the receive clock (it acts only when the stream pauses),
+    ``use_receive_clock=False``), ``hold`` (the node's timer; it acts only when the stream
+    pauses) at ``hold_stamps_ns`` (the stamps of the node's recorded held predictions:
+    when its timer fired) or else every 1 / ``node.publish_rate_hz`` on the receive clock,
     ``finish`` at the end.  Float64 commands: ``push_command(receive time, value)`` and
     ``tick`` every 1 / ``node.publish_rate_hz`` from the first command, or at
     ``tick_stamps_ns`` (the stamps of the live node's recorded joint_states: its ticks on
@@ -168,25 +172,41 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
             if ok.any() else False
         use_now = same if use_receive_clock is None else bool(use_receive_clock)
         info['stamp_window'] = use_now
-        next_hold = int(receive[0]) + period if use_now else None
+        holds: list[int] = []
+        skew = 0
+        if hold_stamps_ns is not None:
+            # a recorded held prediction proves the stream was still stale in the node: it
+            # came before the node took the next sample, even if the recorder received
+            # that sample a little earlier (two subscribers, one executor)
+            skew = RECEIVE_SKEW_NS
+            holds = np.unique(np.asarray(hold_stamps_ns, dtype=np.int64)).tolist()
+            info['holds'] = f'{len(holds)} given instants'
+        elif use_now:
+            holds = list(range(int(receive[0]) + period, int(receive.max()) + 1, period))
+            info['holds'] = f'every {period} ns on the receive clock'
+        else:
+            info['holds'] = 'none (stamps and receive times on different clocks)'
+        k = 0
         last_rx = int(receive[0])
         for s, x, rx in zip(stamps.tolist(), values.tolist(), receive.tolist()):
             if stop_ns is not None and s > stop_ns:
                 continue
-            if next_hold is not None:
-                while next_hold <= rx:
-                    collect(pred.hold(next_hold))
-                    next_hold += period
+            while k < len(holds) and holds[k] <= rx + skew:
+                collect(pred.hold(holds[k]))
+                k += 1
             collect(pred.push(s, x, now_ns=rx if use_now else None))
             last_rx = max(last_rx, rx)
-        if stop_ns is not None and pred.started:
-            # the stream paused after its last sample: the node's timer keeps publishing
-            # the held prediction, stamped with its clock (the receive clock when it
-            # agrees with the stamps)
-            offset = last_rx - pred.last_stamp_ns if use_now else 0
-            h = pred.last_stamp_ns + period
-            while h <= stop_ns:
-                collect(pred.hold(h + offset))
+        # after the last sample: the node's timer keeps publishing the held prediction,
+        # stamped with its clock (the receive clock when it agrees with the stamps)
+        offset = last_rx - pred.last_stamp_ns if use_now else 0
+        until = None if stop_ns is None else stop_ns + offset
+        for h in holds[k:]:
+            if until is None or h <= until:
+                collect(pred.hold(h))
+        if until is not None and pred.started:
+            h = max(pred.last_stamp_ns + offset, holds[-1] if holds else 0) + period
+            while h <= until:
+                collect(pred.hold(h))
                 h += period
         collect(pred.finish())
     else:

@@ -41,11 +41,11 @@ from .model import (
     AUX_VS,
     AUX_WN,
     N_AUX,
-    P_RIGID3,
     energy_series,
     generalized_forces,
     mechanical_energy,
     pack_parameters,
+    rigid_motion_vector,
 )
 from .params import ANGLE_LIMIT, Config, check_usable, derive
 from .profiles import Profile, make_profile
@@ -467,7 +467,8 @@ class Simulator:
         self._cmd_t, self._cmd_value = self.t, self._theta1
         return Trajectory(t=t_rec[:row], theta1=th_rec[:row], theta1_dot=td_rec[:row],
                           theta=u_rec[:row], omega=v_rec[:row], alpha=a_rec[:row],
-                          aux=aux_rec[:row], output_per_input=float(self.p[P_RIGID3]),
+                          aux=aux_rec[:row],
+                          output_per_input=float(rigid_motion_vector(self.p)[2]),
                           profile=profile.describe(), stats=self.stats)
 
     def iter_run(self, profile: Profile, t_end: float, record_every: int = 1,
@@ -478,7 +479,7 @@ class Simulator:
         bit.  Stopping the iteration early leaves the simulator at the last chunk's end."""
         n_total, stride = self._plan(t_end, record_every)
         first = True
-        desc, ratio = profile.describe(), float(self.p[P_RIGID3])
+        desc, ratio = profile.describe(), float(rigid_motion_vector(self.p)[2])
 
         def make(rows: int) -> tuple[np.ndarray, ...]:
             return (np.empty(rows), np.empty(rows), np.empty(rows), np.empty((rows, 3)),

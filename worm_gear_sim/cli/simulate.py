@@ -208,6 +208,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 def _simulate_bag(args: argparse.Namespace) -> int:
     """Replay a bag's command stream through the node's pipeline (worm_gear_sim.replay)."""
+    import numpy as np
+
     from ..records import read_bag
     from ..replay import compare_with_recorded, replay
     if args.column:
@@ -229,10 +231,19 @@ def _simulate_bag(args: argparse.Namespace) -> int:
     say(args, f'input: {rec.describe()}')
     say(args, f'command: {src["command_topic"]} ({src["command_type"]}, time = '
         f'{src["command_stamp"]}), {rec.command_stream()[1].size} samples')
-    ticks = _recorded_ticks(args, names) if src['command_type'].endswith('Float64') else None
+    recorded = _recorded_stamps(args, names)
+    float64 = src['command_type'].endswith('Float64')
     t0 = time.perf_counter()
     rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time,
-                 tick_stamps_ns=ticks)
+                 tick_stamps_ns=recorded if float64 else None,
+                 hold_stamps_ns=() if recorded is not None and not float64 else None)
+    if recorded is not None and not float64:
+        # the node's held predictions (a paused stream) are the recorded stamps that the
+        # samples alone do not produce: replay again with its timer firing there
+        held = np.setdiff1d(recorded, rep.stamps_ns)
+        if held.size:
+            rep = replay(cfg, rec, compensate=not args.no_feedforward,
+                         end_time=args.end_time, hold_stamps_ns=held)
     wall = time.perf_counter() - t0
     c = rep.counters
     rejected = {k[9:]: v for k, v in c.items()
@@ -272,8 +283,9 @@ def _simulate_bag(args: argparse.Namespace) -> int:
     return 0
 
 
-def _recorded_ticks(args: argparse.Namespace, names: tuple) -> Any:
-    """Stamps of the live node's joint_states in the bag (its ticks), or None."""
+def _recorded_stamps(args: argparse.Namespace, names: tuple) -> Any:
+    """Stamps of the live node's joint_states in the bag (its ticks, its held
+    predictions), or None."""
     import numpy as np
 
     from ..records import RecordError, read_bag

@@ -5,7 +5,7 @@ error live and sums it up move by move.
 
 Two interfaces to the node (``--interface``):
 
-* ``stamped``: behaves like a tracking servo.  Each reference sample is a
+* ``stamped`` (default): behaves like a tracking servo.  Each reference sample is a
   ``sensor_msgs/JointState`` on ``worm_angle_reference`` whose ``header.stamp`` is the
   instant it applies (samples on an exact ``--rate`` grid, streamed ahead by the node's
   ``compensation.preview_time`` (``--preview``) plus ``--lead``, so that each correction
@@ -14,7 +14,7 @@ Two interfaces to the node (``--interface``):
   ``~/compensated_command`` (theta1_ref + delta for the same stamp: what a servo would
   command) and its ``joint_states``, stamped with the instant they predict, from which the
   live residual e = theta4 - theta1_ref(stamp) l_w/r_g is computed here, sample by sample.
-* ``float64`` (default): the simple interface, ``worm_angle_command`` (std_msgs/Float64) at
+* ``float64``: the simple interface, ``worm_angle_command`` (std_msgs/Float64) at
   ``--rate``; the error is the node's ``~/positioning_error``, timed on arrival.
 
 Patterns (built from the core's profiles; no physics here): ``paper``, the paper's 18-step
@@ -69,7 +69,7 @@ COMMAND_TOPIC = 'worm_angle_command'
 LINE_WIDTH = 80                 # every line the demo prints fits 80 columns
 REFERENCE_DEPTH = 100           # reliable, keep last >= 100: every sample matters
 PAPER_LEAD = 0.05               # s of rest before the first paper move
-MAX_BURST = 200                 # samples published in one timer call after a stall
+MAX_BURST = 50                  # samples per timer call (half the node's queue of 100)
 HOLD_PERIOD_NS = 20_000_000     # the first sample is repeated every 20 ms until the node answers
 
 
@@ -216,7 +216,8 @@ def offline_moves(cfg: Config, theta1: Callable[[Any], np.ndarray], seg: Segment
     into the same moves as the live trace."""
     times = np.arange(0.0, t_end + 0.5 / rate, 1.0 / rate)
     x = np.asarray(theta1(times), float)
-    sc = Scenario(name='demo', times=times, theta1_ref=x, move_end=t_end, constant_rate=())
+    sc = Scenario(name='demo', times=times, theta1_ref=x, move_end=float(times[0]),
+                  constant_rate=())          # run_scenario's own metrics are not used
     record = max(1, int(round(1.0 / (rate * cfg.integrator.time_step))))
     run = run_scenario(cfg, sc, cfg if compensated else None, record_every=record)
     tracker = MoveTracker(seg, float(modes(cfg).frequencies_hz[0]))
@@ -473,19 +474,20 @@ def node_parameters(node: Node, ex: Any, target: str, names: list[str],
 def _parse(argv: list[str]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog='demo_commander', description=__doc__.split('\n\n')[0])
     ap.add_argument('--pattern', choices=('paper', 'slew'), default='paper')
-    ap.add_argument('--interface', choices=('stamped', 'float64'), default='float64',
-                    help='stamped: worm_angle_reference + ~/compensated_command; '
-                         'float64: worm_angle_command (default)')
+    ap.add_argument('--interface', choices=('stamped', 'float64'), default='stamped',
+                    help='stamped: worm_angle_reference + ~/compensated_command (default); '
+                         'float64: worm_angle_command')
     ap.add_argument('--duration', type=float, default=20.0,
                     help='seconds of streaming after the node answers [20]')
     ap.add_argument('--rate', type=float, default=1000.0, help='reference rate [Hz] (1000)')
     ap.add_argument('--preview', type=float, default=None,
                     help='stamped: stream this many seconds ahead [default: the node\'s '
                          'compensation.preview_time]')
-    ap.add_argument('--lead', type=float, default=0.02,
+    ap.add_argument('--lead', type=float, default=0.05,
                     help='stamped: stream this much further ahead, so that each correction '
-                         'arrives before its instant and a late timer of this process does '
-                         'not stall the stream [0.02 s]')
+                         'arrives before its instant and a late timer of this process (a '
+                         'loaded machine) does not pause the stream; keep lead x rate below '
+                         'the node\'s queue of 100 samples [0.05 s]')
     ap.add_argument('--move-period', type=float, default=0.5,
                     help='paper: seconds between moves [0.5]')
     ap.add_argument('--slew-rate', type=float, default=2.0,

@@ -347,8 +347,9 @@ class WormGearSimNode(Node):
         stamp = st.sec * _NS + st.nanosec
         if self._mode != 'stamped':
             self._enter_mode('stamped')
-        out = self.rt.push(stamp, pos[0], now_ns=self._clock.now().nanoseconds)
-        self._handle(out, REFERENCE_TOPIC, stamp)
+        x = pos[0]
+        out = self.rt.push(stamp, x, now_ns=self._clock.now().nanoseconds)
+        self._handle(out, REFERENCE_TOPIC, stamp, value=x)
         self._busy(t0)
 
     def _reject_message(self, reason: str, text: str) -> None:
