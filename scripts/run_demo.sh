@@ -44,8 +44,7 @@ if [ -n "${DEMO_INTERFACE:-}" ]; then
 fi
 "$PY" -m worm_gear_sim.node "${NODE_ARGS[@]}" &
 NODE_PID=$!
-echo "[demo] ROS 2 $ROS_DISTRO: worm_gear_sim node (pid $NODE_PID), ${CONFIG#"$PWD"/}${NODE_ARGS[*]:5}" \
-    | cut -c1-80
+echo "[demo] ROS 2 $ROS_DISTRO: node pid $NODE_PID ${NODE_ARGS[*]:5}"
 stop_node() {
     if kill -0 "$NODE_PID" 2>/dev/null; then
         kill -TERM "$NODE_PID" 2>/dev/null || true   # background jobs of a script ignore SIGINT

@@ -268,7 +268,10 @@ def compare_with_recorded(rep: Replay, bag: str | Path, topic: str = 'joint_stat
                           joint_names: Sequence[str] | None = None) -> dict[str, Any] | None:
     """If ``bag`` holds the live node's predicted ``joint_states``, the largest difference
     [rad] between them and the replay at equal stamps, per theta2..theta4 and overall,
-    with the number of stamps compared.  None if the bag has no such topic."""
+    with the number of stamps compared, of replayed stamps inside the recorded span that
+    were not recorded (``replay_only``: samples the node did not take, or recorder losses)
+    and of recorded stamps the replay did not produce (``recorded_only``).  None if the
+    bag has no such topic."""
     try:
         live = read_bag(bag, command_topic=rep.record.source.get('command_topic'),
                         joint_states_topic=topic, joint_names=joint_names,
@@ -280,6 +283,9 @@ def compare_with_recorded(rep: Replay, bag: str | Path, topic: str = 'joint_stat
     out: dict[str, Any] = {'topic': live.source['joint_states_topic'],
                            'stamps_compared': int(common.size),
                            'live_stamps': int(ns.size), 'replay_stamps': int(rep.stamps_ns.size)}
+    inside = rep.stamps_ns[(rep.stamps_ns >= ns.min()) & (rep.stamps_ns <= ns.max())]
+    out['replay_only'] = int(np.setdiff1d(inside, ns).size)
+    out['recorded_only'] = int(np.setdiff1d(ns, rep.stamps_ns).size)
     if not common.size:
         return out
     worst = 0.0

@@ -231,8 +231,13 @@ def _simulate_bag(args: argparse.Namespace) -> int:
     say(args, f'input: {rec.describe()}')
     say(args, f'command: {src["command_topic"]} ({src["command_type"]}, time = '
         f'{src["command_stamp"]}), {rec.command_stream()[1].size} samples')
-    recorded = _recorded_stamps(args, names)
+    recorded, early = _recorded_stamps(args, names)
     float64 = src['command_type'].endswith('Float64')
+    if early:
+        say(args, f'warning: {early} recorded {args.joint_states_topic} message(s) precede the '
+            'first recorded command: the bag misses the start of the stream (start recording '
+            'before the servo streams), so the replay, which starts at rest at the first '
+            'recorded sample, cannot equal the live node')
     t0 = time.perf_counter()
     rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time,
                  tick_stamps_ns=recorded if float64 else None,
@@ -266,6 +271,11 @@ def _simulate_bag(args: argparse.Namespace) -> int:
         say(args, f'max |replay - recorded {cmp["topic"]}| = {cmp["max_abs_diff"]:.3e} rad '
             f'(theta2..theta4) over {cmp["stamps_compared"]} equal stamps '
             f'({cmp["live_stamps"]} recorded, {cmp["replay_stamps"]} replayed)')
+        if cmp['replay_only'] or cmp['recorded_only']:
+            say(args, f'warning: {cmp["replay_only"]} replayed prediction(s) inside the '
+                f'recorded span were not recorded and {cmp["recorded_only"]} recorded '
+                'one(s) were not replayed: the node did not take every sample of the bag '
+                '(its queue overflowed: a loaded machine), or the recorder lost messages')
     elif cmp:
         say(args, f'the bag\'s {cmp["topic"]} has no stamp in common with the replay: '
             'not compared')
@@ -285,7 +295,7 @@ def _simulate_bag(args: argparse.Namespace) -> int:
 
 def _recorded_stamps(args: argparse.Namespace, names: tuple) -> Any:
     """Stamps of the live node's joint_states in the bag (its ticks, its held
-    predictions), or None."""
+    predictions) or None, and how many of them precede the first recorded command."""
     import numpy as np
 
     from ..records import RecordError, read_bag
@@ -294,8 +304,9 @@ def _recorded_stamps(args: argparse.Namespace, names: tuple) -> Any:
                         joint_states_topic=args.joint_states_topic, joint_names=names,
                         require_measured=True, min_samples=1)
     except RecordError:
-        return None
-    return live.t0_ns + np.round(live.t * 1e9).astype(np.int64)
+        return None, 0
+    return (live.t0_ns + np.round(live.t * 1e9).astype(np.int64),
+            int(live.source.get('measurements_before_first_command', 0)))
 
 
 def _plot_replay(rep: Any, png: Path) -> Path:

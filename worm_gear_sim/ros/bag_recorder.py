@@ -3,13 +3,15 @@
 """A minimal rosbag2 recorder for this package's topics, for installs without ``ros2 bag``
 (the PyPI ROS wheels have no rosbag2).
 
-    python -m worm_gear_sim.ros.bag_recorder -o run_bag [--storage mcap] [--duration 20]
+    python -m worm_gear_sim.ros.bag_recorder -o run_bag [--storage sqlite3] [--duration 20]
 
-Subscribes to the command, reference, prediction and error topics (or the ``--topic``
-ones), takes each message as serialized bytes (no decoding) and writes it with its receive
-time on the node's clock (``use_sim_time`` honoured), as ``ros2 bag record`` does, with the
-``rosbags`` writer.  The result is the input of ``worm-gear-sim simulate --bag`` and
-``identify`` (docs/data-formats.md).  Ctrl-C / SIGTERM / ``--duration`` close the bag.
+Subscribes to the node's command, reference and measured inputs and its predicted
+``joint_states`` (``--all``: also its errors and corrections; ``--topic``: others), takes
+each message as serialized bytes (no decoding) and writes it with its receive time on the
+node's clock (``use_sim_time`` honoured), as ``ros2 bag record`` does, with the ``rosbags``
+writer.  The result is the input of ``worm-gear-sim simulate --bag`` and ``identify``
+(docs/data-formats.md).  Ctrl-C / SIGTERM / ``--duration`` close the bag.  A Python
+recorder costs CPU per message: on a loaded machine it can fall behind and lose messages.
 """
 
 from __future__ import annotations
@@ -28,14 +30,18 @@ from std_msgs.msg import Float64
 
 from ..records import BAG_VERSION, FLOAT64, JOINT_STATE, NODE_NAMESPACE
 
-__all__ = ['BagRecorder', 'DEFAULT_TOPICS', 'main']
+__all__ = ['BagRecorder', 'DEFAULT_TOPICS', 'ALL_TOPICS', 'main']
 
-#: topic -> message type recorded by default (the node's inputs and outputs)
+#: topic -> message type recorded by default: the node's inputs and its prediction (what
+#: ``simulate --bag`` and ``identify`` read); ``--all`` adds ALL_TOPICS' errors and corrections
 DEFAULT_TOPICS = {
     '/worm_angle_reference': JOINT_STATE,
     '/worm_angle_command': FLOAT64,
     '/joint_states': JOINT_STATE,
     '/measured_joint_states': JOINT_STATE,
+}
+ALL_TOPICS = {
+    **DEFAULT_TOPICS,
     f'/{NODE_NAMESPACE}/positioning_error': FLOAT64,
     f'/{NODE_NAMESPACE}/worm_error': FLOAT64,
     f'/{NODE_NAMESPACE}/feedforward': FLOAT64,
@@ -100,7 +106,10 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog='python -m worm_gear_sim.ros.bag_recorder',
                                 description=__doc__.split('\n\n')[0])
     p.add_argument('-o', '--output', required=True, help='bag directory to create')
-    p.add_argument('--storage', choices=('sqlite3', 'mcap'), default='sqlite3')
+    p.add_argument('--storage', choices=('sqlite3', 'mcap'), default='mcap',
+                   help='default: %(default)s')
+    p.add_argument('--all', action='store_true', help='also the errors, the feed-forward '
+                   'and the compensated command')
     p.add_argument('--topic', action='append', default=[], metavar='NAME:TYPE',
                    help='record NAME (TYPE Float64 or JointState) instead of the defaults '
                    '(repeatable)')
@@ -115,7 +124,7 @@ def main(args: list[str] | None = None) -> int:
     from rclpy.utilities import remove_ros_args
     argv = sys.argv if args is None else args
     opts = _parse(remove_ros_args(args=argv)[1:])
-    topics = None
+    topics = ALL_TOPICS if opts.all else None
     if opts.topic:
         kinds = {'float64': FLOAT64, 'jointstate': JOINT_STATE, FLOAT64.lower(): FLOAT64,
                  JOINT_STATE.lower(): JOINT_STATE}
@@ -135,6 +144,8 @@ def main(args: list[str] | None = None) -> int:
     try:
         node = BagRecorder(opts.output, topics, storage=opts.storage,
                            best_effort=opts.best_effort)
+        print(f'bag_recorder: recording {len(node.counts)} topics to {opts.output}',
+              flush=True)
         end = time.monotonic() + opts.duration if opts.duration > 0 else None
         while rclpy.ok() and (end is None or time.monotonic() < end):
             rclpy.spin_once(node, timeout_sec=0.1)

@@ -67,9 +67,10 @@ __all__ = ['DemoCommander', 'MOVE_HEADER', 'MoveSummary', 'MoveTracker', 'comman
 REFERENCE_TOPIC = 'worm_angle_reference'
 COMMAND_TOPIC = 'worm_angle_command'
 LINE_WIDTH = 80                 # every line the demo prints fits 80 columns
-REFERENCE_DEPTH = 100           # reliable, keep last >= 100: every sample matters
+REFERENCE_DEPTH = 1000          # reliable, keep last 1000 as the node: every sample matters
 PAPER_LEAD = 0.05               # s of rest before the first paper move
-MAX_BURST = 50                  # samples per timer call (half the node's queue of 100)
+MAX_BURST = 100                 # samples per timer call after a stall (the node queues 1000)
+NODE_WAIT_S = 10.0              # stamped: wait for the node's /diagnostics at most this long
 HOLD_PERIOD_NS = 20_000_000     # the first sample is repeated every 20 ms until the node answers
 
 
@@ -297,7 +298,9 @@ class DemoCommander(Node):
         self.output_per_input = derive(self.cfg).output_per_input
         self.theta1 = command_pattern(pattern, self.cfg, move_period, slew_rate, slew_period)
         self.segments = pattern_segments(pattern, self.cfg, move_period, slew_period)
-        self.tracker = MoveTracker(self.segments, float(modes(self.cfg).frequencies_hz[0]))
+        # float64: samples timed on arrival, which a busy machine delays by tens of ms
+        self.tracker = MoveTracker(self.segments, float(modes(self.cfg).frequencies_hz[0]),
+                                   max_gap=0.02 if interface == 'stamped' else 0.1)
         self.tracker.use_commands = False   # until the node says its feed-forward is applied
         self.pattern, self.interface, self.rate = pattern, interface, rate
         self.preview = preview              # s: the node's preview: stream this far ahead
@@ -321,6 +324,8 @@ class DemoCommander(Node):
         self.new_moves: list[MoveSummary] = []
         self._last_hold = -math.inf
         self._grid0: int | None = None      # stamp of the first sample sent
+        self.node_alive = False             # the node's /diagnostics seen: it is spinning
+        self._created = time.monotonic()
         reliable = QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         if interface == 'stamped':
             self.pub = self.create_publisher(JointState, REFERENCE_TOPIC, reliable)
@@ -353,6 +358,8 @@ class DemoCommander(Node):
                 self.sent += 1
             return
         if self.t0_ns is None:
+            if not self.node_alive and time.monotonic() - self._created < NODE_WAIT_S:
+                return      # samples queued while the node starts up would be stale
             # Until the node answers, hold the first sample (it starts the simulation
             # there at rest) 50 times a second.  Every stamp lies on one grid of the
             # sample period from the first one on: the node's time base and its dt steps
@@ -440,6 +447,8 @@ class DemoCommander(Node):
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for s in msg.status:
+            if s.name.startswith(f'{self.target}:'):
+                self.node_alive = True
             if s.name.endswith(': simulation'):
                 self.diag = {kv.key: kv.value for kv in s.values}
 
@@ -486,8 +495,7 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     ap.add_argument('--lead', type=float, default=0.05,
                     help='stamped: stream this much further ahead, so that each correction '
                          'arrives before its instant and a late timer of this process (a '
-                         'loaded machine) does not pause the stream; keep lead x rate below '
-                         'the node\'s queue of 100 samples [0.05 s]')
+                         'loaded machine) does not pause the stream [0.05 s]')
     ap.add_argument('--move-period', type=float, default=0.5,
                     help='paper: seconds between moves [0.5]')
     ap.add_argument('--slew-rate', type=float, default=2.0,
@@ -527,8 +535,8 @@ def _summary(node: DemoCommander, opts: argparse.Namespace, compensated: bool | 
             f'joint_states {node.n_js}')
         if node.latency_ns:
             ahead = np.asarray(node.latency_ns) * 1e-6
-            say(f'  corrections came {np.percentile(ahead, 50):.2f} ms before their instant '
-                f'(median); 1 % less than {np.percentile(ahead, 1):.2f} ms')
+            say(f'  corrections arrived {np.percentile(ahead, 50):.2f} ms before their instant '
+                f'(median), 1 % < {np.percentile(ahead, 1):.2f} ms')
     else:
         say(f'  commands {node.sent}, joint_states {node.n_js}, positioning errors '
             f'{node.n_err}')
