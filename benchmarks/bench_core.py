@@ -4,11 +4,13 @@
 """Benchmark of the compiled Newmark-Newton kernel.
 
 Prints, in one run:
-  * ns/step of the kernel on the paper's 18-step move (0.5 s) at dt = 10 us and 25 us,
-    for the default nonlinear model and the linear model, and the real-time factor;
+  * ns/step of the kernel on the paper's 18-step move (0.5 s) for the node's old setting
+    (tanh friction, plain Newmark at 10 us) and the new default (set-valued friction,
+    frequency-matched worm, 5 us), other models, and the real-time factor;
   * mean Newton solves and force evaluations per step (what bounds the time);
-  * the cost of one force evaluation (the transcendental-heavy part) and of the Python
-    call of Simulator.advance_to (what the node pays per tick);
+  * the cost of one force evaluation (the transcendental-heavy part) and of one 1 kHz tick
+    through Simulator.advance_to (what the node pays per tick), old and new side by side;
+  * pointwise accuracy of theta2/theta4 at the node step and the antenna ring-down;
   * the speed-up over scipy's Radau at equal accuracy of the antenna angle theta4.
 
     python benchmarks/bench_core.py            # full run (~2-4 min)
@@ -33,6 +35,17 @@ from worm_gear_sim import Config, Simulator, make_profile, simulate  # noqa: E40
 from worm_gear_sim.integrator import N_STATS, S_EVALS, S_SOLVES, advance  # noqa: E402
 from worm_gear_sim.model import mesh_forces  # noqa: E402
 
+OLD = {'friction.direction': 'regularized', 'integrator.worm_frequency_matching': False,
+       'integrator.time_step': 1e-5}
+# (name, overrides): the kernel rows; the first two are the node's settings before and after
+# issue 12 (tanh friction, plain Newmark at 10 us / set-valued friction, matched worm, 5 us)
+ROWS = [
+    ('old default (tanh, 10 us)', OLD),
+    ('default (set-valued, 5 us)', {}),
+    ('default at 10 us', {'integrator.time_step': 1e-5}),
+    ('linear, constant mu', {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'}),
+    ('linear, frictionless', {'mesh.stiffness_model': 'linear', 'friction.model': 'off'}),
+]
 MODELS = {
     'nonlinear (default)': {},
     'linear, constant mu': {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'},
@@ -52,7 +65,7 @@ def kernel_ns_per_step(cfg: Config, t_end: float = 0.5, repeats: int = 7):
     for _ in range(repeats):
         sim = Simulator(cfg)
         st = np.zeros(N_STATS, dtype=np.int64)
-        ctl = np.array([1.0, 0.0])
+        ctl = sim._ctl.copy()
         t0 = time.perf_counter()
         advance(sim.p, sim.C, sim._u, sim._v, sim._a, th, td, dt, 0, e3, e3, e3, ea, st, ctl)
         best = min(best, time.perf_counter() - t0)
@@ -81,7 +94,7 @@ def force_eval_ns(cfg: Config, n: int = 200_000) -> float:
 
 
 def advance_to_call_us(cfg: Config, ticks: int = 2000) -> float:
-    """Wall time of one 1 kHz tick (100 steps at dt = 10 us) through Simulator.advance_to."""
+    """Wall time of one 1 kHz tick (1 ms of steps) through Simulator.advance_to."""
     sim = Simulator(cfg)
     prof = make_profile(cfg.input)
     t = np.arange(1, ticks + 1) * 1e-3
@@ -92,6 +105,33 @@ def advance_to_call_us(cfg: Config, ticks: int = 2000) -> float:
     return (time.perf_counter() - t0) / ticks * 1e6
 
 
+def pointwise_accuracy(over: dict, horizon: float = 0.025) -> tuple[float, float]:
+    """max |theta - theta_ref| / oscillation amplitude for theta2 and theta4 over the move and
+    5 ms of ringing, against Newmark at 0.1 us of the same model (test_against_radau checks
+    that reference against Radau)."""
+    base = Config().replace(over)
+    ref_cfg = base.replace({'integrator.time_step': 1e-7})
+    ref = simulate(ref_cfg, t_end=horizon, record_every=50)
+    dt = base.integrator.time_step
+    tr = simulate(base, t_end=horizon, record_every=int(round(5e-6 / dt)) or 1)
+    n = min(len(tr.t), len(ref.t))
+    osc2, osc4 = np.abs(ref.worm_error).max(), np.abs(ref.output_error).max()
+    return (float(np.abs(tr.theta2[:n] - ref.theta2[:n]).max() / osc2),
+            float(np.abs(tr.theta4[:n] - ref.theta4[:n]).max() / osc4))
+
+
+def ring_down_of(over: dict, horizon: float = 0.5) -> float:
+    """The antenna's ring-down over 0.5 s after the 18-step move (simulation.ring_down)."""
+    from worm_gear_sim import static_equilibrium
+    from worm_gear_sim.model import pack_parameters
+    from worm_gear_sim.simulation import ring_down
+    cfg = Config().replace(over)
+    dt = cfg.integrator.time_step
+    tr = simulate(cfg, t_end=0.02 + horizon, record_every=max(1, int(round(1e-5 / dt))))
+    eq = static_equilibrium(pack_parameters(cfg), float(tr.theta1[-1]))
+    return ring_down(tr, 0.02, eq[2], horizon)
+
+
 def radau_comparison(horizon: float = 0.05):
     """Speed-up over Radau at equal theta4 accuracy (reference: Newmark at 50 ns, which the
     test suite checks against Radau at rtol 1e-11)."""
@@ -99,7 +139,7 @@ def radau_comparison(horizon: float = 0.05):
 
     from worm_gear_sim.model import P_J4, P_JG, P_JW, P_KG
 
-    cfg = Config()
+    cfg = Config().replace(OLD)        # Radau needs the smooth (tanh) law
     sample = 1e-5
     ref = simulate(cfg.replace({'integrator.time_step': 5e-8}), t_end=horizon,
                    record_every=200)
@@ -166,25 +206,51 @@ def main(argv=None) -> int:
           f'{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}, python '
           f'{platform.python_version()})')
     print('# 18-step move (0.1131 rad trapezoidal in 20 ms) simulated for 0.5 s; min of 7 runs')
-    print(f'{"model":24s} {"dt [us]":>8s} {"ns/step":>9s} {"x real time":>12s} '
+    print(f'{"model":28s} {"dt [us]":>8s} {"ns/step":>9s} {"x real time":>12s} '
           f'{"solves/step":>12s} {"evals/step":>11s}')
-    for name, over in MODELS.items():
-        for dt in (1e-5, 2.5e-5):
-            cfg = Config().replace(dict(over, **{'integrator.time_step': dt}))
-            ns, solves, evals = kernel_ns_per_step(cfg)
-            print(f'{name:24s} {dt * 1e6:8.0f} {ns:9.1f} {dt / (ns * 1e-9):12.1f} '
-                  f'{solves:12.3f} {evals:11.3f}')
+    for name, over in ROWS:
+        cfg = Config().replace(over)
+        dt = cfg.integrator.time_step
+        ns, solves, evals = kernel_ns_per_step(cfg)
+        print(f'{name:28s} {dt * 1e6:8.0f} {ns:9.1f} {dt / (ns * 1e-9):12.1f} '
+              f'{solves:12.3f} {evals:11.3f}')
     print()
     for name, over in MODELS.items():
         print(f'one force evaluation (mesh_forces), {name}: '
               f'{force_eval_ns(Config().replace(over)):.1f} ns')
-    print(f'Simulator.advance_to, one 1 kHz tick (100 steps, default model): '
-          f'{advance_to_call_us(Config()):.1f} us')
+    print('Simulator.advance_to, one 1 kHz tick (1 ms of steps), min of 3 x 2000 ticks:')
+    ticks = {}
+    for name, over in ROWS[:2]:
+        ticks[name] = min(advance_to_call_us(Config().replace(over)) for _ in range(3))
+        print(f'  {name:28s} {ticks[name]:7.1f} us  (target <= 100 us)')
+    a, b = (ticks[n] for n, _ in ROWS[:2])
+    print(f'  ratio new / old: {b / a:.2f}')
+    print()
+    print('# accuracy at the node step, pointwise over 25 ms (move + 5 ms ringing) against '
+          'Newmark at 0.1 us of the same model, fraction of the oscillation amplitude '
+          '(targets theta2 <= 0.05, theta4 <= 0.001)')
+    for name, over in ROWS[:3]:
+        for mesh in ('linear', 'nonlinear'):
+            o = dict(over)
+            if mesh == 'linear':
+                o.update({'mesh.stiffness_model': 'linear', 'friction.model': 'constant'})
+            e2, e4 = pointwise_accuracy(o)
+            print(f'  {name:28s} {mesh:9s} theta2 {e2:.4f}  theta4 {e4:.2e}')
+    print('# antenna ring-down over 0.5 s after the move (exact-stick limit: tanh as v_eps -> 0,'
+          ' test_integrator)')
+    for name, over in (('old default (tanh 1e-4, 10 us)', OLD),
+                       ('set-valued, 10 us', {'integrator.time_step': 1e-5}),
+                       ('set-valued, 5 us (default)', {}),
+                       ('set-valued, 1 us', {'integrator.time_step': 1e-6}),
+                       ('tanh 1e-7 m/s, 20 ns', {'friction.direction': 'regularized',
+                                                 'friction.regularization_velocity': 1e-7,
+                                                 'integrator.time_step': 2e-8})):
+        print(f'  {name:32s} {100 * ring_down_of(over):.2f} %')
     if args.quick:
         return 0
     print()
     r = radau_comparison()
-    print(f'# equal-accuracy comparison with scipy Radau, default nonlinear model, '
+    print(f'# equal-accuracy comparison with scipy Radau, nonlinear model with the tanh law, '
           f'{r["horizon"] * 1e3:.0f} ms horizon, errors against Newmark at 50 ns')
     print(f'Newmark dt=10us: {r["t_newmark"] * 1e3:.2f} ms wall, theta4 error '
           f'{r["err_nm4"]:.2e} rad ({r["err_nm4"] / r["osc4"]:.1e} of its oscillation '

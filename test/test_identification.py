@@ -40,9 +40,15 @@ TRAIN = TrapezoidalProfile(0.11309733552923255, 0.020, 0.004, 0.005)
 HOLD = SCurveProfile(-0.06, 0.012, 0.003, 0.002)
 
 
+# Fitting needs a model that is smooth in its parameters: the set-valued friction law's
+# stick/slip decisions make finite-difference Jacobians of the residual jump, so the fits
+# here use the tanh law (measured with the set-valued default: residual 48 % of the motion).
+SMOOTH = {'friction.direction': 'regularized'}
+
+
 @pytest.fixture(scope='module')
 def base():
-    return load_config()
+    return load_config().replace(SMOOTH)
 
 
 def _rec(cfg, profile, t_end=0.15, seed=0, outputs=('theta4',), noise=1e-6, name=''):

@@ -59,8 +59,10 @@ def batch(cfg: Config, times: np.ndarray, values: np.ndarray, interpolation='lin
 def test_end_to_end_matches_core_batch_simulation(ros_harness):
     """The paper's 18-step move streamed over worm_angle_command with /clock: the node's
     theta1..theta4, positioning and worm errors equal the core's batch run of the same
-    samples (same linear interpolation, same dt grid) to round-off."""
-    h = ros_harness()
+    samples (same linear interpolation, same dt grid) to round-off.  The tanh friction law:
+    the set-valued law's stick/slip decisions amplify a last-bit difference of a sample time
+    to ~1e-6 rad of theta2 (measured), which would hide what this test checks."""
+    h = ros_harness({'friction.direction': 'regularized'})
     n = 90
     cmds = paper_move_samples(n)
     stamps = run_ticks(h, cmds)

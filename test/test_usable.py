@@ -46,8 +46,12 @@ UNUSABLE = [
     ({'shafts.worm_shaft_radius': 1.9e-8}, 'shafts.worm_shaft_radius',
      ['worm shaft K_w', 'singular stiffness']),
     # a 0.4 nm worm: 52 MHz mode, omega dt = 3300 (was a Newton failure mid-run)
-    ({'geometry.worm_length': 4e-10}, 'geometry.worm_length', ['not resolved', 'worm']),
-    ({'geometry.gear_pitch_radius': 1.6e-4}, 'geometry.gear_pitch_radius', ['not resolved']),
+    # (the set-valued friction law integrates these trials; with the tanh law Newton cannot
+    # follow the unresolved mode and the diagnosis names it)
+    ({'geometry.worm_length': 4e-10, 'friction.direction': 'regularized'},
+     'geometry.worm_length', ['not resolved', 'worm']),
+    ({'geometry.gear_pitch_radius': 1.6e-4, 'friction.direction': 'regularized'},
+     'geometry.gear_pitch_radius', ['not resolved']),
 ]
 
 
@@ -221,9 +225,12 @@ def test_advance_to_huge_span_is_refused_up_front():
 @pytest.mark.parametrize('overrides, words', [
     # accepted (the 2 ms trial passes) but the paper's move stops mid-run: the error names
     # the parameter behind it
-    ({'friction.regularization_velocity': 1e-10}, ['friction.regularization_velocity',
-                                                   'near step']),
-    ({'geometry.gear_width': 6e-7}, ['not resolved', 'geometry.gear_width', 'omega dt']),
+    # (the tanh law: its band is what the first case narrows, and the set-valued law
+    # integrates the unresolved gear of the second)
+    ({'friction.regularization_velocity': 1e-10, 'friction.direction': 'regularized'},
+     ['friction.regularization_velocity', 'near step']),
+    ({'geometry.gear_width': 6e-7, 'friction.direction': 'regularized'},
+     ['not resolved', 'geometry.gear_width', 'omega dt']),
 ])
 def test_integration_failure_names_the_likely_cause(overrides, words):
     from worm_gear_sim.simulation import SimulationError

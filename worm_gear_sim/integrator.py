@@ -41,16 +41,18 @@ from .model import (
     P_COSL,
     P_COUT,
     P_FRIC_MODEL,
+    P_FRIC_SET_VALUED,
     P_GAMMA,
     P_J4,
     P_JG,
-    P_JW,
+    P_JW_STEP,
     P_KG,
     P_LW,
     P_MAXIT,
     P_MAXSUB,
     P_MESH_COSINE,
     P_MESH_LINEAR,
+    P_MU_STATIC,
     P_PHASE0,
     P_RG,
     P_RIGID3,
@@ -60,6 +62,8 @@ from .model import (
     P_VEPS,
     P_ZG,
     mesh_forces,
+    mesh_forces_mu,
+    slip_coefficient,
 )
 
 # stats vector layout (int64, cumulative)
@@ -69,7 +73,8 @@ N_STATS = 8
 
 # controller state (float64, carried between calls): contraction estimate, steps since verify
 C_RHO, C_SINCE = 0, 1
-N_CTL = 2
+C_MODE, C_MU = 2, 3        # set-valued friction: +1/-1 slipping, 0 stuck; last mu_eff
+N_CTL = 4
 VERIFY_EVERY = 8
 SMOOTH_ZONE = 10.0          # |v_s| > SMOOTH_ZONE * v_eps counts as clear of the stick zone
 
@@ -122,7 +127,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     """One Newmark step from (u0, v0, a0) (3-tuples).  Returns
     (ok, u, v, a, rho, since, n_solves, n_evals, verified)."""
     beta, gamma = p[P_BETA], p[P_GAMMA]
-    m0, m1, m2 = p[P_JW], p[P_JG], p[P_J4]
+    m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
     r3 = p[P_RIGID3]
     rtol, atol = p[P_RTOL], p[P_ATOL]
     Kg, cout = p[P_KG], p[P_COUT]
@@ -240,6 +245,231 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
 
 
 @njit(cache=True, error_model='numpy')
+def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
+    """One Newmark step with the set-valued friction law in a fixed mode.
+
+    mode 0, stick: the sliding speed at the end of the step is zero (a linear constraint on
+    u) and mu_eff = lambda is an unknown solved with u in the same Newton iteration.  After a
+    converged stick step the acceleration is replaced by the one consistent with the stuck
+    contact (k . a = 0, with the multiplier lambda' that holds it): the trapezoidal rule
+    would otherwise make the constrained acceleration alternate in sign from step to step,
+    and lambda' is the force the cone test needs.
+    mode +1/-1, slip in that direction: W_f = mode mu(mode v_s) |W_n| (mu_eff = sgn(q) mode
+    mu), Eq. 18 with its cusp at v = 0 rounded below friction.cusp_velocity.
+    Returns (ok, u, v, a, mu_eff, n_solves, n_evals, da/dmu of theta2, theta3 (stick));
+    ok False also when the slip hypothesis cannot hold (the speed would change sign)."""
+    beta, gamma = p[P_BETA], p[P_GAMMA]
+    m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
+    r3 = p[P_RIGID3]
+    rtol, atol = p[P_RTOL], p[P_ATOL]
+    Kg, cout = p[P_KG], p[P_COUT]
+    maxit = int(p[P_MAXIT])
+    c_a = 1.0 / (beta * dt * dt)
+    c_v = gamma / (beta * dt)
+    k2, k3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
+    lw, rg = p[P_LW], p[P_RG]
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = C
+    h2 = dt * dt * (0.5 - beta)
+    us0 = u0[0] + dt * v0[0] + h2 * a0[0]
+    us1 = u0[1] + dt * v0[1] + h2 * a0[1]
+    us2 = u0[2] + dt * v0[2] + h2 * a0[2]
+    vs0 = v0[0] + dt * (1.0 - gamma) * a0[0]
+    vs1 = v0[1] + dt * (1.0 - gamma) * a0[1]
+    vs2 = v0[2] + dt * (1.0 - gamma) * a0[2]
+    x0 = u0[0] + dt * v0[0] + 0.5 * dt * dt * a0[0]
+    x1 = u0[1] + dt * v0[1] + 0.5 * dt * dt * a0[1]
+    x2 = u0[2] + dt * v0[2] + 0.5 * dt * dt * a0[2]
+    stick = mode == 0
+    gdt = gamma * dt
+    e = lam0 if stick else 0.0
+    n_solves = 0
+    n_evals = 0
+    alpha = 1.0
+    r_prev = 0.0
+    d0 = d1 = d2 = de = 0.0
+    p0 = p1 = p2 = pe = 0.0
+    mu = 0.0
+    while True:
+        a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
+                                                 c_a, gdt)
+        sq = 1.0 if lw * x0 - rg * x1 >= 0.0 else -1.0
+        v_s = k2 * w0 + k3 * w1
+        if stick:
+            mu, dmu_dv = e, 0.0
+        else:
+            mag, dmag = slip_coefficient(p, mode * v_s)
+            mu, dmu_dv = sq * mode * mag, sq * dmag
+        f = mesh_forces_mu(p, x0, x1, x2, w2, th1, mu)
+        n_evals += 1
+        rel0 = w0 - th1dot
+        rel1 = w1 - r3 * th1dot
+        rel2 = w2 - r3 * th1dot
+        R0 = m0 * a_0 + c00 * rel0 + c01 * rel1 + c02 * rel2 - f[0]
+        R1 = m1 * a_1 + c10 * rel0 + c11 * rel1 + c12 * rel2 - f[1]
+        R2 = m2 * a_2 + c20 * rel0 + c21 * rel1 + c22 * rel2 - f[2]
+        if not (math.isfinite(R0) and math.isfinite(R1) and math.isfinite(R2)):
+            break
+        g20, g21 = f[7] * dmu_dv * k2, f[7] * dmu_dv * k3     # dQ/dv through mu(v_s)
+        g30, g31 = f[8] * dmu_dv * k2, f[8] * dmu_dv * k3
+        j00 = m0 * c_a + (c00 - g20) * c_v - f[3]
+        j01 = (c01 - g21) * c_v - f[4]
+        j02 = c02 * c_v
+        j10 = (c10 - g30) * c_v - f[5]
+        j11 = m1 * c_a + (c11 - g31) * c_v - f[6]
+        j12 = c12 * c_v - Kg
+        j20 = c20 * c_v
+        j21 = c21 * c_v - Kg
+        j22 = m2 * c_a + (c22 + cout) * c_v + Kg
+        t0 = m0 * (atol + rtol * abs(a_0)) + 8.0 * _EPS * abs(x0) * abs(j00)
+        t1 = m1 * (atol + rtol * abs(a_1)) + 8.0 * _EPS * abs(x1) * abs(j11)
+        m2t = m2 if m2 > 0.0 else j22 / c_a
+        t2 = m2t * (atol + rtol * abs(a_2)) + 8.0 * _EPS * abs(x2) * abs(j22)
+        r_norm = max(abs(R0) / t0, abs(R1) / t1, abs(R2) / t2)
+        if n_solves > 0 and r_norm <= 1.0:
+            if stick:
+                # acceleration consistent with the stuck contact and its multiplier
+                af0 = (f[0] - c00 * rel0 - c01 * rel1 - c02 * rel2) / m0
+                af1 = (f[1] - c10 * rel0 - c11 * rel1 - c12 * rel2) / m1
+                s0, s1 = f[7] / m0, f[8] / m1
+                den = k2 * s0 + k3 * s1
+                if den == 0.0 or not math.isfinite(den):
+                    break
+                delta = -(k2 * af0 + k3 * af1) / den
+                mu = e + delta
+                a_0 = af0 + s0 * delta
+                a_1 = af1 + s1 * delta
+                if m2 > 0.0:
+                    a_2 = (f[2] - c20 * rel0 - c21 * rel1 - c22 * rel2) / m2
+                return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), mu, n_solves,
+                        n_evals, s0, s1)
+            return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), mu, n_solves, n_evals,
+                    0.0, 0.0)
+        if n_solves > 0 and r_norm > r_prev and alpha > 1.0 / 64.0:
+            alpha *= 0.5            # damped Newton: backtrack along the last update
+            x0 = p0 + alpha * d0
+            x1 = p1 + alpha * d1
+            x2 = p2 + alpha * d2
+            e = pe + alpha * de
+            continue
+        if n_solves >= maxit:
+            break
+        ok, d0, d1, d2 = _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, -R0, -R1, -R2)
+        if not ok:
+            break
+        de = 0.0
+        if stick:
+            # J d - q_mu de = -R,  v_s(u + d) = 0:  d = y1 + y2 de
+            ok, y0, y1, y2 = _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22,
+                                     f[7], f[8], 0.0)
+            den = k2 * y0 + k3 * y1
+            if not ok or den == 0.0:
+                break
+            de = (-v_s / c_v - k2 * d0 - k3 * d1) / den
+            d0 += y0 * de
+            d1 += y1 * de
+            d2 += y2 * de
+        p0, p1, p2, pe = x0, x1, x2, e
+        x0 += d0
+        x1 += d1
+        x2 += d2
+        e += de
+        r_prev = r_norm
+        alpha = 1.0
+        n_solves += 1
+    return (False, (x0, x1, x2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), mu, n_solves, n_evals,
+            0.0, 0.0)
+
+
+@njit(cache=True, error_model='numpy')
+def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0):
+    """One step with exact stick-slip: the set-valued law W_f in mu(|v_s|) |W_n| Sgn(v_s)
+    resolved by trials (as a return mapping): a slipping contact first tries to keep
+    slipping; if its sliding speed would reverse, or the contact was stuck, it tries to
+    stick, accepted when the holding force fits inside the cone |W_f| <= mu(0) |W_n|;
+    otherwise it slips in the direction of the force the cone cannot hold (then the other
+    one).  Returns (ok, u, v, a, n_solves, n_evals, mode, mu_eff)."""
+    mu_s = p[P_MU_STATIC] * (1.0 + 1e-12)
+    k2, k3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
+    lw, rg = p[P_LW], p[P_RG]
+    ns = 0
+    ne = 0
+    if mode0 != 0:
+        ok, u, v, a, mu, n1, e1, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode0,
+                                                  lam0)
+        ns += n1
+        ne += e1
+        if ok and mode0 * (k2 * v[0] + k3 * v[1]) >= 0.0:
+            return True, u, v, a, ns, ne, mode0, mu
+    ok_st, u_st, v_st, a_st, lam, n1, e1, s0, s1 = _sv_trial(p, C, u0, v0, a0, th1, th1dot,
+                                                             dt, 0, lam0)
+    ns += n1
+    ne += e1
+    if ok_st and abs(lam) <= mu_s:
+        return True, u_st, v_st, a_st, ns, ne, 0, lam
+    if ok_st:
+        sq = 1.0 if lw * u_st[0] - rg * u_st[1] >= 0.0 else -1.0
+        s = 1 if lam * sq > 0.0 else -1
+    else:
+        # no stick solution (no normal force to hold it): slip the way the drive moves
+        vs_pred = k2 * (v0[0] + dt * a0[0]) + k3 * (v0[1] + dt * a0[1])
+        s = 1 if vs_pred >= 0.0 else -1
+    for s_try in (s, -s):
+        if s_try == mode0:
+            continue            # tried first
+        ok, u, v, a, mu, n1, e1, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, s_try,
+                                                  lam0)
+        ns += n1
+        ne += e1
+        if ok and s_try * (k2 * v[0] + k3 * v[1]) >= 0.0:
+            return True, u, v, a, ns, ne, s_try, mu
+    if ok_st:
+        # No mode is consistent over the whole step: the trapezoidal rule carries the old
+        # friction in a_n, so a contact that stops inside the step reverses in both slip
+        # trials while the cone cannot hold it.  The step ends stopped (v_s = 0) with the
+        # friction at the edge of the cone and the acceleration that friction leaves: the
+        # next step starts from rest and slips (or sticks) without the old memory.
+        lam_edge = mu_s if lam > 0.0 else -mu_s
+        dl = lam_edge - lam
+        a_edge = (a_st[0] + s0 * dl, a_st[1] + s1 * dl, a_st[2])
+        return True, u_st, v_st, a_edge, ns, ne, 0, lam_edge
+    return False, u0, v0, a0, ns, ne, mode0, lam0
+
+
+@njit(cache=True, error_model='numpy')
+def _step(p, Ct, u0, v0, a0, th1, th1dot, dt, rho, since, mode, mu):
+    """One step with the configured friction law: (ok, u, v, a, rho, since, n_solves,
+    n_evals, verified, mode, mu_eff)."""
+    if p[P_FRIC_SET_VALUED] != 0.0:
+        ok, u, v, a, ns, ne, mode, mu = _step_set_valued(p, Ct, u0, v0, a0, th1, th1dot, dt,
+                                                          mode, mu)
+        return ok, u, v, a, rho, since, ns, ne, ok, mode, mu
+    ok, u, v, a, rho, since, ns, ne, ver = _newmark_step(p, Ct, u0, v0, a0, th1, th1dot, dt,
+                                                         rho, since)
+    return ok, u, v, a, rho, since, ns, ne, ver, mode, mu
+
+
+def sliding_speed(p, v) -> float:
+    """v_s = r_w cos(lam) theta2' + r_g sin(lam) theta3' [m/s]."""
+    return float(p[P_RW] * p[P_COSL] * v[0] + p[P_RG] * p[P_SINL] * v[1])
+
+
+@njit(cache=True, error_model='numpy')
+def record_aux(p, u, v, theta1, mu, out):
+    """Mesh quantities (W_n, mu, cwkw, cgkg, v_s, F_X, F_Y, q) at a state; with the
+    set-valued law from the friction coefficient the integrator used (in stick the
+    multiplier, which the state alone does not determine)."""
+    if p[P_FRIC_SET_VALUED] != 0.0:
+        r = mesh_forces_mu(p, u[0], u[1], u[2], v[2], theta1, mu)
+        out[0], out[1], out[2], out[3] = r[9], mu, r[10], r[11]
+        out[4] = p[P_RW] * p[P_COSL] * v[0] + p[P_RG] * p[P_SINL] * v[1]
+        out[5], out[6], out[7] = r[12], r[13], r[14]
+        return
+    f = mesh_forces(p, u[0], u[1], u[2], v[0], v[1], v[2], theta1)
+    for i in range(N_AUX):
+        out[i] = f[11 + i]
+
+
+@njit(cache=True, error_model='numpy')
 def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, rec_a,
             rec_aux, stats, ctl):
     """Advance len(theta1)-1 steps of size dt; theta1[k] is the command at the start of
@@ -254,6 +484,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
     vv = (v[0], v[1], v[2])
     aa = (a[0], a[1], a[2])
     rho, since = ctl[C_RHO], ctl[C_SINCE]
+    mode, mu = int(ctl[C_MODE]), ctl[C_MU]
     for i in range(3):
         if not (math.isfinite(u[i]) and math.isfinite(v[i]) and math.isfinite(a[i])):
             return 0, STATUS_NONFINITE
@@ -269,8 +500,8 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
         if not (math.isfinite(th_b) and math.isfinite(td_b)):
             status = STATUS_NONFINITE
             break
-        ok, un, vn, an, rho, since, ns, ne, ver = _newmark_step(
-            p, Ct, uu, vv, aa, th_b, td_b, dt, rho, since)
+        ok, un, vn, an, rho, since, ns, ne, ver, mode_n, mu_n = _step(
+            p, Ct, uu, vv, aa, th_b, td_b, dt, rho, since, mode, mu)
         n_solves += ns
         n_evals += ne
         n_verified += ver
@@ -281,12 +512,13 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
             stats[S_SUBDIV_EVENTS] += 1
             h = dt / n_sub
             us, vs, as_ = uu, vv, aa
+            mode_n, mu_n = mode, mu
             ok = True
             for j in range(n_sub):
                 f = (j + 1.0) / n_sub
-                ok, us, vs, as_, rho, since, ns, ne, ver = _newmark_step(
+                ok, us, vs, as_, rho, since, ns, ne, ver, mode_n, mu_n = _step(
                     p, Ct, us, vs, as_, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a),
-                    h, rho, since)
+                    h, rho, since, mode_n, mu_n)
                 n_solves += ns
                 n_evals += ne
                 n_verified += ver
@@ -300,6 +532,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
             status = STATUS_FAILED
             break
         uu, vv, aa = un, vn, an
+        mode, mu = mode_n, mu_n
         done += 1
         if record_stride > 0 and done % record_stride == 0:
             j = done // record_stride - 1
@@ -307,15 +540,15 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 rec_u[j, i] = uu[i]
                 rec_v[j, i] = vv[i]
                 rec_a[j, i] = aa[i]
-            r = mesh_forces(p, uu[0], uu[1], uu[2], vv[0], vv[1], vv[2], th_b)
-            for i in range(N_AUX):
-                rec_aux[j, i] = r[11 + i]
+            record_aux(p, uu, vv, th_b, mu, rec_aux[j])
     for i in range(3):
         u[i] = uu[i]
         v[i] = vv[i]
         a[i] = aa[i]
     ctl[C_RHO] = rho
     ctl[C_SINCE] = since
+    ctl[C_MODE] = mode
+    ctl[C_MU] = mu
     stats[S_STEPS] += done
     stats[S_SOLVES] += n_solves
     stats[S_EVALS] += n_evals
@@ -332,7 +565,7 @@ def consistent_acceleration(p, C, u, v, theta1, theta1_dot, a):
     rel0 = v[0] - theta1_dot
     rel1 = v[1] - r3 * theta1_dot
     rel2 = v[2] - r3 * theta1_dot
-    m = (p[P_JW], p[P_JG], p[P_J4])
+    m = (p[P_JW_STEP], p[P_JG], p[P_J4])
     for i in range(2):
         a[i] = (f[i] - C[i, 0] * rel0 - C[i, 1] * rel1 - C[i, 2] * rel2) / m[i]
     if m[2] > 0.0:

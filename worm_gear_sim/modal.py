@@ -16,10 +16,12 @@ from .model import (
     mass_matrix,
     pack_parameters,
     rigid_motion_vector,
+    worm_frequency,
 )
 from .params import ANGLE_LIMIT, Config
 
-__all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix']
+__all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix',
+           'amplitude_time_step']
 
 
 def static_equilibrium(p: np.ndarray, theta1: float, u_guess=None, tol: float = 1e-15,
@@ -155,3 +157,18 @@ def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:
         z = zetas[:len(w)]
         C = C + M @ phi @ np.diag(2.0 * z * w) @ phi.T @ M
     return np.ascontiguousarray(C)
+
+
+def amplitude_time_step(cfg: Config, steps_per_period: float = 20.0) -> float:
+    """Time step for amplitude and pointwise metrics (studies, figures): the configured step
+    divided by the smallest integer n that gives the highest linearised mode (the worm on its
+    shaft, 8.6 kHz for Table 1) at least ``steps_per_period`` steps per period, so no metric
+    depends on an unresolved mode.  An integer divisor keeps the grids of both steps aligned.
+    With worm_frequency_matching, 20 steps per period (5 us for Table 1) give theta2
+    pointwise within 5 % and theta4 within 0.1 % of their oscillation amplitudes against a
+    converged reference (test_integrator)."""
+    import math
+    f_top = worm_frequency(pack_parameters(cfg)) / (2.0 * math.pi)
+    dt = cfg.integrator.time_step
+    n = max(1, math.ceil(dt * steps_per_period * f_top - 1e-9))
+    return dt / n

@@ -64,7 +64,10 @@ P_RIGID3 = 40                                        # theta3/theta1 of the rigi
 P_INV_KGS, P_INV_KWS, P_INV_VEPS, P_LIN_COMPLIANCE = 41, 42, 43, 44   # precomputed
 P_INV_SQRT_VS = 45
 P_MESH_COSINE = 46                                   # contact mapping: 1 cosine, 0 sawtooth
-N_PARAMS = 47
+P_FRIC_SET_VALUED, P_MU_STATIC = 47, 48              # set-valued law; mu(0), the cone's edge
+P_VCUSP = 49                                         # Stribeck cusp rounding speed
+P_JW_STEP = 50                                       # worm inertia in the Newmark step
+N_PARAMS = 51
 
 # layout of the flat output of mesh_eval: Q (3), dQ/du (3x3 row-major), dQ/dv (3x3), aux
 O_Q, O_DQDU, O_DQDV, O_AUX = 0, 3, 12, 21
@@ -139,6 +142,10 @@ def pack_parameters(cfg: Config) -> np.ndarray:
     p[P_FRIC_MODEL] = {'off': FRICTION_OFF, 'constant': FRICTION_CONSTANT,
                        'stribeck': FRICTION_STRIBECK}[fr.model]
     p[P_FRIC_PAPER] = 1.0 if fr.direction == 'paper' else 0.0
+    p[P_FRIC_SET_VALUED] = 1.0 if (fr.direction == 'set_valued' and fr.model != 'off') else 0.0
+    p[P_MU_STATIC] = {'off': 0.0, 'constant': fr.constant_coefficient,
+                      'stribeck': fr.mu_kinetic + fr.mu_stribeck_drop}[fr.model]
+    p[P_VCUSP] = fr.cusp_velocity
     p[P_MU_CONST], p[P_MU_K], p[P_MU_DROP] = (fr.constant_coefficient, fr.mu_kinetic,
                                               fr.mu_stribeck_drop)
     p[P_VS], p[P_VEPS] = fr.stribeck_velocity, fr.regularization_velocity
@@ -152,7 +159,30 @@ def pack_parameters(cfg: Config) -> np.ndarray:
     p[P_INV_VEPS] = 1.0 / fr.regularization_velocity
     p[P_INV_SQRT_VS] = 1.0 / math.sqrt(fr.stribeck_velocity)
     p[P_LIN_COMPLIANCE] = 1.0 / p[P_CWKW_LIN] + 1.0 / p[P_CGKG_LIN]
+    p[P_JW_STEP] = p[P_JW]
+    if integ.worm_frequency_matching:
+        p[P_JW_STEP] = p[P_JW] * worm_inertia_factor(p, integ.time_step)
     return p
+
+
+def worm_frequency(p: np.ndarray) -> float:
+    """Highest linearised natural frequency [rad/s] (frictionless, at the mesh stiffness of
+    theta = 0): the worm on its shaft, 8.6 kHz for Table 1."""
+    import scipy.linalg as sla
+    w2 = sla.eigvals(linear_stiffness(p), mass_matrix(p))
+    w2 = w2[np.isfinite(w2) & (np.abs(w2) < 1e300)].real
+    return float(np.sqrt(max(w2.max(), 0.0)))
+
+
+def worm_inertia_factor(p: np.ndarray, dt: float) -> float:
+    """(x / tan x)^2 with x = omega_w dt / 2: the average-acceleration rule integrates a
+    mode of frequency omega at 2 atan(omega dt / 2) / dt; with the worm inertia scaled by this
+    factor in the step's inertia term the worm mode gets its exact frequency (no period
+    elongation).  1 when the mode is too coarse to correct (x > 1.2, dt > 0.38 period)."""
+    x = 0.5 * worm_frequency(p) * dt
+    if not 0.0 < x <= 1.2:
+        return 1.0
+    return (x / math.tan(x)) ** 2
 
 
 def contact_origins_deg(cfg: Config) -> tuple[float, float]:
@@ -187,6 +217,25 @@ def tooth_stiffness(p, theta2, theta3):
 
 # ---- Eq. 18: friction coefficient and its direction ---------------------------------------
 @njit(cache=True, error_model='numpy')
+def slip_coefficient(p, v):
+    """Friction coefficient of the set-valued law while slipping at speed v = |v_s| (v < 0:
+    the slip hypothesis is violated; mu(0), slope 0), and d mu / d v.  Eq. 18 with the
+    square root rounded at the cusp: sqrt(v) -> v / sqrt(v + v_c), equal to sqrt(v) for
+    v >> v_c, finite slope 1/sqrt(v_c) at 0 (Newton converges), mu(0) unchanged."""
+    if p[P_FRIC_MODEL] != FRICTION_STRIBECK:
+        return p[P_MU_CONST], 0.0
+    if v <= 0.0:
+        return p[P_MU_K] + p[P_MU_DROP], 0.0
+    vc = p[P_VCUSP]
+    r = math.sqrt(v + vc)
+    sroot = v / r
+    dsroot = (v + 2.0 * vc) / (2.0 * r * r * r)
+    isv = p[P_INV_SQRT_VS]
+    ex = math.exp(-sroot * isv)
+    return p[P_MU_K] + p[P_MU_DROP] * ex, -p[P_MU_DROP] * isv * ex * dsroot
+
+
+@njit(cache=True, error_model='numpy')
 def friction_coefficient(p, v_s, q):
     """Return (mu_eff, d mu_eff / d v_s): signed coefficient entering Eqs. 1-2, 10, 12, 14."""
     model = p[P_FRIC_MODEL]
@@ -202,6 +251,16 @@ def friction_coefficient(p, v_s, q):
         dmu = 0.0  # d mu / d|v|; singular at 0, handled below
         if av > 0.0:
             dmu = -0.5 * p[P_MU_DROP] * p[P_INV_SQRT_VS] * ex / sv
+    if p[P_FRIC_SET_VALUED] != 0.0:
+        # set-valued law, slip branch: W_f = mu(|v_s|) |W_n| sgn(v_s).  Below the cusp
+        # velocity the contact counts as stuck and the friction as 0 here: the stick force
+        # is a multiplier the integrator solves for, the state alone does not fix it
+        if av < p[P_VCUSP]:
+            return 0.0, 0.0
+        sq = 1.0 if q >= 0.0 else -1.0
+        sg = 1.0 if v_s > 0.0 else -1.0
+        mag, dmag = slip_coefficient(p, av)
+        return sq * sg * mag, sq * dmag
     if p[P_FRIC_PAPER] != 0.0:
         # fixed sign as printed; derivative floored to stay finite at rest
         if model == FRICTION_STRIBECK:
@@ -249,20 +308,14 @@ def mesh_compliance(p, th2, th3, mu):
 
 # ---- Eqs. 4-15: generalized forces with their analytic Jacobians ---------------------------
 @njit(cache=True, error_model='numpy')
-def mesh_forces(p, th2, th3, th4, w2, w3, w4, theta1):
-    """Generalized forces Q (= M u'' without structural damping) of Eqs. 11, 13 and 6, the
-    non-constant entries of their analytic Jacobians and the mesh quantities, as a tuple:
-
-    (Q2, Q3, Q4, dQ2/dth2, dQ2/dth3, dQ3/dth2, dQ3/dth3, dQ2/dw2, dQ2/dw3, dQ3/dw2, dQ3/dw3,
-     W_n, mu_eff, c_w k_w, c_g k_g, v_s, F_X, F_Y, q).
-
-    The constant entries are dQ3/dth4 = dQ4/dth3 = K_g, dQ4/dth4 = -K_g, dQ4/dw4 = -c_out.
-    Scalars in, scalars out: this is the hot path of the integrator."""
+def mesh_forces_mu(p, th2, th3, th4, w4, theta1, mu):
+    """Generalized forces of Eqs. 11, 13 and 6 for a given signed friction coefficient mu
+    (W_f = mu W_n): the slip law's value or, in stick, the multiplier the integrator solves
+    for.  Returns (Q2, Q3, Q4, dQ2/dth2, dQ2/dth3, dQ3/dth2, dQ3/dth3, dQ2/dmu, dQ3/dmu, W_n,
+    c_w k_w, c_g k_g, F_X, F_Y, q)."""
     lw, rw, rg = p[P_LW], p[P_RW], p[P_RG]
     sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
     q = lw * th2 - rg * th3                                          # Eq. 8 right side
-    v_s = rw * cl * w2 + rg * sl * w3                                # sliding speed
-    mu, dmu_dvs = friction_coefficient(p, v_s, q)
     A = cphi * sl + mu * cl                                          # F_X / W_n, Eq. 1
     B = cphi * cl - mu * sl                                          # F_Y / W_n, Eq. 2
     kgws, dK_dphase, dK_dmu, cwkw, cgkg = mesh_compliance(p, th2, th3, mu)
@@ -277,15 +330,35 @@ def mesh_forces(p, th2, th3, th4, w2, w3, w4, theta1):
     Q2 = -rw * A * Wn - Kw * (th2 - theta1)                          # Eq. 11
     Q3 = rg * B * Wn - Kg * (th3 - th4)                              # Eq. 13
     Q4 = -Kg * (th4 - th3) - p[P_COUT] * w4 - p[P_TLOAD]             # Eq. 6 (+ load)
-    dQ0_dmu = -rw * (cl * Wn + A * dWn_dmu)
-    dQ1_dmu = rg * (-sl * Wn + B * dWn_dmu)
-    dmu_dw2 = dmu_dvs * rw * cl
-    dmu_dw3 = dmu_dvs * rg * sl
     return (Q2, Q3, Q4,
             -rw * A * dWn_dth2 - Kw, -rw * A * dWn_dth3,
             rg * B * dWn_dth2, rg * B * dWn_dth3 - Kg,
-            dQ0_dmu * dmu_dw2, dQ0_dmu * dmu_dw3, dQ1_dmu * dmu_dw2, dQ1_dmu * dmu_dw3,
-            Wn, mu, cwkw, cgkg, v_s, A * Wn, B * Wn, q)
+            -rw * (cl * Wn + A * dWn_dmu), rg * (-sl * Wn + B * dWn_dmu),
+            Wn, cwkw, cgkg, A * Wn, B * Wn, q)
+
+
+@njit(cache=True, error_model='numpy')
+def mesh_forces(p, th2, th3, th4, w2, w3, w4, theta1):
+    """Generalized forces Q (= M u'' without structural damping) of Eqs. 11, 13 and 6, the
+    non-constant entries of their analytic Jacobians and the mesh quantities, as a tuple:
+
+    (Q2, Q3, Q4, dQ2/dth2, dQ2/dth3, dQ3/dth2, dQ3/dth3, dQ2/dw2, dQ2/dw3, dQ3/dw2, dQ3/dw3,
+     W_n, mu_eff, c_w k_w, c_g k_g, v_s, F_X, F_Y, q).
+
+    The constant entries are dQ3/dth4 = dQ4/dth3 = K_g, dQ4/dth4 = -K_g, dQ4/dw4 = -c_out.
+    Friction follows the law of the state (with the set-valued law: the slip branch, zero
+    friction at exactly zero sliding speed).  Scalars in, scalars out: the hot path."""
+    rw, rg = p[P_RW], p[P_RG]
+    sl, cl = p[P_SINL], p[P_COSL]
+    q = p[P_LW] * th2 - rg * th3
+    v_s = rw * cl * w2 + rg * sl * w3                                # sliding speed
+    mu, dmu_dvs = friction_coefficient(p, v_s, q)
+    r = mesh_forces_mu(p, th2, th3, th4, w4, theta1, mu)
+    dmu_dw2 = dmu_dvs * rw * cl
+    dmu_dw3 = dmu_dvs * rg * sl
+    return (r[0], r[1], r[2], r[3], r[4], r[5], r[6],
+            r[7] * dmu_dw2, r[7] * dmu_dw3, r[8] * dmu_dw2, r[8] * dmu_dw3,
+            r[9], mu, r[10], r[11], v_s, r[12], r[13], r[14])
 
 
 @njit(cache=True, error_model='numpy')

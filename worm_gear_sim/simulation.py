@@ -15,6 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from .integrator import (
+    C_MODE,
+    C_MU,
+    C_RHO,
+    C_SINCE,
+    N_CTL,
     N_STATS,
     S_EVALS,
     S_FAILED,
@@ -29,6 +34,10 @@ from .integrator import (
     advance,
     advance_segment,
     consistent_acceleration,
+    record_aux,
+)
+from .integrator import (
+    sliding_speed as record_aux_speed,
 )
 from .modal import damping_matrix, static_equilibrium
 from .model import (
@@ -41,9 +50,11 @@ from .model import (
     AUX_VS,
     AUX_WN,
     N_AUX,
+    P_FRIC_SET_VALUED,
     energy_series,
     generalized_forces,
     mechanical_energy,
+    mesh_forces_mu,
     pack_parameters,
     rigid_motion_vector,
 )
@@ -52,7 +63,7 @@ from .profiles import Profile, make_profile
 from .records import write_csv_header
 
 __all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate',
-           'simulate_to_csv', 'TrajectoryCsvWriter', 'csv_bytes_estimate']
+           'simulate_to_csv', 'TrajectoryCsvWriter', 'csv_bytes_estimate', 'ring_down']
 
 
 class SimulationError(RuntimeError):
@@ -255,7 +266,8 @@ class Simulator:
         self.dt = config.integrator.time_step
         self.interpolation = interpolation or config.node.command_interpolation
         self._stats = np.zeros(N_STATS, dtype=np.int64)
-        self._ctl = np.array([1.0, 0.0])      # Newton controller: contraction, since verify
+        # Newton controller: contraction, steps since verify; friction mode and mu_eff
+        self._ctl = np.zeros(N_CTL)
         self.reset(theta1, t0)
 
     # ---- state ---------------------------------------------------------------------------
@@ -285,7 +297,9 @@ class Simulator:
         self._theta1_dot = 0.0
         self._cmd_t = self._t0
         self._cmd_value = theta1
-        self._ctl[:] = (1.0, 0.0)
+        self._ctl[:] = 0.0
+        self._ctl[C_RHO] = 1.0
+        self._ctl[C_MODE] = self._slip_mode()
 
     def reconfigure(self, config: Config) -> None:
         """Swap in new (already validated) parameters, keeping time, state and command.
@@ -300,7 +314,13 @@ class Simulator:
         if not np.all(np.isfinite(a)):
             raise ValueError('the new parameters give a non-finite acceleration')
         self.config, self.p, self.C, self.derived, self._a = config, p, C, derive(config), a
-        self._ctl[:] = (1.0, 0.0)
+        self._ctl[C_RHO], self._ctl[C_SINCE] = 1.0, 0.0
+
+    def _slip_mode(self) -> float:
+        """Friction mode of the set-valued law at the current state: sign of the sliding
+        speed, 0 (stuck) at rest."""
+        v_s = record_aux_speed(self.p, self._v)
+        return float(np.sign(v_s))
 
     @property
     def t(self) -> float:
@@ -322,10 +342,16 @@ class Simulator:
                 'failed_steps': int(s[S_FAILED]), 'verified_steps': int(s[S_VERIFIED])}
 
     def forces(self) -> dict[str, float]:
-        """Mesh quantities at the current state (W_n, mu, stiffnesses, F_X, F_Y, q)."""
+        """Mesh quantities at the current state (W_n, mu, stiffnesses, F_X, F_Y, q); with
+        the set-valued friction law mu is the coefficient of the last step (in stick the
+        multiplier that holds the contact)."""
         Q, aux = np.zeros(3), np.zeros(N_AUX)
         generalized_forces(self.p, self._u, self._v, self._theta1, Q, np.zeros((3, 3)),
                            np.zeros((3, 3)), aux)
+        if self.p[P_FRIC_SET_VALUED] != 0.0:
+            record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux)
+            r = mesh_forces_mu(self.p, *self._u, self._v[2], self._theta1, self._ctl[C_MU])
+            Q = np.array(r[:3])
         names = ('W_n', 'mu', 'cwkw', 'cgkg', 'v_s', 'F_X', 'F_Y', 'q')
         return dict(zip(names, aux.tolist())) | {'Q2': Q[0], 'Q3': Q[1], 'Q4': Q[2]}
 
@@ -346,6 +372,8 @@ class Simulator:
                                      np.zeros(N_AUX))
         u, v, th1 = self._u, self._v, self._theta1
         generalized_forces(self.p, u, v, th1, buf[0], buf[1], buf[2], buf[3])
+        if self.p[P_FRIC_SET_VALUED] != 0.0:       # the friction the integrator solved for
+            record_aux(self.p, u, v, th1, self._ctl[C_MU], buf[3])
         aux = buf[3]
         g, d = self.config.geometry, self.derived
         u2, u3, u4 = float(u[0]), float(u[1]), float(u[2])
@@ -431,7 +459,7 @@ class Simulator:
             from .usability import diagnose
             hint = diagnose(self.config)
             raise SimulationError(f'integration stopped at t = {self.t:.9g} s: {what}'
-                                  + (f'; likely cause: {hint}' if hint else ''))
+                                  + (f'; {hint}' if hint else ''))
 
     # ---- batch ---------------------------------------------------------------------------
     def run(self, profile: Profile, t_end: float, record_every: int = 1,
@@ -517,8 +545,7 @@ class Simulator:
     def _row0(self, t_rec, th_rec, td_rec, u_rec, v_rec, a_rec, aux_rec) -> None:
         t_rec[0], th_rec[0], td_rec[0] = self.t, self._theta1, self._theta1_dot
         u_rec[0], v_rec[0], a_rec[0] = self._u, self._v, self._a
-        generalized_forces(self.p, self._u, self._v, self._theta1, np.zeros(3),
-                           np.zeros((3, 3)), np.zeros((3, 3)), aux_rec[0])
+        record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux_rec[0])
 
     def _chunks(self, profile: Profile, n_total: int, stride: int, chunk_steps: int):
         """Yield (rows, fill) per chunk of whole strides; ``fill(t, th, td, u, v, a, aux)``
@@ -605,3 +632,16 @@ def simulate_to_csv(config: Config, path: str | Path, profile: Profile | None = 
     out.stats = sim.stats
     return out
 
+
+def ring_down(traj: Trajectory, t_move: float, theta4_eq: float, horizon: float = 0.5,
+              window: float = 0.1) -> float:
+    """Fraction of the antenna's oscillation lost over ``horizon`` after the move ends at
+    ``t_move``: 1 - max|theta4 - eq| over the last ``window`` / max over the first
+    ``window`` of [t_move, t_move + horizon]."""
+    t = traj.t
+    d4 = np.abs(traj.theta4 - theta4_eq)
+    first = (t >= t_move - 1e-12) & (t < t_move + window)
+    last = (t > t_move + horizon - window) & (t <= t_move + horizon + 1e-12)
+    if not first.any() or not last.any() or t[-1] < t_move + horizon - 1e-9:
+        raise ValueError(f'the run must cover the move end ({t_move:g} s) plus {horizon:g} s')
+    return 1.0 - float(d4[last].max() / d4[first].max())

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..modal import static_equilibrium
+from ..modal import amplitude_time_step, static_equilibrium
 from ..params import Config, config_from_mapping, derive
 from ..profiles import Profile, make_profile
 from ..simulation import Simulator
@@ -44,6 +44,10 @@ def run_case(base: Config | Mapping[str, Any], overrides: Mapping[str, Any] | No
     as CPU time of this thread (``kernel_cpu_s``, ``case_cpu_s``)."""
     t0, c0 = time.perf_counter(), time.thread_time()
     cfg = case_config(base, overrides or {})
+    # amplitudes need the worm mode resolved: a step from the model's modes
+    dt_amp = amplitude_time_step(cfg)
+    if dt_amp < cfg.integrator.time_step:
+        cfg = cfg.replace({'integrator.time_step': dt_amp})
     prof = make_profile(cfg.input) if profile is None else profile
     t_end = cfg.input.end_time if t_end is None else float(t_end)
     th0 = float(prof.theta1(np.array([0.0]))[0])
