@@ -246,8 +246,11 @@ def main(argv: list[str] | None = None) -> int:
     slope, se = slope_per_hour(rss[:, 0], rss[:, 1])
     print(f'measured {wall:.1f} s; node exit on SIGTERM: {proc.returncode} '
           f'(alive before: {node_alive}); stderr lines: {len(err.splitlines())}')
+    half = rss[len(rss) // 2:]
+    slope2, se2 = slope_per_hour(half[:, 0], half[:, 1])
     print(f'RSS: {rss[0, 1]:.1f} -> {rss[-1, 1]:.1f} MB (max {rss[:, 1].max():.1f}); fitted '
-          f'slope {slope:+.2f} +- {se:.2f} MB/h over {len(rss)} samples')
+          f'slope {slope:+.2f} +- {se:.2f} MB/h over {len(rss)} samples; second half '
+          f'{slope2:+.2f} +- {se2:.2f} MB/h')
     print(f'CPU of the node: {cpu:.3f} cores')
     for path, st in stamps.items():
         if len(st) < 2:

@@ -459,7 +459,7 @@ class Simulator:
             from .usability import diagnose
             hint = diagnose(self.config)
             raise SimulationError(f'integration stopped at t = {self.t:.9g} s: {what}'
-                                  + (f'; likely cause: {hint}' if hint else ''))
+                                  + (f'; {hint}' if hint else ''))
 
     # ---- batch ---------------------------------------------------------------------------
     def run(self, profile: Profile, t_end: float, record_every: int = 1,

@@ -261,10 +261,10 @@ def _trial_failure(cfg: Config, changed: Sequence[str], m, what: str) -> ConfigE
 
 
 def diagnose(cfg: Config) -> str:
-    """Likely cause of an integration failure with a usable ``cfg``, as text naming the
-    parameters ('' if none is known): an unresolved mode, a friction regularisation far
-    below the sliding-speed change of one substep, the keys that differ from the defaults.
-    Used in the message of :class:`~worm_gear_sim.simulation.SimulationError`."""
+    """Text for the message of :class:`~worm_gear_sim.simulation.SimulationError` with a
+    usable ``cfg``: 'likely cause: ...' naming the parameters when a known cause applies (a
+    mode beyond the step's Nyquist limit, a friction regularisation below 1e-8 m/s), else
+    'no known cause; ...' with the keys that differ from the defaults ('' if none)."""
     try:
         with np.errstate(all='ignore'):
             from .modal import modes
@@ -278,10 +278,12 @@ def diagnose(cfg: Config) -> str:
         parts.append(f'friction.regularization_velocity = {fr.regularization_velocity:g} m/s '
                      'makes the friction law a near step that Newton cannot follow '
                      f'even at dt / 2^{integ.max_subdivision_level}; 1e-4 m/s is the default')
+    if parts:
+        return 'likely cause: ' + '; '.join(parts)
     changed = _differs_from_defaults(cfg)
-    if not parts and changed:
+    if changed:
         flat = cfg.to_flat_dict()
-        parts.append('parameters changed from the defaults: '
-                     + ', '.join(f'{k} = {flat[k]!r}' for k in changed[:6])
-                     + (' ...' if len(changed) > 6 else ''))
-    return '; '.join(parts)
+        return ('no known cause; parameters that differ from the defaults: '
+                + ', '.join(f'{k} = {flat[k]!r}' for k in changed[:6])
+                + (' ...' if len(changed) > 6 else ''))
+    return ''
