@@ -38,7 +38,7 @@ from worm_gear_sim.model import mesh_forces  # noqa: E402
 OLD = {'friction.direction': 'regularized', 'integrator.worm_frequency_matching': False,
        'integrator.time_step': 1e-5}
 # (name, overrides): the kernel rows; the first two are the node's settings before and after
-# issue 12 (tanh friction, plain Newmark at 10 us / set-valued friction, matched worm, 5 us)
+# (tanh friction, plain Newmark at 10 us / set-valued friction, matched worm, 5 us)
 ROWS = [
     ('old default (tanh, 10 us)', OLD),
     ('default (set-valued, 5 us)', {}),
