@@ -126,8 +126,8 @@ class Replay:
 
 def replay(config: Config, record: Record, *, compensate: bool = True,
            end_time: float | None = None, use_receive_clock: bool | None = None,
-           tick_stamps_ns: np.ndarray | None = None,
-           hold_stamps_ns: np.ndarray | None = None) -> Replay:
+           tick_stamps_ns: Sequence[int] | np.ndarray | None = None,
+           hold_stamps_ns: Sequence[int] | np.ndarray | None = None) -> Replay:
     """Feed ``record``'s command stream to a :class:`RealtimePredictor` as the node would.
 
     Stamped references: ``push(stamp, value, now_ns=receive time)`` in arrival order (the
