@@ -34,11 +34,12 @@ __all__ = ['EXIT_CONFIG_ERROR', 'node_main', 'install_signal_handlers', 'set_pha
 EXIT_CONFIG_ERROR = 2
 PROGRAM = 'worm_gear_sim_node'
 
-_state = {'phase': 'starting'}
+_state = {'phase': 'starting', 'signalled': ''}
 
 
 def _on_signal(signum: int, frame: Any) -> None:
     if _state['phase'] == 'starting':
+        _state['signalled'] = 'yes'
         raise SystemExit(0)
 
 
@@ -97,7 +98,14 @@ def config_error(text: str) -> int:
 def node_main(args: list[str] | None = None) -> int:
     """Entry point of ``worm_gear_sim_node``: handlers first, then import and run the node."""
     install_signal_handlers()
-    from .node import main  # numpy, scipy, numba, rclpy: seconds on a loaded machine
+    try:
+        from .node import main  # numpy, scipy, numba, rclpy: seconds on a loaded machine
+    except ImportError:
+        # A SystemExit raised by the handler inside a C extension's module initialisation
+        # (e.g. rclpy's pybind11 module) reaches us as "ImportError: initialization failed".
+        if _state.get('signalled'):
+            return 0
+        raise
     return main(args)
 
 
