@@ -253,7 +253,7 @@ def test_ramp_tracking_without_load_has_no_static_error():
     assert np.abs(tr.output_error[late]).mean() < 1e-4
 
 
-# ---- exact stick-slip (set-valued friction, issue 12.3) -------------------------------------
+# ---- exact stick-slip (set-valued friction) ------------------------------------------------
 def _ring_down(over, dt, horizon=0.5):
     from worm_gear_sim.simulation import ring_down
     cfg = Config().replace(dict(over, **{'integrator.time_step': dt}))
@@ -349,7 +349,7 @@ def test_set_valued_friction_dissipates():
 
 
 
-# ---- a resolved worm at the node's step (issue 12.4) ------------------------------------------
+# ---- a resolved worm at the node's step ------------------------------------------------------
 @pytest.mark.parametrize('over', [
     {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'},
     {},

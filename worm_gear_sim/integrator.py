@@ -53,9 +53,9 @@ from .model import (
     P_MESH_COSINE,
     P_MESH_LINEAR,
     P_MU_STATIC,
+    P_OUTPUT_PER_INPUT,
     P_PHASE0,
     P_RG,
-    P_RIGID3,
     P_RTOL,
     P_RW,
     P_SINL,
@@ -128,7 +128,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     (ok, u, v, a, rho, since, n_solves, n_evals, verified)."""
     beta, gamma = p[P_BETA], p[P_GAMMA]
     m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
-    r3 = p[P_RIGID3]
+    r3 = p[P_OUTPUT_PER_INPUT]
     rtol, atol = p[P_RTOL], p[P_ATOL]
     Kg, cout = p[P_KG], p[P_COUT]
     maxit = int(p[P_MAXIT])
@@ -260,7 +260,7 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
     ok False also when the slip hypothesis cannot hold (the speed would change sign)."""
     beta, gamma = p[P_BETA], p[P_GAMMA]
     m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
-    r3 = p[P_RIGID3]
+    r3 = p[P_OUTPUT_PER_INPUT]
     rtol, atol = p[P_RTOL], p[P_ATOL]
     Kg, cout = p[P_KG], p[P_COUT]
     maxit = int(p[P_MAXIT])
@@ -561,7 +561,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
 def consistent_acceleration(p, C, u, v, theta1, theta1_dot, a):
     """a = M^{-1} (Q - C (v - r theta1')) at a given state (initial condition)."""
     f = mesh_forces(p, u[0], u[1], u[2], v[0], v[1], v[2], theta1)
-    r3 = p[P_RIGID3]
+    r3 = p[P_OUTPUT_PER_INPUT]
     rel0 = v[0] - theta1_dot
     rel1 = v[1] - r3 * theta1_dot
     rel2 = v[2] - r3 * theta1_dot

@@ -60,7 +60,7 @@ P_FRIC_MODEL, P_FRIC_PAPER, P_MU_CONST, P_MU_K, P_MU_DROP, P_VS, P_VEPS = (
 P_FRIC_IN_COMPLIANCE = 31
 P_COUT, P_TLOAD = 32, 33
 P_BETA, P_GAMMA, P_RTOL, P_ATOL, P_MAXIT, P_MAXSUB = 34, 35, 36, 37, 38, 39
-P_RIGID3 = 40                                        # theta3/theta1 of the rigid motion
+P_OUTPUT_PER_INPUT = 40          # l_w / r_g: theta3, theta4 per theta1 in rigid motion
 P_INV_KGS, P_INV_KWS, P_INV_VEPS, P_LIN_COMPLIANCE = 41, 42, 43, 44   # precomputed
 P_INV_SQRT_VS = 45
 P_MESH_COSINE = 46                                   # contact mapping: 1 cosine, 0 sawtooth
@@ -154,7 +154,7 @@ def pack_parameters(cfg: Config) -> np.ndarray:
     p[P_BETA], p[P_GAMMA] = integ.newmark_beta, integ.newmark_gamma
     p[P_RTOL], p[P_ATOL] = integ.newton_rtol, integ.newton_atol
     p[P_MAXIT], p[P_MAXSUB] = integ.newton_max_iterations, integ.max_subdivision_level
-    p[P_RIGID3] = d.l_w / g.gear_pitch_radius
+    p[P_OUTPUT_PER_INPUT] = d.l_w / g.gear_pitch_radius
     p[P_INV_KGS], p[P_INV_KWS] = 1.0 / d.k_gs, 1.0 / d.k_ws
     p[P_INV_VEPS] = 1.0 / fr.regularization_velocity
     p[P_INV_SQRT_VS] = 1.0 / math.sqrt(fr.stribeck_velocity)
@@ -183,6 +183,11 @@ def worm_inertia_factor(p: np.ndarray, dt: float) -> float:
     if not 0.0 < x <= 1.2:
         return 1.0
     return (x / math.tan(x)) ** 2
+
+
+def friction_is_set_valued(p: np.ndarray) -> bool:
+    """True when the packed parameters select the set-valued (stick-slip) friction law."""
+    return bool(p[P_FRIC_SET_VALUED] != 0.0)
 
 
 def contact_origins_deg(cfg: Config) -> tuple[float, float]:
@@ -435,7 +440,7 @@ def linear_stiffness(p: np.ndarray, theta2: float = 0.0, theta3: float = 0.0) ->
 
 def rigid_motion_vector(p: np.ndarray) -> np.ndarray:
     """u of the undeformed drive per unit theta1: (1, l_w/r_g, l_w/r_g)."""
-    return np.array([1.0, p[P_RIGID3], p[P_RIGID3]])
+    return np.array([1.0, p[P_OUTPUT_PER_INPUT], p[P_OUTPUT_PER_INPUT]])
 
 
 def forces(p: np.ndarray, u, v, theta1: float):

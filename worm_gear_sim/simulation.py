@@ -50,8 +50,8 @@ from .model import (
     AUX_VS,
     AUX_WN,
     N_AUX,
-    P_FRIC_SET_VALUED,
     energy_series,
+    friction_is_set_valued,
     generalized_forces,
     mechanical_energy,
     mesh_forces_mu,
@@ -348,7 +348,7 @@ class Simulator:
         Q, aux = np.zeros(3), np.zeros(N_AUX)
         generalized_forces(self.p, self._u, self._v, self._theta1, Q, np.zeros((3, 3)),
                            np.zeros((3, 3)), aux)
-        if self.p[P_FRIC_SET_VALUED] != 0.0:
+        if friction_is_set_valued(self.p):
             record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux)
             r = mesh_forces_mu(self.p, *self._u, self._v[2], self._theta1, self._ctl[C_MU])
             Q = np.array(r[:3])
@@ -372,7 +372,7 @@ class Simulator:
                                      np.zeros(N_AUX))
         u, v, th1 = self._u, self._v, self._theta1
         generalized_forces(self.p, u, v, th1, buf[0], buf[1], buf[2], buf[3])
-        if self.p[P_FRIC_SET_VALUED] != 0.0:       # the friction the integrator solved for
+        if friction_is_set_valued(self.p):       # the friction the integrator solved for
             record_aux(self.p, u, v, th1, self._ctl[C_MU], buf[3])
         aux = buf[3]
         g, d = self.config.geometry, self.derived

@@ -241,7 +241,8 @@ def _simulate_bag(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time,
                  tick_stamps_ns=recorded if float64 else None,
-                 hold_stamps_ns=() if recorded is not None and not float64 else None)
+                 hold_stamps_ns=np.zeros(0, np.int64) if recorded is not None and not float64
+                 else None)
     if recorded is not None and not float64:
         # the node's held predictions (a paused stream) are the recorded stamps that the
         # samples alone do not produce: replay again with its timer firing there
