@@ -21,6 +21,13 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
+from hypothesis import settings
+
+# CI (CI=true) replays the same property-based examples on every run (reproducible failures);
+# locally each run explores new ones.  Tests keep their own max_examples/deadline.
+settings.register_profile('ci', derandomize=True, print_blob=True)
+if os.environ.get('CI'):
+    settings.load_profile('ci')
 
 # The user's ROS_DOMAIN_ID (default 42) for in-process tests, the next one for child processes:
 # concurrent test sessions on one machine stay apart when each sets its own domain.
