@@ -100,9 +100,10 @@ def node_main(args: list[str] | None = None) -> int:
     install_signal_handlers()
     try:
         from .node import main  # numpy, scipy, numba, rclpy: seconds on a loaded machine
-    except ImportError:
-        # A SystemExit raised by the handler inside a C extension's module initialisation
-        # (e.g. rclpy's pybind11 module) reaches us as "ImportError: initialization failed".
+    except BaseException:
+        # The handler's SystemExit can reach us wrapped by the import machinery: as
+        # "ImportError: initialization failed" from a C extension's module initialisation
+        # (rclpy's pybind11 module) or as a RuntimeError from a class's __set_name__.
         if _state.get('signalled'):
             return 0
         raise
