@@ -742,6 +742,12 @@ def identify(base: Config, records: Sequence[Any], keys: Sequence[str], *,
     s2 = float(r @ r) / max(m - n, 1)
     problems: list[str] = []
     warnings: list[str] = []
+    if base.friction.direction == 'set_valued':
+        # Measured: with exact stick-slip the residual is not smooth in the parameters and
+        # least squares stops far from the optimum (48 % residual on the test drives).
+        warnings.append('friction.direction = set_valued: the residual is not smooth in the '
+                        'parameters and the fit may stall; fit with --set '
+                        'friction.direction=regularized (see docs/identification.md)')
     U, sv, Vt = np.linalg.svd(J, full_matrices=False)
     rank_tol = sv[0] * 1e-10 if sv.size and sv[0] > 0 else 0.0
     if sv.size == 0 or sv[-1] <= rank_tol:
