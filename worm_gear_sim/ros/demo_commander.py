@@ -548,8 +548,9 @@ def _summary(node: DemoCommander, opts: argparse.Namespace, compensated: bool | 
     settled = [m.settling for m in moves if math.isfinite(m.settling)]
     say(f'  largest error {node.peak_all * 1e6:.2f} urad; settled to '
         f'{SETTLE_TOLERANCE * 1e6:g} urad {len(settled)}/{len(moves)}'
-        + (f', median {_ms(float(np.median(settled)))}' if settled else '')
-        + (f'; {node.tracker.incomplete} moves with gaps' if node.tracker.incomplete else ''))
+        + (f', median {_ms(float(np.median(settled)))}' if settled else ''))
+    if node.tracker.incomplete:   # a line of its own: never cut by the 80-column limit
+        say(f'  {node.tracker.incomplete} moves with gaps (the stream was interrupted)')
     if opts.no_offline or not moves or node.interface != 'stamped':
         return
     # the same moves through the core, offline: with and without the feed-forward
