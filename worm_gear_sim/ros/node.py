@@ -761,6 +761,8 @@ def main(args: list[str] | None = None) -> int:
         return startup.config_error(startup.clean_rcl_message(exc))
     startup.set_phase('ros')        # from now on rclpy's handler shuts the context down
     try:
+        if startup.signalled():     # a start-up signal whose SystemExit got swallowed
+            return 0
         return _run(opts)
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
@@ -781,7 +783,7 @@ def _run(opts: argparse.Namespace) -> int:
         if not context.ok():
             return 0
         raise
-    if not context.ok():            # Ctrl-C / SIGTERM while the node was being built
+    if not context.ok() or startup.signalled():   # Ctrl-C / SIGTERM during the build
         _quietly(node.destroy_node)
         return 0
     kind = opts.executor or node.config.node.executor

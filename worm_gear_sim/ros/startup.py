@@ -29,7 +29,7 @@ import sys
 from typing import Any
 
 __all__ = ['EXIT_CONFIG_ERROR', 'node_main', 'install_signal_handlers', 'set_phase',
-           'phase', 'config_error', 'clean_rcl_message', 'check_params_files']
+           'phase', 'signalled', 'config_error', 'clean_rcl_message', 'check_params_files']
 
 EXIT_CONFIG_ERROR = 2
 PROGRAM = 'worm_gear_sim_node'
@@ -59,6 +59,13 @@ def set_phase(name: str) -> None:
 
 def phase() -> str:
     return _state['phase']
+
+
+def signalled() -> bool:
+    """True once SIGINT/SIGTERM arrived during the ``starting`` phase: the SystemExit the
+    handler raised may have been swallowed by a library's broad ``except`` on the way, so the
+    start-up checks this before it goes on to spin."""
+    return bool(_state.get('signalled'))
 
 
 _RCL_LOCATION = re.compile(r',? at [^,]*\.c(pp)?:\d+')
