@@ -122,35 +122,76 @@ def _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2, c_a, gdt):
     return a0, a1, a2, vs0 + gdt * a0, vs1 + gdt * a1, vs2 + gdt * a2
 
 
+@njit(cache=True, error_model='numpy', inline='always')
+def _newmark_start(p, u0, v0, a0, dt):
+    """Set-up of one Newmark step from (u0, v0, a0) (3-tuples), shared by both Newton kernels:
+    c_a = 1/(beta dt^2), c_v = gamma/(beta dt), gamma dt, the known parts u*, v* of
+    a = c_a (u - u*), v = v* + gamma dt a, and the constant-acceleration predictor of u."""
+    beta, gamma = p[P_BETA], p[P_GAMMA]
+    c_a = 1.0 / (beta * dt * dt)
+    c_v = gamma / (beta * dt)
+    h2 = dt * dt * (0.5 - beta)
+    us = (u0[0] + dt * v0[0] + h2 * a0[0], u0[1] + dt * v0[1] + h2 * a0[1],
+          u0[2] + dt * v0[2] + h2 * a0[2])
+    g1 = dt * (1.0 - gamma)
+    vs = (v0[0] + g1 * a0[0], v0[1] + g1 * a0[1], v0[2] + g1 * a0[2])
+    x = (u0[0] + dt * v0[0] + 0.5 * dt * dt * a0[0], u0[1] + dt * v0[1] + 0.5 * dt * dt * a0[1],
+         u0[2] + dt * v0[2] + 0.5 * dt * dt * a0[2])
+    return c_a, c_v, gamma * dt, us, vs, x
+
+
+@njit(cache=True, error_model='numpy', inline='always')
+def _residual_jacobian(p, C, c_a, c_v, x0, x1, x2, w0, w1, w2, a_0, a_1, a_2, th1dot, f,
+                       g20, g21, g30, g31):
+    """Newton residual R = M a + C (v - r theta1') - Q, its Jacobian
+    M c_a + (C - dQ/dv) c_v - dQ/du (dQ/dv of the mesh given as g20 = dQ2/dv2, g21 = dQ2/dv3,
+    g30 = dQ3/dv2, g31 = dQ3/dv3) and the residual's norm as an acceleration error:
+    |R_i| / M_ii against atol + rtol |a_i| with a round-off floor of a few ulps of u_i seen
+    through the Jacobian (a massless degree of freedom, J_4 = 0 without flywheel, is
+    algebraic: its residual is scaled by j22 beta dt^2, the same acceleration-error measure).
+    Returns (finite, R0, R1, R2, j00, ..., j22, r_norm); finite False (r_norm 0) if R is
+    not finite."""
+    m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
+    r3 = p[P_OUTPUT_PER_INPUT]
+    Kg, cout = p[P_KG], p[P_COUT]
+    c00, c01, c02, c10, c11, c12, c20, c21, c22 = C
+    rel0 = w0 - th1dot
+    rel1 = w1 - r3 * th1dot
+    rel2 = w2 - r3 * th1dot
+    R0 = m0 * a_0 + c00 * rel0 + c01 * rel1 + c02 * rel2 - f[0]
+    R1 = m1 * a_1 + c10 * rel0 + c11 * rel1 + c12 * rel2 - f[1]
+    R2 = m2 * a_2 + c20 * rel0 + c21 * rel1 + c22 * rel2 - f[2]
+    j00 = m0 * c_a + (c00 - g20) * c_v - f[3]
+    j01 = (c01 - g21) * c_v - f[4]
+    j02 = c02 * c_v
+    j10 = (c10 - g30) * c_v - f[5]
+    j11 = m1 * c_a + (c11 - g31) * c_v - f[6]
+    j12 = c12 * c_v - Kg
+    j20 = c20 * c_v
+    j21 = c21 * c_v - Kg
+    j22 = m2 * c_a + (c22 + cout) * c_v + Kg
+    if not (math.isfinite(R0) and math.isfinite(R1) and math.isfinite(R2)):
+        return False, R0, R1, R2, j00, j01, j02, j10, j11, j12, j20, j21, j22, 0.0
+    rtol, atol = p[P_RTOL], p[P_ATOL]
+    t0 = m0 * (atol + rtol * abs(a_0)) + 8.0 * _EPS * abs(x0) * abs(j00)
+    t1 = m1 * (atol + rtol * abs(a_1)) + 8.0 * _EPS * abs(x1) * abs(j11)
+    m2t = m2 if m2 > 0.0 else j22 / c_a
+    t2 = m2t * (atol + rtol * abs(a_2)) + 8.0 * _EPS * abs(x2) * abs(j22)
+    r_norm = max(abs(R0) / t0, abs(R1) / t1, abs(R2) / t2)
+    return True, R0, R1, R2, j00, j01, j02, j10, j11, j12, j20, j21, j22, r_norm
+
+
 @njit(cache=True, error_model='numpy')
 def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     """One Newmark step from (u0, v0, a0) (3-tuples).  Returns
     (ok, u, v, a, rho, since, n_solves, n_evals, verified)."""
-    beta, gamma = p[P_BETA], p[P_GAMMA]
-    m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
-    r3 = p[P_OUTPUT_PER_INPUT]
-    rtol, atol = p[P_RTOL], p[P_ATOL]
-    Kg, cout = p[P_KG], p[P_COUT]
     maxit = int(p[P_MAXIT])
-    c_a = 1.0 / (beta * dt * dt)
-    c_v = gamma / (beta * dt)
     k_vs2, k_vs3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
     veps = p[P_VEPS]
     lw, rg = p[P_LW], p[P_RG]
     friction_on = p[P_FRIC_MODEL] != 0.0
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = C
-    # Newmark: a = c_a (u - ustar), v = vstar + gamma dt a
-    h2 = dt * dt * (0.5 - beta)
-    us0 = u0[0] + dt * v0[0] + h2 * a0[0]
-    us1 = u0[1] + dt * v0[1] + h2 * a0[1]
-    us2 = u0[2] + dt * v0[2] + h2 * a0[2]
-    vs0 = v0[0] + dt * (1.0 - gamma) * a0[0]
-    vs1 = v0[1] + dt * (1.0 - gamma) * a0[1]
-    vs2 = v0[2] + dt * (1.0 - gamma) * a0[2]
-    # predictor: constant acceleration
-    x0 = u0[0] + dt * v0[0] + 0.5 * dt * dt * a0[0]
-    x1 = u0[1] + dt * v0[1] + 0.5 * dt * dt * a0[1]
-    x2 = u0[2] + dt * v0[2] + 0.5 * dt * dt * a0[2]
+    c_a, c_v, gdt, (us0, us1, us2), (vs0, vs1, vs2), (x0, x1, x2) = _newmark_start(
+        p, u0, v0, a0, dt)
     vs_start = k_vs2 * v0[0] + k_vs3 * v0[1]
     q_start = lw * u0[0] - rg * u0[1]
     cycle_start = _phase_cycle(p, u0[0], u0[1])
@@ -161,39 +202,16 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     r0 = 0.0
     d0 = d1 = d2 = 0.0
     p0 = p1 = p2 = 0.0
-    gdt = gamma * dt
     while True:
         a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
                                                  c_a, gdt)
         f = mesh_forces(p, x0, x1, x2, w0, w1, w2, th1)
         n_evals += 1
-        rel0 = w0 - th1dot
-        rel1 = w1 - r3 * th1dot
-        rel2 = w2 - r3 * th1dot
-        R0 = m0 * a_0 + c00 * rel0 + c01 * rel1 + c02 * rel2 - f[0]
-        R1 = m1 * a_1 + c10 * rel0 + c11 * rel1 + c12 * rel2 - f[1]
-        R2 = m2 * a_2 + c20 * rel0 + c21 * rel1 + c22 * rel2 - f[2]
-        if not (math.isfinite(R0) and math.isfinite(R1) and math.isfinite(R2)):
+        (finite, R0, R1, R2, j00, j01, j02, j10, j11, j12, j20, j21, j22,
+         r_norm) = _residual_jacobian(p, C, c_a, c_v, x0, x1, x2, w0, w1, w2, a_0, a_1, a_2,
+                                      th1dot, f, f[7], f[8], f[9], f[10])
+        if not finite:
             break
-        # Jacobian M c_a + (C - dQ/dv) c_v - dQ/du
-        j00 = m0 * c_a + (c00 - f[7]) * c_v - f[3]
-        j01 = (c01 - f[8]) * c_v - f[4]
-        j02 = c02 * c_v
-        j10 = (c10 - f[9]) * c_v - f[5]
-        j11 = m1 * c_a + (c11 - f[10]) * c_v - f[6]
-        j12 = c12 * c_v - Kg
-        j20 = c20 * c_v
-        j21 = c21 * c_v - Kg
-        j22 = m2 * c_a + (c22 + cout) * c_v + Kg
-        # residual as acceleration error: |R_i| / M_ii against atol + rtol |a_i|, with a
-        # round-off floor of a few ulps of u_i seen through the Jacobian
-        # (a massless degree of freedom, J_4 = 0 without flywheel, is algebraic: its
-        # residual is scaled by j22 beta dt^2, the same acceleration-error measure)
-        t0 = m0 * (atol + rtol * abs(a_0)) + 8.0 * _EPS * abs(x0) * abs(j00)
-        t1 = m1 * (atol + rtol * abs(a_1)) + 8.0 * _EPS * abs(x1) * abs(j11)
-        m2t = m2 if m2 > 0.0 else j22 / c_a
-        t2 = m2t * (atol + rtol * abs(a_2)) + 8.0 * _EPS * abs(x2) * abs(j22)
-        r_norm = max(abs(R0) / t0, abs(R1) / t1, abs(R2) / t2)
         if n_solves == 0:
             r0 = r_norm
         elif r_norm <= 1.0:
@@ -258,29 +276,15 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
     mu), Eq. 18 with its cusp at v = 0 rounded below friction.cusp_velocity.
     Returns (ok, u, v, a, mu_eff, n_solves, n_evals, da/dmu of theta2, theta3 (stick));
     ok False also when the slip hypothesis cannot hold (the speed would change sign)."""
-    beta, gamma = p[P_BETA], p[P_GAMMA]
     m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
     r3 = p[P_OUTPUT_PER_INPUT]
-    rtol, atol = p[P_RTOL], p[P_ATOL]
-    Kg, cout = p[P_KG], p[P_COUT]
     maxit = int(p[P_MAXIT])
-    c_a = 1.0 / (beta * dt * dt)
-    c_v = gamma / (beta * dt)
     k2, k3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
     lw, rg = p[P_LW], p[P_RG]
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = C
-    h2 = dt * dt * (0.5 - beta)
-    us0 = u0[0] + dt * v0[0] + h2 * a0[0]
-    us1 = u0[1] + dt * v0[1] + h2 * a0[1]
-    us2 = u0[2] + dt * v0[2] + h2 * a0[2]
-    vs0 = v0[0] + dt * (1.0 - gamma) * a0[0]
-    vs1 = v0[1] + dt * (1.0 - gamma) * a0[1]
-    vs2 = v0[2] + dt * (1.0 - gamma) * a0[2]
-    x0 = u0[0] + dt * v0[0] + 0.5 * dt * dt * a0[0]
-    x1 = u0[1] + dt * v0[1] + 0.5 * dt * dt * a0[1]
-    x2 = u0[2] + dt * v0[2] + 0.5 * dt * dt * a0[2]
+    c_a, c_v, gdt, (us0, us1, us2), (vs0, vs1, vs2), (x0, x1, x2) = _newmark_start(
+        p, u0, v0, a0, dt)
     stick = mode == 0
-    gdt = gamma * dt
     e = lam0 if stick else 0.0
     n_solves = 0
     n_evals = 0
@@ -301,32 +305,18 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
             mu, dmu_dv = sq * mode * mag, sq * dmag
         f = mesh_forces_mu(p, x0, x1, x2, w2, th1, mu)
         n_evals += 1
-        rel0 = w0 - th1dot
-        rel1 = w1 - r3 * th1dot
-        rel2 = w2 - r3 * th1dot
-        R0 = m0 * a_0 + c00 * rel0 + c01 * rel1 + c02 * rel2 - f[0]
-        R1 = m1 * a_1 + c10 * rel0 + c11 * rel1 + c12 * rel2 - f[1]
-        R2 = m2 * a_2 + c20 * rel0 + c21 * rel1 + c22 * rel2 - f[2]
-        if not (math.isfinite(R0) and math.isfinite(R1) and math.isfinite(R2)):
+        # dQ/dv through mu(v_s)
+        (finite, R0, R1, R2, j00, j01, j02, j10, j11, j12, j20, j21, j22,
+         r_norm) = _residual_jacobian(p, C, c_a, c_v, x0, x1, x2, w0, w1, w2, a_0, a_1, a_2,
+                                      th1dot, f, f[7] * dmu_dv * k2, f[7] * dmu_dv * k3,
+                                      f[8] * dmu_dv * k2, f[8] * dmu_dv * k3)
+        if not finite:
             break
-        g20, g21 = f[7] * dmu_dv * k2, f[7] * dmu_dv * k3     # dQ/dv through mu(v_s)
-        g30, g31 = f[8] * dmu_dv * k2, f[8] * dmu_dv * k3
-        j00 = m0 * c_a + (c00 - g20) * c_v - f[3]
-        j01 = (c01 - g21) * c_v - f[4]
-        j02 = c02 * c_v
-        j10 = (c10 - g30) * c_v - f[5]
-        j11 = m1 * c_a + (c11 - g31) * c_v - f[6]
-        j12 = c12 * c_v - Kg
-        j20 = c20 * c_v
-        j21 = c21 * c_v - Kg
-        j22 = m2 * c_a + (c22 + cout) * c_v + Kg
-        t0 = m0 * (atol + rtol * abs(a_0)) + 8.0 * _EPS * abs(x0) * abs(j00)
-        t1 = m1 * (atol + rtol * abs(a_1)) + 8.0 * _EPS * abs(x1) * abs(j11)
-        m2t = m2 if m2 > 0.0 else j22 / c_a
-        t2 = m2t * (atol + rtol * abs(a_2)) + 8.0 * _EPS * abs(x2) * abs(j22)
-        r_norm = max(abs(R0) / t0, abs(R1) / t1, abs(R2) / t2)
         if n_solves > 0 and r_norm <= 1.0:
             if stick:
+                rel0 = w0 - th1dot
+                rel1 = w1 - r3 * th1dot
+                rel2 = w2 - r3 * th1dot
                 # acceleration consistent with the stuck contact and its multiplier
                 af0 = (f[0] - c00 * rel0 - c01 * rel1 - c02 * rel2) / m0
                 af1 = (f[1] - c10 * rel0 - c11 * rel1 - c12 * rel2) / m1
