@@ -29,7 +29,6 @@ from .params import (
     Config,
     ConfigError,
     config_from_mapping,
-    derive,
     load_config,
     suggest,
     value_kind,
@@ -114,14 +113,14 @@ def params_document(cfg: Config) -> dict[str, Any]:
     """The fully resolved parameters: every config section plus a ``derived`` block
     (inertias, stiffnesses, lead per radian, ratio, mesh calibration, linear modes)."""
     from .modal import modes
-    from .model import contact_origins_deg
+    from .model import DriveModel
     doc: dict[str, Any] = {'format': PARAMS_FORMAT}
     doc.update(cfg.to_nested_dict())
-    d = dataclasses.asdict(derive(cfg))
-    d['output_per_input'] = derive(cfg).output_per_input
-    d['worm_contact_origin_deg'], d['gear_contact_origin_deg'] = contact_origins_deg(cfg)
+    model = DriveModel(cfg)
+    d = dataclasses.asdict(model.derived)
+    d['worm_contact_origin_deg'], d['gear_contact_origin_deg'] = model.contact_origins_deg
     try:
-        d['natural_frequencies_hz'] = [float(f) for f in modes(cfg).undamped_hz]
+        d['natural_frequencies_hz'] = [float(f) for f in modes(model).undamped_hz]
     except Exception:  # noqa: BLE001 - informative only
         d['natural_frequencies_hz'] = None
     doc['derived'] = d

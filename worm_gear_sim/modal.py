@@ -11,12 +11,11 @@ import numpy as np
 import scipy.linalg as sla
 
 from .model import (
+    DriveModel,
     forces,
     linear_stiffness,
     mass_matrix,
-    pack_parameters,
     rigid_motion_vector,
-    worm_frequency,
 )
 from .params import ANGLE_LIMIT, Config
 
@@ -24,9 +23,12 @@ __all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix',
            'amplitude_time_step']
 
 
-def static_equilibrium(p: np.ndarray, theta1: float, u_guess=None, tol: float = 1e-15,
+def static_equilibrium(model: DriveModel | np.ndarray, theta1: float,
+                       u_guess: np.ndarray | None = None, tol: float = 1e-15,
                        max_iter: int = 50) -> np.ndarray:
-    """Solve Q(u, 0, theta1) = 0 (at rest, so no sliding friction) by Newton's method."""
+    """Solve Q(u, 0, theta1) = 0 (at rest, so no sliding friction) by Newton's method;
+    ``model``: a :class:`DriveModel` (or its packed vector)."""
+    p = model.p if isinstance(model, DriveModel) else model
     u = rigid_motion_vector(p) * theta1 if u_guess is None else np.array(u_guess, float)
     v = np.zeros(3)
     for _ in range(max_iter):
@@ -65,9 +67,10 @@ class ModalResult:
         return '\n'.join(lines)
 
 
-def modes(cfg: Config, theta1: float = 0.0, sliding_rate: float = 0.0,
+def modes(model: DriveModel | Config, theta1: float = 0.0, sliding_rate: float = 0.0,
           include_damping: bool = True) -> ModalResult:
-    """Linearise Eq. 15 about the static equilibrium at ``theta1`` (motor end held).
+    """Linearise Eq. 15 of ``model`` (a :class:`DriveModel` or a Config) about the static
+    equilibrium at ``theta1`` (motor end held).
 
     ``sliding_rate`` is a worm speed [rad/s] of the operating point (steady slewing); the
     friction terms are linearised there (at rest, tanh makes friction act like viscous
@@ -77,13 +80,14 @@ def modes(cfg: Config, theta1: float = 0.0, sliding_rate: float = 0.0,
                                                             1e6)):
         if not (math.isfinite(float(x)) and abs(float(x)) <= limit):
             raise ValueError(f'modes: {name} = {x!r} must be finite and within +-{limit:g}')
-    p = pack_parameters(cfg)
+    model = DriveModel.of(model)
+    p = model.p
     u = static_equilibrium(p, theta1)
     v = rigid_motion_vector(p) * sliding_rate
     _, dQdu, dQdv, _ = forces(p, u, v, theta1)
     M = mass_matrix(p)
     K = -dQdu
-    C = damping_matrix(cfg, p) - dQdv if include_damping else np.zeros((3, 3))
+    C = damping_matrix(model) - dQdv if include_damping else np.zeros((3, 3))
     undamped, shapes = _undamped_modes(K, M)
     # state-space eigenvalues for damped frequencies and damping ratios
     damped, zeta = _damped_modes(M, K, C, len(undamped))
@@ -139,13 +143,13 @@ def _damped_modes(M: np.ndarray, K: np.ndarray, C: np.ndarray, n_modes: int = 3)
     return np.array([m[1] for m in modes_]), zeta
 
 
-def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:
-    """Structural damping C (acts on velocities relative to the rigid kinematic motion):
-    Rayleigh alpha M + beta K0 plus modal damping M Phi diag(2 zeta w) Phi^T M, with K0 the
-    frictionless stiffness at the mean mesh stiffness."""
-    if p is None:
-        p = pack_parameters(cfg)
-    d = cfg.damping
+def damping_matrix(model: DriveModel | Config) -> np.ndarray:
+    """Structural damping C of ``model`` (a :class:`DriveModel` or a Config; acts on
+    velocities relative to the rigid kinematic motion): Rayleigh alpha M + beta K0 plus modal
+    damping M Phi diag(2 zeta w) Phi^T M, with K0 the frictionless stiffness at the mean mesh
+    stiffness."""
+    model = DriveModel.of(model)
+    p, d = model.p, model.config.damping
     M = mass_matrix(p)
     K0 = linear_stiffness(p)
     C = d.rayleigh_alpha * M + d.rayleigh_beta * K0
@@ -159,7 +163,7 @@ def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:
     return np.ascontiguousarray(C)
 
 
-def amplitude_time_step(cfg: Config, steps_per_period: float = 20.0) -> float:
+def amplitude_time_step(model: DriveModel | Config, steps_per_period: float = 20.0) -> float:
     """Time step for amplitude and pointwise metrics (studies, figures): the configured step
     divided by the smallest integer n that gives the highest linearised mode (the worm on its
     shaft, 8.6 kHz for Table 1) at least ``steps_per_period`` steps per period, so no metric
@@ -167,8 +171,8 @@ def amplitude_time_step(cfg: Config, steps_per_period: float = 20.0) -> float:
     With worm_frequency_matching, 20 steps per period (5 us for Table 1) give theta2
     pointwise within 5 % and theta4 within 0.1 % of their oscillation amplitudes against a
     converged reference (test_integrator)."""
-    import math
-    f_top = worm_frequency(pack_parameters(cfg)) / (2.0 * math.pi)
-    dt = cfg.integrator.time_step
+    model = DriveModel.of(model)
+    f_top = model.worm_frequency() / (2.0 * math.pi)
+    dt = model.config.integrator.time_step
     n = max(1, math.ceil(dt * steps_per_period * f_top - 1e-9))
     return dt / n

@@ -675,11 +675,7 @@ class Derived:
     ratio: float        # r_g / l_w (56 with the kinematic lead)
     gear_teeth: float   # z_g = 2 pi r_g / lead (mesh cycles per gear revolution)
     lead_angle_consistent: bool  # tan(lambda) == l_w/r_w (virtual work holds)
-
-    @property
-    def output_per_input(self) -> float:
-        """Rigid kinematic ratio theta4/theta1 = l_w / r_g."""
-        return 1.0 / self.ratio
+    output_per_input: float      # l_w / r_g: rigid theta4 (and theta3) per theta1 [rad/rad]
 
 
 def derive(cfg: Config) -> Derived:
@@ -719,4 +715,5 @@ def derive(cfg: Config) -> Derived:
                    k_ws=k_ws, k_gs=k_gs, l_w=l_w, lead_angle=lam,
                    ratio=g.gear_pitch_radius / l_w,
                    gear_teeth=2.0 * math.pi * g.gear_pitch_radius / g.lead,
-                   lead_angle_consistent=consistent)
+                   lead_angle_consistent=consistent,
+                   output_per_input=l_w / g.gear_pitch_radius)

@@ -115,10 +115,10 @@ import copy
 import math
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any
 
 from .command_timing import CommandQueue, StreamClock
 from .compensation import Compensator
+from .model import DriveModel
 from .params import Config
 from .simulation import SimulationError, Simulator
 
@@ -218,12 +218,16 @@ class Output:
 
 @dataclass(frozen=True)
 class Prepared:
-    """A configuration made ready for :meth:`RealtimePredictor.reconfigure` (the
-    compensator designed, the simulator's parameters checked)."""
+    """A configuration made ready for :meth:`RealtimePredictor.reconfigure` (its model
+    built once, the compensator designed, the simulator's parameters checked)."""
 
-    config: Config
-    compensator: Any
+    model: DriveModel
+    compensator: Compensator | None
     error: str = ''          # compensator design failure (the swap keeps running without)
+
+    @property
+    def config(self) -> Config:
+        return self.model.config
 
 
 COUNTER_NAMES = (
@@ -240,19 +244,19 @@ COUNTER_NAMES = (
 class RealtimePredictor:
     """The real-time pipeline: samples in, corrections and predictions out (module doc).
 
-    ``config``: a validated :class:`Config` (the plant model AND the compensator's nominal
-    design).  ``compensate``: compute corrections; ``apply_compensation``: drive the
-    simulator with theta1_ref + delta (None: ``node.compensation_applied``);
-    ``simulate``: run the simulator at all (False: corrections only, as
-    ``feedforward_series``); ``base_ns``: the time origin (None: the first accepted
+    ``model``: a :class:`DriveModel` or a validated :class:`Config` (the plant model AND the
+    compensator's nominal design; built once and shared by both). ``compensate``: compute
+    corrections; ``apply_compensation``: drive the simulator with theta1_ref + delta (None:
+    ``node.compensation_applied``); ``simulate``: run the simulator at all (False: corrections
+    only, as ``feedforward_series``); ``base_ns``: the time origin (None: the first accepted
     stamp); ``sim_time``: the Float64 path's reception times are /clock readings;
-    ``max_stamp_age`` / ``max_stamp_lead`` [s]: accepted stamp window around ``now_ns``
-    (lead: plus the preview time); ``stale_margin`` [s]: lateness allowed to samples
-    before ``hold`` declares the stream stale; ``confirm_samples``: agreeing candidates
-    that confirm a jump or a restart.
+    ``max_stamp_age`` / ``max_stamp_lead`` [s]: accepted stamp window around ``now_ns`` (lead:
+    plus the preview time); ``stale_margin`` [s]: lateness allowed to samples before ``hold``
+    declares the stream stale; ``confirm_samples``: agreeing candidates that confirm a jump or
+    a restart.
     """
 
-    def __init__(self, config: Config, *, compensate: bool = True,
+    def __init__(self, model: DriveModel | Config, *, compensate: bool = True,
                  apply_compensation: bool | None = None, simulate: bool = True,
                  base_ns: int | None = None, sim_time: bool = False,
                  max_stamp_age: float = 1.0, max_stamp_lead: float = 1.0,
@@ -274,12 +278,13 @@ class RealtimePredictor:
         self.compensation_error = ''
         self.last_error = ''
         self._comp: Compensator | None = None
-        self.sim: Simulator | None = Simulator(config, 0.0, 0.0) if simulate else None
+        model = DriveModel.of(model)
+        self.sim: Simulator | None = Simulator(model, 0.0, 0.0) if simulate else None
         if self.sim is not None:                      # compile / load the kernel now
             self.sim.advance_to(10 * self.sim.dt, 0.0)
             self.sim.reset(0.0, 0.0)
         self._queue = CommandQueue()
-        self._set_config(config, self._design(config))
+        self._set_config(self._design(model))
         self._stream = StreamClock(float(self._period_ns))
         self._last_now_ns: int | None = None
         self._last_tick_ns = 0
@@ -288,16 +293,17 @@ class RealtimePredictor:
         self._init_state()
 
     # ---- configuration -----------------------------------------------------------------
-    def _design(self, config: Config) -> Prepared:
+    def _design(self, model: DriveModel) -> Prepared:
         if not self.compensate:
-            return Prepared(config, None)
+            return Prepared(model, None)
         try:
-            return Prepared(config, Compensator(config))
+            return Prepared(model, Compensator(model))
         except Exception as exc:  # noqa: BLE001 - run uncompensated, say why
-            return Prepared(config, None, f'{type(exc).__name__}: {exc}')
+            return Prepared(model, None, f'{type(exc).__name__}: {exc}')
 
-    def _set_config(self, config: Config, prepared: Prepared) -> None:
-        self.config = config
+    def _set_config(self, prepared: Prepared) -> None:
+        self.model = prepared.model
+        self.config = config = prepared.model.config
         node = config.node
         self.apply_compensation = node.compensation_applied if self._apply_arg is None \
             else bool(self._apply_arg)
@@ -315,29 +321,30 @@ class RealtimePredictor:
         self._max_jump = node.max_command_jump
         self._max_abs = node.max_command_abs
         self._max_catch_up = node.max_catch_up
+        self._output_per_input = self.model.output_per_input
         if self.sim is not None:
             self.sim.interpolation = node.command_interpolation
-            self._output_per_input = self.sim.derived.output_per_input
 
-    def prepare(self, config: Config) -> Prepared:
-        """Design for ``config`` off the real-time path (compensator design, a trial
-        of the simulator's parameters; it only reads the pipeline, so another thread may
-        run it while samples flow).  Raises ValueError (ConfigError) if the simulator
+    def prepare(self, config: DriveModel | Config) -> Prepared:
+        """Design for ``config`` off the real-time path (its model, the compensator design,
+        a trial of the simulator's parameters; it only reads the pipeline, so another thread
+        may run it while samples flow).  Raises ValueError (ConfigError) if the simulator
         cannot take it (``integrator.time_step`` changed, non-finite acceleration).  Every
         other method belongs to one thread (the node's executor)."""
+        model = DriveModel.of(config)
         if self.sim is not None:
             trial = copy.copy(self.sim)   # shallow: reconfigure only reads the state
-            trial.reconfigure(config)
-        return self._design(config)
+            trial.reconfigure(model)
+        return self._design(model)
 
-    def reconfigure(self, new: Config | Prepared) -> None:
+    def reconfigure(self, new: DriveModel | Config | Prepared) -> None:
         """Swap in a validated configuration (or what :meth:`prepare` made of one),
         keeping time, state, reference history and pending corrections.  On ValueError
         nothing changed."""
         prepared = new if isinstance(new, Prepared) else self.prepare(new)
         if self.sim is not None:
-            self.sim.reconfigure(prepared.config)
-        self._set_config(prepared.config, prepared)
+            self.sim.reconfigure(prepared.model)
+        self._set_config(prepared)
         if self._stream.period0 != float(self._period_ns):  # pragma: no cover - read-only
             self._stream = StreamClock(float(self._period_ns))
         self.counters['reconfigurations'] += 1

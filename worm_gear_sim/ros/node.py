@@ -215,7 +215,7 @@ class WormGearSimNode(Node):
                                              self._guard(self.publish_diagnostics))
         self.get_logger().info(
             f'ready: dt = {self.sim.dt:g} s, {cfg.node.publish_rate_hz:g} Hz, ratio '
-            f'1:{1.0 / self.sim.derived.output_per_input:.6g}; waiting for '
+            f'1:{self.rt.model.derived.ratio:.6g}; waiting for '
             f'{self.resolve_topic_name(REFERENCE_TOPIC)} (stamped) or '
             f'{self.resolve_topic_name(COMMAND_TOPIC)}')
         if self.rt.compensator is None:
