@@ -48,7 +48,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .modal import modes
-from .model import pack_parameters, rigid_motion_vector
+from .model import DriveModel
 from .params import Config, ConfigError, suggest
 from .profiles import SampledProfile, motion_span
 from .records import Record
@@ -322,7 +322,7 @@ def predict(cfg: Config, rec: Any, t_end: float | None = None) -> dict[str, np.n
 
 
 def _rigid(cfg: Config) -> np.ndarray:
-    return rigid_motion_vector(pack_parameters(cfg))
+    return DriveModel(cfg).rigid_motion
 
 
 # ---- the least-squares problem -----------------------------------------------------------------

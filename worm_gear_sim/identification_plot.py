@@ -14,7 +14,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from .identification import OUTPUTS, predict
-from .model import pack_parameters, rigid_motion_vector
+from .model import DriveModel
 from .params import Config
 from .simulation import SimulationError
 
@@ -34,7 +34,7 @@ def plot_fit(records: Sequence[Any], before: Config, after: Config, path: str | 
     fig = Figure(figsize=(max(6.0, 4.2 * ncol), 2.4 * nrow + 0.6), layout='constrained')
     FigureCanvasAgg(fig)
     ax = fig.subplots(nrow, ncol, squeeze=False, sharex='col')
-    rigid = rigid_motion_vector(pack_parameters(after))
+    rigid = DriveModel(after).rigid_motion
     for c, rec in enumerate(recs):
         preds: dict[str, dict[str, np.ndarray] | None] = {}
         for label, cfg in (('before', before), ('after', after)):
