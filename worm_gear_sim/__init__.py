@@ -25,6 +25,7 @@ __version__ = '0.1.0'
 _EXPORTS: dict[str, str] = {
     'ModalResult': 'modal', 'damping_matrix': 'modal', 'modes': 'modal',
     'static_equilibrium': 'modal',
+    'DriveModel': 'model',
     'Config': 'params', 'ConfigError': 'params', 'Derived': 'params',
     'default_config': 'params', 'derive': 'params', 'load_config': 'params',
     'check_usable': 'params',
@@ -40,7 +41,7 @@ _EXPORTS: dict[str, str] = {
 
 __all__ = [
     'Config', 'ConfigError', 'Derived', 'default_config', 'derive', 'load_config',
-    'check_usable', 'simulate_to_csv', 'Profile', 'StepProfile', 'RampProfile',
+    'check_usable', 'DriveModel', 'simulate_to_csv', 'Profile', 'StepProfile', 'RampProfile',
     'TrapezoidalProfile', 'SCurveProfile', 'SampledProfile', 'make_profile', 'Simulator',
     'Trajectory', 'SimState',
     'SimulationError', 'simulate', 'modes', 'ModalResult', 'static_equilibrium',
@@ -52,6 +53,7 @@ if TYPE_CHECKING:  # static analysers see the eager imports
     from .compensation import Compensator, feedforward_series
     from .config_io import params_document, resolve_config
     from .modal import ModalResult, damping_matrix, modes, static_equilibrium
+    from .model import DriveModel
     from .params import (
         Config,
         ConfigError,

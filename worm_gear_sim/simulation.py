@@ -592,17 +592,19 @@ RUN_MEMORY_LIMIT = 2e9
 KEEP_ROWS = 200_000
 
 
-def simulate(config: Config, profile: Profile | None = None, t_end: float | None = None,
-             record_every: int = 1, theta1_initial: float | None = None,
+def simulate(model: DriveModel | Config, profile: Profile | None = None,
+             t_end: float | None = None, record_every: int = 1,
+             theta1_initial: float | None = None,
              max_bytes: float | None = None) -> Trajectory:
-    """Batch run from rest: the config's input profile (or ``profile``) to ``t_end``, in
-    memory (up-front ValueError beyond ``max_bytes``, see :meth:`Simulator.run`; long runs:
-    :func:`simulate_to_csv`)."""
+    """Batch run of ``model`` (a :class:`DriveModel` or a Config) from rest: the config's
+    input profile (or ``profile``) to ``t_end``, in memory (up-front ValueError beyond
+    ``max_bytes``, see :meth:`Simulator.run`; long runs: :func:`simulate_to_csv`)."""
+    config = model.config if isinstance(model, DriveModel) else model
     profile = profile if profile is not None else make_profile(config.input)
     t_end = config.input.end_time if t_end is None else t_end
     th0 = float(profile.theta1(np.array([0.0]))[0]) if theta1_initial is None else \
         theta1_initial
-    sim = Simulator(config, theta1=th0)
+    sim = Simulator(model, theta1=th0)
     return sim.run(profile, t_end, record_every, max_bytes=max_bytes)
 
 
@@ -612,19 +614,21 @@ def csv_bytes_estimate(rows: int) -> float:
     return rows * 22 * 18.0
 
 
-def simulate_to_csv(config: Config, path: str | Path, profile: Profile | None = None,
-                    t_end: float | None = None, record_every: int = 1,
-                    theta1_initial: float | None = None, header_comment: str = '',
-                    keep_rows: int = KEEP_ROWS, chunk_steps: int = 1 << 16) -> Trajectory:
+def simulate_to_csv(model: DriveModel | Config, path: str | Path,
+                    profile: Profile | None = None, t_end: float | None = None,
+                    record_every: int = 1, theta1_initial: float | None = None,
+                    header_comment: str = '', keep_rows: int = KEEP_ROWS,
+                    chunk_steps: int = 1 << 16) -> Trajectory:
     """:func:`simulate` streamed to a CSV file in chunks: memory stays bounded whatever the
     duration.  Returns a thinned Trajectory (every k-th recorded row, at most about
     ``keep_rows`` rows, always the last) for plots and metrics; the file has every
     recorded row and equals ``simulate(...).to_csv(path)``."""
+    config = model.config if isinstance(model, DriveModel) else model
     profile = profile if profile is not None else make_profile(config.input)
     t_end = config.input.end_time if t_end is None else t_end
     th0 = float(profile.theta1(np.array([0.0]))[0]) if theta1_initial is None else \
         theta1_initial
-    sim = Simulator(config, theta1=th0)
+    sim = Simulator(model, theta1=th0)
     n_total, stride = sim._plan(t_end, record_every)
     n_rows = n_total // stride + 1
     keep = max(1, -(-n_rows // max(1, int(keep_rows))))     # ceil
