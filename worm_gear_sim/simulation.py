@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,7 +40,12 @@ from .integrator import (
 from .integrator import (
     sliding_speed as record_aux_speed,
 )
-from .modal import damping_matrix, static_equilibrium
+from .modal import (
+    StepResolutionWarning,
+    damping_matrix,
+    static_equilibrium,
+    step_resolution_warning,
+)
 from .model import (
     AUX_CGKG,
     AUX_CWKW,
@@ -57,6 +63,7 @@ from .model import (
     mesh_forces_mu,
     pack_parameters,
     rigid_motion_vector,
+    worm_frequency,
 )
 from .params import ANGLE_LIMIT, Config, check_usable, derive
 from .profiles import Profile, make_profile
@@ -261,6 +268,11 @@ class Simulator:
             check_usable(config)
         self.config = config
         self.p = pack_parameters(config)
+        if check:   # allowed, but theta2 pointwise is not trustworthy (modal.STEPS_PER_PERIOD)
+            omega_dt = worm_frequency(self.p) * config.integrator.time_step
+            msg = step_resolution_warning(config, omega_dt)
+            if msg:
+                warnings.warn(msg, StepResolutionWarning, stacklevel=2)
         self.C = damping_matrix(config, self.p)
         self.derived = derive(config)
         self.dt = config.integrator.time_step
