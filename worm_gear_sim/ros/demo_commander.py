@@ -56,8 +56,10 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from ..config_io import load_config
+from ..derived import derive
 from ..modal import modes
-from ..params import Config, derive, load_config
+from ..params import Config
 from ..profiles import TrapezoidalProfile
 from ..studies.compensation_eval import SETTLE_TOLERANCE, Scenario, move_metrics, run_scenario
 
