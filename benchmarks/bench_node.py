@@ -79,14 +79,14 @@ def breakdown(n_ticks: int = 2000) -> dict[str, float]:
         t0 = time.monotonic()
         for i in range(n_ticks + 200):
             if i == 200:
-                busy0, k0 = node._window['busy_ns'], node._window['ticks']
+                busy0, k0 = node.load.window['busy_ns'], node.counters['ticks']
             msg.data = slew(time.monotonic() - t0)
             node._on_command(msg)
             node._on_tick()
             while time.monotonic() - t0 < (i + 1) * 1e-3:
                 pass
         out['tick callback (all below)'] = \
-            (node._window['busy_ns'] - busy0) / (node._window['ticks'] - k0) / 1e3
+            (node.load.window['busy_ns'] - busy0) / (node.counters['ticks'] - k0) / 1e3
         # physics alone: 1 ms of the same slew per call
         from worm_gear_sim.simulation import Simulator
         s = Simulator(node.config, theta1=slew(0.0))
@@ -129,7 +129,7 @@ def empty_timer_cost(kind: str, seconds: float = 10.0) -> tuple[float, float, fl
     code = f'''
 import time, rclpy
 from rclpy.node import Node
-from worm_gear_sim.ros.node import make_executor
+from worm_gear_sim.ros.run import make_executor
 rclpy.init(domain_id={int(os.environ.get('ROS_DOMAIN_ID', '44')) + 1})
 n = Node('empty_timer'); ts = []
 n.create_timer(1e-3, lambda: ts.append(time.monotonic_ns()))
@@ -225,8 +225,8 @@ def stamped_main(args: argparse.Namespace) -> int:
     from std_msgs.msg import Float64
 
     from worm_gear_sim.compensation import feedforward_series
-    from worm_gear_sim.params import load_config
-    from worm_gear_sim.ros.node import make_executor
+    from worm_gear_sim.config_io import load_config
+    from worm_gear_sim.ros.run import make_executor
 
     load0 = os.getloadavg()
     cfg_path = ROOT / 'config' / 'worm_gear_sim.yaml'
@@ -494,7 +494,7 @@ def main(argv: list[str] | None = None) -> int:
     probe.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     # The probe runs on the EventsExecutor (bounded spin slices, as the node does): a 1 kHz
     # timer publishes the commands and advances the phases, so the probe itself stays light.
-    from worm_gear_sim.ros.node import make_executor
+    from worm_gear_sim.ros.run import make_executor
     ex.shutdown()
     ex = make_executor('events')
     ex.add_node(probe)

@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
 
-    from worm_gear_sim.ros.node import make_executor
+    from worm_gear_sim.ros.run import make_executor
 
     load0 = os.getloadavg()
     node_cmd = [sys.executable, '-m', 'worm_gear_sim.node', '--ros-args', '--params-file',
