@@ -45,7 +45,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .params import Config, Derived, derive
+from .derived import Derived, derive
+from .params import Config
 
 # ---- packed parameter vector layout (compile-time constants for numba) -------------------
 P_JW, P_JG, P_J4 = 0, 1, 2

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .derived import Derived
 from .integrator import (
     C_MODE,
     C_MU,
@@ -56,7 +57,7 @@ from .model import (
     mechanical_energy,
     mesh_forces_mu,
 )
-from .params import ANGLE_LIMIT, Config, Derived, check_usable
+from .params import ANGLE_LIMIT, Config, check_usable
 from .profiles import Profile, make_profile
 from .records import write_csv_header
 

@@ -54,7 +54,9 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..params import Config, derive, load_config
+from ..config_io import load_config
+from ..derived import derive
+from ..params import Config
 from ..studies.demo_moves import (
     MoveSummary,
     MoveTracker,

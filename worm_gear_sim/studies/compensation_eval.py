@@ -14,9 +14,10 @@ from typing import Any
 import numpy as np
 
 from ..compensation import feedforward_series
+from ..derived import derive
 from ..modal import modes
 from ..model import DriveModel
-from ..params import Config, derive
+from ..params import Config
 from ..profiles import SampledProfile, TrapezoidalProfile, motion_span
 from ..simulation import simulate
 
