@@ -123,13 +123,12 @@ def pointwise_accuracy(over: dict, horizon: float = 0.025) -> tuple[float, float
 
 def ring_down_of(over: dict, horizon: float = 0.5) -> float:
     """The antenna's ring-down over 0.5 s after the 18-step move (simulation.ring_down)."""
-    from worm_gear_sim import static_equilibrium
-    from worm_gear_sim.model import pack_parameters
+    from worm_gear_sim import DriveModel, static_equilibrium
     from worm_gear_sim.simulation import ring_down
-    cfg = Config().replace(over)
-    dt = cfg.integrator.time_step
-    tr = simulate(cfg, t_end=0.02 + horizon, record_every=max(1, int(round(1e-5 / dt))))
-    eq = static_equilibrium(pack_parameters(cfg), float(tr.theta1[-1]))
+    model = DriveModel(Config().replace(over))
+    dt = model.config.integrator.time_step
+    tr = simulate(model, t_end=0.02 + horizon, record_every=max(1, int(round(1e-5 / dt))))
+    eq = static_equilibrium(model, float(tr.theta1[-1]))
     return ring_down(tr, 0.02, eq[2], horizon)
 
 
@@ -137,8 +136,6 @@ def radau_comparison(horizon: float = 0.05):
     """Speed-up over Radau at equal theta4 accuracy (reference: Newmark at 50 ns, which the
     test suite checks against Radau at rtol 1e-11)."""
     from scipy.integrate import solve_ivp
-
-    from worm_gear_sim.model import P_J4, P_JG, P_JW, P_KG
 
     cfg = Config().replace(OLD)        # Radau needs the smooth (tanh) law
     sample = 1e-5
@@ -155,10 +152,11 @@ def radau_comparison(horizon: float = 0.05):
     osc2 = np.abs(ref.worm_error).max()
 
     sim = Simulator(cfg)
-    p = sim.p
-    M = np.array([p[P_JW], p[P_JG], p[P_J4]])
+    p = sim.p                       # the packed vector the compiled mesh_forces takes
+    d = sim.derived
+    M = np.array([d.J_w, d.J_g, d.J_4])
     prof = make_profile(cfg.input)
-    kg = p[P_KG]
+    kg = d.K_g
 
     def rhs(t, y):
         f = mesh_forces(p, y[0], y[1], y[2], y[3], y[4], y[5],

@@ -33,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from worm_gear_sim import derive, load_config, modes  # noqa: E402
 from worm_gear_sim.identification import (  # noqa: E402
+    DIFF_STEP,
     STRATEGIES,
     FitOptions,
     Record,
@@ -77,6 +78,12 @@ def drives(base):
             'materials.gear_shaft_shear_modulus': kg * 1.3,
             'materials.flywheel_density': rho * 0.95,
             'damping.modal_damping_ratios': [0.008, 0.0, 0.0]}), True),
+        'variant: tanh friction, Stribeck': (base.replace({
+            'friction.direction': 'regularized', 'friction.regularization_velocity': 1e-3,
+            'friction.mu_stribeck_drop': 0.05, 'friction.stribeck_velocity': 0.2,
+            'materials.gear_shaft_shear_modulus': kg * 0.9,
+            'materials.flywheel_density': rho * 1.1,
+            'damping.modal_damping_ratios': [0.004, 0.0, 0.0]}), True),
         'variant: linear mesh, soft bearings': (base.replace({
             'mesh.stiffness_model': 'linear', 'mesh.worm_tooth_stiffness_multiplier': 0.7,
             'mesh.gear_tooth_stiffness_multiplier': 0.7,
@@ -103,16 +110,30 @@ def held_out(cfg, hold: Record, clean: Record) -> tuple[float, float]:
     return 100 * e['rel'], 100 * c['rms_rad'] / e['amplitude_rad']
 
 
+def approaches(args) -> list[tuple[str, str, float, bool]]:
+    """(label, strategy, finite-difference step, fit on the tanh surrogate) per table row."""
+    out = []
+    for s in args.strategies or list(STRATEGIES):
+        for h in args.diff_steps:
+            tag = '' if len(args.diff_steps) == 1 else f' h={h:g}'
+            out.append((s + tag, s, h, False))
+            if args.surrogate:
+                out.append((s + tag + ' tanh', s, h, True))
+    return out
+
+
 def compare(args) -> None:
     base = load_config(args.config) if args.config else load_config()
-    names = args.strategies or list(STRATEGIES)
-    print(f'load average {os.getloadavg()}; base antenna mode '
-          f'{modes(base).undamped_hz[0]:.2f} Hz; keys {", ".join(KEYS)}')
-    print(f'{"drive":<38} {"strategy":<18} {"hold %":>7} {"vs truth %":>10} {"train %":>8} '
+    rows = approaches(args)
+    print(f'load average {os.getloadavg()}; base: friction.direction '
+          f'{base.friction.direction}, antenna mode {modes(base).undamped_hz[0]:.2f} Hz; '
+          f'keys {", ".join(KEYS)}')
+    print(f'{"drive":<38} {"approach":<24} {"hold %":>7} {"vs truth %":>10} {"train %":>8} '
           f'{"time s":>7}  verdict')
-    summary: dict[str, list[float]] = {s: [] for s in names}
-    times: dict[str, list[float]] = {s: [] for s in names}
+    summary: dict[str, list[float]] = {r[0]: [] for r in rows}
+    times: dict[str, list[float]] = {r[0]: [] for r in rows}
     ratio = derive(base).output_per_input
+    smooth = base.replace({'friction.direction': 'regularized'})
     chosen = {k: v for k, v in drives(base).items()
               if not args.drives or any(d in k for d in args.drives)}
     for (dname, (truth, _variant)), duration in itertools.product(chosen.items(),
@@ -120,27 +141,31 @@ def compare(args) -> None:
         train, hold, clean = records(truth, seed=7, duration=duration)
         f_true = modes(truth).undamped_hz[0]
         h0, c0 = held_out(base, hold, clean)
-        print(f'{dname + f" {f_true:.1f} Hz, {duration:g} s":<38} {"(default config)":<18} '
+        print(f'{dname + f" {f_true:.1f} Hz, {duration:g} s":<38} {"(default config)":<24} '
               f'{h0:>7.1f} {c0:>10.1f}')
-        for s in names:
+        for label, s, step, surrogate in rows:
             opt = FitOptions(strategy=s, serial=args.serial, workers=args.workers,
-                             method=args.method)
+                             method=args.method, diff_step=step)
             t0 = time.perf_counter()
-            res = identify(base, [train], KEYS, options=opt)
+            res = identify(smooth if surrogate else base, [train], KEYS, options=opt)
             wall = time.perf_counter() - t0
-            h, c = held_out(res.config, hold, clean)
-            tr = 100 * res.rms_after['theta4'] / (0.5 * np.ptp(
-                train.measured['theta4'] - train.theta1 * ratio))
+            # the surrogate's estimates in the base model (the fitted YAML keeps its law)
+            fitted = res.config.replace({'friction.direction': base.friction.direction})
+            h, c = held_out(fitted, hold, clean)
+            tr = 100 * prediction_errors(fitted, [train])[0]['theta4']['rms_rad'] / (
+                0.5 * np.ptp(train.measured['theta4'] - train.theta1 * ratio))
             verdict = 'trustworthy' if res.trustworthy else \
                 f'NOT trustworthy: {res.problems[0][:60]}'
-            summary[s].append(h)
-            times[s].append(wall)
-            print(f'{"":<38} {s:<18} {h:>7.2f} {c:>10.2f} {tr:>8.2f} {wall:>7.1f}  {verdict}')
-    print('\nstrategy            cases with held-out theta4 error <= 3 %   worst %   '
+            summary[label].append(h)
+            times[label].append(wall)
+            print(f'{"":<38} {label:<24} {h:>7.2f} {c:>10.2f} {tr:>8.2f} {wall:>7.1f}  '
+                  f'{verdict}', flush=True)
+    print(f'\n{"approach":<24} cases with held-out theta4 error <= 3 %   worst %   '
           'median time s')
     for s, v in summary.items():
-        print(f'{s:<20} {sum(x <= 3.0 for x in v)}/{len(v):<35} {max(v):>7.2f}   '
+        print(f'{s:<24} {sum(x <= 3.0 for x in v)}/{len(v):<35} {max(v):>7.2f}   '
               f'{float(np.median(times[s])):.1f}')
+    print(f'load average after {os.getloadavg()}')
 
 
 def timing(args) -> None:
@@ -185,6 +210,10 @@ def main() -> None:
     ap.add_argument('--durations', type=float, nargs='*', default=[0.15, 0.5],
                     help='record lengths [s] in --compare')
     ap.add_argument('--method', default='dogbox', help='least_squares method (--compare)')
+    ap.add_argument('--diff-steps', type=float, nargs='*', default=[DIFF_STEP],
+                    help='finite-difference steps in the fitted coordinate (--compare)')
+    ap.add_argument('--surrogate', action='store_true', help='also fit on the tanh friction '
+                    'law and predict with the base law (--compare)')
     ap.add_argument('--drives', nargs='*', help='substrings of drive names in --compare')
     ap.add_argument('--config', help='base YAML (default: the package config)')
     args = ap.parse_args()

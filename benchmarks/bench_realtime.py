@@ -36,22 +36,7 @@ import numpy as np
 
 from worm_gear_sim import Config
 from worm_gear_sim.compensation import Compensator
-from worm_gear_sim.model import (
-    P_COSL,
-    P_COSPHI,
-    P_COUT,
-    P_J4,
-    P_JG,
-    P_KG,
-    P_KW,
-    P_LW,
-    P_RG,
-    P_RW,
-    P_SINL,
-    P_TLOAD,
-    friction_coefficient,
-    mesh_compliance,
-)
+from worm_gear_sim.model import friction_coefficient, mesh_compliance
 from worm_gear_sim.realtime import RealtimePredictor
 from worm_gear_sim.simulation import Simulator
 
@@ -65,8 +50,16 @@ class PythonCompensator:
 
     def __init__(self, comp: Compensator) -> None:
         self.c = comp
-        inv = comp._inv
-        self.p, self.ratio = inv.p, inv.ratio
+        model = comp.model
+        cfg, d = model.config, model.derived
+        self.p, self.ratio, self.out_per_in = model.p, d.ratio, model.output_per_input
+        # the quantities of the inverse by name (the values the packed vector holds)
+        self.Kw, self.Kg, self.J4, self.Jg = d.K_w, d.K_g, d.J_4, d.J_g
+        self.cout, self.Tload = cfg.load.output_viscous_coefficient, cfg.load.output_torque
+        self.rw, self.rg, self.lw = cfg.geometry.worm_pitch_radius, \
+            cfg.geometry.gear_pitch_radius, d.l_w
+        self.sl, self.cl = math.sin(d.lead_angle), math.cos(d.lead_angle)
+        self.cphi = math.cos(cfg.geometry.pressure_angle)
 
     def reset(self, x: float, t: float) -> None:
         self.ht, self.hx = [t], [x]
@@ -85,25 +78,25 @@ class PythonCompensator:
         te = t - c.preview
         ref = float(np.interp(te, ht, hx))
         r = c._W @ np.interp(te - c._tau, ht, hx)
-        k = c._out_per_in
+        k = self.out_per_in
         return self.theta1(r[0] * k, r[1] * k, r[2] * k) - ref
 
     def theta1(self, y0: float, y1: float, y2: float) -> float:
         p = self.p
-        Kg, J4, Jg, cout = p[P_KG], p[P_J4], p[P_JG], p[P_COUT]
-        rw, rg, lw, sl, cl = p[P_RW], p[P_RG], p[P_LW], p[P_SINL], p[P_COSL]
-        Ts = J4 * y2 + cout * y1 + p[P_TLOAD]
+        Kg, J4, Jg, cout, Tload = self.Kg, self.J4, self.Jg, self.cout, self.Tload
+        rw, rg, lw, sl, cl = self.rw, self.rg, self.lw, self.sl, self.cl
+        Ts = J4 * y2 + cout * y1 + Tload
         th3 = y0 + Ts / Kg
         th3_1 = y1 + cout * y2 / Kg
-        Tm = (Jg + J4) * y2 + cout * y1 + p[P_TLOAD]
+        Tm = (Jg + J4) * y2 + cout * y1 + Tload
         v_s = rw * cl * th3_1 * self.ratio + rg * sl * th3_1
         mu, _ = friction_coefficient(p, v_s, Tm)
-        A = p[P_COSPHI] * sl + mu * cl
-        B = p[P_COSPHI] * cl - mu * sl
+        A = self.cphi * sl + mu * cl
+        B = self.cphi * cl - mu * sl
         Wn = Tm / (rg * B)
         kgws = mesh_compliance(p, th3 * self.ratio, th3, mu)[0]
         th2 = (Wn * kgws / cl + rg * th3) / lw
-        return th2 + rw * A * Wn / p[P_KW]
+        return th2 + rw * A * Wn / self.Kw
 
 
 def slew(n: int, seed: int = 1) -> tuple[list[int], list[float]]:

@@ -6,7 +6,8 @@ Side by side in one run: building a Config from overrides without the check
 (``config_from_mapping(..., usable=False)``), the check of a new set (each set distinct, so
 nothing is cached), the check of a set already proven (a dictionary look-up), and
 ``Config.replace`` end to end (what the node's parameter bridge and the CLI call).  Also the
-parts of the check: pack_parameters + rules 1-2, the modes, the 2 ms trial move.
+parts of the check: building the model (``DriveModel``: derived quantities, packed vector),
+the modes, the 2 ms trial move.
 
     python benchmarks/bench_usable.py            # 200 sets, minimum of 5 repetitions
 """
@@ -38,13 +39,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--repeat', type=int, default=5)
     args = ap.parse_args(argv)
     from worm_gear_sim.modal import modes
-    from worm_gear_sim.model import pack_parameters
+    from worm_gear_sim.model import DriveModel
     from worm_gear_sim.simulation import Simulator
     from worm_gear_sim.usability import TRIAL_ANGLE, TRIAL_TIME
     check_usable(Config().replace({'load.output_torque': -1.0}))      # compile / warm up
     rows: dict[str, list[float]] = {k: [] for k in (
         'build (no check)', 'check, new set', 'check, proven set', 'replace() end to end',
-        '  pack_parameters', '  modes', '  trial move')}
+        '  DriveModel', '  modes', '  trial move')}
     base = Config()
     for r in range(args.repeat):
         off = (r + 1) * 10 * args.sets
@@ -55,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
         rows['check, proven set'].append(_time(check_usable, cfgs))
         ov = [{'load.output_torque': 0.001 * (i + off + args.sets)} for i in range(args.sets)]
         rows['replace() end to end'].append(_time(base.replace, ov))
-        rows['  pack_parameters'].append(_time(pack_parameters, cfgs))
+        rows['  DriveModel'].append(_time(DriveModel, cfgs))
         rows['  modes'].append(_time(lambda c: modes(c, include_damping=False), cfgs))
 
         def trial(c):

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from worm_gear_sim import cli
-from worm_gear_sim.params import Config, default_config_path
+from worm_gear_sim.config_io import default_config_path
+from worm_gear_sim.params import Config
 
 REPO = Path(__file__).resolve().parents[1]
 SHORT = ['--end-time', '0.03']       # the move ends at 0.02 s

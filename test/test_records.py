@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""records.py: CSV by header (units, epoch, every malformed case) and rosbag2 in/out on
+"""records: CSV by header (units, epoch, every malformed case) and rosbag2 in/out on
 small bags this test writes with ``rosbags`` itself (sqlite3 and mcap, Float64 and the
 stamped JointState reference)."""
 

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from worm_gear_sim import studies as S
+from worm_gear_sim.derived import derive
 from worm_gear_sim.model import P_CGKG_LIN, pack_parameters
-from worm_gear_sim.params import Config, ConfigError, derive
+from worm_gear_sim.params import Config, ConfigError
 
 SHORT = 0.03     # s: the move ends at 0.02 s, 10 ms of ringing is enough for the checks
 

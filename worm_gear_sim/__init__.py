@@ -25,8 +25,9 @@ __version__ = '0.1.0'
 _EXPORTS: dict[str, str] = {
     'ModalResult': 'modal', 'damping_matrix': 'modal', 'modes': 'modal',
     'static_equilibrium': 'modal',
-    'Config': 'params', 'ConfigError': 'params', 'Derived': 'params',
-    'default_config': 'params', 'derive': 'params', 'load_config': 'params',
+    'DriveModel': 'model',
+    'Config': 'params', 'ConfigError': 'params', 'Derived': 'derived',
+    'default_config': 'params', 'derive': 'derived', 'load_config': 'config_io',
     'check_usable': 'params',
     'Profile': 'profiles', 'RampProfile': 'profiles', 'SampledProfile': 'profiles',
     'SCurveProfile': 'profiles', 'StepProfile': 'profiles', 'TrapezoidalProfile': 'profiles',
@@ -40,7 +41,7 @@ _EXPORTS: dict[str, str] = {
 
 __all__ = [
     'Config', 'ConfigError', 'Derived', 'default_config', 'derive', 'load_config',
-    'check_usable', 'simulate_to_csv', 'Profile', 'StepProfile', 'RampProfile',
+    'check_usable', 'DriveModel', 'simulate_to_csv', 'Profile', 'StepProfile', 'RampProfile',
     'TrapezoidalProfile', 'SCurveProfile', 'SampledProfile', 'make_profile', 'Simulator',
     'Trajectory', 'SimState',
     'SimulationError', 'simulate', 'modes', 'ModalResult', 'static_equilibrium',
@@ -50,17 +51,11 @@ __all__ = [
 
 if TYPE_CHECKING:  # static analysers see the eager imports
     from .compensation import Compensator, feedforward_series
-    from .config_io import params_document, resolve_config
+    from .config_io import load_config, params_document, resolve_config
+    from .derived import Derived, derive
     from .modal import ModalResult, damping_matrix, modes, static_equilibrium
-    from .params import (
-        Config,
-        ConfigError,
-        Derived,
-        check_usable,
-        default_config,
-        derive,
-        load_config,
-    )
+    from .model import DriveModel
+    from .params import Config, ConfigError, check_usable, default_config
     from .profiles import (
         Profile,
         RampProfile,

@@ -55,11 +55,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 from scipy.interpolate import BSpline
 
 from .modal import modes
-from .model import inverse_theta1, pack_parameters
-from .params import Config, derive
+from .model import DriveModel, inverse_theta1
+from .params import Config
 
 __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_filter',
            'feedforward_series', 'SHAPERS', 'compensation_kernel']
@@ -276,19 +277,6 @@ def compensation_kernel(te, tau, W, ht, hx, lo, hi, p, out_per_in, quasi_static,
     return th1 - ref, ref
 
 
-class _Inverse:
-    """Flat-output inverse of the nominal chain: theta1 needed for theta4 = y(t)."""
-
-    def __init__(self, cfg: Config):
-        self.p = pack_parameters(cfg)
-        self.ratio = derive(cfg).ratio                # r_g / l_w: theta1 per theta4
-
-    def theta1(self, y0: float, y1: float, y2: float, y3: float, y4: float,
-               dynamic: bool) -> float:
-        """theta1 making theta4 = y; ``dynamic`` keeps the y''' and y'''' terms."""
-        return float(inverse_theta1(self.p, y0, y1, y2, y3, y4, bool(dynamic)))
-
-
 # ---- the streaming compensator -------------------------------------------------------------
 class Compensator:
     """Streaming feed-forward: ``update(t, theta1_ref)`` returns delta to ADD to theta1.
@@ -301,21 +289,25 @@ class Compensator:
     costs tens of microseconds.
     """
 
-    def __init__(self, config: Config) -> None:
+    def __init__(self, model: DriveModel | Config) -> None:
         self._derivs = np.zeros(0)       # r, r', ... of the filtered reference (reset fills it)
-        self.reconfigure(config)
+        self.reconfigure(model)
         self.reset(0.0, 0.0)
 
     # ---- design ----------------------------------------------------------------------------
-    def reconfigure(self, config: Config) -> None:
-        """Redesign from a (nominal) configuration; keeps the stored reference history."""
+    def reconfigure(self, model: DriveModel | Config) -> None:
+        """Redesign from a (nominal) model or configuration; keeps the stored reference
+        history."""
+        model = DriveModel.of(model)
+        config = model.config
         cs = config.compensation
+        self.model = model
         self.config = config
         self.enabled = bool(cs.enabled)
         self.quasi_static = bool(cs.quasi_static)
         self.dynamic = bool(cs.model_inverse) and self.quasi_static
         self.preview = float(cs.preview_time)
-        res = modes(config)
+        res = modes(model)
         # the antenna mode: largest theta4 participation (mode 1 for the default drive)
         k = int(np.argmax(np.abs(res.shapes[2, :])))
         self.mode_frequency_hz = float(res.frequencies_hz[k] or res.undamped_hz[k])
@@ -338,9 +330,8 @@ class Compensator:
         if self._derivs.size != n_deriv:
             self._derivs = np.zeros(n_deriv)
         self._n_deriv = n_deriv
-        self._inv = _Inverse(config)
         self._span = self.filter.lag_span + self.preview
-        self._output_per_input = 1.0 / self._inv.ratio
+        self._p, self._output_per_input = model.p, model.output_per_input   # per-sample use
 
     # ---- streaming -------------------------------------------------------------------------
     def reset(self, theta1_ref: float, t: float) -> None:
@@ -395,7 +386,7 @@ class Compensator:
         """The correction for time ``te`` from the history so far (the reference at ``te``
         becomes :attr:`reference`); any ``te`` not before the last :meth:`trim`."""
         d, ref = compensation_kernel(float(te), self._tau, self._W, self._ht, self._hx,
-                                     self._lo, self._hi, self._inv.p, self._output_per_input,
+                                     self._lo, self._hi, self._p, self._output_per_input,
                                      self.quasi_static, self.dynamic, self.enabled,
                                      self._derivs)
         self._reference = ref
@@ -443,7 +434,8 @@ class Compensator:
                 f'quasi_static {self.quasi_static}, model_inverse {self.dynamic}')
 
 
-def feedforward_series(config: Config, times, theta1_ref) -> np.ndarray:
+def feedforward_series(model: DriveModel | Config, times: ArrayLike,
+                       theta1_ref: ArrayLike) -> np.ndarray:
     """The offline twin of the live pipeline: the correction for each sample of a sampled
     reference, exactly as :class:`worm_gear_sim.realtime.RealtimePredictor` (the node's
     pipeline) computes it from the same (time, value) pairs, whatever their arrival.
@@ -472,7 +464,7 @@ def feedforward_series(config: Config, times, theta1_ref) -> np.ndarray:
         i = int(np.argmax(np.diff(rel) <= 0)) + 1
         raise ValueError(f'times must be strictly increasing (to the nanosecond): sample {i}')
     origin = 1_000_000_000                     # stamps must be > 0: any origin will do
-    p = RealtimePredictor(config, simulate=False, base_ns=origin)
+    p = RealtimePredictor(model, simulate=False, base_ns=origin)
     out = np.empty(x.size)
     k = 0
     for i in range(x.size):

@@ -11,12 +11,11 @@ import numpy as np
 import scipy.linalg as sla
 
 from .model import (
+    DriveModel,
     forces,
     linear_stiffness,
     mass_matrix,
-    pack_parameters,
     rigid_motion_vector,
-    worm_frequency,
 )
 from .params import ANGLE_LIMIT, Config
 
@@ -25,9 +24,12 @@ __all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix',
            'StepResolutionWarning', 'STEPS_PER_PERIOD']
 
 
-def static_equilibrium(p: np.ndarray, theta1: float, u_guess=None, tol: float = 1e-15,
+def static_equilibrium(model: DriveModel | np.ndarray, theta1: float,
+                       u_guess: np.ndarray | None = None, tol: float = 1e-15,
                        max_iter: int = 50) -> np.ndarray:
-    """Solve Q(u, 0, theta1) = 0 (at rest, so no sliding friction) by Newton's method."""
+    """Solve Q(u, 0, theta1) = 0 (at rest, so no sliding friction) by Newton's method;
+    ``model``: a :class:`DriveModel` (or its packed vector)."""
+    p = model.p if isinstance(model, DriveModel) else model
     u = rigid_motion_vector(p) * theta1 if u_guess is None else np.array(u_guess, float)
     v = np.zeros(3)
     for _ in range(max_iter):
@@ -66,9 +68,10 @@ class ModalResult:
         return '\n'.join(lines)
 
 
-def modes(cfg: Config, theta1: float = 0.0, sliding_rate: float = 0.0,
+def modes(model: DriveModel | Config, theta1: float = 0.0, sliding_rate: float = 0.0,
           include_damping: bool = True) -> ModalResult:
-    """Linearise Eq. 15 about the static equilibrium at ``theta1`` (motor end held).
+    """Linearise Eq. 15 of ``model`` (a :class:`DriveModel` or a Config) about the static
+    equilibrium at ``theta1`` (motor end held).
 
     ``sliding_rate`` is a worm speed [rad/s] of the operating point (steady slewing); the
     friction terms are linearised there (at rest, tanh makes friction act like viscous
@@ -78,13 +81,14 @@ def modes(cfg: Config, theta1: float = 0.0, sliding_rate: float = 0.0,
                                                             1e6)):
         if not (math.isfinite(float(x)) and abs(float(x)) <= limit):
             raise ValueError(f'modes: {name} = {x!r} must be finite and within +-{limit:g}')
-    p = pack_parameters(cfg)
+    model = DriveModel.of(model)
+    p = model.p
     u = static_equilibrium(p, theta1)
     v = rigid_motion_vector(p) * sliding_rate
     _, dQdu, dQdv, _ = forces(p, u, v, theta1)
     M = mass_matrix(p)
     K = -dQdu
-    C = damping_matrix(cfg, p) - dQdv if include_damping else np.zeros((3, 3))
+    C = damping_matrix(model) - dQdv if include_damping else np.zeros((3, 3))
     undamped, shapes = _undamped_modes(K, M)
     # state-space eigenvalues for damped frequencies and damping ratios
     damped, zeta = _damped_modes(M, K, C, len(undamped))
@@ -140,13 +144,13 @@ def _damped_modes(M: np.ndarray, K: np.ndarray, C: np.ndarray, n_modes: int = 3)
     return np.array([m[1] for m in modes_]), zeta
 
 
-def damping_matrix(cfg: Config, p: np.ndarray | None = None) -> np.ndarray:
-    """Structural damping C (acts on velocities relative to the rigid kinematic motion):
-    Rayleigh alpha M + beta K0 plus modal damping M Phi diag(2 zeta w) Phi^T M, with K0 the
-    frictionless stiffness at the mean mesh stiffness."""
-    if p is None:
-        p = pack_parameters(cfg)
-    d = cfg.damping
+def damping_matrix(model: DriveModel | Config) -> np.ndarray:
+    """Structural damping C of ``model`` (a :class:`DriveModel` or a Config; acts on
+    velocities relative to the rigid kinematic motion): Rayleigh alpha M + beta K0 plus modal
+    damping M Phi diag(2 zeta w) Phi^T M, with K0 the frictionless stiffness at the mean mesh
+    stiffness."""
+    model = DriveModel.of(model)
+    p, d = model.p, model.config.damping
     M = mass_matrix(p)
     K0 = linear_stiffness(p)
     C = d.rayleigh_alpha * M + d.rayleigh_beta * K0
@@ -173,34 +177,38 @@ class StepResolutionWarning(UserWarning):
     """The time step gives the highest mode fewer than STEPS_PER_PERIOD steps per period."""
 
 
-def step_resolution(cfg: Config) -> float:
+def step_resolution(model: DriveModel | Config) -> float:
     """omega_max dt: the configured step against the highest linearised mode (the worm on
     its shaft); 2 pi / (omega_max dt) steps per period of that mode."""
-    return worm_frequency(pack_parameters(cfg)) * cfg.integrator.time_step
+    model = DriveModel.of(model)
+    return model.worm_frequency() * model.config.integrator.time_step
 
 
-def step_resolution_warning(cfg: Config, omega_dt: float | None = None) -> str:
+def step_resolution_warning(model: DriveModel | Config) -> str:
     """'' if ``integrator.time_step`` resolves the highest mode with at least
     STEPS_PER_PERIOD steps per period, else a one-line warning (the rule of
     :func:`amplitude_time_step`; a coarser step is allowed: the average-acceleration rule
     is stable at any step, only theta2's pointwise accuracy degrades)."""
-    x = step_resolution(cfg) if omega_dt is None else omega_dt
+    model = DriveModel.of(model)
+    x = step_resolution(model)
     if not x > 2.0 * math.pi / STEPS_PER_PERIOD:
         return ''
-    dt = cfg.integrator.time_step
+    dt = model.config.integrator.time_step
     return (f'integrator.time_step = {dt:g} s gives the highest mode ({x / (2 * math.pi * dt):.4g}'
             f' Hz) {2 * math.pi / x:.1f} steps per period (< {STEPS_PER_PERIOD:g}, omega dt = '
             f'{x:.3g}): theta2 can be more than 5 % of its oscillation off pointwise; use '
-            f'<= {amplitude_time_step(cfg):.3g} s for theta2 and amplitudes')
+            f'<= {amplitude_time_step(model):.3g} s for theta2 and amplitudes')
 
 
-def amplitude_time_step(cfg: Config, steps_per_period: float = STEPS_PER_PERIOD) -> float:
+def amplitude_time_step(model: DriveModel | Config,
+                        steps_per_period: float = STEPS_PER_PERIOD) -> float:
     """Time step for amplitude and pointwise metrics (studies, figures): the configured step
     divided by the smallest integer n that gives the highest linearised mode (the worm on its
     shaft, 8.6 kHz for Table 1) at least ``steps_per_period`` steps per period, so no metric
     depends on an unresolved mode.  An integer divisor keeps the grids of both steps aligned.
     The default step (4 us, 29 steps per period for Table 1) needs no division."""
-    f_top = worm_frequency(pack_parameters(cfg)) / (2.0 * math.pi)
-    dt = cfg.integrator.time_step
+    model = DriveModel.of(model)
+    f_top = model.worm_frequency() / (2.0 * math.pi)
+    dt = model.config.integrator.time_step
     n = max(1, math.ceil(dt * steps_per_period * f_top - 1e-9))
     return dt / n

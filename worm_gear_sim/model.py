@@ -45,7 +45,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .params import Config, derive
+from .derived import Derived, derive
+from .params import Config
 
 # ---- packed parameter vector layout (compile-time constants for numba) -------------------
 P_JW, P_JG, P_J4 = 0, 1, 2
@@ -100,9 +101,10 @@ def _calibrated_origin(scale: float, b: float, target_mean: float,
     return math.log(target_mean / (scale * cycle_mean_factor)) / b
 
 
-def pack_parameters(cfg: Config) -> np.ndarray:
-    """Flatten a Config (plus derived quantities) into the kernel's parameter vector."""
-    d = derive(cfg)
+def pack_parameters(cfg: Config, derived: Derived | None = None) -> np.ndarray:
+    """Flatten a Config (plus its derived quantities ``derived``, computed if not given)
+    into the kernel's parameter vector (use :class:`DriveModel`: it does this once)."""
+    d = derive(cfg) if derived is None else derived
     g, mesh, fr, integ = cfg.geometry, cfg.mesh, cfg.friction, cfg.integrator
     p = np.zeros(N_PARAMS)
     p[P_JW], p[P_JG], p[P_J4] = d.J_w, d.J_g, d.J_4
@@ -154,7 +156,7 @@ def pack_parameters(cfg: Config) -> np.ndarray:
     p[P_BETA], p[P_GAMMA] = integ.newmark_beta, integ.newmark_gamma
     p[P_RTOL], p[P_ATOL] = integ.newton_rtol, integ.newton_atol
     p[P_MAXIT], p[P_MAXSUB] = integ.newton_max_iterations, integ.max_subdivision_level
-    p[P_OUTPUT_PER_INPUT] = d.l_w / g.gear_pitch_radius
+    p[P_OUTPUT_PER_INPUT] = d.output_per_input
     p[P_INV_KGS], p[P_INV_KWS] = 1.0 / d.k_gs, 1.0 / d.k_ws
     p[P_INV_VEPS] = 1.0 / fr.regularization_velocity
     p[P_INV_SQRT_VS] = 1.0 / math.sqrt(fr.stribeck_velocity)
@@ -193,8 +195,76 @@ def friction_is_set_valued(p: np.ndarray) -> bool:
 def contact_origins_deg(cfg: Config) -> tuple[float, float]:
     """The calibrated origins x0 of the worm and gear contact positions of Eqs. 16-17 [deg]
     (cycle means equal to the linear tooth stiffnesses; see docs/model-notes.md)."""
-    p = pack_parameters(cfg)
-    return float(p[P_WORM_X0]), float(p[P_GEAR_X0])
+    return DriveModel(cfg).contact_origins_deg
+
+
+class DriveModel:
+    """The drive's model built once from a validated :class:`Config`: the Config, its
+    derived quantities (:class:`Derived`: inertias, stiffnesses, l_w, ratio) and the packed
+    parameter vector ``p`` of the compiled kernels, whose layout (``P_*``) is private to
+    this module and the integrator.  Build it once and pass it to :class:`Simulator`,
+    :class:`Compensator`, :func:`modes`, the studies and the real-time pipeline (each also
+    accepts a Config and builds the model itself).  Treat it as immutable: ``p`` is shared
+    by everyone holding the model (it stays a writeable array because the compiled kernels
+    are specialised on that array type)."""
+
+    __slots__ = ('config', 'derived', 'p')
+
+    def __init__(self, config: Config) -> None:
+        self.config = config
+        self.derived = derive(config)
+        self.p = pack_parameters(config, self.derived)
+
+    @classmethod
+    def of(cls, model: DriveModel | Config) -> DriveModel:
+        """``model`` itself, or the model of a Config."""
+        return model if isinstance(model, DriveModel) else cls(model)
+
+    def __repr__(self) -> str:
+        return f'DriveModel(output_per_input={self.output_per_input!r})'
+
+    @property
+    def output_per_input(self) -> float:
+        """Rigid kinematic ratio theta4/theta1 = theta3/theta1 = l_w / r_g [rad/rad]."""
+        return self.derived.output_per_input
+
+    @property
+    def rigid_motion(self) -> np.ndarray:
+        """u = (theta2, theta3, theta4) of the undeformed drive per unit theta1."""
+        return rigid_motion_vector(self.p)
+
+    @property
+    def friction_is_set_valued(self) -> bool:
+        """True with the set-valued (stick-slip) friction law."""
+        return friction_is_set_valued(self.p)
+
+    @property
+    def contact_origins_deg(self) -> tuple[float, float]:
+        """Calibrated origins x0 of the worm and gear contact positions (Eqs. 16-17) [deg]."""
+        return float(self.p[P_WORM_X0]), float(self.p[P_GEAR_X0])
+
+    @property
+    def linear_tooth_stiffness(self) -> tuple[float, float]:
+        """c_w k_w and c_g k_g of the linear mesh (multipliers and module applied) [N/m]."""
+        return float(self.p[P_CWKW_LIN]), float(self.p[P_CGKG_LIN])
+
+    @property
+    def linear_mesh_compliance(self) -> float:
+        """1/c_w k_w + 1/c_g k_g of the linear tooth stiffnesses (Eq. 10) [m/N]."""
+        return float(self.p[P_LIN_COMPLIANCE])
+
+    @property
+    def mesh_is_linear(self) -> bool:
+        """True when the tooth stiffnesses are constant (``mesh.stiffness_model: linear``)."""
+        return bool(self.p[P_MESH_LINEAR] != 0.0)
+
+    def mass_matrix(self) -> np.ndarray:
+        """diag(J_w, J_g, J_4) of Eq. 15."""
+        return mass_matrix(self.p)
+
+    def worm_frequency(self) -> float:
+        """Highest linearised natural frequency [rad/s] (see :func:`worm_frequency`)."""
+        return worm_frequency(self.p)
 
 
 # ---- Eqs. 16-17: tooth stiffness over the mesh cycle ----------------------------------------

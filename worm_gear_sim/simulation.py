@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .derived import Derived
 from .integrator import (
     C_MODE,
     C_MU,
@@ -56,16 +57,13 @@ from .model import (
     AUX_VS,
     AUX_WN,
     N_AUX,
+    DriveModel,
     energy_series,
-    friction_is_set_valued,
     generalized_forces,
     mechanical_energy,
     mesh_forces_mu,
-    pack_parameters,
-    rigid_motion_vector,
-    worm_frequency,
 )
-from .params import ANGLE_LIMIT, Config, check_usable, derive
+from .params import ANGLE_LIMIT, Config, check_usable
 from .profiles import Profile, make_profile
 from .records import write_csv_header
 
@@ -121,10 +119,10 @@ class Trajectory:
         """theta4 - theta1 l_w / r_g [rad]: antenna positioning error."""
         return self.theta[:, 2] - self.theta1 * self.output_per_input
 
-    def energy(self, config: Config) -> np.ndarray:
-        """Kinetic + shaft torsion + mesh energy 0.5 k_Y q^2 [J] at every row."""
-        p = pack_parameters(config)
-        return energy_series(p, np.ascontiguousarray(self.theta),
+    def energy(self, model: DriveModel | Config) -> np.ndarray:
+        """Kinetic + shaft torsion + mesh energy 0.5 k_Y q^2 [J] at every row (``model``:
+        the run's :class:`DriveModel` or Config)."""
+        return energy_series(DriveModel.of(model).p, np.ascontiguousarray(self.theta),
                              np.ascontiguousarray(self.omega), np.ascontiguousarray(self.theta1))
 
     def columns(self) -> dict[str, np.ndarray]:
@@ -256,27 +254,28 @@ class Simulator:
     Real time: call :meth:`advance_to` with the current time and the latest command; the
     command is a sample at that time and theta1 is interpolated from the previous sample
     (``interpolation='linear'``) or applied at once (``'hold'``).  Batch: :meth:`run`.
+
+    ``model``: a :class:`DriveModel` (built once, shared with the compensator and the
+    studies) or a Config (the simulator builds its model).  ``check``: prove the parameter
+    set usable first (:func:`check_usable`, cached per Config).
     """
 
     #: Default step limit of one :meth:`advance_to` call (1e8 steps: 1000 s at 10 us,
     #: roughly half a minute of computation).
     max_advance_steps: int = 10 ** 8
 
-    def __init__(self, config: Config, theta1: float = 0.0, t0: float = 0.0,
-                 interpolation: str | None = None, *, check: bool = True):
+    def __init__(self, model: DriveModel | Config, theta1: float = 0.0, t0: float = 0.0,
+                 interpolation: str | None = None, *, check: bool = True) -> None:
+        config = model.config if isinstance(model, DriveModel) else model
         if check:   # ConfigError naming the keys unless the set can be simulated
             check_usable(config)
-        self.config = config
-        self.p = pack_parameters(config)
+        self._set_model(DriveModel.of(model))
         if check:   # allowed, but theta2 pointwise is not trustworthy (modal.STEPS_PER_PERIOD)
-            omega_dt = worm_frequency(self.p) * config.integrator.time_step
-            msg = step_resolution_warning(config, omega_dt)
+            msg = step_resolution_warning(self.model)
             if msg:
                 warnings.warn(msg, StepResolutionWarning, stacklevel=2)
-        self.C = damping_matrix(config, self.p)
-        self.derived = derive(config)
-        self.dt = config.integrator.time_step
-        self.interpolation = interpolation or config.node.command_interpolation
+        self.dt: float = config.integrator.time_step
+        self.interpolation: str = interpolation or config.node.command_interpolation
         self._stats = np.zeros(N_STATS, dtype=np.int64)
         # Newton controller: contraction, steps since verify; friction mode and mu_eff
         self._ctl = np.zeros(N_CTL)
@@ -313,19 +312,33 @@ class Simulator:
         self._ctl[C_RHO] = 1.0
         self._ctl[C_MODE] = self._slip_mode()
 
-    def reconfigure(self, config: Config) -> None:
+    def _set_model(self, model: DriveModel, C: np.ndarray | None = None) -> None:
+        self.model = model
+        self.config: Config = model.config
+        self.p: np.ndarray = model.p          # the packed vector the kernels take
+        self.C: np.ndarray = damping_matrix(model) if C is None else C
+
+    @property
+    def derived(self) -> Derived:
+        """The model's derived quantities (inertias, stiffnesses, l_w, ratio)."""
+        return self.model.derived
+
+    def reconfigure(self, model: DriveModel | Config) -> None:
         """Swap in new (already validated) parameters, keeping time, state and command.
         The time step cannot change (it is read-only in the node)."""
+        config = model.config if isinstance(model, DriveModel) else model
         if config.integrator.time_step != self.dt:
             raise ValueError('integrator.time_step cannot change on a running simulator')
         check_usable(config)
-        p = pack_parameters(config)
-        C = damping_matrix(config, p)
+        model = DriveModel.of(model)
+        C = damping_matrix(model)
         a = np.zeros(3)
-        consistent_acceleration(p, C, self._u, self._v, self._theta1, self._theta1_dot, a)
+        consistent_acceleration(model.p, C, self._u, self._v, self._theta1,
+                                self._theta1_dot, a)
         if not np.all(np.isfinite(a)):
             raise ValueError('the new parameters give a non-finite acceleration')
-        self.config, self.p, self.C, self.derived, self._a = config, p, C, derive(config), a
+        self._set_model(model, C)
+        self._a = a
         self._ctl[C_RHO], self._ctl[C_SINCE] = 1.0, 0.0
 
     def _slip_mode(self) -> float:
@@ -360,7 +373,7 @@ class Simulator:
         Q, aux = np.zeros(3), np.zeros(N_AUX)
         generalized_forces(self.p, self._u, self._v, self._theta1, Q, np.zeros((3, 3)),
                            np.zeros((3, 3)), aux)
-        if friction_is_set_valued(self.p):
+        if self.model.friction_is_set_valued:
             record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux)
             r = mesh_forces_mu(self.p, *self._u, self._v[2], self._theta1, self._ctl[C_MU])
             Q = np.array(r[:3])
@@ -384,7 +397,7 @@ class Simulator:
                                      np.zeros(N_AUX))
         u, v, th1 = self._u, self._v, self._theta1
         generalized_forces(self.p, u, v, th1, buf[0], buf[1], buf[2], buf[3])
-        if friction_is_set_valued(self.p):       # the friction the integrator solved for
+        if self.model.friction_is_set_valued:    # the friction the integrator solved for
             record_aux(self.p, u, v, th1, self._ctl[C_MU], buf[3])
         aux = buf[3]
         g, d = self.config.geometry, self.derived
@@ -508,7 +521,7 @@ class Simulator:
         return Trajectory(t=t_rec[:row], theta1=th_rec[:row], theta1_dot=td_rec[:row],
                           theta=u_rec[:row], omega=v_rec[:row], alpha=a_rec[:row],
                           aux=aux_rec[:row],
-                          output_per_input=float(rigid_motion_vector(self.p)[2]),
+                          output_per_input=self.model.output_per_input,
                           profile=profile.describe(), stats=self.stats)
 
     def iter_run(self, profile: Profile, t_end: float, record_every: int = 1,
@@ -519,7 +532,7 @@ class Simulator:
         bit.  Stopping the iteration early leaves the simulator at the last chunk's end."""
         n_total, stride = self._plan(t_end, record_every)
         first = True
-        desc, ratio = profile.describe(), float(rigid_motion_vector(self.p)[2])
+        desc, ratio = profile.describe(), self.model.output_per_input
 
         def make(rows: int) -> tuple[np.ndarray, ...]:
             return (np.empty(rows), np.empty(rows), np.empty(rows), np.empty((rows, 3)),
@@ -590,17 +603,19 @@ RUN_MEMORY_LIMIT = 2e9
 KEEP_ROWS = 200_000
 
 
-def simulate(config: Config, profile: Profile | None = None, t_end: float | None = None,
-             record_every: int = 1, theta1_initial: float | None = None,
+def simulate(model: DriveModel | Config, profile: Profile | None = None,
+             t_end: float | None = None, record_every: int = 1,
+             theta1_initial: float | None = None,
              max_bytes: float | None = None) -> Trajectory:
-    """Batch run from rest: the config's input profile (or ``profile``) to ``t_end``, in
-    memory (up-front ValueError beyond ``max_bytes``, see :meth:`Simulator.run`; long runs:
-    :func:`simulate_to_csv`)."""
+    """Batch run of ``model`` (a :class:`DriveModel` or a Config) from rest: the config's
+    input profile (or ``profile``) to ``t_end``, in memory (up-front ValueError beyond
+    ``max_bytes``, see :meth:`Simulator.run`; long runs: :func:`simulate_to_csv`)."""
+    config = model.config if isinstance(model, DriveModel) else model
     profile = profile if profile is not None else make_profile(config.input)
     t_end = config.input.end_time if t_end is None else t_end
     th0 = float(profile.theta1(np.array([0.0]))[0]) if theta1_initial is None else \
         theta1_initial
-    sim = Simulator(config, theta1=th0)
+    sim = Simulator(model, theta1=th0)
     return sim.run(profile, t_end, record_every, max_bytes=max_bytes)
 
 
@@ -610,19 +625,21 @@ def csv_bytes_estimate(rows: int) -> float:
     return rows * 22 * 18.0
 
 
-def simulate_to_csv(config: Config, path: str | Path, profile: Profile | None = None,
-                    t_end: float | None = None, record_every: int = 1,
-                    theta1_initial: float | None = None, header_comment: str = '',
-                    keep_rows: int = KEEP_ROWS, chunk_steps: int = 1 << 16) -> Trajectory:
+def simulate_to_csv(model: DriveModel | Config, path: str | Path,
+                    profile: Profile | None = None, t_end: float | None = None,
+                    record_every: int = 1, theta1_initial: float | None = None,
+                    header_comment: str = '', keep_rows: int = KEEP_ROWS,
+                    chunk_steps: int = 1 << 16) -> Trajectory:
     """:func:`simulate` streamed to a CSV file in chunks: memory stays bounded whatever the
     duration.  Returns a thinned Trajectory (every k-th recorded row, at most about
     ``keep_rows`` rows, always the last) for plots and metrics; the file has every
     recorded row and equals ``simulate(...).to_csv(path)``."""
+    config = model.config if isinstance(model, DriveModel) else model
     profile = profile if profile is not None else make_profile(config.input)
     t_end = config.input.end_time if t_end is None else t_end
     th0 = float(profile.theta1(np.array([0.0]))[0]) if theta1_initial is None else \
         theta1_initial
-    sim = Simulator(config, theta1=th0)
+    sim = Simulator(model, theta1=th0)
     n_total, stride = sim._plan(t_end, record_every)
     n_rows = n_total // stride + 1
     keep = max(1, -(-n_rows // max(1, int(keep_rows))))     # ceil

@@ -124,23 +124,9 @@ def _blame(cfg: Config, changed: Sequence[str], suspects: Sequence[str],
 
 
 def _check(cfg: Config, changed: Sequence[str]) -> None:
-    from .model import (
-        P_CGKG_LIN,
-        P_CWKW_LIN,
-        P_GEAR_B,
-        P_KG,
-        P_KW,
-        P_LIN_COMPLIANCE,
-        P_LW,
-        P_MESH_LINEAR,
-        P_RG,
-        P_WORM_B,
-        mesh_stiffness_y,
-        pack_parameters,
-        tooth_stiffness,
-    )
+    from .model import DriveModel, mesh_stiffness_y, tooth_stiffness
     try:
-        p = pack_parameters(cfg)
+        model = DriveModel(cfg)
     except (ArithmeticError, ValueError):
         # the calibration of Eqs. 16-17 overflows: e^{360 b} too steep
         b_keys = [k for k in ('mesh.worm_fit_b', 'mesh.gear_fit_b') if k in changed] \
@@ -157,35 +143,37 @@ def _check(cfg: Config, changed: Sequence[str]) -> None:
     for phase in (0.0, 0.5 * two_pi, two_pi * (1.0 - 1e-12)):
         # theta2 = 2 (phase - phase_offset) with theta3 = 0 gives that mesh phase
         states.append((2.0 * (phase - cfg.mesh.phase_offset), 0.0))
-    linear = p[P_MESH_LINEAR] != 0.0
-    if not math.isfinite(p[P_LIN_COMPLIANCE]):
+    p = model.p
+    linear = model.mesh_is_linear
+    b_fit = {'worm': cfg.mesh.worm_fit_b, 'gear': cfg.mesh.gear_fit_b}     # Eqs. 16-17
+    if not math.isfinite(model.linear_mesh_compliance):
         raise _blame(cfg, changed, _TEETH['worm'][2:] + _TEETH['gear'][2:4],
                      'the linear tooth compliance 1/c_w k_w + 1/c_g k_g (Eq. 7) overflows: '
                      'a tooth stiffness this small is no mesh')
-    for side, lin_idx, b_idx in (('worm', P_CWKW_LIN, P_WORM_B), ('gear', P_CGKG_LIN,
-                                                                   P_GEAR_B)):
-        vals = [tooth_stiffness(p, th2, th3)[0 if side == 'worm' else 1]
-                for th2, th3 in states]
+    for i, side in enumerate(('worm', 'gear')):
+        vals = [tooth_stiffness(p, th2, th3)[i] for th2, th3 in states]
         if linear:
-            vals = [p[lin_idx]]
+            vals = [model.linear_tooth_stiffness[i]]
         lo, hi = min(vals), max(vals)
         if not (math.isfinite(hi) and lo > 0.0 and math.isfinite(lo)):
             sym = 'c_w k_w' if side == 'worm' else 'c_g k_g'
             why = (f'the {side} tooth stiffness {sym} (Eq. {16 if side == "worm" else 17}) '
                    f'spans {lo:.3g} .. {hi:.3g} N/m over a mesh cycle')
             if not linear:
-                why += f' (a factor e^(360 |b|) = {math.exp(min(700.0, 360 * abs(p[b_idx]))):.3g})'
+                factor = math.exp(min(700.0, 360 * abs(b_fit[side])))
+                why += f' (a factor e^(360 |b|) = {factor:.3g})'
             raise _blame(cfg, changed, _TEETH[side], why + ': it must stay finite and > 0')
 
     # Rule 2: the spring chain holds every body, at both ends of the cycle.  Seen from the
     # motor, each body is held by the springs between it and the motor (in series); if that
     # holding stiffness is lost next to the spring leading further out, the pivot of the
     # stiffness matrix at the next body cancels to 0: singular.
-    Kw, Kg, lw, rg = p[P_KW], p[P_KG], p[P_LW], p[P_RG]
+    d = model.derived
+    Kw, Kg, lw, rg = d.K_w, d.K_g, d.l_w, cfg.geometry.gear_pitch_radius
     variation = '' if linear else (
         'over a mesh cycle the tooth stiffnesses of Eqs. 16-17 vary by e^(360 |b|) = '
-        f'{math.exp(min(700.0, 360 * abs(p[P_WORM_B]))):.3g} (worm), '
-        f'{math.exp(min(700.0, 360 * abs(p[P_GEAR_B]))):.3g} (gear); at its weakest ')
+        f'{math.exp(min(700.0, 360 * abs(b_fit["worm"]))):.3g} (worm), '
+        f'{math.exp(min(700.0, 360 * abs(b_fit["gear"]))):.3g} (gear); at its weakest ')
     mesh_keys = _TEETH['worm'] + _TEETH['gear'][:4] + _MESH
     for th2, th3 in states:
         kY = mesh_stiffness_y(p, th2, th3)
@@ -212,14 +200,14 @@ def _check(cfg: Config, changed: Sequence[str]) -> None:
 
     # Rule 3: the modes are computable (the diagnosis of a failing trial uses them)
     from .modal import modes
-    m = modes(cfg, include_damping=False)
+    m = modes(model, include_damping=False)
     if not np.all(np.isfinite(m.undamped_hz)):
         raise _blame(cfg, changed, (), 'the linearised natural frequencies are not finite')
 
     # Rule 4: trial (equilibrium finite and in range, a short ramp integrates)
     from .simulation import SimulationError, Simulator
     try:
-        sim = Simulator(cfg, theta1=0.0, check=False)
+        sim = Simulator(model, theta1=0.0, check=False)
         u0 = sim.state.theta
         if not (np.all(np.isfinite(u0)) and np.all(np.abs(u0) <= ANGLE_LIMIT)):
             raise _blame(cfg, changed, ('load.output_torque',), f'the static equilibrium '

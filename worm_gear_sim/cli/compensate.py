@@ -18,6 +18,7 @@ import numpy as np
 
 from ..compensation import Compensator
 from ..config_io import resolve_config
+from ..model import DriveModel
 from ..profiles import make_profile, motion_span
 from ..records import write_csv_columns
 from ..studies.compensation_eval import (
@@ -139,16 +140,18 @@ def cmd_compensate(args: argparse.Namespace) -> int:
     cfg = resolve_config(args.config, args.set)
     cfg, scen = _scenario(args, cfg)
     plant = detuned(cfg, factors) if factors else cfg
-    comp_cfg = cfg.replace({'compensation.enabled': True})
-    off = run_scenario(plant, scen, None, record_every=args.record_every)
-    on = run_scenario(plant, scen, comp_cfg, record_every=args.record_every)
+    nominal = DriveModel(cfg.replace({'compensation.enabled': True}))
+    plant_model = DriveModel(plant)
+    off = run_scenario(plant_model, scen, None, record_every=args.record_every)
+    on = run_scenario(plant_model, scen, nominal, record_every=args.record_every)
     out = Path(args.output)
+    described = Compensator(nominal).describe()
     write_csv(out, off, on, header=f'scenario: {scen.description}\ncompensator: '
-              f'{Compensator(comp_cfg).describe()}\nplant detuning: {factors or "none"}')
+              f'{described}\nplant detuning: {factors or "none"}')
     quiet = getattr(args, 'quiet', False)
     if not quiet:
         print(f'{scen.name}: {scen.description}')
-        print(f'compensator: {Compensator(comp_cfg).describe()}')
+        print(f'compensator: {described}')
         if factors:
             print(f'plant detuned: {factors}')
         print(f'{"metric":16s} {"without":>12s} {"with":>12s} {"ratio":>9s}')

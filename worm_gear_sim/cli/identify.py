@@ -201,7 +201,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
     stem = out.with_suffix('')
     figures = []
     if not args.no_plot:
-        from ..identification_plot import plot_fit
+        from ..identification.plot import plot_fit
         figures.append(str(plot_fit(records, cfg, res.config, stem.with_suffix('.png'),
                                     'identify: training records')))
         if held:

@@ -17,15 +17,16 @@ Two interfaces to the node (``--interface``):
 * ``float64``: the simple interface, ``worm_angle_command`` (std_msgs/Float64) at
   ``--rate``; the error is the node's ``~/positioning_error``, timed on arrival.
 
-Patterns (built from the core's profiles; no physics here): ``paper``, the paper's 18-step
-move (0.1131 rad of worm in 20 ms, trapezoidal) forward then back every ``--move-period``
-seconds; ``slew``, a radar slew at ``--slew-rate`` with a sharp reversal every
-``--slew-period`` seconds.
+Patterns (:mod:`worm_gear_sim.studies.demo_moves`, built from the core's profiles):
+``paper``, the paper's 18-step move (0.1131 rad of worm in 20 ms, trapezoidal) forward then
+back every ``--move-period`` seconds; ``slew``, a radar slew at ``--slew-rate`` with a sharp
+reversal every ``--slew-period`` seconds.
 
-Output: on a terminal ONE status line (at most 80 columns) refreshed 10 times a second;
-otherwise one line per completed move: peak error, ringing once the applied command rests,
-settling to 10 urad (:func:`worm_gear_sim.studies.compensation_eval.move_metrics`, the rules
-of the offline evaluation).  At the end, a summary and the same moves run offline through the core
+Output (:mod:`.demo_report`): on a terminal ONE status line (at most 80 columns) refreshed
+10 times a second; otherwise one line per completed move: peak error, ringing once the
+applied command rests, settling to 10 urad
+(:func:`worm_gear_sim.studies.compensation_eval.move_metrics`, the rules of the offline
+evaluation).  At the end, a summary and the same moves run offline through the core
 (``run_scenario``, with and without the feed-forward), so the live figures stand next to
 what the model says with and without compensation.  Exit code 0 after ``--duration``
 seconds of streaming, 1 if the node never answers.
@@ -40,11 +41,8 @@ import math
 import shutil
 import sys
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, TextIO
 
-import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.srv import GetParameters
@@ -56,230 +54,36 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..modal import modes
-from ..params import Config, derive, load_config
-from ..profiles import TrapezoidalProfile
-from ..studies.compensation_eval import SETTLE_TOLERANCE, Scenario, move_metrics, run_scenario
+from ..config_io import load_config
+from ..derived import derive
+from ..params import Config
+from ..studies.demo_moves import (
+    MoveSummary,
+    MoveTracker,
+    command_pattern,
+    first_mode_hz,
+    offline_moves,
+    pattern_segments,
+)
+from ..topics import private_topic
+from .demo_report import LINE_WIDTH, MOVE_HEADER, fit, format_move, format_status, summary, urad
+from .interface import (
+    COMMAND_TOPIC,
+    COMPENSATED_COMMAND_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    JOINT_STATES_TOPIC,
+    POSITIONING_ERROR_TOPIC,
+    REFERENCE_DEPTH,
+    REFERENCE_TOPIC,
+)
 
 __all__ = ['DemoCommander', 'MOVE_HEADER', 'MoveSummary', 'MoveTracker', 'command_pattern',
-           'format_move', 'format_status', 'main', 'offline_moves', 'pattern_segments']
+           'format_move', 'format_status', 'main', 'offline_moves', 'pattern_segments',
+           'LINE_WIDTH']
 
-REFERENCE_TOPIC = 'worm_angle_reference'
-COMMAND_TOPIC = 'worm_angle_command'
-LINE_WIDTH = 80                 # every line the demo prints fits 80 columns
-REFERENCE_DEPTH = 1000          # reliable, keep last 1000 as the node: every sample matters
-PAPER_LEAD = 0.05               # s of rest before the first paper move
 MAX_BURST = 100                 # samples per timer call after a stall (the node queues 1000)
 NODE_WAIT_S = 10.0              # stamped: wait for the node's /diagnostics at most this long
 HOLD_PERIOD_NS = 20_000_000     # the first sample is repeated every 20 ms until the node answers
-
-
-def command_pattern(name: str, cfg: Config, move_period: float = 0.5,
-                    slew_rate: float = 2.0, slew_period: float = 2.0
-                    ) -> Callable[[Any], np.ndarray]:
-    """theta1(t) [rad] of the demo stream, vectorised over t [s]."""
-    if name == 'paper':
-        inp = cfg.input
-        move = TrapezoidalProfile(inp.target_angle, inp.move_time, inp.accel_time, 0.0)
-
-        def theta1(t):
-            t = np.asarray(t, float) - PAPER_LEAD
-            k = np.floor(np.maximum(t, 0.0) / move_period)
-            tau = np.where(t < 0.0, -1.0, t - k * move_period)
-            x = move.theta1(tau)
-            return np.where(k % 2 == 0, x, inp.target_angle - x)   # forward, back, ...
-        return theta1
-    if name == 'slew':
-        amp = slew_rate * slew_period      # one leg: slew_period at slew_rate
-
-        def theta1(t):
-            x = (np.asarray(t, float) / (2.0 * slew_period)) % 1.0
-            return np.where(x < 0.5, 2.0 * amp * x, 2.0 * amp * (1.0 - x))
-        return theta1
-    raise ValueError(f'unknown pattern {name!r} (paper | slew)')
-
-
-@dataclass(frozen=True)
-class Segments:
-    """Moves of a pattern: move k spans [first + k period, first + (k+1) period); its
-    reference moves until ``motion`` after its start, then rests (paper) or keeps a
-    constant rate (slew, ``constant_rate``)."""
-
-    first: float
-    period: float
-    motion: float
-    constant_rate: bool
-    labels: tuple[str, str]
-
-
-def pattern_segments(name: str, cfg: Config, move_period: float = 0.5,
-                     slew_period: float = 2.0) -> Segments:
-    if name == 'paper':
-        return Segments(PAPER_LEAD, move_period, cfg.input.move_time, False, ('fwd', 'back'))
-    if name == 'slew':
-        return Segments(0.0, slew_period, 0.0, True, ('up', 'down'))
-    raise ValueError(f'unknown pattern {name!r} (paper | slew)')
-
-
-@dataclass(frozen=True)
-class MoveSummary:
-    index: int
-    label: str
-    start: float                  # s of pattern time
-    peak: float                   # max |e| over the move [rad]
-    ringing: float                # max |e - static| once the applied command rests [rad]
-    settling: float               # s from the end of the motion into +-10 urad (inf: never)
-    tracking_rms: float           # rad, slew legs (nan for paper moves)
-    samples: int
-
-
-class MoveTracker:
-    """Collects (t, e) samples in time order and closes each move of the pattern when a
-    sample past its end arrives; a move with a gap longer than ``max_gap`` (or not covered
-    to within ``max_gap`` of its ends) is dropped and counted in ``incomplete``.
-
-    The metrics are :func:`~worm_gear_sim.studies.compensation_eval.move_metrics`: ``ringing``
-    is its ``residual_peak``, measured once the applied command rests.  Without command samples
-    (``add_command``) the command is the reference, which rests when its motion ends; with
-    a feed-forward applied, the command keeps moving for the correction's span."""
-
-    def __init__(self, seg: Segments, mode_hz: float, max_gap: float = 0.02):
-        self.seg, self.mode_hz, self.max_gap = seg, mode_hz, max_gap
-        self.moves: list[MoveSummary] = []
-        self.incomplete = 0
-        self._k = 0
-        self._t: list[float] = []
-        self._e: list[float] = []
-        self._moving: dict[int, float] = {}     # move -> last instant its command moved
-        self._last_cmd: tuple[float, float] | None = None
-        self.use_commands = True                # False: the command is the reference
-
-    def _bounds(self, k: int) -> tuple[float, float]:
-        a = self.seg.first + k * self.seg.period
-        return a, a + self.seg.period
-
-    def add_command(self, t: float, command: float) -> None:
-        """A sample of the command applied to the drive (theta1_ref + delta)."""
-        last = self._last_cmd
-        self._last_cmd = (t, command)
-        if last is None or t <= last[0] or abs(command - last[1]) <= 1e-12:
-            return
-        k = int((t - self.seg.first) // self.seg.period)
-        if k >= 0:
-            self._moving[k] = t
-
-    def add(self, t: float, e: float) -> MoveSummary | None:
-        """Add a sample; returns the move it completed, if any."""
-        a, b = self._bounds(self._k)
-        if t < a:
-            return None
-        done = None
-        if t >= b:
-            done = self._close()
-            k = int((t - self.seg.first) // self.seg.period)
-            self.incomplete += k - self._k - 1      # moves without a single sample
-            self._k = k
-        self._t.append(t)
-        self._e.append(e)
-        return done
-
-    def _close(self) -> MoveSummary | None:
-        a, b = self._bounds(self._k)
-        t, e = np.asarray(self._t), np.asarray(self._e)
-        self._t, self._e = [], []
-        moved = self._moving.pop(self._k, None)
-        for k in [k for k in self._moving if k < self._k]:
-            del self._moving[k]
-        if t.size < 3 or t[0] - a > self.max_gap or b - t[-1] > self.max_gap \
-                or np.max(np.diff(t)) > self.max_gap:
-            self.incomplete += 1
-            return None
-        tr = t - a
-        seg = self.seg
-        sc = Scenario(name='demo move', times=tr, theta1_ref=np.zeros_like(tr),
-                      move_end=seg.motion,
-                      constant_rate=((seg.motion, seg.period),) if seg.constant_rate else ())
-        command_end = seg.motion
-        if moved is not None and self.use_commands and not seg.constant_rate:
-            command_end = min(max(moved - a, seg.motion), float(tr[-1]))
-        m = move_metrics(tr, e, sc, self.mode_hz, command_end)
-        summary = MoveSummary(self._k, seg.labels[self._k % 2], a, float(np.max(np.abs(e))),
-                              m['residual_peak'], m['settling_time'], m['tracking_rms'],
-                              int(t.size))
-        self.moves.append(summary)
-        return summary
-
-
-def offline_moves(cfg: Config, theta1: Callable[[Any], np.ndarray], seg: Segments,
-                  t_end: float, rate: float, compensated: bool) -> list[MoveSummary]:
-    """The same reference, sampled at ``rate`` up to ``t_end``, through the core
-    (``run_scenario``: nonlinear plant, feed-forward of ``cfg`` when ``compensated``), cut
-    into the same moves as the live trace."""
-    times = np.arange(0.0, t_end + 0.5 / rate, 1.0 / rate)
-    x = np.asarray(theta1(times), float)
-    sc = Scenario(name='demo', times=times, theta1_ref=x, move_end=float(times[0]),
-                  constant_rate=())          # run_scenario's own metrics are not used
-    record = max(1, int(round(1.0 / (rate * cfg.integrator.time_step))))
-    run = run_scenario(cfg, sc, cfg if compensated else None, record_every=record)
-    tracker = MoveTracker(seg, float(modes(cfg).frequencies_hz[0]))
-    if compensated:
-        for ti, ci in zip(times, x + run.delta):
-            tracker.add_command(float(ti), float(ci))
-    for ti, ei in zip(run.trajectory.t, run.error):
-        tracker.add(float(ti), float(ei))
-    return tracker.moves
-
-
-# ---- text: every line fits LINE_WIDTH ------------------------------------------------------
-def _urad(x: float, width: int = 7, sign: bool = False) -> str:
-    """x [rad] in urad, right-aligned in ``width`` characters, as many decimals as fit."""
-    if not math.isfinite(x):
-        return f'{"-" if math.isnan(x) else ("+inf" if x > 0 else "-inf"):>{width}}'
-    v = x * 1e6
-    plus = '+' if sign else ''
-    for d in (2, 1, 0):
-        s = f'{v:{plus}{width}.{d}f}'
-        if len(s) <= width:
-            return s
-    return f'{v:{plus}{width}.0e}'
-
-
-def _ms(x: float) -> str:
-    return 'never' if math.isinf(x) else ('-' if math.isnan(x) else f'{x * 1e3:.1f} ms')
-
-
-def fit(line: str, width: int = LINE_WIDTH) -> str:
-    return line if len(line) <= width else line[:width - 1] + '>'
-
-
-MOVE_HEADER = ' move           t [s]  peak [urad]  ringing [urad]  rms [urad]  settling'
-
-
-def format_move(m: MoveSummary) -> str:
-    """One line per completed move (no terminal), in the columns of MOVE_HEADER."""
-    rms = _urad(m.tracking_rms, 10) if math.isfinite(m.tracking_rms) else f'{"":10}'
-    return fit(f'{m.index:5d} {m.label:<4} {m.start:10.2f}  {_urad(m.peak, 11)}  '
-               f'{_urad(m.ringing, 14)}  {rms}  {_ms(m.settling):>8}')
-
-
-def format_status(t: float, e: float, scale: float, last: MoveSummary | None,
-                  extra: str = '', width: int = LINE_WIDTH) -> str:
-    """The one terminal line: time, live error with a bar, the last move's summary."""
-    n = 6
-    k = 0 if not (math.isfinite(e) and scale > 0) else int(round(min(1.0, abs(e) / scale) * n))
-    bar = (' ' * (n - k) + '#' * k + '|' + ' ' * n) if e < 0 else \
-        (' ' * n + '|' + '#' * k + ' ' * (n - k))
-    s = f'{t:6.1f}s e{_urad(e, 9, True)} urad [{bar}]'
-    if last is not None:
-        s += f' #{last.index} ring{_urad(last.ringing, 7)}, {_ms(last.settling)}'
-    if extra:
-        s += ' ' + extra
-    return fit(s, width - 1)          # never the last column: no wrap on any terminal
-
-
-def _stats(values: list[float]) -> tuple[float, float]:
-    a = np.asarray([v for v in values if math.isfinite(v)])
-    return (float(np.median(a)), float(np.max(a))) if a.size else (math.nan, math.nan)
 
 
 # ---- the ROS node ----------------------------------------------------------------------------
@@ -299,7 +103,7 @@ class DemoCommander(Node):
         self.theta1 = command_pattern(pattern, self.cfg, move_period, slew_rate, slew_period)
         self.segments = pattern_segments(pattern, self.cfg, move_period, slew_period)
         # float64: samples timed on arrival, which a busy machine delays by tens of ms
-        self.tracker = MoveTracker(self.segments, float(modes(self.cfg).frequencies_hz[0]),
+        self.tracker = MoveTracker(self.segments, first_mode_hz(self.cfg),
                                    max_gap=0.02 if interface == 'stamped' else 0.1)
         self.tracker.use_commands = False   # until the node says its feed-forward is applied
         self.pattern, self.interface, self.rate = pattern, interface, rate
@@ -330,14 +134,16 @@ class DemoCommander(Node):
         if interface == 'stamped':
             self.pub = self.create_publisher(JointState, REFERENCE_TOPIC, reliable)
             self._ref_msg = JointState(name=[self.joint], position=[0.0])
-            self.create_subscription(JointState, f'/{node_under_test}/compensated_command',
-                                     self._on_compensated, reliable)
+            self.create_subscription(
+                JointState, '/' + private_topic(COMPENSATED_COMMAND_TOPIC, node_under_test),
+                self._on_compensated, reliable)
         else:
             self.pub = self.create_publisher(Float64, COMMAND_TOPIC, QoSProfile(depth=10))
-            self.create_subscription(Float64, f'/{node_under_test}/positioning_error',
-                                     self._on_error, 100)
-        self.create_subscription(JointState, 'joint_states', self._on_js, reliable)
-        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
+            self.create_subscription(
+                Float64, '/' + private_topic(POSITIONING_ERROR_TOPIC, node_under_test),
+                self._on_error, 100)
+        self.create_subscription(JointState, JOINT_STATES_TOPIC, self._on_js, reliable)
+        self.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diag, 10)
         self.create_timer(1.0 / rate, self._on_timer)
 
     # -- streaming --
@@ -455,7 +261,7 @@ class DemoCommander(Node):
     def status_line(self, width: int = LINE_WIDTH) -> str:
         if self.t0_ns is None:
             return fit(f'waiting for the {self.target} node (joint_states) ...', width - 1)
-        extra = f' ff{_urad(self.delta, 8, True)}' if self.interface == 'stamped' else ''
+        extra = f' ff{urad(self.delta, 8, True)}' if self.interface == 'stamped' else ''
         return format_status(self.t_error, self.error, max(50e-6, self.peak_all),
                              self.last_move, extra, width)
 
@@ -521,61 +327,6 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     return opts
 
 
-def _summary(node: DemoCommander, opts: argparse.Namespace, compensated: bool | None,
-             out: TextIO) -> None:
-    def say(line: str) -> None:
-        print(fit(line), file=out, flush=True)
-    moves = node.tracker.moves
-    say(f'demo done: {node.elapsed():.1f} s of {opts.pattern} moves, {node.interface} '
-        f'references at {opts.rate:g} Hz' + (f', {(node.preview + node.lead) * 1e3:g} ms '
-                                               'ahead' if node.interface == 'stamped' else ''))
-    if node.interface == 'stamped':
-        share = 100.0 * node.n_cc / node.sent if node.sent else 0.0
-        say(f'  references {node.sent}, compensated commands {node.n_cc} ({share:.2f} %), '
-            f'joint_states {node.n_js}')
-        if node.latency_ns:
-            ahead = np.asarray(node.latency_ns) * 1e-6
-            say(f'  corrections arrived {np.percentile(ahead, 50):.2f} ms before their instant '
-                f'(median), 1 % < {np.percentile(ahead, 1):.2f} ms')
-    else:
-        say(f'  commands {node.sent}, joint_states {node.n_js}, positioning errors '
-            f'{node.n_err}')
-    label = {True: 'with feed-forward', False: 'without feed-forward',
-             None: 'feed-forward unknown'}[compensated]
-    med, mx = _stats([m.ringing for m in moves])
-    say(f'  {len(moves)} moves {label}: ringing median {med * 1e6:.2f}, '
-        f'max {mx * 1e6:.2f} urad')
-    settled = [m.settling for m in moves if math.isfinite(m.settling)]
-    say(f'  largest error {node.peak_all * 1e6:.2f} urad; settled to '
-        f'{SETTLE_TOLERANCE * 1e6:g} urad {len(settled)}/{len(moves)}'
-        + (f', median {_ms(float(np.median(settled)))}' if settled else ''))
-    if node.tracker.incomplete:   # a line of its own: never cut by the 80-column limit
-        say(f'  {node.tracker.incomplete} moves with gaps (the stream was interrupted)')
-    if opts.no_offline or not moves or node.interface != 'stamped':
-        return
-    # the same moves through the core, offline: with and without the feed-forward
-    t_end = moves[-1].start + node.segments.period + 1e-3
-    cfg = node.cfg
-    if node.node_preview is not None:        # the feed-forward the node computes
-        cfg = cfg.replace({'compensation.preview_time': node.node_preview})
-    off = {c: {m.index: m for m in offline_moves(cfg, node.theta1, node.segments, t_end,
-                                                 node.rate, c)} for c in (False, True)}
-    same = [m for m in moves if m.index in off[False] and m.index in off[True]]
-    if not same:
-        return
-    o_off = _stats([off[False][m.index].ringing for m in same])[0]
-    o_on = _stats([off[True][m.index].ringing for m in same])[0]
-    live = _stats([m.ringing for m in same])[0]
-    say(f'  offline, same moves: ringing {o_off * 1e6:.2f} urad without, '
-        f'{o_on * 1e6:.2f} with feed-forward')
-    if compensated is not None:
-        ref = off[compensated]
-        dev = max(abs(m.ringing - ref[m.index].ringing) for m in same)
-        say(f'  live vs offline ({label}): ringing differs by at most {dev:.1e} rad')
-    if compensated and live > 0:
-        say(f'  => ~/compensated_command applied: the antenna rings {o_off / live:.0f}x '
-            'less than without')
-
 
 def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
     argv = sys.argv if args is None else args
@@ -584,7 +335,7 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
     tty = out.isatty()
     width = min(LINE_WIDTH, shutil.get_terminal_size((LINE_WIDTH, 24)).columns) if tty \
         else LINE_WIDTH
-    from .node import make_executor
+    from .run import make_executor
     cfg = load_config(opts.config) if opts.config else load_config()
     # rclpy.init() as a context manager exists only from Kilted (rclpy 9) on: on Jazzy
     # (rclpy 7.1) it returns None, so init, then try_shutdown in a finally.
@@ -648,7 +399,7 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
         if tty:
             out.write('\r' + node.status_line(width) + '\x1b[K\n')
         ex.shutdown(1.0)
-        _summary(node, opts, compensated, out)
+        summary(node, opts, compensated, out)
     except (KeyboardInterrupt, ExternalShutdownException):
         print('', file=out)
     finally:

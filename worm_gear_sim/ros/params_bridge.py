@@ -24,10 +24,12 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
-from ..params import Config, value_kind
+from ..params import SECTIONS, Config, ConfigError, value_kind
+from ..params import suggest as suggest_name
 
 __all__ = ['parameter_type', 'descriptor_for', 'declare_config', 'to_core_value',
-           'coerce_parameter', 'is_model_parameter', 'MODEL_PARAMETER_NAMES']
+           'coerce_parameter', 'is_model_parameter', 'check_overrides',
+           'MODEL_PARAMETER_NAMES']
 
 #: Dotted names of all model parameters, in declaration order.
 MODEL_PARAMETER_NAMES: tuple[str, ...] = tuple(Config().to_flat_dict())
@@ -97,6 +99,25 @@ def declare_config(node: Any, defaults: Config) -> dict[str, Any]:
         (name, value, descriptor_for(name, value, meta[name]))
         for name, value in defaults.to_flat_dict().items()])
     return {p.name: to_core_value(p.value) for p in declared}
+
+
+def check_overrides(node: Any) -> None:
+    """Parameters given to ``node`` (params file, ``-p``, ``parameter_overrides``) that it
+    does not declare: a misspelt model or QoS key raises :class:`ConfigError` naming it,
+    with the closest declared name; any other unknown name is logged and ignored (a ``/**``
+    block shared by several nodes may hold theirs)."""
+    declared = {name: None for name in MODEL_PARAMETER_NAMES}
+    unknown = sorted(n for n in node._parameter_overrides if not node.has_parameter(n))
+    for name in unknown:
+        head = name.split('.', 1)[0]
+        hint = suggest_name(name, declared)
+        if head in SECTIONS or head == 'qos_overrides' or hint:
+            if head == 'qos_overrides':
+                qos = node.get_parameters_by_prefix('qos_overrides')
+                hint = suggest_name(name, {'qos_overrides.' + n: None for n in qos})
+            raise ConfigError(name, 'unknown parameter of this node' + hint)
+        node.get_logger().warning(f'ignoring parameter {name!r}: not a parameter of '
+                                  f'{node.get_name()}')
 
 
 def to_core_value(value: Any) -> Any:

@@ -106,7 +106,7 @@ def node_main(args: list[str] | None = None) -> int:
     """Entry point of ``worm_gear_sim_node``: handlers first, then import and run the node."""
     install_signal_handlers()
     try:
-        from .node import main  # numpy, scipy, numba, rclpy: seconds on a loaded machine
+        from .run import main  # numpy, scipy, numba, rclpy: seconds on a loaded machine
     except BaseException:
         # The handler's SystemExit can reach us wrapped by the import machinery: as
         # "ImportError: initialization failed" from a C extension's module initialisation

@@ -9,7 +9,8 @@ Pure study logic (no argparse, no rclpy, no plotting), one module per job:
 * :mod:`.metrics` -- oscillation metrics of one run (definitions in docs/studies.md), CSV rows;
 * :mod:`.engine` -- running one case, many cases serially or on Dask;
 * :mod:`.experiment` -- the paper's Sec. 3 experiment (Figs. 9-11);
-* :mod:`.compensation_eval` -- scenarios and metrics of the compensator's evaluation.
+* :mod:`.compensation_eval` -- scenarios and metrics of the compensator's evaluation;
+* :mod:`.demo_moves` -- the demo servo's patterns and its move-by-move metrics.
 """
 
 from .cases import (

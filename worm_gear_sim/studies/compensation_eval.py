@@ -14,8 +14,10 @@ from typing import Any
 import numpy as np
 
 from ..compensation import feedforward_series
+from ..derived import derive
 from ..modal import modes
-from ..params import Config, derive
+from ..model import DriveModel
+from ..params import Config
 from ..profiles import SampledProfile, TrapezoidalProfile, motion_span
 from ..simulation import simulate
 
@@ -109,7 +111,7 @@ def radar_slew_scenario(cfg: Config, antenna_rate: float = 0.2,
     Defaults: 0.2 rad/s (11.5 deg/s) with 60 rad/s^2 (reversal in 6.7 ms).  Angles are
     worm angles, sampled every ``period`` (default: 1 / node.publish_rate_hz)."""
     period = _command_period(cfg) if period is None else period
-    ratio = derive(cfg).ratio
+    ratio = derive(cfg).ratio                 # theta1 per theta4
     w = antenna_rate * ratio
     acc = antenna_acceleration * ratio
     ramp = w / acc
@@ -134,12 +136,14 @@ class CompensationRun:
     metrics: dict
 
 
-def run_scenario(plant: Config, scenario: Scenario, compensator: Config | None,
+def run_scenario(plant: DriveModel | Config, scenario: Scenario,
+                 compensator: DriveModel | Config | None,
                  record_every: int = 10) -> CompensationRun:
     """Simulate ``plant`` (nonlinear, with friction) driven by the scenario's reference,
     plus the feed-forward of a compensator designed on ``compensator`` (None: without
-    compensation).  The command is streamed at the scenario's sample times and joined by
-    straight lines, as the node does."""
+    compensation); both a :class:`DriveModel` or a Config.  The command is streamed at the
+    scenario's sample times and joined by straight lines, as the node does."""
+    plant = DriveModel.of(plant)
     t, x = scenario.times, scenario.theta1_ref
     delta = feedforward_series(compensator, t, x) if compensator is not None \
         else np.zeros_like(x)

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from ..modal import amplitude_time_step, static_equilibrium
-from ..params import Config, config_from_mapping, derive
+from ..model import DriveModel
+from ..params import Config, config_from_mapping
 from ..profiles import Profile, make_profile
 from ..simulation import Simulator
 from .cases import Case
@@ -44,21 +45,23 @@ def run_case(base: Config | Mapping[str, Any], overrides: Mapping[str, Any] | No
     as CPU time of this thread (``kernel_cpu_s``, ``case_cpu_s``)."""
     t0, c0 = time.perf_counter(), time.thread_time()
     cfg = case_config(base, overrides or {})
+    model = DriveModel(cfg)
     # amplitudes need the worm mode resolved: a step from the model's modes
-    dt_amp = amplitude_time_step(cfg)
+    dt_amp = amplitude_time_step(model)
     if dt_amp < cfg.integrator.time_step:
         cfg = cfg.replace({'integrator.time_step': dt_amp})
+        model = DriveModel(cfg)
     prof = make_profile(cfg.input) if profile is None else profile
     t_end = cfg.input.end_time if t_end is None else float(t_end)
     th0 = float(prof.theta1(np.array([0.0]))[0])
-    sim = Simulator(cfg, theta1=th0)
+    sim = Simulator(model, theta1=th0)
     tk, ck = time.perf_counter(), time.thread_time()
     traj = sim.run(prof, t_end, record_every=1)
     kernel, kernel_cpu = time.perf_counter() - tk, time.thread_time() - ck
     t_move = move_end_time(cfg, prof)
-    eq = static_equilibrium(sim.p, float(traj.theta1[-1]))
+    eq = static_equilibrium(model, float(traj.theta1[-1]))
     out = oscillation_metrics(traj, t_move, eq)
-    d = derive(cfg)
+    d = model.derived
     out.update(t_move=t_move, t_end=float(traj.t[-1]), J_4=d.J_4, ratio=d.ratio,
                steps=traj.stats.get('steps', 0),
                subdivision_events=traj.stats.get('subdivision_events', 0),
@@ -182,9 +185,9 @@ def warm_up() -> float:
     worker does not pay for imports and numba cache loading."""
     t0 = time.perf_counter()
     cfg = Config()
-    sim = Simulator(cfg)
-    sim.run(make_profile(cfg.input), 10 * cfg.integrator.time_step)
-    static_equilibrium(sim.p, 0.0)
+    model = DriveModel(cfg)
+    Simulator(model).run(make_profile(cfg.input), 10 * cfg.integrator.time_step)
+    static_equilibrium(model, 0.0)
     return time.perf_counter() - t0
 
 

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from ..modal import static_equilibrium
+from ..model import DriveModel
 from ..params import Config
 from ..profiles import Profile, SampledProfile, motion_span
 from ..simulation import Trajectory
@@ -52,10 +53,10 @@ def move_end_time(cfg: Config, profile: Profile | None = None) -> float:
     return inp.start_time + inp.move_time
 
 
-def equilibrium(cfg: Config, theta1_final: float, p: np.ndarray | None = None) -> np.ndarray:
-    """Static equilibrium (theta2, theta3, theta4) at the final command."""
-    from ..model import pack_parameters
-    return static_equilibrium(pack_parameters(cfg) if p is None else p, theta1_final)
+def equilibrium(model: DriveModel | Config, theta1_final: float) -> np.ndarray:
+    """Static equilibrium (theta2, theta3, theta4) of ``model`` (a :class:`DriveModel` or a
+    Config) at the final command."""
+    return static_equilibrium(DriveModel.of(model), theta1_final)
 
 
 def dominant_frequency(t: np.ndarray, y: np.ndarray, f_min: float = 1.0) -> float:

@@ -1,332 +1,47 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Records of a drive: commanded and measured angles from CSV files and rosbag2 bags.
+"""rosbag2 bags in and out with the ``rosbags`` library (no ROS installation, never rclpy):
+a record read from the node's command and JointState topics, and a prediction written with
+the node's output topics and message types.
 
-One reader for every consumer (``simulate --csv/--bag``, identification): a
-:class:`Record` holds the command theta1 and the measured theta2..theta4 [rad] on one time
-base t [s] relative to ``t0_ns``, the source clock's reading at t = 0 (an absolute epoch
-stamp when the source had one).  :func:`write_bag` writes a prediction as a rosbag2 bag
-with the node's topics and message types.  Bags are read and written with the ``rosbags``
-library: no ROS installation is needed and rclpy is never imported.
-
-Formats (columns, units, topics, types): docs/data-formats.md.
+Topics and types: docs/data-formats.md.
 """
 
 from __future__ import annotations
 
-import csv
-import difflib
-import math
-import re
+import shutil
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from datetime import UTC, datetime
-from decimal import Decimal, InvalidOperation
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
-__all__ = ['Record', 'RecordError', 'read_csv', 'read_bag', 'read_record', 'write_bag',
-           'BagStream', 'prediction_streams', 'write_streams', 'bag_topics',
-           'ANGLE_UNITS', 'TIME_UNITS', 'DEFAULT_COMMAND_TOPICS',
-           'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE', 'FLOAT64', 'JOINT_STATE',
-           'write_csv_header', 'write_csv_columns']
+from ..topics import (
+    COMMAND_TOPIC,
+    COMPENSATED_COMMAND_TOPIC,
+    FEEDFORWARD_TOPIC,
+    FLOAT64,
+    JOINT_STATE,
+    JOINT_STATES_TOPIC,
+    MEASURED_TOPIC,
+    NODE_NAMESPACE,
+    POSITIONING_ERROR_TOPIC,
+    REFERENCE_TOPIC,
+    WORM_ERROR_TOPIC,
+    private_topic,
+)
+from .record import MEASURED_NAMES, Record, RecordError, valid_sorted
 
-#: angle units accepted in a CSV header, factor to rad
-ANGLE_UNITS: dict[str, float] = {'rad': 1.0, 'mrad': 1e-3, 'urad': 1e-6, 'µrad': 1e-6,
-                                 'deg': math.pi / 180.0}
-#: time units accepted in a CSV header, factor to s (exact decimals)
-TIME_UNITS: dict[str, Decimal] = {'s': Decimal(1), 'ms': Decimal('1e-3'),
-                                  'us': Decimal('1e-6'), 'µs': Decimal('1e-6'),
-                                  'ns': Decimal('1e-9')}
-TIME_NAMES = ('t', 'time', '__time')            # __time: PlotJuggler's CSV export
-ANGLE_NAMES = ('theta1', 'theta2', 'theta3', 'theta4')
-MEASURED_NAMES = ('theta2', 'theta3', 'theta4')
-#: a start later than this (1973-03-03) is an absolute epoch stamp
-EPOCH_MIN_NS = 10 ** 17
-#: a unitless time column starting above this many "seconds" (year 5138) is refused:
-#: it is a stamp in ms/us/ns whose unit the header must name
-PLAUSIBLE_SECONDS = 1e11
+__all__ = ['read_bag', 'bag_topics', 'BagStream', 'write_streams', 'prediction_streams',
+           'write_bag', 'DEFAULT_COMMAND_TOPICS', 'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE',
+           'FLOAT64', 'JOINT_STATE', 'BAG_VERSION']
 
-DEFAULT_COMMAND_TOPICS = ('worm_angle_reference', 'worm_angle_command')
-DEFAULT_MEASURED_TOPICS = ('measured_joint_states', 'joint_states')
-NODE_NAMESPACE = 'worm_gear_sim'                # the node's name: its ~/ topics live here
-FLOAT64 = 'std_msgs/msg/Float64'
-JOINT_STATE = 'sensor_msgs/msg/JointState'
+DEFAULT_COMMAND_TOPICS = (REFERENCE_TOPIC, COMMAND_TOPIC)
+DEFAULT_MEASURED_TOPICS = (MEASURED_TOPIC, JOINT_STATES_TOPIC)
 BAG_VERSION: Literal[8, 9] = 8          # rosbag2 metadata version (rosbags writes 8 or 9)
 
 
-class RecordError(ValueError):
-    """A record that cannot be read as asked: one line naming the cause, the file and the
-    row/column or topic (the CLI reports it with exit status 2)."""
-
-
-@dataclass
-class Record:
-    """Command and measurements of one run on one time base.
-
-    ``t`` [s] is relative to ``t0_ns`` (the source clock at t = 0; 0 when the source times
-    started at 0) and strictly increasing; ``theta1`` [rad] is the command at ``t``;
-    ``measured`` maps a subset of ``theta2``, ``theta3``, ``theta4`` to angles [rad] at
-    ``t``.  When the command came as a separate stream (a bag), ``command_stamps_ns``
-    (absolute, int64) and ``command_values`` [rad] hold its raw samples in arrival order,
-    invalid ones included, as a live node would have received them; ``t``/``theta1`` then
-    hold the valid samples sorted by stamp (or the command interpolated at the measurement
-    stamps when a measured topic was read), and ``command_receive_ns`` the bag's receive
-    times of the raw samples.  ``source`` says where everything came from.
-    """
-
-    name: str
-    t: np.ndarray
-    theta1: np.ndarray
-    measured: dict[str, np.ndarray] = field(default_factory=dict)
-    t0_ns: int = 0
-    command_stamps_ns: np.ndarray | None = None
-    command_values: np.ndarray | None = None
-    source: dict[str, Any] = field(default_factory=dict)
-    command_receive_ns: np.ndarray | None = None
-
-    @property
-    def is_epoch(self) -> bool:
-        """True if ``t0_ns`` is an absolute (Unix epoch) time."""
-        return self.t0_ns >= EPOCH_MIN_NS
-
-    @property
-    def duration(self) -> float:
-        return float(self.t[-1]) if self.t.size else 0.0
-
-    def command_samples(self) -> tuple[np.ndarray, np.ndarray]:
-        """The valid command samples sorted by time: (t [s] relative to t0_ns, theta1)."""
-        if self.command_stamps_ns is None or self.command_values is None:
-            return self.t, self.theta1
-        t, v, _ = _valid_sorted(self.command_stamps_ns, self.command_values, self.t0_ns)
-        return t, v
-
-    def command_stream(self) -> tuple[np.ndarray, np.ndarray]:
-        """The command as received: (absolute stamps [ns] int64, values [rad]) in arrival
-        order (a CSV's rows when the command did not come separately)."""
-        if self.command_stamps_ns is not None and self.command_values is not None:
-            return self.command_stamps_ns, self.command_values
-        return self.t0_ns + np.round(self.t * 1e9).astype(np.int64), self.theta1
-
-    def describe(self) -> str:
-        """One line: samples, span, measured outputs, epoch."""
-        meas = ', '.join(self.measured) or 'none'
-        start = (f'; t = 0 at {iso_time(self.t0_ns)}' if self.is_epoch else
-                 f'; times shifted by -{self.t0_ns * 1e-9:.9g} s' if self.t0_ns else '')
-        return (f'{self.name}: {self.t.size} samples over {self.duration:.6g} s, measured: '
-                f'{meas}{start}')
-
-
-def write_csv_header(fh: Any, names: Sequence[str], comment: str = '') -> None:
-    """The head of a numeric CSV: each line of ``comment`` as a ``# `` line, then the column
-    names (with their units, e.g. ``theta4[rad]``) on one line."""
-    fh.write(''.join(f'# {line}\n' for line in comment.splitlines()))
-    fh.write(','.join(names) + '\n')
-
-
-def write_csv_columns(path: str | Path, names: Sequence[str], data: np.ndarray,
-                      fmt: str | Sequence[str] = '%.12g', comment: str = '') -> Path:
-    """Numeric columns as CSV (``data``: one row per sample), with the head of
-    :func:`write_csv_header`; the parent directory is created."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    with open(p, 'w') as fh:
-        write_csv_header(fh, names, comment)
-        np.savetxt(fh, data, delimiter=',', fmt=fmt)
-    return p
-
-
-def iso_time(ns: int) -> str:
-    """An epoch stamp [ns] as ISO 8601 UTC with nanoseconds."""
-    sec, frac = divmod(int(ns), 10 ** 9)
-    return datetime.fromtimestamp(sec, UTC).strftime('%Y-%m-%dT%H:%M:%S') + \
-        f'.{frac:09d}Z'
-
-
-# ---- CSV ---------------------------------------------------------------------------------
-_HEADER_RE = re.compile(r'^\s*(?P<name>[^\[\(]*?)\s*(?:[\[\(](?P<unit>[^\]\)]*)[\]\)])?\s*$')
-
-
-def _split_header(field_text: str) -> tuple[str, str]:
-    """'theta1 [deg]' -> ('theta1', 'deg'); 't(s)' -> ('t', 's'); 'theta2' -> ('theta2', '')."""
-    text = field_text.strip().strip('"\'')
-    m = _HEADER_RE.match(text)
-    if not m:
-        return text, ''
-    return m.group('name').strip(), (m.group('unit') or '').strip()
-
-
-def read_csv(path: str | Path, *, columns: Mapping[str, str] | None = None,
-             name: str | None = None, min_samples: int = 2,
-             require_measured: bool = False) -> Record:
-    """Read a CSV record whose header names its columns.
-
-    Required: a time column ``t`` (also ``time`` or PlotJuggler's ``__time``) and
-    ``theta1``; optional ``theta2``, ``theta3``, ``theta4``.  A unit in brackets or
-    parentheses after the name is converted (time: s, ms, us, ns; angles: rad, mrad, urad,
-    deg); without one, SI (s, rad) is assumed.  ``columns`` maps a role to a header name
-    (``{'theta1': '/worm_angle_command/data'}``).  Other columns are ignored and listed in
-    ``source['ignored_columns']``.  Lines starting with '#' are comments.  Times become
-    relative to the first sample, read as exact decimals (epoch stamps keep their
-    nanoseconds); ``t0_ns`` is the first time.  Every problem raises :class:`RecordError`
-    naming the line and column.
-    """
-    p = Path(path)
-    where = str(p)
-    if not p.exists():
-        raise RecordError(f'{where}: file not found')
-    if p.is_dir():
-        raise RecordError(f'{where}: is a directory (a rosbag2 bag? use --bag)')
-    try:
-        text = p.read_text(encoding='utf-8-sig')
-    except UnicodeDecodeError:
-        raise RecordError(f'{where}: not a text CSV file') from None
-    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
-             if ln.strip() and not ln.lstrip().startswith('#')]
-    if not lines:
-        raise RecordError(f'{where}: empty (no header, no data)')
-    head_no, head = lines[0]
-    delim = next((d for d in (',', ';', '\t') if d in head), ',')
-    header = next(csv.reader([head], delimiter=delim))
-    if all(_is_number(h) for h in header):
-        raise RecordError(f'{where}: line {head_no}: no header line; the first line must '
-                          "name the columns, e.g. 't [s],theta1 [rad]'")
-    fields = [_split_header(h) for h in header]
-    roles = _assign_roles(fields, header, columns or {}, where)
-    units, scale = {}, {}
-    for role, col in roles.items():
-        unit = fields[col][1]
-        if role == 't':
-            unit = unit or 's'
-            if unit not in TIME_UNITS:
-                raise RecordError(f'{where}: column {header[col].strip()!r}: unknown time unit '
-                                  f'{unit!r} (use one of {", ".join(TIME_UNITS)})')
-        else:
-            unit = unit or 'rad'
-            if unit not in ANGLE_UNITS:
-                raise RecordError(f'{where}: column {header[col].strip()!r}: unknown angle '
-                                  f'unit {unit!r} (use one of {", ".join(ANGLE_UNITS)})')
-            scale[role] = ANGLE_UNITS[unit]
-        units[role] = unit
-    n_fields = len(header)
-    times: list[Decimal] = []
-    values: dict[str, list[float]] = {r: [] for r in roles if r != 't'}
-    t_col = roles['t']
-    prev: Decimal | None = None
-    for line_no, ln in lines[1:]:
-        row = next(csv.reader([ln], delimiter=delim))
-        if len(row) == n_fields + 1 and not row[-1].strip():
-            row = row[:-1]                        # trailing delimiter
-        if len(row) != n_fields:
-            raise RecordError(f'{where}: line {line_no}: {len(row)} fields, the header has '
-                              f'{n_fields}')
-        cell = row[t_col].strip()
-        try:
-            tv = Decimal(cell)
-        except InvalidOperation:
-            tv = Decimal('NaN')
-        if not tv.is_finite():
-            raise RecordError(f'{where}: line {line_no}, column {header[t_col].strip()!r}: '
-                              f'{cell!r} is not a finite time')
-        if prev is not None and tv <= prev:
-            what = 'repeats the previous time (duplicated sample)' if tv == prev else \
-                f'goes backwards (after {prev})'
-            raise RecordError(f'{where}: line {line_no}, column {header[t_col].strip()!r}: '
-                              f'time {cell} {what}; times must increase strictly')
-        prev = tv
-        times.append(tv)
-        for role, vals in values.items():
-            col = roles[role]
-            cell = row[col].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                what = 'empty' if not cell else f'{cell!r} is not a number'
-                raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
-                                  f'{what}') from None
-            if not math.isfinite(v):
-                raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
-                                  f'{cell} is not a finite angle')
-            vals.append(v * scale[role])
-    if len(times) < min_samples:
-        raise RecordError(f'{where}: {len(times)} data row(s); a record needs at least '
-                          f'{min_samples} samples')
-    sc = TIME_UNITS[units['t']]
-    first = times[0] * sc                                   # seconds, exact
-    if not fields[t_col][1] and abs(first) > PLAUSIBLE_SECONDS:
-        raise RecordError(f'{where}: column {header[t_col].strip()!r}: first time {times[0]} '
-                          'is not a plausible time in seconds; name its unit in the header, '
-                          "e.g. 't [ns]' or 't [ms]'")
-    t = np.array([float(tv * sc - first) for tv in times])
-    t0_ns = int((first * 10 ** 9).to_integral_value())
-    measured = {r: np.asarray(values[r]) for r in MEASURED_NAMES if r in values}
-    if require_measured and not measured:
-        raise RecordError(f'{where}: no measured column (theta2, theta3 or theta4) in the '
-                          f'header {", ".join(h.strip() for h in header)}')
-    used = set(roles.values())
-    src = {'kind': 'csv', 'path': str(p), 'units': units,
-           'columns': {r: header[c].strip() for r, c in roles.items()},
-           'ignored_columns': [header[i].strip() for i in range(n_fields) if i not in used]}
-    return Record(name=name or p.stem, t=t, theta1=np.asarray(values['theta1']),
-                  measured=measured, t0_ns=t0_ns, source=src)
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def _assign_roles(fields: list[tuple[str, str]], header: list[str],
-                  columns: Mapping[str, str], where: str) -> dict[str, int]:
-    """Column index of each role (t, theta1..theta4) by header name."""
-    known = ('t',) + ANGLE_NAMES
-    for role in columns:
-        if role not in known:
-            raise RecordError(f'column mapping {role!r}: unknown role (one of '
-                              f'{", ".join(known)})')
-    names = [f[0] for f in fields]
-    roles: dict[str, int] = {}
-    for role in known:
-        if role in columns:
-            want = columns[role].strip()
-            hits = [i for i, h in enumerate(header) if h.strip() == want or names[i] == want]
-            if not hits:
-                raise RecordError(f'{where}: no column {want!r} (mapped to {role}) in the '
-                                  f'header {", ".join(h.strip() for h in header)}'
-                                  + _did_you_mean(want, names))
-        else:
-            aliases = TIME_NAMES if role == 't' else (role,)
-            hits = [i for i, n in enumerate(names) if n in aliases
-                    and not any(names[i] == columns[r] for r in columns)]
-        if len(hits) > 1:
-            cols = ', '.join(repr(header[i].strip()) for i in hits)
-            raise RecordError(f'{where}: columns {cols} all give {role}: ambiguous, keep one')
-        if hits:
-            roles[role] = hits[0]
-    for role in ('t', 'theta1'):
-        if role not in roles:
-            what = 'time' if role == 't' else 'commanded worm angle'
-            raise RecordError(f'{where}: no column {role!r} ({what}) in the header '
-                              f'{", ".join(h.strip() for h in header)}'
-                              + _did_you_mean(role, names, TIME_NAMES if role == 't' else ())
-                              + '; name it in the header or map it (--column ROLE=NAME)')
-    return roles
-
-
-def _did_you_mean(name: str, candidates: Sequence[str], aliases: Sequence[str] = ()) -> str:
-    for n in (name, *aliases):
-        close = difflib.get_close_matches(n, list(candidates), n=1, cutoff=0.5)
-        if close:
-            return f' (did you mean {close[0]!r}?)'
-    return ''
-
-
-# ---- rosbag2 -----------------------------------------------------------------------------
 def _typestore() -> Any:
     from rosbags.typesys import Stores, get_typestore
     return get_typestore(Stores.ROS2_JAZZY)   # Float64/JointState are the same in Kilted
@@ -413,7 +128,7 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     p = Path(path)
     where = str(p)
     if joint_names is None:
-        from .params import Config
+        from ..params import Config
         joint_names = tuple(Config().node.joint_names)
     joint_names = tuple(joint_names)
     if len(joint_names) != 4:
@@ -453,7 +168,7 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     if not ok.any():
         raise RecordError(f'{where}: no finite command sample on {cmd_topic}')
     t0_ns = int(stamps[ok].min())
-    tc, yc, n_dup = _valid_sorted(stamps, vals, t0_ns)
+    tc, yc, n_dup = valid_sorted(stamps, vals, t0_ns)
     src['non_finite_commands'] = int((~ok).sum())
     src['duplicate_command_stamps'] = n_dup
     rec_name = name or p.stem
@@ -477,17 +192,6 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     measured = {k: v[keep] for k, v in m_vals.items()}
     return Record(rec_name, t, th1, measured, t0_ns, stamps, vals, src, received)
 
-
-def _valid_sorted(stamps: np.ndarray, vals: np.ndarray, t0_ns: int
-                  ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Finite samples sorted by stamp (stable: of equal stamps the first received is kept),
-    as (t [s] relative to t0_ns, values, number of duplicates dropped)."""
-    ok = np.isfinite(vals)
-    s, v = stamps[ok], vals[ok]
-    order = np.argsort(s, kind='stable')
-    s, v = s[order], v[order]
-    first = np.concatenate(([True], np.diff(s) > 0))
-    return (s[first] - t0_ns) * 1e-9, v[first], int((~first).sum())
 
 
 def _read_commands(reader: Any, topic: str, msgtype: str, worm_joint: str, where: str
@@ -586,19 +290,6 @@ def _read_joint_states(reader: Any, topic: str, joints: Sequence[str], where: st
     return grid, out, info
 
 
-def read_record(path: str | Path, **kwargs: Any) -> Record:
-    """A CSV file (``*.csv``) or a rosbag2 bag (a directory, ``*.db3`` or ``*.mcap``)."""
-    p = Path(path)
-    if p.is_dir() or p.suffix.lower() in ('.db3', '.mcap', '.yaml'):
-        if p.suffix.lower() == '.yaml':
-            p = p.parent
-        bag_keys = ('command_topic', 'joint_states_topic', 'joint_names', 'name',
-                    'require_measured', 'interpolation', 'min_samples')
-        return read_bag(p, **{k: v for k, v in kwargs.items() if k in bag_keys})
-    csv_keys = ('columns', 'name', 'min_samples', 'require_measured')
-    return read_csv(p, **{k: v for k, v in kwargs.items() if k in csv_keys})
-
-
 # ---- writing -----------------------------------------------------------------------------
 @dataclass
 class BagStream:
@@ -618,8 +309,6 @@ class BagStream:
 def write_streams(path: str | Path, streams: Sequence[BagStream], *,
                   storage: str = 'sqlite3', overwrite: bool = False) -> Path:
     """Write the streams as a rosbag2 bag (directory ``path``), messages in time order."""
-    import shutil
-
     from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
     p = Path(path)
     plugins = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
@@ -690,24 +379,25 @@ def prediction_streams(stamps_ns: np.ndarray, position: np.ndarray, *,
     topic (e.g. 'replay' -> /replay/joint_states)."""
     names = tuple(joint_names)
     ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
-    priv = f'{ns}/{NODE_NAMESPACE}'
     stamps = np.asarray(stamps_ns, dtype=np.int64)
-    out = [BagStream(f'{ns}/joint_states', stamps, np.asarray(position), 'joint_state', names,
-                     velocity, effort)]
+    out = [BagStream(f'{ns}/{JOINT_STATES_TOPIC}', stamps, np.asarray(position), 'joint_state',
+                     names, velocity, effort)]
 
     def scalar(topic: str, st: np.ndarray, v: np.ndarray, joint: str) -> BagStream:
+        name = f'{ns}/{private_topic(topic)}'
         if stamped:
-            return BagStream(topic, st, np.asarray(v).reshape(-1, 1), 'joint_state', (joint,))
-        return BagStream(topic, st, np.asarray(v), 'float64')
+            return BagStream(name, st, np.asarray(v).reshape(-1, 1), 'joint_state', (joint,))
+        return BagStream(name, st, np.asarray(v), 'float64')
 
     if positioning_error is not None:
-        out.append(scalar(f'{priv}/positioning_error', stamps, positioning_error, names[3]))
+        out.append(scalar(POSITIONING_ERROR_TOPIC, stamps, positioning_error, names[3]))
     if worm_error is not None:
-        out.append(scalar(f'{priv}/worm_error', stamps, worm_error, names[1]))
+        out.append(scalar(WORM_ERROR_TOPIC, stamps, worm_error, names[1]))
     if feedforward is not None:
-        out.append(scalar(f'{priv}/feedforward', feedforward[0], feedforward[1], names[0]))
+        out.append(scalar(FEEDFORWARD_TOPIC, feedforward[0], feedforward[1], names[0]))
     if compensated_command is not None:
-        out.append(BagStream(f'{priv}/compensated_command', compensated_command[0],
+        out.append(BagStream(f'{ns}/{private_topic(COMPENSATED_COMMAND_TOPIC)}',
+                             compensated_command[0],
                              np.asarray(compensated_command[1]).reshape(-1, 1), 'joint_state',
                              (names[0],)))
     return out

@@ -7,24 +7,24 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from .identification import OUTPUTS, predict
-from .model import pack_parameters, rigid_motion_vector
-from .params import Config
-from .simulation import SimulationError
+from ..model import DriveModel
+from ..params import Config
+from ..records import Record
+from ..simulation import SimulationError
+from .data import OUTPUTS, predict, record_name
 
 __all__ = ['plot_fit']
 
 MAX_RECORDS = 6
 
 
-def plot_fit(records: Sequence[Any], before: Config, after: Config, path: str | Path,
-             title: str = '') -> Path:
+def plot_fit(records: Sequence[Record], before: DriveModel | Config,
+             after: DriveModel | Config, path: str | Path, title: str = '') -> Path:
     """One column per record (at most MAX_RECORDS), per measured output two panels: the
     oscillating part theta_i - theta1 u_rigid [rad] measured, predicted by ``before`` and by
     ``after``; and the residuals predicted - measured of both."""
@@ -34,12 +34,13 @@ def plot_fit(records: Sequence[Any], before: Config, after: Config, path: str | 
     fig = Figure(figsize=(max(6.0, 4.2 * ncol), 2.4 * nrow + 0.6), layout='constrained')
     FigureCanvasAgg(fig)
     ax = fig.subplots(nrow, ncol, squeeze=False, sharex='col')
-    rigid = rigid_motion_vector(pack_parameters(after))
+    models = {'before': DriveModel.of(before), 'after': DriveModel.of(after)}
+    rigid = models['after'].rigid_motion
     for c, rec in enumerate(recs):
         preds: dict[str, dict[str, np.ndarray] | None] = {}
-        for label, cfg in (('before', before), ('after', after)):
+        for label, model in models.items():
             try:
-                preds[label] = predict(cfg, rec)
+                preds[label] = predict(model, rec)
             except (SimulationError, ValueError):
                 preds[label] = None
         t = np.asarray(rec.t)
@@ -68,7 +69,7 @@ def plot_fit(records: Sequence[Any], before: Config, after: Config, path: str | 
             a.legend(fontsize=7, loc='upper right')
             b.legend(fontsize=7, loc='upper right')
             if k == 0:
-                a.set_title(getattr(rec, 'name', '') or f'record {c + 1}', fontsize=9)
+                a.set_title(record_name(rec, c), fontsize=9)
         ax[-1, c].set_xlabel('t [s]')
     if title:
         fig.suptitle(title, fontsize=10)

@@ -1,0 +1,270 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The robust search: :func:`identify` fits the keys to the records with
+``scipy.optimize.least_squares`` (Jacobian by finite differences in the fitted coordinate,
+:mod:`.problem`).
+
+Oscillatory records defeat a plain local fit (it locks onto the wrong period).  Three
+measures, compared in docs/identification.md, make it robust:
+
+* **frequency start**: the dominant frequency of each measured output (FFT after the move) is
+  matched to the nearest linearised mode of the model (:func:`worm_gear_sim.modal.modes`) by a
+  minimum-change Gauss-Newton step on the fitted keys before the time-domain fit;
+* **growing windows**: the fit runs on the first few periods after motion starts, then on
+  longer windows, each starting from the previous estimate;
+* **multi-start**: several starts (the frequency start, the base, a scrambled Sobol set over
+  the start box) run in parallel on the Dask engine of the sweeps; the lowest cost wins.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..modal import modes
+from ..params import Config, ConfigError
+from ..records import Record
+from .data import IdentificationError, measured_frequencies
+from .parameters import fit_parameters
+from .problem import DIFF_STEP, Problem
+from .report import FitResult, assess
+
+__all__ = ['STRATEGIES', 'FitOptions', 'frequency_start', 'identify']
+
+
+def frequency_start(problem: Problem, x0: np.ndarray | None = None,
+                    regularization: float = 1e-3) -> tuple[np.ndarray, dict[str, Any]]:
+    """Move the fitted keys (minimum change, within bounds) so that the model's linearised
+    modes match the measured dominant frequencies; returns (x, info)."""
+    x0 = np.zeros(problem.n) if x0 is None else np.asarray(x0, float)
+    meas = measured_frequencies(problem.base, problem.records)
+    base_f = np.asarray(modes(problem.config(x0)).undamped_hz, float)
+    targets: dict[int, list[float]] = {}
+    skipped = []
+    for f, o, _, fs in meas:   # nearest model mode in log-frequency
+        k = int(np.argmin(np.abs(np.log(base_f / f))))
+        # A mode above Nyquist shows up aliased: a peak near such an alias is ambiguous; so is
+        # a match to a mode the sampling cannot resolve or more than a factor 2 away.
+        aliases = [abs(fm - round(fm / fs) * fs) for fm in base_f if fm > 0.5 * fs]
+        if base_f[k] > 0.4 * fs or not (0.5 < f / base_f[k] < 2.0) or \
+                any(abs(f - a) < 0.15 * a for a in aliases):
+            skipped.append((round(f, 4), o))
+            continue
+        targets.setdefault(k, []).append(f)
+    info: dict[str, Any] = {'measured_hz': sorted({round(f, 4) for f, _, _, _ in meas}),
+                            'model_hz_before': base_f.tolist(),
+                            'skipped_peaks': skipped}
+    if not targets:
+        info['note'] = 'no measured oscillation found'
+        return x0, info
+    idx = sorted(targets)
+    goal = np.log([float(np.median(targets[k])) for k in idx])
+
+    def fres(x: np.ndarray) -> np.ndarray:
+        try:
+            f = np.asarray(modes(problem.config(x)).undamped_hz, float)[idx]
+        except (ConfigError, np.linalg.LinAlgError, ValueError):
+            return np.full(len(idx) + problem.n, 1e3)
+        return np.concatenate([np.log(np.maximum(f, 1e-9)) - goal,
+                               math.sqrt(regularization) * (x - x0)])
+
+    lo, hi = problem.x_bounds
+    res = least_squares(fres, np.clip(x0, lo, hi), bounds=(lo, hi), diff_step=1e-6,
+                        max_nfev=200)
+    f_after = np.asarray(modes(problem.config(res.x)).undamped_hz, float)
+    info.update(model_hz_after=f_after.tolist(), matched_modes=[k + 1 for k in idx],
+                target_hz=np.exp(goal).tolist())
+    return res.x, info
+
+
+# ---- one local fit -------------------------------------------------------------------------
+STRATEGIES: dict[str, dict[str, Any]] = {
+    'local': dict(frequency_start=False, growing_windows=False, n_starts=1),
+    'frequency': dict(frequency_start=True, growing_windows=False, n_starts=1),
+    'windows': dict(frequency_start=False, growing_windows=True, n_starts=1),
+    'frequency+windows': dict(frequency_start=True, growing_windows=True, n_starts=1),
+    'multistart': dict(frequency_start=False, growing_windows=False, n_starts=8),
+    'robust': dict(frequency_start=True, growing_windows=True, n_starts=4),
+}
+
+
+@dataclass
+class FitOptions:
+    """How :func:`identify` searches.  ``strategy`` presets (STRATEGIES) fill the three flags;
+    ``n_starts`` counts every start (frequency start and base included)."""
+
+    strategy: str = 'robust'
+    frequency_start: bool | None = None
+    growing_windows: bool | None = None
+    n_starts: int | None = None
+    seed: int = 0
+    max_nfev: int = 100
+    diff_step: float = DIFF_STEP   # finite-difference step in the fitted coordinate
+    method: str = 'dogbox'     # least_squares method; trf creeps away from a start near a
+    #                            bound (its step scales with the distance to the bound)
+    workers: int | None = None
+    scheduler: str | None = None
+    serial: bool = False
+    client: Any = None
+    progress: bool = False
+
+    def resolved(self) -> tuple[bool, bool, int]:
+        if self.strategy not in STRATEGIES:
+            raise IdentificationError(f'unknown strategy {self.strategy!r} (known: '
+                                      f'{", ".join(STRATEGIES)})')
+        s = STRATEGIES[self.strategy]
+        fs = s['frequency_start'] if self.frequency_start is None else self.frequency_start
+        gw = s['growing_windows'] if self.growing_windows is None else self.growing_windows
+        ns = s['n_starts'] if self.n_starts is None else int(self.n_starts)
+        return bool(fs), bool(gw), max(1, ns)
+
+
+def _local_fit(problem: Problem, x0: np.ndarray, windows: Sequence[float | None],
+               max_nfev: int, diff_step: float, method: str = 'dogbox') -> dict[str, Any]:
+    lo, hi = problem.x_bounds
+    x = _interior(problem, x0)
+    t0 = time.perf_counter()
+    res = None
+    stages = []
+
+    def jac(xj: np.ndarray, window: float | None) -> np.ndarray:
+        return problem.jacobian(xj, window, diff_step)
+
+    for w in windows:
+        res = least_squares(problem.residuals, x, jac=jac, bounds=(lo, hi), args=(w,),
+                            method=method, max_nfev=max_nfev, x_scale=1.0,
+                            xtol=1e-8, ftol=1e-8, gtol=1e-8)
+        x = res.x
+        stages.append({'window_s': w, 'cost': float(res.cost), 'nfev': int(res.nfev),
+                       'njev': int(res.njev or 0), 'status': int(res.status)})
+    assert res is not None
+    return {'x0': np.asarray(x0, float).tolist(), 'x': res.x.tolist(), 'cost': float(res.cost),
+            'status': int(res.status), 'message': str(res.message),
+            'nfev': sum(s['nfev'] + problem.n * s['njev'] for s in stages), 'stages': stages,
+            'seconds': time.perf_counter() - t0}
+
+
+def _interior(problem: Problem, x0: np.ndarray) -> np.ndarray:
+    """x0 moved 1 % of the start box inside finite bounds: least_squares' trf scales a step by
+    the distance to an active bound, so a start on a bound (a damping ratio of 0) never
+    leaves it."""
+    x = np.asarray(x0, float).copy()
+    for i, p in enumerate(problem.params):
+        lo, hi = p.x_bounds
+        margin = 0.01 * (p.box[1] - p.box[0])
+        if math.isfinite(lo):
+            x[i] = max(x[i], lo + margin)
+        if math.isfinite(hi):
+            x[i] = min(x[i], hi - margin)
+    return x
+
+
+def _start_task(problem: Problem, x0: list[float], windows: list[float | None], max_nfev: int,
+                diff_step: float, index: int, method: str = 'dogbox') -> dict[str, Any]:
+    out = _local_fit(problem, np.asarray(x0), windows, max_nfev, diff_step, method)
+    out['index'] = index
+    return out
+
+
+def _starts(problem: Problem, x_first: list[np.ndarray], n_starts: int, seed: int) -> list:
+    starts = [np.asarray(x, float) for x in x_first][:n_starts]
+    n_more = n_starts - len(starts)
+    if n_more > 0:
+        from scipy.stats import qmc
+        box_lo = np.array([p.box[0] for p in problem.params])
+        box_hi = np.array([p.box[1] for p in problem.params])
+        m = max(1, math.ceil(math.log2(n_more)))
+        u = qmc.Sobol(problem.n, scramble=True, seed=seed).random_base2(m)[:n_more]
+        starts += list(box_lo + u * (box_hi - box_lo))
+    return starts
+
+
+# ---- the fit ---------------------------------------------------------------------------------
+def identify(base: Config, records: Sequence[Record], keys: Sequence[str], *,
+             bounds: Mapping[str, tuple[float, float]] | None = None,
+             options: FitOptions | None = None,
+             on_start_done: Callable[[dict], None] | None = None) -> FitResult:
+    """Fit ``keys`` of ``base`` to the records jointly (see the module docstring)."""
+    t_begin = time.perf_counter()
+    opt = options or FitOptions()
+    use_freq, use_windows, n_starts = opt.resolved()
+    params = fit_parameters(base, keys, bounds)
+    problem = Problem(base, params, records)
+    x_base = np.zeros(problem.n)
+    freq_info: dict[str, Any] = {}
+    first = []
+    if use_freq:
+        x_f, freq_info = frequency_start(problem, x_base)
+        first.append(x_f)
+    first.append(x_base)
+    starts = _starts(problem, first, n_starts, opt.seed)
+    windows = problem.windows() if use_windows else [None]
+    results = _run_starts(problem, starts, windows, opt, on_start_done)
+    results.sort(key=lambda r: r['index'])
+    best, stats = assess(problem, results, opt.max_nfev)
+    return FitResult(
+        **stats,
+        strategy={'name': opt.strategy, 'frequency_start': use_freq,
+                  'growing_windows': use_windows, 'n_starts': n_starts,
+                  'windows_s': windows},
+        starts=results, frequency_info=freq_info, seconds=time.perf_counter() - t_begin)
+
+
+def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
+                windows: Sequence[float | None], opt: FitOptions,
+                on_done: Callable[[dict], None] | None) -> list[dict[str, Any]]:
+    """Local fits from every start: in this process (``serial`` or a single start) or on Dask
+    (the sweeps' engine: a LocalCluster by default, ``scheduler`` for a cluster)."""
+    out: list[dict[str, Any]] = []
+    bar = None
+
+    def start_bar() -> None:   # after the engine is up: no bar before a connection error
+        nonlocal bar
+        if opt.progress:
+            import sys
+
+            from tqdm import tqdm
+            bar = tqdm(total=len(starts), desc='identify', unit='start', file=sys.stderr,
+                       dynamic_ncols=True)
+
+    def done(r: dict[str, Any]) -> None:
+        out.append(r)
+        if bar is not None:
+            bar.set_postfix(best=f'{min(o["cost"] for o in out):.4g}')
+            bar.update()
+        if on_done:
+            on_done(r)
+
+    try:
+        if opt.serial or (len(starts) == 1 and opt.client is None and opt.scheduler is None):
+            start_bar()
+            for i, x0 in enumerate(starts):
+                done(_start_task(problem, list(x0), list(windows), opt.max_nfev,
+                                 opt.diff_step, i, opt.method))
+        else:
+            from ..studies.engine import _dask_client, warm_up
+            with _dask_client(opt.client, opt.scheduler, opt.workers) as cl:
+                from distributed import as_completed
+                if len(cl.run(warm_up)) == 0:
+                    raise ConnectionError('the Dask cluster has no workers')
+                pf = cl.scatter(problem, broadcast=True)
+                start_bar()
+                futs = [cl.submit(_start_task, pf, list(x0), list(windows), opt.max_nfev,
+                                  opt.diff_step, i, opt.method, pure=False)
+                        for i, x0 in enumerate(starts)]
+                try:
+                    for fut in as_completed(futs):
+                        done(fut.result())
+                finally:
+                    for f in futs:
+                        f.cancel()
+    finally:
+        if bar is not None:
+            bar.close()
+    return out

@@ -1,0 +1,180 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The least-squares problem: records + base config + fitted keys -> the weighted residual
+vector r(x) and its Jacobian.
+
+Residuals are predicted - measured of every measured output of every record, each output
+divided by its noise level (estimated from 4th differences of the measured angle, pooled over
+the records; at least 1e-3 of its *scale*, the RMS of the measured angle minus the rigid
+kinematic motion theta1 * u_rigid), so that theta2 (~0.1 rad) and theta4 (~1e-3 rad) weigh by
+their information.
+
+The Jacobian is taken by finite differences with an absolute step in the fitted coordinate x
+(DIFF_STEP = 1e-3: 0.1 % of a log-scaled value).  The step is this large on purpose: with the
+set-valued (exact stick-slip) friction law each time step decides stick or slip, and a change
+of a parameter in its last bits flips a few of those decisions; the residual then moves by a
+few 1e-8 rad (measured: 0.05-0.1 in noise-weighted units over a 0.15 s record, for a change of
+1e-12).  A step of 1e-6 sees only that (the Jacobian is noise, the fit stalls); at 1e-3 the
+parameters' effect is ~100-1000 times larger while the truncation error of the differences
+stays below 1 %.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..modal import modes
+from ..model import DriveModel
+from ..params import Config, ConfigError
+from ..records import Record
+from ..simulation import SimulationError
+from .data import (
+    OUTPUTS,
+    IdentificationError,
+    measured_frequencies,
+    motion_times,
+    normalised,
+    predict,
+    rigid_motion,
+)
+from .parameters import FitParameter, apply_values
+
+__all__ = ['DIFF_STEP', 'Problem', 'jacobian']
+
+#: Finite-difference step in the fitted coordinate x (see the module docstring).
+DIFF_STEP = 1e-3
+
+
+class Problem:
+    """Records + base config + fitted keys -> weighted residual vector r(x)."""
+
+    def __init__(self, base: Config, params: Sequence[FitParameter],
+                 records: Sequence[Record]):
+        if not records:
+            raise IdentificationError('no records to fit')
+        self.base = base
+        self.params = list(params)
+        self.records = [normalised(r, i) for i, r in enumerate(records)]
+        rigid = rigid_motion(base)
+        self.outputs = [o for o in OUTPUTS if any(o in r.measured for r in self.records)]
+        self.scale: dict[str, float] = {}
+        for o in self.outputs:
+            j = OUTPUTS.index(o)
+            dev = np.concatenate([r.measured[o] - rigid[j] * r.theta1
+                                  for r in self.records if o in r.measured])
+            s = float(np.sqrt(np.mean((dev - dev.mean()) ** 2)))
+            if not s > 0:
+                raise IdentificationError(f'{o}: the measured angle follows the command '
+                                          'exactly; nothing to fit')
+            self.scale[o] = s
+        # white-noise level of each output from 4th differences (a 100 Hz mode sampled at
+        # 10 kHz contributes (2 pi f dt)^4 = 2e-5 of its amplitude): var(d4 x) = 70 sigma^2
+        self.noise: dict[str, float] = {}
+        for o in self.outputs:
+            d4 = np.concatenate([np.diff(r.measured[o], 4) for r in self.records
+                                 if o in r.measured])
+            self.noise[o] = float(np.sqrt(np.mean(d4 ** 2) / 70.0)) if d4.size else 0.0
+        # residual weights: 1 / noise level (maximum likelihood for white Gaussian noise; a
+        # noisy output such as a worm encoder that hardly sees the mesh wind-up cannot drown
+        # the antenna's), at most 1000 / scale for noise-free data
+        self.sigma = {o: max(self.noise[o], 1e-3 * self.scale[o]) for o in self.outputs}
+        self.period = self.dominant_period()
+        self.n_evals = 0
+        self._last: tuple[bytes, float | None, np.ndarray] | None = None
+
+    def dominant_period(self) -> float:
+        """Period [s] of the lowest measured oscillation (for time windows)."""
+        freqs = [f for f, _, _, fs in measured_frequencies(self.base, self.records)
+                 if f < 0.4 * fs]
+        if freqs:
+            return 1.0 / min(freqs)
+        return 1.0 / float(modes(self.base).frequencies_hz[0] or 1.0)
+
+    @property
+    def n(self) -> int:
+        return len(self.params)
+
+    @property
+    def x_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds of x."""
+        lo, hi = zip(*[p.x_bounds for p in self.params])
+        return np.array(lo, float), np.array(hi, float)
+
+    def config(self, x: np.ndarray) -> Config:
+        return apply_values(self.base, self.params, [p.from_x(v) for p, v in zip(self.params, x)])
+
+    def windows(self, n_periods: Sequence[float] = (4.0, 10.0, 25.0)) -> list[float | None]:
+        """Growing window lengths after the start of motion (None: whole records)."""
+        start = min(motion_times(r.t, r.theta1)[0] - r.t[0] for r in self.records)
+        longest = max(r.t[-1] - r.t[0] for r in self.records)
+        out: list[float | None] = [start + k * self.period for k in n_periods
+                                   if start + k * self.period < 0.8 * longest]
+        return out + [None]
+
+    def residuals(self, x: np.ndarray, window: float | None = None) -> np.ndarray:
+        """Weighted residuals (predicted - measured) / sigma over every record and output
+        (the records cut ``window`` seconds after their start; None: whole records)."""
+        x = np.asarray(x, float)
+        key = x.tobytes()
+        if self._last is not None and self._last[0] == key and self._last[1] == window:
+            return self._last[2].copy()
+        self.n_evals += 1
+        parts = []
+        try:
+            model: DriveModel | None = DriveModel(self.config(x))
+        except ConfigError:
+            model = None
+        for r in self.records:
+            t_end = None if window is None else r.t[0] + window
+            n = r.t.size if t_end is None else max(2, int(np.searchsorted(r.t, t_end,
+                                                                          side='right')))
+            pred = None
+            if model is not None:
+                try:
+                    pred = predict(model, r, t_end)
+                except (SimulationError, ValueError):
+                    pred = None
+            for o in self.outputs:
+                if o not in r.measured:
+                    continue
+                meas = r.measured[o][:n]
+                if pred is None:   # failed run: a large, smooth penalty
+                    parts.append(np.full(n, 10.0 * self.scale[o] / self.sigma[o]))
+                else:
+                    parts.append((pred[o][:n] - meas) / self.sigma[o])
+        out = np.concatenate(parts)
+        self._last = (key, window, out)
+        return out.copy()
+
+    def cost(self, x: np.ndarray, window: float | None = None) -> float:
+        r = self.residuals(x, window)
+        return 0.5 * float(r @ r)
+
+    def jacobian(self, x: np.ndarray, window: float | None = None, h: float = DIFF_STEP,
+                 central: bool = False) -> np.ndarray:
+        """d residuals / dx by finite differences with the absolute step ``h`` in x: forward
+        (n evaluations; backward next to an upper bound) or ``central`` (2 n; one-sided next
+        to a bound)."""
+        x = np.asarray(x, float)
+        lo, hi = self.x_bounds
+        r0 = self.residuals(x, window)
+        J = np.empty((r0.size, x.size))
+        for i in range(x.size):
+            e = np.zeros_like(x)
+            e[i] = h
+            up, down = x[i] + h <= hi[i], x[i] - h >= lo[i]
+            if central and up and down:
+                J[:, i] = (self.residuals(x + e, window) - self.residuals(x - e, window)) / (2 * h)
+            elif up:
+                J[:, i] = (self.residuals(x + e, window) - r0) / h
+            else:
+                J[:, i] = (r0 - self.residuals(x - e, window)) / h
+        return J
+
+
+def jacobian(problem: Problem, x: np.ndarray, h: float = DIFF_STEP) -> np.ndarray:
+    """d residuals / dx over the whole records by central differences with step ``h`` in the
+    fitted coordinate (one-sided next to a bound): the Jacobian of the report."""
+    return problem.jacobian(x, None, h, central=True)

@@ -1,0 +1,273 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""What a fit means: estimates with 95 % confidence intervals from the Jacobian
+(s^2 (J^T J)^-1, white-noise assumption), the correlation matrix (pairs above 0.95 flagged),
+residual RMS per output before and after, and a verdict: a fit that did not converge, cannot
+determine a parameter or leaves a residual far above the noise is marked not trustworthy,
+with the reason.  Also the prediction error on held-out records (``--validate``)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2
+
+from ..model import DriveModel
+from ..params import Config
+from ..records import Record
+from ..simulation import SimulationError
+from .data import OUTPUTS, IdentificationError, normalised, predict, rigid_motion
+from .problem import DIFF_STEP, Problem, jacobian
+
+__all__ = ['CORRELATION_WARN', 'Z95', 'FitResult', 'assess', 'residual_rms',
+           'prediction_errors', 'validate']
+
+CORRELATION_WARN = 0.95
+Z95 = 1.959963984540054
+#: A Jacobian column that changes by more than this between the steps h and 4 h is not
+#: resolved: the parameter's effect is at the level of the stick-slip decisions' noise.
+STEP_CONSISTENCY_WARN = 0.1
+
+
+@dataclass
+class FitResult:
+    """Estimates, uncertainty, residuals and verdict of :func:`identify` (``to_dict`` for
+    JSON)."""
+
+    keys: list[str]
+    units: list[str]
+    base_values: list[float]
+    values: list[float]
+    ci95: list[tuple[float, float]]
+    std_x: list[float]                    # standard deviation in the fitted coordinate
+    log_scale: list[bool]
+    correlation: list[list[float]]
+    rms_before: dict[str, float]          # [rad], pooled over the records
+    rms_after: dict[str, float]
+    scale: dict[str, float]               # [rad] residual scale per output
+    noise: dict[str, float]               # [rad] white-noise estimate per output
+    per_record: list[dict[str, Any]]
+    cost: float
+    converged: bool
+    trustworthy: bool
+    problems: list[str]                   # why it is not trustworthy
+    warnings: list[str]
+    strategy: dict[str, Any]
+    starts: list[dict[str, Any]]
+    frequency_info: dict[str, Any]
+    seconds: float
+    config: Config = field(repr=False)
+    base_config: Config = field(repr=False)
+    step_consistency: list[float] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            'parameters': [
+                {'key': k, 'unit': u, 'base': b, 'estimate': v, 'ci95': list(ci),
+                 'log_scale': lg, 'std_fitted_coordinate': s, 'jacobian_step_change': sc}
+                for k, u, b, v, ci, lg, s, sc in zip(
+                    self.keys, self.units, self.base_values, self.values, self.ci95,
+                    self.log_scale, self.std_x,
+                    self.step_consistency or [math.nan] * len(self.keys))],
+            'correlation': self.correlation, 'rms_before_rad': self.rms_before,
+            'rms_after_rad': self.rms_after, 'residual_scale_rad': self.scale,
+            'noise_estimate_rad': self.noise,
+            'records': self.per_record, 'cost': self.cost, 'converged': self.converged,
+            'trustworthy': self.trustworthy, 'problems': self.problems,
+            'warnings': self.warnings, 'strategy': self.strategy, 'starts': self.starts,
+            'frequency_start': self.frequency_info, 'seconds': self.seconds,
+        }
+
+    def table(self) -> str:
+        lines = [f'{"parameter":<44} {"base":>12} {"estimate":>12} {"95 % CI":>27}  unit']
+        for k, u, b, v, (lo, hi) in zip(self.keys, self.units, self.base_values, self.values,
+                                        self.ci95):
+            lines.append(f'{k:<44} {b:>12.6g} {v:>12.6g} [{lo:>11.6g}, {hi:>11.6g}]  {u}')
+        lines.append('residual RMS per output [rad] (before -> after, % of the residual scale):')
+        for o in self.rms_after:
+            s = self.scale[o]
+            lines.append(f'  {o}: {self.rms_before[o]:.4g} -> {self.rms_after[o]:.4g} '
+                         f'({100 * self.rms_before[o] / s:.1f} % -> '
+                         f'{100 * self.rms_after[o] / s:.2f} %; noise level '
+                         f'{self.noise[o]:.3g})')
+        if len(self.keys) > 1:
+            lines.append('correlation:')
+            for k, row in zip(self.keys, self.correlation):
+                lines.append(f'  {k:<44} ' + ' '.join(f'{c:+.3f}' for c in row))
+        for w in self.warnings:
+            lines.append(f'WARNING: {w}')
+        for p in self.problems:
+            lines.append(f'NOT TRUSTWORTHY: {p}')
+        return '\n'.join(lines)
+
+
+def residual_rms(problem: Problem, model: DriveModel | Config
+                 ) -> tuple[dict[str, float], list[dict[str, Any]]]:
+    """Pooled and per-record RMS of predicted - measured [rad] per output."""
+    model = DriveModel.of(model)
+    pooled: dict[str, list[np.ndarray]] = {o: [] for o in problem.outputs}
+    per = []
+    for r in problem.records:
+        try:
+            pred = predict(model, r)
+        except (SimulationError, ValueError):
+            pred = None
+        row: dict[str, Any] = {'name': r.name}
+        for o, meas in r.measured.items():
+            e = (pred[o] - meas) if pred is not None else np.full(meas.size, np.nan)
+            pooled[o].append(e)
+            row[o] = float(np.sqrt(np.mean(e ** 2)))
+        per.append(row)
+    return ({o: float(np.sqrt(np.mean(np.concatenate(v) ** 2))) for o, v in pooled.items()},
+            per)
+
+
+def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
+           ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The statistics and the verdict of the best of ``results`` (local fits, each with
+    ``x``, ``cost``, ``status``, ``message``, ``index``): returns (best, fields of
+    :class:`FitResult` other than strategy, starts, frequency_info and seconds)."""
+    params = problem.params
+    best = min(results, key=lambda r: r['cost'] if math.isfinite(r['cost']) else np.inf)
+    x = np.asarray(best['x'], float)
+    # Jacobian at the estimate (full records) for the uncertainty; least_squares' own jac is
+    # scaled by the distance to active bounds and unusable for that.  The same columns with
+    # a 4 times larger step tell whether the finite differences resolve each parameter.
+    J = jacobian(problem, x, DIFF_STEP)
+    J4 = jacobian(problem, x, 4 * DIFF_STEP)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        step_change = (np.linalg.norm(J - J4, axis=0) / np.linalg.norm(J4, axis=0)).tolist()
+    r = problem.residuals(x)
+    m, n = r.size, problem.n
+    s2 = float(r @ r) / max(m - n, 1)
+    problems: list[str] = []
+    warnings: list[str] = []
+    U, sv, Vt = np.linalg.svd(J, full_matrices=False)
+    rank_tol = sv[0] * 1e-10 if sv.size and sv[0] > 0 else 0.0
+    if sv.size == 0 or sv[-1] <= rank_tol:
+        weakest = params[int(np.argmax(np.abs(Vt[-1])))].key if sv.size else '?'
+        problems.append(f'the data do not determine {weakest} (singular Jacobian)')
+        cov = np.full((n, n), np.nan)
+    else:
+        cov = s2 * (Vt.T / sv ** 2) @ Vt
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        corr = cov / np.outer(std, std)
+    values, ci = [], []
+    for p, xi, si in zip(params, x, std):
+        values.append(p.from_x(float(xi)))
+        if not math.isfinite(si):
+            ci.append((math.nan, math.nan))
+        else:
+            ci.append((p.from_x(xi - Z95 * si), p.from_x(xi + Z95 * si)))
+    model_fit = DriveModel(problem.config(x))
+    rms_before, per_before = residual_rms(problem, problem.base)
+    rms_after, per_after = residual_rms(problem, model_fit)
+    per_record = [{'name': a['name'],
+                   'rms_before_rad': {k: v for k, v in a.items() if k != 'name'},
+                   'rms_after_rad': {k: v for k, v in b.items() if k != 'name'}}
+                  for a, b in zip(per_before, per_after)]
+    converged = best['status'] > 0
+    if not converged:
+        problems.append(f'the fit did not converge within {max_nfev} evaluations '
+                        f'({best["message"]})')
+    for o in problem.outputs:
+        rel = rms_after[o] / problem.scale[o]
+        if not math.isfinite(rel):
+            problems.append(f'the fitted model cannot be simulated on every record ({o})')
+        elif rel > 0.25 and rms_after[o] > 3.0 * problem.noise[o]:
+            problems.append(f'{o}: residual RMS {100 * rel:.0f} % of the measured motion '
+                            f'(> 25 %) and {rms_after[o] / max(problem.noise[o], 1e-300):.1f}'
+                            ' x the noise level: the model does not match the records')
+        elif rms_after[o] > rms_before[o] * 1.0001:
+            warnings.append(f'{o}: residual RMS grew ({rms_before[o]:.3g} -> '
+                            f'{rms_after[o]:.3g} rad)')
+    for i in range(n):
+        for j in range(i + 1, n):
+            c = corr[i, j]
+            if math.isfinite(c) and abs(c) > CORRELATION_WARN:
+                warnings.append(f'{params[i].key} and {params[j].key} are correlated '
+                                f'({c:+.3f}): the data can hardly separate them')
+    for p, v, (clo, chi), si, sc in zip(params, values, ci, std, step_change):
+        bx = p.x_bounds
+        xi = p.to_x(v)
+        if (math.isfinite(bx[0]) and xi - bx[0] < 1e-6) or \
+                (math.isfinite(bx[1]) and bx[1] - xi < 1e-6):
+            warnings.append(f'{p.key} = {v:.6g} sits on a bound: the optimum may lie outside')
+        if not (sc <= STEP_CONSISTENCY_WARN):
+            warnings.append(f'{p.key}: its effect on the residuals is hardly resolved (the '
+                            f'finite-difference sensitivity changes by {100 * sc:.0f} % '
+                            f'between steps {DIFF_STEP:g} and {4 * DIFF_STEP:g}): the data '
+                            'hardly see it beside the stick-slip decisions of the friction '
+                            'law; its interval is not reliable')
+        elif math.isfinite(si) and p.log and si > 0.5:
+            warnings.append(f'{p.key}: 95 % interval {clo:.3g} .. {chi:.3g} spans more than '
+                            f'a factor {math.exp(2 * Z95 * 0.5):.0f}: hardly determined by the '
+                            'data (its value in the YAML is arbitrary; fix it or record a move '
+                            'that excites it)')
+        elif math.isfinite(si) and not p.log and Z95 * si * p.scale > max(abs(v), p.scale):
+            warnings.append(f'{p.key}: 95 % interval {clo:.3g} .. {chi:.3g} is wider than the '
+                            'value: poorly determined')
+    # Another start that fits statistically as well (cost within the 95 % confidence region,
+    # 0.5 s^2 chi2(0.95, n)) but lies far outside the linearised region (Mahalanobis distance
+    # > 2 sqrt(chi2)): a second minimum, the optimum is not unique.
+    c95 = float(chi2.ppf(0.95, n))
+    JtJ = J.T @ J
+    for rr in results:
+        if rr is best or not math.isfinite(rr['cost']):
+            continue
+        dx = np.asarray(rr['x']) - x
+        if rr['cost'] - best['cost'] <= 0.5 * s2 * c95 and \
+                float(dx @ JtJ @ dx) / s2 > 4.0 * c95:
+            far = [f'{p.key} = {p.from_x(float(xi)):.4g}' for p, xi, d, si in
+                   zip(params, rr['x'], dx, std) if abs(d) > 2 * Z95 * max(si, 1e-300)]
+            warnings.append(f'start {rr["index"] + 1} fits as well with '
+                            f'{", ".join(far) or "other values"}: the data do not fix '
+                            'these values (both fit the records equally well)')
+            break
+    return best, dict(
+        keys=[p.key for p in params], units=[p.unit for p in params],
+        base_values=[p.base for p in params], values=values, ci95=ci,
+        std_x=[float(s) for s in std], log_scale=[p.log for p in params],
+        correlation=np.where(np.isfinite(corr), corr, np.nan).tolist(),
+        rms_before=rms_before, rms_after=rms_after, scale=dict(problem.scale),
+        noise=dict(problem.noise), per_record=per_record, cost=float(0.5 * r @ r),
+        converged=converged, trustworthy=not problems, problems=problems, warnings=warnings,
+        config=model_fit.config, base_config=problem.base,
+        step_consistency=[float(s) for s in step_change])
+
+
+# ---- validation on held-out records ------------------------------------------------------------
+def prediction_errors(cfg: DriveModel | Config, records: Sequence[Record]
+                      ) -> list[dict[str, Any]]:
+    """Per record and measured output: RMS of predicted - measured [rad], the oscillation
+    amplitude (half the peak-to-peak range of the measured angle minus the rigid motion
+    theta1 * u_rigid [rad]) and their ratio ``rel``."""
+    model = DriveModel.of(cfg)
+    rigid = rigid_motion(model)
+    out = []
+    for i, rec in enumerate(records):
+        rr = normalised(rec, i)
+        try:
+            pred = predict(model, rr)
+        except SimulationError as exc:
+            raise IdentificationError(f'{rr.name}: the model cannot be simulated ({exc})'
+                                      ) from None
+        row: dict[str, Any] = {'name': rr.name}
+        for o, meas in rr.measured.items():
+            e = pred[o] - meas
+            amp = 0.5 * float(np.ptp(meas - rigid[OUTPUTS.index(o)] * rr.theta1))
+            rms = float(np.sqrt(np.mean(e ** 2)))
+            row[o] = {'rms_rad': rms, 'amplitude_rad': amp,
+                      'rel': rms / amp if amp > 0 else math.inf}
+        out.append(row)
+    return out
+
+
+def validate(cfg: DriveModel | Config, records: Sequence[Record]) -> list[dict[str, Any]]:
+    """Alias of :func:`prediction_errors` (the ``--validate`` report)."""
+    return prediction_errors(cfg, records)

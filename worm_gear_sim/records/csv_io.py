@@ -1,0 +1,238 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""CSV records: reading a record by its header (names and units), and the numeric CSV
+writer every table of the package uses (``# `` comment lines, then ``name[unit]`` columns).
+
+Columns and units: docs/data-formats.md.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import math
+import re
+from collections.abc import Mapping, Sequence
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .record import ANGLE_NAMES, MEASURED_NAMES, Record, RecordError
+
+__all__ = ['read_csv', 'write_csv_header', 'write_csv_columns', 'ANGLE_UNITS', 'TIME_UNITS',
+           'TIME_NAMES']
+
+#: angle units accepted in a CSV header, factor to rad
+ANGLE_UNITS: dict[str, float] = {'rad': 1.0, 'mrad': 1e-3, 'urad': 1e-6, 'µrad': 1e-6,
+                                 'deg': math.pi / 180.0}
+#: time units accepted in a CSV header, factor to s (exact decimals)
+TIME_UNITS: dict[str, Decimal] = {'s': Decimal(1), 'ms': Decimal('1e-3'),
+                                  'us': Decimal('1e-6'), 'µs': Decimal('1e-6'),
+                                  'ns': Decimal('1e-9')}
+TIME_NAMES = ('t', 'time', '__time')            # __time: PlotJuggler's CSV export
+#: a unitless time column starting above this many "seconds" (year 5138) is refused:
+#: it is a stamp in ms/us/ns whose unit the header must name
+PLAUSIBLE_SECONDS = 1e11
+
+
+def write_csv_header(fh: Any, names: Sequence[str], comment: str = '') -> None:
+    """The head of a numeric CSV: each line of ``comment`` as a ``# `` line, then the column
+    names (with their units, e.g. ``theta4[rad]``) on one line."""
+    fh.write(''.join(f'# {line}\n' for line in comment.splitlines()))
+    fh.write(','.join(names) + '\n')
+
+
+def write_csv_columns(path: str | Path, names: Sequence[str], data: np.ndarray,
+                      fmt: str | Sequence[str] = '%.12g', comment: str = '') -> Path:
+    """Numeric columns as CSV (``data``: one row per sample), with the head of
+    :func:`write_csv_header`; the parent directory is created."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    with open(p, 'w') as fh:
+        write_csv_header(fh, names, comment)
+        np.savetxt(fh, data, delimiter=',', fmt=fmt)
+    return p
+
+
+
+# ---- CSV ---------------------------------------------------------------------------------
+_HEADER_RE = re.compile(r'^\s*(?P<name>[^\[\(]*?)\s*(?:[\[\(](?P<unit>[^\]\)]*)[\]\)])?\s*$')
+
+
+def _split_header(field_text: str) -> tuple[str, str]:
+    """'theta1 [deg]' -> ('theta1', 'deg'); 't(s)' -> ('t', 's'); 'theta2' -> ('theta2', '')."""
+    text = field_text.strip().strip('"\'')
+    m = _HEADER_RE.match(text)
+    if not m:
+        return text, ''
+    return m.group('name').strip(), (m.group('unit') or '').strip()
+
+
+def read_csv(path: str | Path, *, columns: Mapping[str, str] | None = None,
+             name: str | None = None, min_samples: int = 2,
+             require_measured: bool = False) -> Record:
+    """Read a CSV record whose header names its columns.
+
+    Required: a time column ``t`` (also ``time`` or PlotJuggler's ``__time``) and
+    ``theta1``; optional ``theta2``, ``theta3``, ``theta4``.  A unit in brackets or
+    parentheses after the name is converted (time: s, ms, us, ns; angles: rad, mrad, urad,
+    deg); without one, SI (s, rad) is assumed.  ``columns`` maps a role to a header name
+    (``{'theta1': '/worm_angle_command/data'}``).  Other columns are ignored and listed in
+    ``source['ignored_columns']``.  Lines starting with '#' are comments.  Times become
+    relative to the first sample, read as exact decimals (epoch stamps keep their
+    nanoseconds); ``t0_ns`` is the first time.  Every problem raises :class:`RecordError`
+    naming the line and column.
+    """
+    p = Path(path)
+    where = str(p)
+    if not p.exists():
+        raise RecordError(f'{where}: file not found')
+    if p.is_dir():
+        raise RecordError(f'{where}: is a directory (a rosbag2 bag? use --bag)')
+    try:
+        text = p.read_text(encoding='utf-8-sig')
+    except UnicodeDecodeError:
+        raise RecordError(f'{where}: not a text CSV file') from None
+    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
+             if ln.strip() and not ln.lstrip().startswith('#')]
+    if not lines:
+        raise RecordError(f'{where}: empty (no header, no data)')
+    head_no, head = lines[0]
+    delim = next((d for d in (',', ';', '\t') if d in head), ',')
+    header = next(csv.reader([head], delimiter=delim))
+    if all(_is_number(h) for h in header):
+        raise RecordError(f'{where}: line {head_no}: no header line; the first line must '
+                          "name the columns, e.g. 't [s],theta1 [rad]'")
+    fields = [_split_header(h) for h in header]
+    roles = _assign_roles(fields, header, columns or {}, where)
+    units, scale = {}, {}
+    for role, col in roles.items():
+        unit = fields[col][1]
+        if role == 't':
+            unit = unit or 's'
+            if unit not in TIME_UNITS:
+                raise RecordError(f'{where}: column {header[col].strip()!r}: unknown time unit '
+                                  f'{unit!r} (use one of {", ".join(TIME_UNITS)})')
+        else:
+            unit = unit or 'rad'
+            if unit not in ANGLE_UNITS:
+                raise RecordError(f'{where}: column {header[col].strip()!r}: unknown angle '
+                                  f'unit {unit!r} (use one of {", ".join(ANGLE_UNITS)})')
+            scale[role] = ANGLE_UNITS[unit]
+        units[role] = unit
+    n_fields = len(header)
+    times: list[Decimal] = []
+    values: dict[str, list[float]] = {r: [] for r in roles if r != 't'}
+    t_col = roles['t']
+    prev: Decimal | None = None
+    for line_no, ln in lines[1:]:
+        row = next(csv.reader([ln], delimiter=delim))
+        if len(row) == n_fields + 1 and not row[-1].strip():
+            row = row[:-1]                        # trailing delimiter
+        if len(row) != n_fields:
+            raise RecordError(f'{where}: line {line_no}: {len(row)} fields, the header has '
+                              f'{n_fields}')
+        cell = row[t_col].strip()
+        try:
+            tv = Decimal(cell)
+        except InvalidOperation:
+            tv = Decimal('NaN')
+        if not tv.is_finite():
+            raise RecordError(f'{where}: line {line_no}, column {header[t_col].strip()!r}: '
+                              f'{cell!r} is not a finite time')
+        if prev is not None and tv <= prev:
+            what = 'repeats the previous time (duplicated sample)' if tv == prev else \
+                f'goes backwards (after {prev})'
+            raise RecordError(f'{where}: line {line_no}, column {header[t_col].strip()!r}: '
+                              f'time {cell} {what}; times must increase strictly')
+        prev = tv
+        times.append(tv)
+        for role, vals in values.items():
+            col = roles[role]
+            cell = row[col].strip()
+            try:
+                v = float(cell)
+            except ValueError:
+                what = 'empty' if not cell else f'{cell!r} is not a number'
+                raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
+                                  f'{what}') from None
+            if not math.isfinite(v):
+                raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
+                                  f'{cell} is not a finite angle')
+            vals.append(v * scale[role])
+    if len(times) < min_samples:
+        raise RecordError(f'{where}: {len(times)} data row(s); a record needs at least '
+                          f'{min_samples} samples')
+    sc = TIME_UNITS[units['t']]
+    first = times[0] * sc                                   # seconds, exact
+    if not fields[t_col][1] and abs(first) > PLAUSIBLE_SECONDS:
+        raise RecordError(f'{where}: column {header[t_col].strip()!r}: first time {times[0]} '
+                          'is not a plausible time in seconds; name its unit in the header, '
+                          "e.g. 't [ns]' or 't [ms]'")
+    t = np.array([float(tv * sc - first) for tv in times])
+    t0_ns = int((first * 10 ** 9).to_integral_value())
+    measured = {r: np.asarray(values[r]) for r in MEASURED_NAMES if r in values}
+    if require_measured and not measured:
+        raise RecordError(f'{where}: no measured column (theta2, theta3 or theta4) in the '
+                          f'header {", ".join(h.strip() for h in header)}')
+    used = set(roles.values())
+    src = {'kind': 'csv', 'path': str(p), 'units': units,
+           'columns': {r: header[c].strip() for r, c in roles.items()},
+           'ignored_columns': [header[i].strip() for i in range(n_fields) if i not in used]}
+    return Record(name=name or p.stem, t=t, theta1=np.asarray(values['theta1']),
+                  measured=measured, t0_ns=t0_ns, source=src)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _assign_roles(fields: list[tuple[str, str]], header: list[str],
+                  columns: Mapping[str, str], where: str) -> dict[str, int]:
+    """Column index of each role (t, theta1..theta4) by header name."""
+    known = ('t',) + ANGLE_NAMES
+    for role in columns:
+        if role not in known:
+            raise RecordError(f'column mapping {role!r}: unknown role (one of '
+                              f'{", ".join(known)})')
+    names = [f[0] for f in fields]
+    roles: dict[str, int] = {}
+    for role in known:
+        if role in columns:
+            want = columns[role].strip()
+            hits = [i for i, h in enumerate(header) if h.strip() == want or names[i] == want]
+            if not hits:
+                raise RecordError(f'{where}: no column {want!r} (mapped to {role}) in the '
+                                  f'header {", ".join(h.strip() for h in header)}'
+                                  + _did_you_mean(want, names))
+        else:
+            aliases = TIME_NAMES if role == 't' else (role,)
+            hits = [i for i, n in enumerate(names) if n in aliases
+                    and not any(names[i] == columns[r] for r in columns)]
+        if len(hits) > 1:
+            cols = ', '.join(repr(header[i].strip()) for i in hits)
+            raise RecordError(f'{where}: columns {cols} all give {role}: ambiguous, keep one')
+        if hits:
+            roles[role] = hits[0]
+    for role in ('t', 'theta1'):
+        if role not in roles:
+            what = 'time' if role == 't' else 'commanded worm angle'
+            raise RecordError(f'{where}: no column {role!r} ({what}) in the header '
+                              f'{", ".join(h.strip() for h in header)}'
+                              + _did_you_mean(role, names, TIME_NAMES if role == 't' else ())
+                              + '; name it in the header or map it (--column ROLE=NAME)')
+    return roles
+
+
+def _did_you_mean(name: str, candidates: Sequence[str], aliases: Sequence[str] = ()) -> str:
+    for n in (name, *aliases):
+        close = difflib.get_close_matches(n, list(candidates), n=1, cutoff=0.5)
+        if close:
+            return f' (did you mean {close[0]!r}?)'
+    return ''

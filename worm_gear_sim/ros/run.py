@@ -1,0 +1,155 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The node's process: ``rclpy.init``, the executor, spinning until Ctrl-C / SIGTERM, and
+the exit codes (0 after a signal at any time, 2 after a one-line configuration error).
+
+Reached through :func:`worm_gear_sim.ros.startup.node_main` (console script
+``worm_gear_sim_node``, ``python -m worm_gear_sim.node``), which installs the start-up
+signal handlers before the heavy imports.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import sys
+from typing import Any
+
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
+from rclpy.task import Future
+from rclpy.utilities import remove_ros_args
+
+from ..params import ConfigError
+from . import startup
+from .node import WormGearSimNode
+
+RCLError = _rclpy_impl.RCLError          # RCLInvalidROSArgsError derives from it
+
+__all__ = ['main', 'make_executor', 'spin_until_shutdown', 'STARTUP_CONFIG_ERRORS']
+
+#: Errors of the parameters given at start-up: one line and exit code 2 (``startup``).
+#: ValueError covers numerically unusable values (LinAlgError is one) until the core proves
+#: a set usable itself.
+STARTUP_CONFIG_ERRORS = (ConfigError, ParameterException, ValueError, ArithmeticError)
+
+
+def make_executor(kind: str, context: Any = None) -> Any:
+    """'events' (rclpy.experimental.EventsExecutor) or 'single_threaded'."""
+    if kind == 'events':
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor(context=context)
+    if kind == 'single_threaded':
+        return SingleThreadedExecutor(context=context)
+    raise ValueError(f'unknown executor {kind!r} (events | single_threaded)')
+
+
+def spin_until_shutdown(executor: Any, context: Any = None, slice_s: float = 1.0) -> None:
+    """Spin until the context shuts down (Ctrl-C, SIGTERM, rclpy.shutdown).
+
+    The loop runs ``spin_until_future_complete`` on a future that never completes, with a
+    finite ``slice_s``: with ros-rclpy 9.1.2 from PyPI, ``EventsExecutor.spin()`` (an
+    unbounded deadline) busy-waits at 100 % CPU and never dispatches wall-clock timers, while
+    a bounded deadline works (0.1 core for an empty 1 kHz timer).  Each slice processes
+    every event until its deadline, so this is not a ``spin_once`` loop.
+    """
+    ctx = context if context is not None else rclpy.get_default_context()
+    never = Future()
+    while ctx.ok():
+        executor.spin_until_future_complete(never, timeout_sec=slice_s)
+
+
+def _parse_args(argv: list[str]) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(
+        prog='worm_gear_sim_node',
+        description='Worm-gear drive model in real time (parameters: --ros-args '
+                    '--params-file config/worm_gear_sim.yaml).')
+    ap.add_argument('--executor', choices=('events', 'single_threaded'), default=None,
+                    help='override the node.executor parameter')
+    return ap.parse_args(argv)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``worm_gear_sim_node`` and ``python -m worm_gear_sim.node`` (through
+    :func:`worm_gear_sim.ros.startup.node_main`, which installs the signal handlers before
+    the heavy imports).
+
+    Returns 0 after Ctrl-C / SIGTERM at any time (no traceback), 2 after one line naming a
+    configuration error (broken, missing or unreadable params file, malformed ``-p``,
+    unknown or misspelt parameter, invalid or unusable value).  Portable across rclpy 7
+    (Jazzy) and 9 (Kilted): ``rclpy.init`` + ``try/finally rclpy.try_shutdown()``.
+    """
+    startup.install_signal_handlers()
+    argv = list(sys.argv if args is None else args)
+    bad = startup.check_params_files(argv)
+    if bad:
+        return startup.config_error(bad)
+    try:   # parses --ros-args, params files included: errors end here, before rclpy.init
+        rest = remove_ros_args(args=argv)
+    except RCLError as exc:
+        return startup.config_error(startup.clean_rcl_message(exc))
+    opts = _parse_args(rest[1:])
+    try:
+        rclpy.init(args=argv)
+    except RCLError as exc:
+        return startup.config_error(startup.clean_rcl_message(exc))
+    startup.set_phase('ros')        # from now on rclpy's handler shuts the context down
+    try:
+        if startup.signalled():     # a start-up signal whose SystemExit got swallowed
+            return 0
+        return _run(opts)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    finally:
+        startup.set_phase('stopping')
+        _quietly(rclpy.try_shutdown)
+
+
+def _run(opts: argparse.Namespace) -> int:
+    context = rclpy.get_default_context()
+    try:
+        node = WormGearSimNode()
+    except STARTUP_CONFIG_ERRORS as exc:
+        if not context.ok():        # a signal shut the context down during declaration
+            return 0
+        return startup.config_error(f'invalid parameters: {exc}')
+    except Exception:
+        if not context.ok():
+            return 0
+        raise
+    if not context.ok() or startup.signalled():   # Ctrl-C / SIGTERM during the build
+        _quietly(node.destroy_node)
+        return 0
+    kind = opts.executor or node.config.node.executor
+    executor = make_executor(kind)
+    # Move everything allocated so far (numba, scipy, rclpy: a large heap) out of the
+    # cyclic GC's reach: full collections of it took milliseconds and showed up as missed
+    # ticks.
+    gc.collect()
+    gc.freeze()
+    executor.add_node(node)
+    node.get_logger().info(f'spinning with the {kind} executor')
+    try:
+        spin_until_shutdown(executor, context)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:
+        if context.ok():
+            raise
+        # The signal handler shut the context down while a callback was running (e.g. a
+        # publish on a context being torn down): a normal shutdown.
+    finally:
+        startup.set_phase('stopping')
+        _quietly(executor.shutdown, 1.0)
+        _quietly(node.destroy_node)
+    return 0
+
+
+def _quietly(fn: Any, *args: Any) -> None:
+    try:
+        fn(*args)
+    except Exception:  # noqa: BLE001 - best effort at shutdown
+        pass
+

@@ -1,0 +1,192 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The demo servo's reference patterns and its move-by-move account of a live error trace.
+
+:func:`command_pattern` is theta1(t) of a pattern (``paper``: the paper's 18-step move
+forward then back every ``move_period``; ``slew``: a radar slew with a sharp reversal every
+``slew_period``), built from the core's profiles; :func:`pattern_segments` cuts it into
+moves; :class:`MoveTracker` closes each move as its samples arrive and measures it with
+:func:`~worm_gear_sim.studies.compensation_eval.move_metrics` (the rules of the offline
+evaluation); :func:`offline_moves` runs the same reference through the core
+(:func:`~worm_gear_sim.studies.compensation_eval.run_scenario`) into the same moves.  The
+ROS side (streaming, subscriptions) is :mod:`worm_gear_sim.ros.demo_commander`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..modal import modes
+from ..params import Config
+from ..profiles import TrapezoidalProfile
+from .compensation_eval import Scenario, move_metrics, run_scenario
+
+__all__ = ['PAPER_LEAD', 'command_pattern', 'Segments', 'pattern_segments', 'MoveSummary',
+           'MoveTracker', 'offline_moves', 'first_mode_hz']
+
+PAPER_LEAD = 0.05               # s of rest before the first paper move
+
+
+def command_pattern(name: str, cfg: Config, move_period: float = 0.5,
+                    slew_rate: float = 2.0, slew_period: float = 2.0
+                    ) -> Callable[[Any], np.ndarray]:
+    """theta1(t) [rad] of the demo stream, vectorised over t [s]."""
+    if name == 'paper':
+        inp = cfg.input
+        move = TrapezoidalProfile(inp.target_angle, inp.move_time, inp.accel_time, 0.0)
+
+        def theta1(t):
+            t = np.asarray(t, float) - PAPER_LEAD
+            k = np.floor(np.maximum(t, 0.0) / move_period)
+            tau = np.where(t < 0.0, -1.0, t - k * move_period)
+            x = move.theta1(tau)
+            return np.where(k % 2 == 0, x, inp.target_angle - x)   # forward, back, ...
+        return theta1
+    if name == 'slew':
+        amp = slew_rate * slew_period      # one leg: slew_period at slew_rate
+
+        def theta1(t):
+            x = (np.asarray(t, float) / (2.0 * slew_period)) % 1.0
+            return np.where(x < 0.5, 2.0 * amp * x, 2.0 * amp * (1.0 - x))
+        return theta1
+    raise ValueError(f'unknown pattern {name!r} (paper | slew)')
+
+
+@dataclass(frozen=True)
+class Segments:
+    """Moves of a pattern: move k spans [first + k period, first + (k+1) period); its
+    reference moves until ``motion`` after its start, then rests (paper) or keeps a
+    constant rate (slew, ``constant_rate``)."""
+
+    first: float
+    period: float
+    motion: float
+    constant_rate: bool
+    labels: tuple[str, str]
+
+
+def pattern_segments(name: str, cfg: Config, move_period: float = 0.5,
+                     slew_period: float = 2.0) -> Segments:
+    if name == 'paper':
+        return Segments(PAPER_LEAD, move_period, cfg.input.move_time, False, ('fwd', 'back'))
+    if name == 'slew':
+        return Segments(0.0, slew_period, 0.0, True, ('up', 'down'))
+    raise ValueError(f'unknown pattern {name!r} (paper | slew)')
+
+
+@dataclass(frozen=True)
+class MoveSummary:
+    index: int
+    label: str
+    start: float                  # s of pattern time
+    peak: float                   # max |e| over the move [rad]
+    ringing: float                # max |e - static| once the applied command rests [rad]
+    settling: float               # s from the end of the motion into +-10 urad (inf: never)
+    tracking_rms: float           # rad, slew legs (nan for paper moves)
+    samples: int
+
+
+class MoveTracker:
+    """Collects (t, e) samples in time order and closes each move of the pattern when a
+    sample past its end arrives; a move with a gap longer than ``max_gap`` (or not covered
+    to within ``max_gap`` of its ends) is dropped and counted in ``incomplete``.
+
+    The metrics are :func:`~worm_gear_sim.studies.compensation_eval.move_metrics`: ``ringing``
+    is its ``residual_peak``, measured once the applied command rests.  Without command samples
+    (``add_command``) the command is the reference, which rests when its motion ends; with
+    a feed-forward applied, the command keeps moving for the correction's span."""
+
+    def __init__(self, seg: Segments, mode_hz: float, max_gap: float = 0.02):
+        self.seg, self.mode_hz, self.max_gap = seg, mode_hz, max_gap
+        self.moves: list[MoveSummary] = []
+        self.incomplete = 0
+        self._k = 0
+        self._t: list[float] = []
+        self._e: list[float] = []
+        self._moving: dict[int, float] = {}     # move -> last instant its command moved
+        self._last_cmd: tuple[float, float] | None = None
+        self.use_commands = True                # False: the command is the reference
+
+    def _bounds(self, k: int) -> tuple[float, float]:
+        a = self.seg.first + k * self.seg.period
+        return a, a + self.seg.period
+
+    def add_command(self, t: float, command: float) -> None:
+        """A sample of the command applied to the drive (theta1_ref + delta)."""
+        last = self._last_cmd
+        self._last_cmd = (t, command)
+        if last is None or t <= last[0] or abs(command - last[1]) <= 1e-12:
+            return
+        k = int((t - self.seg.first) // self.seg.period)
+        if k >= 0:
+            self._moving[k] = t
+
+    def add(self, t: float, e: float) -> MoveSummary | None:
+        """Add a sample; returns the move it completed, if any."""
+        a, b = self._bounds(self._k)
+        if t < a:
+            return None
+        done = None
+        if t >= b:
+            done = self._close()
+            k = int((t - self.seg.first) // self.seg.period)
+            self.incomplete += k - self._k - 1      # moves without a single sample
+            self._k = k
+        self._t.append(t)
+        self._e.append(e)
+        return done
+
+    def _close(self) -> MoveSummary | None:
+        a, b = self._bounds(self._k)
+        t, e = np.asarray(self._t), np.asarray(self._e)
+        self._t, self._e = [], []
+        moved = self._moving.pop(self._k, None)
+        for k in [k for k in self._moving if k < self._k]:
+            del self._moving[k]
+        if t.size < 3 or t[0] - a > self.max_gap or b - t[-1] > self.max_gap \
+                or np.max(np.diff(t)) > self.max_gap:
+            self.incomplete += 1
+            return None
+        tr = t - a
+        seg = self.seg
+        sc = Scenario(name='demo move', times=tr, theta1_ref=np.zeros_like(tr),
+                      move_end=seg.motion,
+                      constant_rate=((seg.motion, seg.period),) if seg.constant_rate else ())
+        command_end = seg.motion
+        if moved is not None and self.use_commands and not seg.constant_rate:
+            command_end = min(max(moved - a, seg.motion), float(tr[-1]))
+        m = move_metrics(tr, e, sc, self.mode_hz, command_end)
+        summary = MoveSummary(self._k, seg.labels[self._k % 2], a, float(np.max(np.abs(e))),
+                              m['residual_peak'], m['settling_time'], m['tracking_rms'],
+                              int(t.size))
+        self.moves.append(summary)
+        return summary
+
+
+def offline_moves(cfg: Config, theta1: Callable[[Any], np.ndarray], seg: Segments,
+                  t_end: float, rate: float, compensated: bool) -> list[MoveSummary]:
+    """The same reference, sampled at ``rate`` up to ``t_end``, through the core
+    (``run_scenario``: nonlinear plant, feed-forward of ``cfg`` when ``compensated``), cut
+    into the same moves as the live trace."""
+    times = np.arange(0.0, t_end + 0.5 / rate, 1.0 / rate)
+    x = np.asarray(theta1(times), float)
+    sc = Scenario(name='demo', times=times, theta1_ref=x, move_end=float(times[0]),
+                  constant_rate=())          # run_scenario's own metrics are not used
+    record = max(1, int(round(1.0 / (rate * cfg.integrator.time_step))))
+    run = run_scenario(cfg, sc, cfg if compensated else None, record_every=record)
+    tracker = MoveTracker(seg, first_mode_hz(cfg))
+    if compensated:
+        for ti, ci in zip(times, x + run.delta):
+            tracker.add_command(float(ti), float(ci))
+    for ti, ei in zip(run.trajectory.t, run.error):
+        tracker.add(float(ti), float(ei))
+    return tracker.moves
+
+
+def first_mode_hz(cfg: Config) -> float:
+    """The first natural frequency [Hz] of the drive (the metrics' ringing period)."""
+    return float(modes(cfg).frequencies_hz[0])
