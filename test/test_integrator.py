@@ -265,7 +265,10 @@ def test_ramp_tracking_without_load_has_no_static_error():
 def _ring_down(over, dt, horizon=0.5):
     from worm_gear_sim.simulation import ring_down
     cfg = Config().replace(dict(over, **{'integrator.time_step': dt}))
-    tr = simulate(cfg, t_end=0.02 + horizon, record_every=max(1, int(round(1e-5 / dt))))
+    n, k = round((0.02 + horizon) / dt), max(1, int(1e-5 / dt + 1e-9))
+    while n % k:                # a row about every 10 us, and one at the end of the run
+        k -= 1
+    tr = simulate(cfg, t_end=0.02 + horizon, record_every=k)
     eq = static_equilibrium(pack_parameters(cfg), float(tr.theta1[-1]))
     return ring_down(tr, 0.02, eq[2], horizon)
 
