@@ -422,10 +422,11 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
+
+    from worm_gear_sim.ros.run import make_executor
 
     load0 = os.getloadavg()
     logs = tempfile.TemporaryDirectory(prefix='bench_node_')
@@ -433,8 +434,6 @@ def main(argv: list[str] | None = None) -> int:
         ['-p', f'node.command_timing:={args.command_timing}'] if args.command_timing else []))
     rclpy.init()
     probe = rclpy.create_node('bench_probe')
-    ex = SingleThreadedExecutor()
-    ex.add_node(probe)
     pub = probe.create_publisher(Float64, 'worm_angle_command', QoSProfile(depth=10))
     sent: collections.deque = collections.deque(maxlen=64)      # (value, t_sent)
     step = args.command_rate and args.slew_rate / args.command_rate  # rad between commands
@@ -478,8 +477,6 @@ def main(argv: list[str] | None = None) -> int:
     probe.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     # The probe runs on the EventsExecutor (bounded spin slices, as the node does): a 1 kHz
     # timer publishes the commands and advances the phases, so the probe itself stays light.
-    from worm_gear_sim.ros.run import make_executor
-    ex.shutdown()
     ex = make_executor('events')
     ex.add_node(probe)
     done = rclpy.task.Future()
