@@ -35,7 +35,6 @@ import argparse
 import collections
 import math
 import os
-import signal
 import subprocess
 import sys
 import tempfile
@@ -334,8 +333,6 @@ def stamped_main(args: argparse.Namespace) -> int:
     try:
         spin_until_done(ex, done, linger=0.5)     # then let the last answers arrive
     finally:
-        for p in procs.values():
-            p.send_signal(signal.SIGINT)
         errs = {ns: stop_node(p, log, timeout=30.0)[1] for ns, (p, log) in started.items()}
         logs.cleanup()
         ex.shutdown()

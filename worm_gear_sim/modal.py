@@ -113,7 +113,8 @@ def _undamped_modes(K: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return undamped, shapes
 
 
-def _damped_modes(M: np.ndarray, K: np.ndarray, C: np.ndarray, n_modes: int = 3):
+def _damped_modes(M: np.ndarray, K: np.ndarray, C: np.ndarray,
+                  n_modes: int = 3) -> tuple[np.ndarray, np.ndarray]:
     """Damped frequency [Hz] and damping ratio of each mode, lowest natural frequency first.
 
     The finite eigenvalues of the first-order pencil ([0 I; -K -C], [I 0; 0 M]) are grouped

@@ -54,7 +54,7 @@ PHASE_AT_MEAN_STIFFNESS = 1.8373
 
 def _f(default: Any, description: str, unit: str = '', lo: float | None = None,
        hi: float | None = None, lo_open: bool = False, choices: tuple[str, ...] = (),
-       read_only: bool = False, length: int | None = None):
+       read_only: bool = False, length: int | None = None) -> Any:
     """Declare a parameter field with its metadata (single source for docs, ROS, checks)."""
     meta = dict(description=description, unit=unit, lo=lo, hi=hi, lo_open=lo_open,
                 choices=choices, read_only=read_only, length=length)
@@ -360,7 +360,7 @@ class Config:
     node: NodeSettings = field(default_factory=NodeSettings)
     compensation: CompensationSettings = field(default_factory=CompensationSettings)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         validate(self)
 
     def to_flat_dict(self) -> dict[str, Any]:

@@ -25,10 +25,13 @@ __all__ = ['ConfigError', 'suggest', 'VALUE_KINDS', 'value_kind', 'field_default
 
 
 class ConfigError(ValueError):
-    """An invalid parameter value or configuration file; ``key`` names the bad parameter."""
+    """An invalid parameter value or configuration file; ``key`` names the bad parameter,
+    ``keys`` every parameter blamed (a whole-set rule of :mod:`~worm_gear_sim.usability` may
+    name several)."""
 
-    def __init__(self, key: str, message: str):
+    def __init__(self, key: str, message: str, keys: Iterable[str] = ()) -> None:
         self.key = key
+        self.keys: tuple[str, ...] = tuple(keys) or ((key,) if key else ())
         self.reason = message
         super().__init__(f'{key}: {message}' if key else message)
 
