@@ -35,9 +35,9 @@ import argparse
 import collections
 import math
 import os
-import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -45,20 +45,18 @@ from typing import Any
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from node_probe import (  # noqa: E402
+    Phases,
+    lost_periods,
+    proc_cpu_seconds,
+    slew,
+    spin_until_done,
+    start_node,
+    stop_node,
+)
+
 TARGET_CPU, TARGET_MISSED, TARGET_P99_MS = 0.15, 0.001, 1.5
-
-
-def proc_cpu_seconds(pid: int) -> float:
-    """utime + stime of a process (all threads) in seconds."""
-    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-
-
-def slew(t: float, rate: float = 0.5, amplitude: float = 0.5) -> float:
-    """Triangle: constant rate back and forth between +-amplitude [rad of worm]."""
-    period = 4.0 * amplitude / rate
-    x = (t % period) / period
-    return amplitude * (4.0 * x - 1.0 if x < 0.5 else 3.0 - 4.0 * x)
 
 
 def breakdown(n_ticks: int = 2000) -> dict[str, float]:
@@ -225,19 +223,17 @@ def stamped_main(args: argparse.Namespace) -> int:
     from std_msgs.msg import Float64
 
     from worm_gear_sim.compensation import feedforward_series
-    from worm_gear_sim.params import load_config
+    from worm_gear_sim.config_io import load_config
     from worm_gear_sim.ros.run import make_executor
 
     load0 = os.getloadavg()
     cfg_path = ROOT / 'config' / 'worm_gear_sim.yaml'
     cfg = load_config(cfg_path)
-    procs = {}
-    for ns in ('stamped', 'float64'):
-        procs[ns] = subprocess.Popen(
-            [sys.executable, '-m', 'worm_gear_sim.node', '--executor', args.executor,
-             '--ros-args', '--params-file', str(cfg_path), '-r', f'__ns:=/{ns}',
-             '--log-level', 'warn'], cwd=ROOT, stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE, text=True)
+    logs = tempfile.TemporaryDirectory(prefix='bench_node_')
+    started = {ns: start_node(Path(logs.name) / f'{ns}.log', executor=args.executor,
+                              ros_args=['-r', f'__ns:=/{ns}'])
+               for ns in ('stamped', 'float64')}
+    procs = {ns: p for ns, (p, _) in started.items()}
     rclpy.init()
     probe = rclpy.create_node('bench_probe')
     reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -335,21 +331,10 @@ def stamped_main(args: argparse.Namespace) -> int:
 
     probe.create_timer(1.0 / args.command_rate, on_timer)
     try:
-        while not done.done():
-            ex.spin_until_future_complete(done, timeout_sec=1.0)
-        t_end = time.monotonic() + 0.5                # let the last answers arrive
-        while time.monotonic() < t_end:
-            ex.spin_until_future_complete(rclpy.task.Future(), timeout_sec=0.1)
+        spin_until_done(ex, done, linger=0.5)     # then let the last answers arrive
     finally:
-        for p in procs.values():
-            p.send_signal(signal.SIGINT)
-        errs = {}
-        for n, p in procs.items():
-            try:
-                errs[n] = p.communicate(timeout=30)[1]
-            except subprocess.TimeoutExpired:
-                p.kill()
-                errs[n] = p.communicate()[1]
+        errs = {ns: stop_node(p, log, timeout=30.0)[1] for ns, (p, log) in started.items()}
+        logs.cleanup()
         ex.shutdown()
         probe.destroy_node()
         rclpy.try_shutdown()
@@ -418,7 +403,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--slew-rate', type=float, default=0.5,
                     help='worm slew rate [rad/s] (0.5; amplitude 0.5 rad)')
     ap.add_argument('--stamped', action='store_true',
-                    help='issue-8 benchmark: stamped references to one node and the same '
+                    help='stamped references to one node and the same '
                          'samples as Float64 commands to a second node, side by side')
     ap.add_argument('--param-sets', type=int, default=0,
                     help='--stamped: this many valid parameter sets (friction.mu_kinetic) '
@@ -434,23 +419,18 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
 
+    from worm_gear_sim.ros.run import make_executor
+
     load0 = os.getloadavg()
-    node_cmd = [sys.executable, '-m', 'worm_gear_sim.node', '--executor', args.executor,
-                '--ros-args', '--params-file', str(ROOT / 'config' / 'worm_gear_sim.yaml'),
-                '--log-level', 'warn']
-    if args.command_timing:
-        node_cmd += ['-p', f'node.command_timing:={args.command_timing}']
-    proc = subprocess.Popen(node_cmd, cwd=ROOT, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+    logs = tempfile.TemporaryDirectory(prefix='bench_node_')
+    proc, log = start_node(Path(logs.name) / 'node.log', executor=args.executor, ros_args=(
+        ['-p', f'node.command_timing:={args.command_timing}'] if args.command_timing else []))
     rclpy.init()
     probe = rclpy.create_node('bench_probe')
-    ex = SingleThreadedExecutor()
-    ex.add_node(probe)
     pub = probe.create_publisher(Float64, 'worm_angle_command', QoSProfile(depth=10))
     sent: collections.deque = collections.deque(maxlen=64)      # (value, t_sent)
     step = args.command_rate and args.slew_rate / args.command_rate  # rad between commands
@@ -494,35 +474,21 @@ def main(argv: list[str] | None = None) -> int:
     probe.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     # The probe runs on the EventsExecutor (bounded spin slices, as the node does): a 1 kHz
     # timer publishes the commands and advances the phases, so the probe itself stays light.
-    from worm_gear_sim.ros.run import make_executor
-    ex.shutdown()
     ex = make_executor('events')
     ex.add_node(probe)
     done = rclpy.task.Future()
     t_start = time.monotonic()
-    run = {'phase': 'wait', 'cpu0': 0.0, 'wall0': 0.0, 'cpu1': 0.0, 'wall1': 0.0,
-           'diag0': {}, 'error': '', 'k': 0}
+    phases = Phases(proc, args.warmup, args.duration, t_start)
+    run = {'diag0': {}, 'k': 0}
 
     def on_timer() -> None:
         now = time.monotonic()
-        if proc.poll() is not None:
-            run['error'] = 'node process exited'
-            done.set_result(True)
-            return
-        ph = run['phase']
-        if ph == 'wait' and state['n_js'] > 0:
-            run['phase'], run['t_warm'] = 'warm', now
-        elif ph == 'warm' and now - run['t_warm'] >= args.warmup:
-            run['phase'], state['measuring'] = 'measure', True
-            run['cpu0'], run['wall0'] = proc_cpu_seconds(proc.pid), now
+        event = phases.update(now, state['n_js'] > 0)
+        if event == 'start':
+            state['measuring'] = True
             run['diag0'] = dict(diag)
-        elif ph == 'measure' and now - run['wall0'] >= args.duration:
-            run['cpu1'], run['wall1'] = proc_cpu_seconds(proc.pid), now
+        elif event == 'end':
             state['measuring'] = False
-            done.set_result(True)
-            return
-        elif ph == 'wait' and now - t_start > 120.0:
-            run['error'] = 'no JointState from the node within 120 s'
             done.set_result(True)
             return
         if args.servo_grid:   # one slot per callback; re-synchronised after lost ones
@@ -537,36 +503,23 @@ def main(argv: list[str] | None = None) -> int:
 
     probe.create_timer(1.0 / args.command_rate, on_timer)
     try:
-        while not done.done():
-            ex.spin_until_future_complete(done, timeout_sec=1.0)
-        if run['error']:
-            print(run['error'], file=sys.stderr)
+        spin_until_done(ex, done)
+        if phases.error:
+            print(phases.error, file=sys.stderr)
             return 2
-        t_end = time.monotonic() + 1.5               # the last diagnostics (1 s period)
-        while time.monotonic() < t_end:
-            ex.spin_until_future_complete(rclpy.task.Future(), timeout_sec=0.2)
+        spin_until_done(ex, done, linger=1.5)       # the last diagnostics (1 s period)
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-        try:
-            rc = proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            rc = proc.wait()
+        rc, _ = stop_node(proc, log)
+        logs.cleanup()
         ex.shutdown()
         probe.destroy_node()
         rclpy.try_shutdown()
-    cpu0, wall0, cpu1, wall1 = run['cpu0'], run['wall0'], run['cpu1'], run['wall1']
     diag0 = run['diag0']
 
-    wall = wall1 - wall0
-    cores = (cpu1 - cpu0) / wall
+    wall = phases.wall
+    cores = phases.cores
     n_expected = round(wall * 1000.0)
-    lost = 0
-    for a, b in zip(stamps, stamps[1:]):
-        gap = (b - a) / 1e6
-        if gap > 1.5:
-            lost += int(round(gap)) - 1
+    lost = lost_periods(stamps, 1e6)
     missed_rx = lost / max(1, n_expected)
     node_missed = int(diag.get('missed_ticks', 0)) - int(diag0.get('missed_ticks', 0))
     node_ticks = int(diag.get('ticks', 0)) - int(diag0.get('ticks', 0))

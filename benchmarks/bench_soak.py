@@ -38,8 +38,9 @@ import argparse
 import collections
 import math
 import os
-import subprocess
+import signal
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -47,7 +48,14 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_node import proc_cpu_seconds, slew  # noqa: E402
+from node_probe import (  # noqa: E402
+    Phases,
+    lost_periods,
+    slew,
+    spin_until_done,
+    start_node,
+    stop_node,
+)
 
 
 def rss_mb(pid: int) -> float:
@@ -109,12 +117,9 @@ def main(argv: list[str] | None = None) -> int:
     from worm_gear_sim.ros.run import make_executor
 
     load0 = os.getloadavg()
-    node_cmd = [sys.executable, '-m', 'worm_gear_sim.node', '--ros-args', '--params-file',
-                str(ROOT / 'config' / 'worm_gear_sim.yaml'), '--log-level',
-                'warn' if args.node_log else 'error']
-    log_fh = open(args.node_log, 'w') if args.node_log else None
-    proc = subprocess.Popen(node_cmd, cwd=ROOT, stdout=subprocess.DEVNULL,
-                            stderr=log_fh or subprocess.PIPE, text=True)
+    logs = tempfile.TemporaryDirectory(prefix='bench_soak_')
+    proc, log = start_node(Path(args.node_log or Path(logs.name) / 'node.log'),
+                           log_level='warn' if args.node_log else 'error')
     rclpy.init()
     probe = rclpy.create_node('soak_probe')
     pub_cmd = probe.create_publisher(Float64, 'worm_angle_command', QoSProfile(depth=10))
@@ -145,8 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     ex.add_node(probe)
     done = rclpy.task.Future()
     t_start = time.monotonic()
-    run: dict = {'phase': 'wait', 'error': '', 'rss': [], 'diag0': {}, 'next_param': 0.0,
-                 'k_param': 0, 'next_rss': 0.0}
+    phases = Phases(proc, args.warmup, args.duration, t_start)
+    run: dict = {'rss': [], 'diag0': {}, 'next_param': 0.0, 'k_param': 0, 'next_rss': 0.0}
 
     def path_at(now: float) -> str:
         if args.input != 'alternate':
@@ -162,29 +167,18 @@ def main(argv: list[str] | None = None) -> int:
 
     def on_timer() -> None:
         now = time.monotonic()
-        if proc.poll() is not None:
-            run['error'] = f'node process exited with {proc.returncode}'
-            done.set_result(True)
-            return
-        ph = run['phase']
-        if ph == 'wait' and state['n_js'] > 0:
-            run['phase'], run['t_warm'] = 'warm', now
-        elif ph == 'warm' and now - run['t_warm'] >= args.warmup:
-            run['phase'], state['measuring'] = 'measure', True
-            run['cpu0'], run['wall0'] = proc_cpu_seconds(proc.pid), now
+        event = phases.update(now, state['n_js'] > 0)
+        if event == 'start':
+            state['measuring'] = True
             run['diag0'] = dict(diag)
             run['next_rss'] = now
-        elif ph == 'measure' and now - run['wall0'] >= args.duration:
-            run['cpu1'], run['wall1'] = proc_cpu_seconds(proc.pid), now
+        elif event == 'end':
             state['measuring'] = False
             done.set_result(True)
             return
-        elif ph == 'wait' and now - t_start > 120.0:
-            run['error'] = 'no JointState from the node within 120 s'
-            done.set_result(True)
-            return
+        ph = phases.phase
         if ph == 'measure' and now >= run['next_rss']:
-            run['rss'].append((now - run['wall0'], rss_mb(proc.pid)))
+            run['rss'].append((now - phases.wall0, rss_mb(proc.pid)))
             run['next_rss'] += 1.0
         if (args.param_period > 0 and ph in ('warm', 'measure') and now >= run['next_param']
                 and param_cli.service_is_ready()):
@@ -220,31 +214,23 @@ def main(argv: list[str] | None = None) -> int:
           f'{args.duration:g} s after {args.warmup:g} s warm-up; load average '
           f'{load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}', flush=True)
     try:
-        while not done.done():
-            ex.spin_until_future_complete(done, timeout_sec=1.0)
+        spin_until_done(ex, done)
     finally:
         node_alive = proc.poll() is None
-        proc.terminate()
-        try:
-            _, err = proc.communicate(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            _, err = proc.communicate()
-        err = err or ''
-        if log_fh:
-            log_fh.close()
+        rc, err = stop_node(proc, log, signal.SIGTERM)
+        logs.cleanup()
         ex.shutdown()
         probe.destroy_node()
         rclpy.try_shutdown()
-    if run['error']:
-        print(f'error: {run["error"]}\n{err[-2000:]}')
+    if phases.error:
+        print(f'error: {phases.error}\n{err[-2000:]}')
         return 1
     load1 = os.getloadavg()
-    wall = run['wall1'] - run['wall0']
-    cpu = (run['cpu1'] - run['cpu0']) / wall
+    wall = phases.wall
+    cpu = phases.cores
     rss = np.array(run['rss'])
     slope, se = slope_per_hour(rss[:, 0], rss[:, 1])
-    print(f'measured {wall:.1f} s; node exit on SIGTERM: {proc.returncode} '
+    print(f'measured {wall:.1f} s; node exit on SIGTERM: {rc} '
           f'(alive before: {node_alive}); stderr lines: {len(err.splitlines())}')
     half = rss[len(rss) // 2:]
     slope2, se2 = slope_per_hour(half[:, 0], half[:, 1])
@@ -255,15 +241,13 @@ def main(argv: list[str] | None = None) -> int:
     for path, st in stamps.items():
         if len(st) < 2:
             continue
-        st_arr = np.array(st, dtype=np.int64)
-        gaps = np.diff(st_arr) / period_ns
+        gaps = np.diff(np.array(st, dtype=np.int64)) / period_ns
         # a path switch leaves one long gap per switch: not a missed tick
-        lost = int(np.sum(np.round(gaps[(gaps > 1.5) & (gaps < 1000)]) - 1))
+        lost = lost_periods(st, period_ns, max_gap=1000)
         print(f'{path:8s}: {len(st)} JointStates, missed ticks {lost} '
               f'({100.0 * lost / (len(st) + lost):.3f} %), gaps > 1 s: '
               f'{int(np.sum(gaps >= 1000))}')
-    sg = np.diff(np.array(sends)) * args.rate
-    probe_lost = int(np.sum(np.round(sg[sg > 1.5]) - 1))
+    probe_lost = lost_periods(np.round(np.array(sends) * 1e9), 1e9 / args.rate)
     print(f'probe (this process): {len(sends)} commands sent, {probe_lost} send slots missed '
           f'({100.0 * probe_lost / max(1, len(sends) + probe_lost):.3f} %): the share of the '
           'missed ticks that is the sender\'s')

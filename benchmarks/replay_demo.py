@@ -26,6 +26,8 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / 'test'))
+from processes import start_logged, stop_and_read  # noqa: E402
 
 
 def main() -> int:
@@ -49,14 +51,11 @@ def main() -> int:
         return 2
     procs = []
     try:
-        node = subprocess.Popen([py, '-m', 'worm_gear_sim.node', '--ros-args', '--params-file',
-                                 str(REPO / 'config/worm_gear_sim.yaml'), *comp], env=env,
-                                stdout=open(work / 'node.log', 'w'), stderr=subprocess.STDOUT)
-        procs.append(node)
-        rec = subprocess.Popen([py, '-m', 'worm_gear_sim.ros.bag_recorder', '-o', str(bag)],
-                               env=env, stdout=open(work / 'rec.log', 'w'),
-                               stderr=subprocess.STDOUT)
-        procs.append(rec)
+        procs.append(start_logged([py, '-m', 'worm_gear_sim.node', '--ros-args',
+                                   '--params-file', str(REPO / 'config/worm_gear_sim.yaml'),
+                                   *comp], env, work / 'node.log'))
+        procs.append(start_logged([py, '-m', 'worm_gear_sim.ros.bag_recorder', '-o', str(bag)],
+                                  env, work / 'rec.log'))
         deadline = time.monotonic() + 180
         while time.monotonic() < deadline:
             if 'recording' in (work / 'rec.log').read_text() and \
@@ -74,13 +73,8 @@ def main() -> int:
         (work / 'demo.log').write_text(demo.stdout + demo.stderr)
         time.sleep(1.0)
     finally:
-        for proc in reversed(procs):
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
+        for proc, log in reversed(procs):
+            stop_and_read(proc, log, signal.SIGINT, timeout=10.0)
     print((work / 'rec.log').read_text().strip().splitlines()[-1])
     sim = ['simulate', '--bag', str(bag), '-o', str(work / 'replay.csv'), '--no-plot']
     if a.compensated:

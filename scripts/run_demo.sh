@@ -29,7 +29,7 @@ scripts/setup_env.sh                   # creates the venv and installs everythin
 PY="$VENV/bin/python"
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
-CONFIG="$("$PY" -c 'from worm_gear_sim.params import default_config_path; print(default_config_path())')"
+CONFIG="$("$PY" -c 'from worm_gear_sim.config_io import default_config_path; print(default_config_path())')"
 
 NODE_ARGS=(--ros-args --params-file "$CONFIG" --log-level warn)
 DEMO_ARGS=(--duration "$DURATION" --pattern "$PATTERN" --config "$CONFIG")

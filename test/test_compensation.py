@@ -13,9 +13,10 @@ from worm_gear_sim.compensation import (
     design_shaper,
     feedforward_series,
 )
+from worm_gear_sim.derived import derive
 from worm_gear_sim.modal import static_equilibrium
 from worm_gear_sim.model import pack_parameters
-from worm_gear_sim.params import Config, derive
+from worm_gear_sim.params import Config
 
 LOADED = {'load.output_torque': 5.0, 'load.output_viscous_coefficient': 2.0}
 

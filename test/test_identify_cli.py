@@ -9,13 +9,13 @@ from __future__ import annotations
 import json
 import math
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import start_logged, stop_and_read
 
 from worm_gear_sim import load_config
 from worm_gear_sim.cli import main
@@ -23,7 +23,6 @@ from worm_gear_sim.identification import record_from_model
 from worm_gear_sim.profiles import SCurveProfile, TrapezoidalProfile
 from worm_gear_sim.records import BagStream, write_streams
 
-ROOT = Path(__file__).resolve().parent.parent
 KG = 'materials.gear_shaft_shear_modulus'
 ZETA = 'damping.modal_damping_ratios[0]'
 RES = 2 * math.pi / 2 ** 20
@@ -115,7 +114,7 @@ def test_bag_records(tmp_path, truth):
     rec = _record(truth, TrapezoidalProfile(0.1131, 0.02, 0.004, 0.005), 3,
                   outputs=('theta2', 'theta4'))
     names = tuple(load_config().node.joint_names)
-    # epoch stamps with +-200 ns of jitter (off the model's 10 us grid)
+    # epoch stamps with +-200 ns of jitter (off the model's dt grid)
     jitter = np.random.default_rng(0).integers(-200, 201, rec.t.size)
     stamps = np.int64(1_700_000_000_000_000_000) + np.round(rec.t * 1e9).astype(np.int64) + \
         jitter
@@ -222,10 +221,9 @@ def test_node_loads_the_fitted_yaml(fitted, ros_dds_context, ros_subprocess_env,
     from rclpy.executors import SingleThreadedExecutor
     ex = SingleThreadedExecutor(context=ros_dds_context)
     ex.add_node(node)
-    log = open(tmp_path / 'node.txt', 'w+')
-    proc = subprocess.Popen([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
-                             '--params-file', str(fitted)], cwd=ROOT, env=ros_subprocess_env,
-                            stdout=log, stderr=subprocess.STDOUT)
+    proc, log = start_logged([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
+                              '--params-file', str(fitted)], ros_subprocess_env,
+                             tmp_path / 'node.txt')
     try:
         cli = node.create_client(GetParameters, '/worm_gear_sim/get_parameters')
         t0 = time.monotonic()
@@ -241,15 +239,7 @@ def test_node_loads_the_fitted_yaml(fitted, ros_dds_context, ros_subprocess_env,
         assert vals[0].double_value == cfg.materials.gear_shaft_shear_modulus
         assert list(vals[1].double_array_value) == list(cfg.damping.modal_damping_ratios)
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            rc = proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            rc = proc.wait()
+        rc, text = stop_and_read(proc, log, signal.SIGINT, timeout=30.0)
         ex.shutdown()
         node.destroy_node()
-        log.seek(0)
-        text = log.read()
-        log.close()
     assert rc == 0 and 'Traceback' not in text, text

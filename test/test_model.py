@@ -176,7 +176,7 @@ def _rigid_end_frequencies(cfg: Config) -> np.ndarray:
     """Independent 2-DOF reference for the drive without flywheel: the massless gear shaft
     ends free (assumption 8), so it carries no torque; worm on K_w, gear on the mesh only.
     Written from the parameters (Eqs. 7-10 frictionless), not from modal.py."""
-    from worm_gear_sim.params import derive
+    from worm_gear_sim.derived import derive
     d = derive(cfg)
     g, m = cfg.geometry, cfg.mesh
     sl, cl, cphi = math.sin(d.lead_angle), math.cos(d.lead_angle), math.cos(g.pressure_angle)
@@ -218,7 +218,7 @@ def test_no_flywheel_theta4_follows_theta3_under_load():
     """Without flywheel theta4 is the free shaft end: theta4 = theta3 - T_load/K_g at every
     step of a move (the massless shaft transmits the load torque, no dynamics of its own)."""
     from worm_gear_sim import simulate
-    from worm_gear_sim.params import derive
+    from worm_gear_sim.derived import derive
     for T in (0.0, 2.0):
         cfg = Config().replace({'geometry.flywheel_enabled': False, 'load.output_torque': T})
         tr = simulate(cfg, t_end=0.03)

@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from processes import start_logged, stop_and_read
 
-from worm_gear_sim.params import load_config
+from worm_gear_sim.config_io import load_config
 
 ROOT = Path(__file__).resolve().parent.parent
 PKG = 'worm_gear_sim'

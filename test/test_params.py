@@ -8,7 +8,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from worm_gear_sim.params import Config, ConfigError, config_from_mapping, derive, load_config
+from worm_gear_sim.config_io import load_config
+from worm_gear_sim.derived import derive
+from worm_gear_sim.params import Config, ConfigError, config_from_mapping
 
 REPO = Path(__file__).resolve().parents[1]
 YAML_PATH = REPO / 'config' / 'worm_gear_sim.yaml'
@@ -45,6 +47,37 @@ def test_derived_quantities_table1():
     assert paper.ratio == pytest.approx(8.9127, rel=1e-4)
     table_angle = derive(Config().replace({'geometry.lead_angle': math.radians(3 + 41 / 60)}))
     assert not table_angle.lead_angle_consistent
+
+
+def test_one_rigid_ratio_in_every_holder():
+    """output_per_input = l_w / r_g (theta4 per theta1) is one value: the derived quantity,
+    the model, the simulator's trajectories and the real-time pipeline carry the same float;
+    ratio is its inverse, the reduction (56)."""
+    from worm_gear_sim import DriveModel, RealtimePredictor, simulate
+    for cfg in (Config(), Config().replace({'geometry.lead_convention': 'paper'})):
+        d = derive(cfg)
+        assert d.output_per_input == d.l_w / cfg.geometry.gear_pitch_radius
+        assert d.ratio * d.output_per_input == pytest.approx(1.0, rel=1e-15)
+        model = DriveModel(cfg)
+        assert model.output_per_input == d.output_per_input
+        assert model.rigid_motion.tolist() == [1.0, d.output_per_input, d.output_per_input]
+        assert simulate(model, t_end=1e-4).output_per_input == d.output_per_input
+        rt = RealtimePredictor(model, compensate=False)
+        assert rt.model is model and rt.sim is not None and rt.sim.model is model
+
+
+def test_moved_names_still_import_from_params_with_a_warning():
+    """load_config, default_config_path (config_io) and derive, Derived (derived) moved
+    out of params; the old imports work for one release and say where they went."""
+    import worm_gear_sim.config_io as config_io
+    import worm_gear_sim.derived as derived
+    import worm_gear_sim.params as params
+    for name, home in (('load_config', config_io), ('default_config_path', config_io),
+                       ('derive', derived), ('Derived', derived)):
+        with pytest.warns(DeprecationWarning, match=f'moved to {home.__name__}.{name}'):
+            assert getattr(params, name) is getattr(home, name)
+    with pytest.raises(AttributeError):
+        params.no_such_name  # noqa: B018
 
 
 def test_replace_is_validated_and_all_or_nothing():

@@ -26,8 +26,8 @@ _EXPORTS: dict[str, str] = {
     'ModalResult': 'modal', 'damping_matrix': 'modal', 'modes': 'modal',
     'static_equilibrium': 'modal',
     'DriveModel': 'model',
-    'Config': 'params', 'ConfigError': 'params', 'Derived': 'params',
-    'default_config': 'params', 'derive': 'params', 'load_config': 'params',
+    'Config': 'params', 'ConfigError': 'params', 'Derived': 'derived',
+    'default_config': 'params', 'derive': 'derived', 'load_config': 'config_io',
     'check_usable': 'params',
     'Profile': 'profiles', 'RampProfile': 'profiles', 'SampledProfile': 'profiles',
     'SCurveProfile': 'profiles', 'StepProfile': 'profiles', 'TrapezoidalProfile': 'profiles',
@@ -51,18 +51,11 @@ __all__ = [
 
 if TYPE_CHECKING:  # static analysers see the eager imports
     from .compensation import Compensator, feedforward_series
-    from .config_io import params_document, resolve_config
+    from .config_io import load_config, params_document, resolve_config
+    from .derived import Derived, derive
     from .modal import ModalResult, damping_matrix, modes, static_equilibrium
     from .model import DriveModel
-    from .params import (
-        Config,
-        ConfigError,
-        Derived,
-        check_usable,
-        default_config,
-        derive,
-        load_config,
-    )
+    from .params import Config, ConfigError, check_usable, default_config
     from .profiles import (
         Profile,
         RampProfile,

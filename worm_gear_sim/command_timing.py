@@ -84,10 +84,10 @@ class StreamClock:
             self._rate += 0.125 * (1.0 - self._rate)
             if self._rate <= self.max_outlier_rate:
                 self.outliers += 1
-                if e > 0.0:               # late (a delayed callback): on its slot
-                    self._t = pred
-                # early (a stalled stream catching up, a faster one): on the previous
-                # sample's time, whose value it replaces (CommandQueue / Compensator merge)
+                # late (a delayed callback): on its slot; early (a stalled stream catching
+                # up, a faster one): on the previous sample's time, whose value it replaces
+                # (CommandQueue / Compensator merge)
+                self._t = pred if e > 0.0 else t
                 return int(round(self._t))
         if t is not None:
             self.relocks += 1

@@ -3,10 +3,11 @@
 """Configuration in and out: parameter files, ``--set`` overrides, the resolved-parameters
 document.
 
-* in: YAML (ROS layout or plain sections, :func:`worm_gear_sim.params.load_config`) or a
+* in: YAML (ROS layout or plain sections, :func:`load_config`; the package's file:
+  :func:`default_config_path`) or a
   ``params`` JSON (:func:`load_params_json`, its ``derived`` block checked), chosen by
   :func:`load_any_config`; ``--set key=value`` strings typed by the parameter's kind
-  (:func:`typed_value`, the rule of :func:`worm_gear_sim.params.value_kind`);
+  (:func:`typed_value`, the rule of :func:`worm_gear_sim.validation.value_kind`);
 * out: :func:`params_document` (every section plus the derived quantities), written as JSON
   (:func:`params_json_dump`, exact float round trip) or as a ROS params YAML
   (:func:`params_yaml_text`).
@@ -25,24 +26,78 @@ from typing import Any
 
 import yaml
 
-from .params import (
-    Config,
-    ConfigError,
-    config_from_mapping,
-    load_config,
-    suggest,
-    value_kind,
-)
+from .params import NODE_NAME, Config, ConfigError, config_from_mapping, suggest, value_kind
 
-__all__ = ['PARAMS_FORMAT', 'typed_value', 'parse_set', 'check_key', 'params_document',
-           'load_params_json', 'load_any_config', 'resolve_config', 'params_json_dump',
-           'params_yaml_text']
+__all__ = ['load_config', 'default_config_path', 'PARAMS_FORMAT', 'typed_value', 'parse_set',
+           'check_key', 'params_document', 'load_params_json', 'load_any_config',
+           'resolve_config', 'params_json_dump', 'params_yaml_text']
 
 PARAMS_FORMAT = 'worm_gear_sim.params/1'
 _RESERVED_JSON_KEYS = ('format', 'derived')
 
 _TRUE = ('true', 'yes', 'on', '1')
 _FALSE = ('false', 'no', 'off', '0')
+
+
+def _ros_parameters(doc: Any, path: str, node_name: str) -> Mapping[str, Any]:
+    if not isinstance(doc, Mapping):
+        raise ConfigError('', f'{path}: expected a mapping with "{node_name}: ros__parameters:"')
+    for key in (node_name, f'/{node_name}', '/**'):
+        if key in doc:
+            block = doc[key]
+            if not isinstance(block, Mapping) or 'ros__parameters' not in block:
+                raise ConfigError(key, f'{path}: "{key}" must hold a "ros__parameters" mapping')
+            params = block['ros__parameters']
+            return params if params is not None else {}
+    for key, block in doc.items():  # namespaced node, e.g. /radar/worm_gear_sim
+        if isinstance(key, str) and key.endswith('/' + node_name) and isinstance(block, Mapping):
+            return block.get('ros__parameters') or {}
+    if 'ros__parameters' in doc:
+        raise ConfigError('', f'{path}: put ros__parameters under "{node_name}:"')
+    # Plain sections at top level are accepted for offline use.
+    return doc
+
+
+def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
+                node_name: str = NODE_NAME) -> Config:
+    """Load a YAML parameter file (ROS layout or plain sections) and validate it."""
+    if path is None:
+        path = default_config_path()
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError('', f'config file not found: {p}')
+    try:
+        doc = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
+        problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
+        raise ConfigError('', f'{p}: broken YAML{where}: {problem}') from None
+    if doc is None:
+        doc = {}
+    params = _ros_parameters(doc, str(p), node_name)
+    params = {k: v for k, v in params.items() if k not in _ROS_RESERVED}
+    cfg = config_from_mapping(params, source=str(p))
+    return cfg.replace(overrides) if overrides else cfg
+
+
+# Parameters rclpy itself may find in a params file; they are not model parameters.
+_ROS_RESERVED = frozenset({'use_sim_time', 'qos_overrides', 'diagnostic_updater',
+                           'start_type_description_service'})
+
+
+def default_config_path() -> Path:
+    """The package's default YAML: source tree, or installed share/worm_gear_sim/config."""
+    here = Path(__file__).resolve().parent
+    candidates = [here.parent / 'config' / 'worm_gear_sim.yaml',
+                  here / 'config' / 'worm_gear_sim.yaml']
+    import sys
+    candidates.append(Path(sys.prefix) / 'share' / 'worm_gear_sim' / 'config'
+                      / 'worm_gear_sim.yaml')
+    for c in candidates:
+        if c.is_file():
+            return c
+    return candidates[0]
 
 
 def check_key(key: str) -> Any:

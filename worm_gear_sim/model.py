@@ -44,8 +44,10 @@ import math
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
-from .params import Config, Derived, derive
+from .derived import Derived, derive
+from .params import Config
 
 # ---- packed parameter vector layout (compile-time constants for numba) -------------------
 P_JW, P_JG, P_J4 = 0, 1, 2
@@ -512,7 +514,8 @@ def rigid_motion_vector(p: np.ndarray) -> np.ndarray:
     return np.array([1.0, p[P_OUTPUT_PER_INPUT], p[P_OUTPUT_PER_INPUT]])
 
 
-def forces(p: np.ndarray, u, v, theta1: float):
+def forces(p: np.ndarray, u: ArrayLike, v: ArrayLike,
+           theta1: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, float]]:
     """Python convenience wrapper: returns (Q, dQ/du, dQ/dv, aux dict)."""
     Q, dQdu, dQdv, aux = np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(N_AUX)
     generalized_forces(p, np.asarray(u, float), np.asarray(v, float), float(theta1),

@@ -8,12 +8,16 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+import warnings
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from .derived import Derived
 from .integrator import (
     C_MODE,
     C_MU,
@@ -39,7 +43,12 @@ from .integrator import (
 from .integrator import (
     sliding_speed as record_aux_speed,
 )
-from .modal import damping_matrix, static_equilibrium
+from .modal import (
+    StepResolutionWarning,
+    damping_matrix,
+    static_equilibrium,
+    step_resolution_warning,
+)
 from .model import (
     AUX_CGKG,
     AUX_CWKW,
@@ -56,7 +65,7 @@ from .model import (
     mechanical_energy,
     mesh_forces_mu,
 )
-from .params import ANGLE_LIMIT, Config, Derived, check_usable
+from .params import ANGLE_LIMIT, Config, check_usable
 from .profiles import Profile, make_profile
 from .records import write_csv_header
 
@@ -150,9 +159,13 @@ class Trajectory:
         if not parts:
             raise ValueError('no trajectory parts to concatenate')
         last = parts[-1]
-        return Trajectory(*(np.concatenate([getattr(t, n) for t in parts]) for n in (
-            't', 'theta1', 'theta1_dot', 'theta', 'omega', 'alpha', 'aux')),
-            output_per_input=last.output_per_input, profile=last.profile, stats=last.stats)
+
+        def cat(name: str) -> np.ndarray:
+            return np.concatenate([getattr(t, name) for t in parts])
+        return Trajectory(t=cat('t'), theta1=cat('theta1'), theta1_dot=cat('theta1_dot'),
+                          theta=cat('theta'), omega=cat('omega'), alpha=cat('alpha'),
+                          aux=cat('aux'), output_per_input=last.output_per_input,
+                          profile=last.profile, stats=last.stats)
 
 
 #: CSV number format: t to 1 ns whatever the duration; every other column to 12
@@ -169,7 +182,7 @@ class TrajectoryCsvWriter:
         self.path = Path(path)
         self.header_comment = header_comment
         self.rows_written = 0
-        self._fh = None
+        self._fh: TextIO | None = None
 
     def write(self, traj: Trajectory) -> None:
         cols = traj.columns()
@@ -194,7 +207,7 @@ class TrajectoryCsvWriter:
     def __enter__(self) -> TrajectoryCsvWriter:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
@@ -224,7 +237,7 @@ def _finite_scalar(name: str, x: float, limit: float, unit: str) -> float:
     return x
 
 
-def _finite_vector(name: str, x, limit: float, unit: str) -> np.ndarray:
+def _finite_vector(name: str, x: ArrayLike, limit: float, unit: str) -> np.ndarray:
     try:
         arr = np.array(x, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -263,6 +276,10 @@ class Simulator:
         if check:   # ConfigError naming the keys unless the set can be simulated
             check_usable(config)
         self._set_model(DriveModel.of(model))
+        if check:   # allowed, but theta2 pointwise is not trustworthy (modal.STEPS_PER_PERIOD)
+            msg = step_resolution_warning(self.model)
+            if msg:
+                warnings.warn(msg, StepResolutionWarning, stacklevel=2)
         self.dt: float = config.integrator.time_step
         self.interpolation: str = interpolation or config.node.command_interpolation
         self._stats = np.zeros(N_STATS, dtype=np.int64)
@@ -271,7 +288,8 @@ class Simulator:
         self.reset(theta1, t0)
 
     # ---- state ---------------------------------------------------------------------------
-    def reset(self, theta1: float = 0.0, t0: float = 0.0, theta=None, omega=None) -> None:
+    def reset(self, theta1: float = 0.0, t0: float = 0.0, theta: ArrayLike | None = None,
+              omega: ArrayLike | None = None) -> None:
         """Start at time t0 with command theta1; by default at rest in static equilibrium.
         Raises ValueError (state unchanged) for a non-finite or out-of-range input: angles
         beyond ANGLE_LIMIT, rates beyond RATE_LIMIT, or a state whose acceleration is not
@@ -364,7 +382,9 @@ class Simulator:
                            np.zeros((3, 3)), aux)
         if self.model.friction_is_set_valued:
             record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux)
-            r = mesh_forces_mu(self.p, *self._u, self._v[2], self._theta1, self._ctl[C_MU])
+            u = self._u
+            r = mesh_forces_mu(self.p, u[0], u[1], u[2], self._v[2], self._theta1,
+                               self._ctl[C_MU])
             Q = np.array(r[:3])
         names = ('W_n', 'mu', 'cwkw', 'cgkg', 'v_s', 'F_X', 'F_Y', 'q')
         return dict(zip(names, aux.tolist())) | {'Q2': Q[0], 'Q3': Q[1], 'Q4': Q[2]}
@@ -457,7 +477,8 @@ class Simulator:
             return float(theta1)
         return self._cmd_value + slope * (grid - self._cmd_t)
 
-    def _run_kernel(self, th, td, stride, ru, rv, ra, raux) -> None:
+    def _run_kernel(self, th: np.ndarray, td: np.ndarray, stride: int, ru: np.ndarray,
+                    rv: np.ndarray, ra: np.ndarray, raux: np.ndarray) -> None:
         done, status = advance(self.p, self.C, self._u, self._v, self._a, th, td, self.dt,
                                stride, ru, rv, ra, raux, self._stats, self._ctl)
         self._after_kernel(done, status, float(th[done]), float(td[done]))
@@ -556,12 +577,15 @@ class Simulator:
             raise ValueError(f'record_every must be >= 1, got {record_every!r}')
         return n_total, stride
 
-    def _row0(self, t_rec, th_rec, td_rec, u_rec, v_rec, a_rec, aux_rec) -> None:
+    def _row0(self, t_rec: np.ndarray, th_rec: np.ndarray, td_rec: np.ndarray,
+              u_rec: np.ndarray, v_rec: np.ndarray, a_rec: np.ndarray,
+              aux_rec: np.ndarray) -> None:
         t_rec[0], th_rec[0], td_rec[0] = self.t, self._theta1, self._theta1_dot
         u_rec[0], v_rec[0], a_rec[0] = self._u, self._v, self._a
         record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux_rec[0])
 
-    def _chunks(self, profile: Profile, n_total: int, stride: int, chunk_steps: int):
+    def _chunks(self, profile: Profile, n_total: int, stride: int,
+                chunk_steps: int) -> Iterator[tuple[int, Callable[..., None]]]:
         """Yield (rows, fill) per chunk of whole strides; ``fill(t, th, td, u, v, a, aux)``
         integrates the chunk writing its recorded rows into the given arrays."""
         chunk = max(stride, (int(chunk_steps) // stride) * stride)
@@ -570,7 +594,9 @@ class Simulator:
             n = min(chunk, n_total - done_total)
             m = n // stride
 
-            def fill(t_rec, th_rec, td_rec, u_rec, v_rec, a_rec, aux_rec, n=n, m=m):
+            def fill(t_rec: np.ndarray, th_rec: np.ndarray, td_rec: np.ndarray,
+                     u_rec: np.ndarray, v_rec: np.ndarray, a_rec: np.ndarray,
+                     aux_rec: np.ndarray, n: int = n, m: int = m) -> None:
                 ks = self._k + np.arange(1, n + 1)
                 grid = self._t0 + ks * self.dt
                 th = np.concatenate(([self._theta1], profile.theta1(grid)))

@@ -36,10 +36,14 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .params import ANGLE_LIMIT, Config, ConfigError
+
+if TYPE_CHECKING:
+    from .modal import ModalResult
 
 __all__ = ['check_usable', 'diagnose', 'SPRING_RATIO_MIN', 'OMEGA_DT_MAX', 'TRIAL_TIME']
 
@@ -116,10 +120,9 @@ def _blame(cfg: Config, changed: Sequence[str], suspects: Sequence[str],
     flat = cfg.to_flat_dict()
     named = [k for k in suspects if k in changed] or list(changed) or list(suspects[:1])
     head = ', '.join(f'{k} = {flat[k]!r}' for k in named if k in flat)
-    err = ConfigError(named[0] if named else '', why)
+    err = ConfigError(named[0] if named else '', why, keys=named)
     if head:
         err.args = (f'{head}: {why}',)
-    err.keys = tuple(named)
     return err
 
 
@@ -222,7 +225,7 @@ def _check(cfg: Config, changed: Sequence[str]) -> None:
         raise _trial_failure(cfg, changed, m, str(exc)) from None
 
 
-def _unresolved_mode(cfg: Config, m) -> tuple[str, tuple[str, ...]] | None:
+def _unresolved_mode(cfg: Config, m: ModalResult) -> tuple[str, tuple[str, ...]] | None:
     """(text, inertia keys) when the highest mode is beyond the step's Nyquist limit."""
     dt = cfg.integrator.time_step
     i = int(np.argmax(m.undamped_hz))
@@ -237,7 +240,8 @@ def _unresolved_mode(cfg: Config, m) -> tuple[str, tuple[str, ...]] | None:
             f'check the {names[body]} inertia', _INERTIA[body])
 
 
-def _trial_failure(cfg: Config, changed: Sequence[str], m, what: str) -> ConfigError:
+def _trial_failure(cfg: Config, changed: Sequence[str], m: ModalResult,
+                   what: str) -> ConfigError:
     """The trial move failed: name the unresolved mode if there is one (the usual cause:
     a tiny inertia or a huge stiffness puts a mode far above the step's Nyquist limit, where
     the implicit step exists but Newton cannot follow the nonlinear mesh), else the keys."""

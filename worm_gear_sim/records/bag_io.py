@@ -17,17 +17,28 @@ from typing import Any, Literal
 
 import numpy as np
 
+from ..topics import (
+    COMMAND_TOPIC,
+    COMPENSATED_COMMAND_TOPIC,
+    FEEDFORWARD_TOPIC,
+    FLOAT64,
+    JOINT_STATE,
+    JOINT_STATES_TOPIC,
+    MEASURED_TOPIC,
+    NODE_NAMESPACE,
+    POSITIONING_ERROR_TOPIC,
+    REFERENCE_TOPIC,
+    WORM_ERROR_TOPIC,
+    private_topic,
+)
 from .record import MEASURED_NAMES, Record, RecordError, valid_sorted
 
 __all__ = ['read_bag', 'bag_topics', 'BagStream', 'write_streams', 'prediction_streams',
            'write_bag', 'DEFAULT_COMMAND_TOPICS', 'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE',
            'FLOAT64', 'JOINT_STATE', 'BAG_VERSION']
 
-DEFAULT_COMMAND_TOPICS = ('worm_angle_reference', 'worm_angle_command')
-DEFAULT_MEASURED_TOPICS = ('measured_joint_states', 'joint_states')
-NODE_NAMESPACE = 'worm_gear_sim'                # the node's name: its ~/ topics live here
-FLOAT64 = 'std_msgs/msg/Float64'
-JOINT_STATE = 'sensor_msgs/msg/JointState'
+DEFAULT_COMMAND_TOPICS = (REFERENCE_TOPIC, COMMAND_TOPIC)
+DEFAULT_MEASURED_TOPICS = (MEASURED_TOPIC, JOINT_STATES_TOPIC)
 BAG_VERSION: Literal[8, 9] = 8          # rosbag2 metadata version (rosbags writes 8 or 9)
 
 
@@ -368,24 +379,25 @@ def prediction_streams(stamps_ns: np.ndarray, position: np.ndarray, *,
     topic (e.g. 'replay' -> /replay/joint_states)."""
     names = tuple(joint_names)
     ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
-    priv = f'{ns}/{NODE_NAMESPACE}'
     stamps = np.asarray(stamps_ns, dtype=np.int64)
-    out = [BagStream(f'{ns}/joint_states', stamps, np.asarray(position), 'joint_state', names,
-                     velocity, effort)]
+    out = [BagStream(f'{ns}/{JOINT_STATES_TOPIC}', stamps, np.asarray(position), 'joint_state',
+                     names, velocity, effort)]
 
     def scalar(topic: str, st: np.ndarray, v: np.ndarray, joint: str) -> BagStream:
+        name = f'{ns}/{private_topic(topic)}'
         if stamped:
-            return BagStream(topic, st, np.asarray(v).reshape(-1, 1), 'joint_state', (joint,))
-        return BagStream(topic, st, np.asarray(v), 'float64')
+            return BagStream(name, st, np.asarray(v).reshape(-1, 1), 'joint_state', (joint,))
+        return BagStream(name, st, np.asarray(v), 'float64')
 
     if positioning_error is not None:
-        out.append(scalar(f'{priv}/positioning_error', stamps, positioning_error, names[3]))
+        out.append(scalar(POSITIONING_ERROR_TOPIC, stamps, positioning_error, names[3]))
     if worm_error is not None:
-        out.append(scalar(f'{priv}/worm_error', stamps, worm_error, names[1]))
+        out.append(scalar(WORM_ERROR_TOPIC, stamps, worm_error, names[1]))
     if feedforward is not None:
-        out.append(scalar(f'{priv}/feedforward', feedforward[0], feedforward[1], names[0]))
+        out.append(scalar(FEEDFORWARD_TOPIC, feedforward[0], feedforward[1], names[0]))
     if compensated_command is not None:
-        out.append(BagStream(f'{priv}/compensated_command', compensated_command[0],
+        out.append(BagStream(f'{ns}/{private_topic(COMPENSATED_COMMAND_TOPIC)}',
+                             compensated_command[0],
                              np.asarray(compensated_command[1]).reshape(-1, 1), 'joint_state',
                              (names[0],)))
     return out

@@ -28,24 +28,37 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..records import BAG_VERSION, FLOAT64, JOINT_STATE, NODE_NAMESPACE
+from ..records import BAG_VERSION
+from ..topics import (
+    COMMAND_TOPIC,
+    COMPENSATED_COMMAND_TOPIC,
+    FEEDFORWARD_TOPIC,
+    FLOAT64,
+    JOINT_STATE,
+    JOINT_STATES_TOPIC,
+    MEASURED_TOPIC,
+    POSITIONING_ERROR_TOPIC,
+    REFERENCE_TOPIC,
+    WORM_ERROR_TOPIC,
+    private_topic,
+)
 
 __all__ = ['BagRecorder', 'DEFAULT_TOPICS', 'ALL_TOPICS', 'main']
 
 #: topic -> message type recorded by default: the node's inputs and its prediction (what
 #: ``simulate --bag`` and ``identify`` read); ``--all`` adds ALL_TOPICS' errors and corrections
 DEFAULT_TOPICS = {
-    '/worm_angle_reference': JOINT_STATE,
-    '/worm_angle_command': FLOAT64,
-    '/joint_states': JOINT_STATE,
-    '/measured_joint_states': JOINT_STATE,
+    '/' + REFERENCE_TOPIC: JOINT_STATE,
+    '/' + COMMAND_TOPIC: FLOAT64,
+    '/' + JOINT_STATES_TOPIC: JOINT_STATE,
+    '/' + MEASURED_TOPIC: JOINT_STATE,
 }
 ALL_TOPICS = {
     **DEFAULT_TOPICS,
-    f'/{NODE_NAMESPACE}/positioning_error': FLOAT64,
-    f'/{NODE_NAMESPACE}/worm_error': FLOAT64,
-    f'/{NODE_NAMESPACE}/feedforward': FLOAT64,
-    f'/{NODE_NAMESPACE}/compensated_command': JOINT_STATE,
+    '/' + private_topic(POSITIONING_ERROR_TOPIC): FLOAT64,
+    '/' + private_topic(WORM_ERROR_TOPIC): FLOAT64,
+    '/' + private_topic(FEEDFORWARD_TOPIC): FLOAT64,
+    '/' + private_topic(COMPENSATED_COMMAND_TOPIC): JOINT_STATE,
 }
 _CLASSES = {FLOAT64: Float64, JOINT_STATE: JointState}
 

@@ -54,7 +54,9 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..params import Config, derive, load_config
+from ..config_io import load_config
+from ..derived import derive
+from ..params import Config
 from ..studies.demo_moves import (
     MoveSummary,
     MoveTracker,
@@ -63,8 +65,17 @@ from ..studies.demo_moves import (
     offline_moves,
     pattern_segments,
 )
+from ..topics import private_topic
 from .demo_report import LINE_WIDTH, MOVE_HEADER, fit, format_move, format_status, summary, urad
-from .interface import COMMAND_TOPIC, REFERENCE_DEPTH, REFERENCE_TOPIC
+from .interface import (
+    COMMAND_TOPIC,
+    COMPENSATED_COMMAND_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    JOINT_STATES_TOPIC,
+    POSITIONING_ERROR_TOPIC,
+    REFERENCE_DEPTH,
+    REFERENCE_TOPIC,
+)
 
 __all__ = ['DemoCommander', 'MOVE_HEADER', 'MoveSummary', 'MoveTracker', 'command_pattern',
            'format_move', 'format_status', 'main', 'offline_moves', 'pattern_segments',
@@ -123,14 +134,16 @@ class DemoCommander(Node):
         if interface == 'stamped':
             self.pub = self.create_publisher(JointState, REFERENCE_TOPIC, reliable)
             self._ref_msg = JointState(name=[self.joint], position=[0.0])
-            self.create_subscription(JointState, f'/{node_under_test}/compensated_command',
-                                     self._on_compensated, reliable)
+            self.create_subscription(
+                JointState, '/' + private_topic(COMPENSATED_COMMAND_TOPIC, node_under_test),
+                self._on_compensated, reliable)
         else:
             self.pub = self.create_publisher(Float64, COMMAND_TOPIC, QoSProfile(depth=10))
-            self.create_subscription(Float64, f'/{node_under_test}/positioning_error',
-                                     self._on_error, 100)
-        self.create_subscription(JointState, 'joint_states', self._on_js, reliable)
-        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
+            self.create_subscription(
+                Float64, '/' + private_topic(POSITIONING_ERROR_TOPIC, node_under_test),
+                self._on_error, 100)
+        self.create_subscription(JointState, JOINT_STATES_TOPIC, self._on_js, reliable)
+        self.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diag, 10)
         self.create_timer(1.0 / rate, self._on_timer)
 
     # -- streaming --

@@ -55,8 +55,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from ..command_timing import COMMAND_QUEUE_LENGTH, CommandQueue, StreamClock
+from ..config_io import load_config
 from ..model_check import ModelCheck
-from ..params import NODE_NAME, Config, ConfigError, config_from_mapping, load_config
+from ..params import NODE_NAME, Config, ConfigError, config_from_mapping
 from ..realtime import STALE_PERIODS, Output, Prediction, RealtimePredictor
 from . import diagnostics as diag
 from .interface import (

@@ -104,8 +104,9 @@ def paper_study(name: str, base: Config) -> Study:
                  Case(name, 'flywheel', 1.0, 'with', {'geometry.flywheel_enabled': True}))
         return Study(name, 'Flywheel off / on (paper Figs. 12-13)', 'flywheel', cases,
                      categorical=True, paper_figure='Figs. 12-13',
-                     note='without the flywheel theta4 is the gear-shaft end carrying a third '
-                          'of the shaft inertia (core decision, params.derive)')
+                     note='without the flywheel the massless gear shaft ends free: theta4 is its '
+                          'end, J_4 = 0 unless geometry.shaft_end_inertia or '
+                          'shafts.gear_shaft_inertia_fraction is set (derived.derive)')
     if name == 'flywheel_diameter':
         cases = tuple(Case(name, 'flywheel diameter', 2 * r, f'D={2 * r:g} m',
                            {'geometry.flywheel_enabled': True, 'geometry.flywheel_radius': r})

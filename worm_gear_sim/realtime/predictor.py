@@ -1,130 +1,26 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""The real-time pipeline of the node, in the core (no rclpy): :class:`RealtimePredictor`.
-
-One object turns a stream of reference samples theta1_ref into
-
-* **corrections** (:class:`Correction`): the feed-forward delta of
-  :class:`~worm_gear_sim.compensation.Compensator` for every accepted sample, stamped with
-  the sample's stamp, and ``compensated = theta1_ref + delta`` (what the servo should
-  command for that instant);
-* **predictions** (:class:`Prediction`): the simulated drive
-  (:class:`~worm_gear_sim.simulation.Simulator`) at the instant they predict: theta1..theta4,
-  rates, shaft torques, the antenna positioning error and the worm error;
-* **events** (:class:`Event`) the node logs once (warning): resyncs, clock restarts, a
-  stale or resumed stream, overruns, simulation or compensation errors;
-* **counters** (:attr:`RealtimePredictor.counters`): integers with stable names for
-  /diagnostics.
-
-The node (``worm_gear_sim.ros``) only translates messages into these calls and back.
-``compensation.feedforward_series`` (the offline twin) drives the same object.
-
-Time
-    Stamps are integer nanoseconds on the caller's clock (ROS time: epoch ~1.7e18 ns, or
-    /clock with ``use_sim_time``).  Internally every time is ``(stamp - base) * 1e-9``
-    seconds, with ``base`` the first accepted stamp (or ``base_ns``): a float of epoch
-    seconds would lose ~0.2 us of resolution, i.e. ~7e-6 rad of correction.
-
-Stamped path (``push``; ``sensor_msgs/JointState`` ``worm_angle_reference``)
-    ``push(stamp_ns, theta1_ref, now_ns=...)`` validates the sample and rejects it with a
-    :class:`Reject` reason (counted as ``rejected_<reason>``; the state is untouched):
-    NaN, inf, ``|theta1_ref| > node.max_command_abs``, a stamp <= 0, a stamp more than
-    ``max_stamp_age`` before or ``max_stamp_lead`` after ``now_ns``, a stamp equal to
-    (``duplicate``) or older than (``out_of_order``) the last accepted sample, a change of
-    more than ``node.max_command_jump`` from the last accepted sample (``jump``).
-    Accepted samples are processed in stamp order:
-
-    * With ``compensation.preview_time`` P the servo streams its reference P ahead: the
-      correction for stamp t is computed (the compensator evaluated at exactly t) as soon
-      as a sample stamped at or after t + P has been accepted, and returned by that push.
-      With P = 0 every push returns its own correction.
-    * The simulator is advanced to each sample's stamp with the applied command (samples
-      joined as ``node.command_interpolation`` says): theta1_ref at once when the
-      compensation is not applied; theta1_ref + delta when its correction is ready when it
-      is (``apply_compensation``, default ``node.compensation_applied``).  Each advance
-      returns a prediction stamped with the sample's stamp.
-    * The result depends only on the accepted (stamp, value) pairs, never on when or in
-      which bursts they arrive: ``feedforward_series`` of the same pairs gives the same
-      deltas (tested to <= 1e-6 rad; measured bit for bit).
-
-Gaps, pauses and the stale stream
-    Let G = max(3.5 / node.publish_rate_hz, 2 min(last sample interval, 50 ms)).  A stamp
-    more than G after the previous sample means the stream paused and the reference RESTED
-    at its last value: rest samples (the last value, stamps previous + G + k/publish_rate,
-    k = 0..K-1, K covering the filter and the preview) are inserted before it.  They are
-    fed to the compensator and the simulator but produce no :class:`Correction` (the servo
-    never sent them).  ``hold(now_ns)``, called by the node's slow timer, declares the
-    stream stale when ``now_ns`` is more than G + ``stale_margin`` after the last sample:
-    it inserts the rest samples due by ``now_ns`` (the same ones a later sample would
-    insert, so the deltas stay those of the offline twin), releases the corrections that
-    were waiting for a preview, advances the simulator holding the last command up to
-    ``now_ns`` and returns that held prediction stamped ``now_ns``; ``stale`` is True
-    (event ``stream_stale`` once).  The next accepted sample ends it (``stream_resumed``).
-    A sample that arrives after its stale time with a stamp before an inserted rest sample
-    is rejected (``out_of_order``): the only case where the live deltas can differ from
-    the offline twin.
-
-Resync policy (jumps and restarts)
-    A rejected ``jump`` sample, or an ``out_of_order`` one more than 100 ms older than the
-    last sample (a late packet is not a restart), is kept as a candidate.  When
-    ``confirm_samples`` (3) candidates in a row agree with each other (stamps increasing
-    by at most 50 ms, values within ``node.max_command_jump``), the new level or timeline
-    is real (a servo that really moved 3 rad; a servo whose stamps restarted): the pipeline
-    resynchronises: corrections waiting for a preview are released (the old reference
-    rested), the simulator restarts at rest at the first candidate (static equilibrium)
-    and the other candidates follow; counted in ``resyncs``, event ``resync``.  A single
-    outlier (a spike, a late packet) stays rejected.  A caller clock going backwards
-    (``now_ns`` earlier than the previous ``now_ns`` by more than 1 ms: a simulator reset,
-    a looping bag with ``use_sim_time``) re-initialises at once: pending corrections of
-    the old timeline are dropped (``corrections_dropped``), the next accepted sample
-    starts afresh (new base; ``clock_restarts``, event ``clock_restart``).
-
-Float64 path (``push_command`` + ``tick``; ``std_msgs/Float64`` ``worm_angle_command``)
-    Unstamped commands are handed over with their reception time; ``tick(now_ns)`` at
-    ``node.publish_rate_hz`` turns them into samples as ``node.command_timing`` says
-    (``tick``: the newest command since the previous tick is a sample at the tick;
-    ``reception``; ``stream``: :class:`~worm_gear_sim.command_timing.StreamClock`; with
-    ``sim_time`` the /clock reading at reception), feeds them through the same sample
-    path (a sample not after the previous one replaces its value: ``merged_samples``),
-    holds the last command up to the tick (or to the last corrected sample when a preview
-    delays the applied compensation) and returns one prediction at that instant.  The
-    first tick after the first command starts the simulation at rest at the newest command.
-    A merged sample re-emits its own correction; with a preview, corrections released
-    earlier whose window reached that sample keep the value they were computed with.
-    The stream is stale after G without a command (no margin: tick stamps are never late).
-    The pipeline serves one input at a time: a valid stamped sample after Float64 commands,
-    or a tick with queued commands after stamped samples, restarts it on the other input
-    (event ``input_changed``); a tick without queued commands leaves a stamped stream alone.
-
-Catch-up
-    The simulator never integrates more than ``node.max_catch_up`` seconds for one sample
-    or hold; the rest of the interval is skipped (``Simulator.resync``, counted in
-    ``overruns`` and ``dropped_time_ns``, event ``overrun``).  ``node.max_catch_up`` must
-    be at least the tick period 1 / ``node.publish_rate_hz`` (a :class:`ConfigError`
-    otherwise), so the physics always advances.
-
-Parameters are swapped with :meth:`RealtimePredictor.reconfigure`; the expensive part
-(compensator design, the model's matrices) is :meth:`RealtimePredictor.prepare`, which the
-node can run off the real-time path.
-"""
+"""The real-time pipeline's state machine, :class:`RealtimePredictor`: the stamped path
+(``push``, ``hold``), the Float64 path (``push_command``, ``tick``), validation and the
+resync policy, and the sample path through the compensator; the simulator side is
+:class:`~.drive.SimulatedDrive`.  The rules are written out in the package's docstring
+(:mod:`worm_gear_sim.realtime`)."""
 
 from __future__ import annotations
 
 import collections
 import copy
 import math
-from dataclasses import dataclass, field
-from enum import StrEnum
 
-from .command_timing import CommandQueue, StreamClock
-from .compensation import Compensator
-from .model import DriveModel
-from .params import Config
-from .simulation import SimulationError, Simulator
+from ..command_timing import CommandQueue, StreamClock
+from ..compensation import Compensator
+from ..model import DriveModel
+from ..params import Config
+from ..simulation import Simulator
+from .drive import SimulatedDrive
+from .outputs import COUNTER_NAMES, Correction, Event, Output, Prepared, Reject
 
-__all__ = ['RealtimePredictor', 'Correction', 'Prediction', 'Event', 'Output', 'Reject',
-           'Prepared', 'STALE_PERIODS', 'STALE_MAX_INTERVAL', 'CONFIRM_SAMPLES',
-           'COUNTER_NAMES']
+__all__ = ['RealtimePredictor', 'STALE_PERIODS', 'STALE_MAX_INTERVAL', 'CONFIRM_SAMPLES']
 
 STALE_PERIODS = 3.5          # tick periods without a sample: the reference rests
 STALE_MAX_INTERVAL = 0.05    # s: sample intervals longer than this are pauses, not a rate
@@ -133,112 +29,6 @@ CHAIN_MAX_GAP_NS = 50_000_000  # candidates further apart do not confirm each ot
 RESTART_MIN_BACK_NS = 100_000_000  # a stamp this much older may start a new timeline
 CLOCK_TOLERANCE_NS = 1_000_000  # now_ns may step back this much without a restart
 INFO_EVENTS = ('started', 'stream_resumed')
-HOLD_EPS = 0.5e-9            # s: 'hold' steps just after the sample time (stamps are whole ns)
-
-
-class Reject(StrEnum):
-    """Why a sample was rejected (counter ``rejected_<value>``)."""
-
-    NAN = 'nan'
-    INF = 'inf'
-    OUT_OF_RANGE = 'out_of_range'     # |theta1_ref| > node.max_command_abs
-    JUMP = 'jump'                     # change > node.max_command_jump (until confirmed)
-    ZERO_STAMP = 'zero_stamp'         # stamp <= 0 (unset header)
-    TOO_OLD = 'too_old'               # stamp < now - max_stamp_age
-    TOO_NEW = 'too_new'               # stamp > now + max_stamp_lead
-    DUPLICATE = 'duplicate'           # stamp equal to the last accepted sample's
-    OUT_OF_ORDER = 'out_of_order'     # stamp before the last accepted sample's
-
-
-@dataclass(frozen=True, slots=True)
-class Correction:
-    """Feed-forward for one accepted sample: command ``compensated`` at ``stamp_ns``."""
-
-    stamp_ns: int
-    theta1_ref: float        # the sample [rad]
-    delta: float             # correction to ADD [rad] (~/feedforward)
-
-    @property
-    def compensated(self) -> float:
-        """theta1_ref + delta [rad] (~/compensated_command)."""
-        return self.theta1_ref + self.delta
-
-
-@dataclass(frozen=True, slots=True)
-class Prediction:
-    """The simulated drive at ``stamp_ns`` (the instant it predicts; the state lies on the
-    dt grid point at or just before it)."""
-
-    stamp_ns: int
-    theta1: float            # command as applied [rad]
-    theta1_dot: float        # [rad/s]
-    theta: tuple             # (theta2, theta3, theta4) [rad]
-    omega: tuple             # (omega2, omega3, omega4) [rad/s]
-    effort: tuple            # Simulator.joint_torques(): K_w twist, r_w F_X, r_g F_Y,
-    #                          K_g twist [N m]
-    reference: float         # theta1_ref the positioning error is measured against [rad]
-    positioning_error: float  # theta4 - reference l_w / r_g [rad] (~/positioning_error)
-    worm_error: float        # theta2 - theta1 [rad] (~/worm_error)
-    held: bool = False       # held: the stream is stale, the last command is held
-
-    @property
-    def position(self) -> tuple:
-        """JointState.position: theta1..theta4."""
-        return (self.theta1, *self.theta)
-
-    @property
-    def velocity(self) -> tuple:
-        """JointState.velocity: theta1_dot, omega2..omega4."""
-        return (self.theta1_dot, *self.omega)
-
-
-@dataclass(frozen=True, slots=True)
-class Event:
-    """Something the node should log once.  ``kind``: started, stream_resumed (``level``
-    'info'); resync, clock_restart, stream_stale, overrun, simulation_error,
-    compensation_error, input_changed ('warn').  The counters say how often."""
-
-    kind: str
-    message: str
-    level: str = 'warn'
-
-
-@dataclass(slots=True)
-class Output:
-    """What one call produced.  ``accepted``/``rejected``: the pushed sample's fate
-    (``push``/``push_command``); ``stale``: the stream is stale after this call."""
-
-    accepted: bool = False
-    rejected: Reject | None = None
-    corrections: list = field(default_factory=list)
-    predictions: list = field(default_factory=list)
-    events: list = field(default_factory=list)
-    stale: bool = False
-
-
-@dataclass(frozen=True)
-class Prepared:
-    """A configuration made ready for :meth:`RealtimePredictor.reconfigure` (its model
-    built once, the compensator designed, the simulator's parameters checked)."""
-
-    model: DriveModel
-    compensator: Compensator | None
-    error: str = ''          # compensator design failure (the swap keeps running without)
-
-    @property
-    def config(self) -> Config:
-        return self.model.config
-
-
-COUNTER_NAMES = (
-    'samples_received', 'samples_accepted', 'rejected_samples',
-    *(f'rejected_{r.value}' for r in Reject),
-    'commands_received', 'commands_used', 'commands_merged', 'commands_restamped',
-    'commands_dropped', 'merged_samples', 'rest_samples', 'corrections',
-    'corrections_dropped', 'predictions', 'late_for_simulation', 'resyncs',
-    'clock_restarts', 'stale_events', 'overruns', 'dropped_time_ns', 'steps',
-    'simulation_errors', 'compensation_errors', 'reconfigurations', 'stream_relocks',
-    'stream_outliers')
 
 
 class RealtimePredictor:
@@ -283,6 +73,7 @@ class RealtimePredictor:
         if self.sim is not None:                      # compile / load the kernel now
             self.sim.advance_to(10 * self.sim.dt, 0.0)
             self.sim.reset(0.0, 0.0)
+        self._drive = SimulatedDrive(self.sim, self.counters, self._event)
         self._queue = CommandQueue()
         self._set_config(self._design(model))
         self._stream = StreamClock(float(self._period_ns))
@@ -307,6 +98,10 @@ class RealtimePredictor:
         node = config.node
         self.apply_compensation = node.compensation_applied if self._apply_arg is None \
             else bool(self._apply_arg)
+        drive = self._drive
+        drive.apply_compensation = self.apply_compensation
+        drive.max_catch_up = node.max_catch_up
+        drive.output_per_input = self.model.output_per_input
         self._period_ns = int(round(1e9 / node.publish_rate_hz))
         self._gap0_ns = int(round(STALE_PERIODS * self._period_ns))
         comp = prepared.compensator
@@ -320,8 +115,6 @@ class RealtimePredictor:
         self._rest_count = int(math.ceil(span * 1e9 / self._period_ns)) + 2
         self._max_jump = node.max_command_jump
         self._max_abs = node.max_command_abs
-        self._max_catch_up = node.max_catch_up
-        self._output_per_input = self.model.output_per_input
         if self.sim is not None:
             self.sim.interpolation = node.command_interpolation
 
@@ -371,11 +164,8 @@ class RealtimePredictor:
         self._pending: collections.deque = collections.deque()   # (ns, x, real)
         self._chain: list[tuple[int, float]] = []
         self._stale = False
-        self._drive_t = -math.inf                # last command time given to the simulator
-        self._t_start = math.nan                 # time of the first sample [s]
-        self._held = 0.0                         # command the simulator holds [rad]
-        self._held_ref = 0.0                     # reference of that command [rad]
         self._delta = 0.0                        # last correction [rad]
+        self._drive.clear()
 
     # ---- properties --------------------------------------------------------------------
     @property
@@ -704,12 +494,7 @@ class RealtimePredictor:
             except Exception as exc:  # noqa: BLE001 - a compensator bug must not stop us
                 self._compensation_failed(exc, Output())
         self._delta = d
-        self._held_ref = x
-        self._held = x + d if self.apply_compensation else x
-        if self.sim is not None:
-            self.sim.reset(self._held, t)
-            self._drive_t = t
-        self._t_start = t
+        self._drive.start(x + d if self.apply_compensation else x, x, t)
         self._started = True
         self._last_ns = ns
         if not self._mode:
@@ -733,7 +518,7 @@ class RealtimePredictor:
     def _feed(self, ns: int, x: float, real: bool, out: Output, predict: bool) -> None:
         """One sample into the compensator and (unless the compensation is applied) the
         simulator; release the corrections that became ready."""
-        t = (ns - self._base) * 1e-9
+        t = self._time(ns)
         comp = self._comp
         if comp is not None:
             try:
@@ -747,11 +532,11 @@ class RealtimePredictor:
                 p.append((ns, x, real))
         self._last_ns = ns
         if comp is None or not self.apply_compensation:
-            self._drive(ns, t, x, x, out, predict)
+            self._drive.drive(ns, t, x, x, out, predict)
         if comp is not None:
             self._release(ns, out, predict)
             try:
-                comp.trim((self._pending[0][0] - self._base) * 1e-9 if self._pending else t)
+                comp.trim(self._time(self._pending[0][0]) if self._pending else t)
             except Exception as exc:  # noqa: BLE001  # pragma: no cover
                 self._compensation_failed(exc, out)
 
@@ -764,7 +549,7 @@ class RealtimePredictor:
         P = self.preview_ns
         while p and (newest_ns is None or p[0][0] + P <= newest_ns):
             ns, x, real = p.popleft()
-            t = (ns - self._base) * 1e-9
+            t = self._time(ns)
             try:
                 d = float(comp.evaluate(t))
                 if not math.isfinite(d):
@@ -777,7 +562,7 @@ class RealtimePredictor:
                 out.corrections.append(Correction(ns, x, d))
                 self.counters['corrections'] += 1
             if self.apply_compensation:
-                self._drive(ns, t, x + d, x, out, predict)
+                self._drive.drive(ns, t, x + d, x, out, predict)
 
     def _compensation_failed(self, exc: Exception, out: Output) -> None:
         self.counters['compensation_errors'] += 1
@@ -785,73 +570,15 @@ class RealtimePredictor:
                     f'{exc}); keeping the last correction {self._delta:.3g} rad')
 
     # ---- internals: the simulator ------------------------------------------------------
-    def _drive(self, ns: int, t: float, cmd: float, ref: float, out: Output,
-               predict: bool) -> None:
-        """Advance the simulator to ``t`` with the command sample ``cmd``."""
-        sim = self.sim
-        self._held, self._held_ref = cmd, ref
-        if sim is None:
-            return
-        if t < self._drive_t:           # already integrated past it: applies from there
-            self.counters['late_for_simulation'] += 1
-            t = self._drive_t
-        if t == self._t_start and sim.t == t:
-            # the first sample's own command (e.g. its correction, once a preview allowed
-            # it): the drive has not moved yet, so it starts at rest there
-            try:
-                sim.reset(cmd, t)
-            except ValueError as exc:  # pragma: no cover - cmd is finite
-                self._simulation_failed(exc, t, out)
-            if predict:
-                out.predictions.append(self._prediction(ns, False))
-            return
-        self._catch_up(t, out)
-        try:
-            if sim.interpolation == 'hold':   # the grid point at or after t takes cmd
-                self.counters['steps'] += sim.advance_to(t - HOLD_EPS, None)
-            self.counters['steps'] += sim.advance_to(t, cmd)
-        except (SimulationError, ValueError) as exc:
-            self._simulation_failed(exc, t, out)
-        self._drive_t = max(self._drive_t, t)
-        if predict:
-            out.predictions.append(self._prediction(ns, False))
 
     def _hold_to(self, ns: int, out: Output) -> None:
         """Hold the last command up to ``ns`` (not past a sample whose applied
         correction is still pending) and predict there."""
-        sim = self.sim
-        if sim is None or not self._started:
+        if self.sim is None or not self._started:
             return
         if self.apply_compensation and self._pending:
             ns = min(ns, self._pending[0][0])
-        t = (ns - self._base) * 1e-9
-        if t > self._drive_t:
-            self._catch_up(t, out)
-            try:
-                self.counters['steps'] += sim.advance_to(t, self._held)
-            except (SimulationError, ValueError) as exc:
-                self._simulation_failed(exc, t, out)
-            self._drive_t = t
-        out.predictions.append(self._prediction(ns, self._stale))
-
-    def _catch_up(self, t: float, out: Output) -> None:
-        sim = self.sim
-        behind = t - sim.t
-        cap = self._max_catch_up
-        if behind > cap:
-            sim.resync(t - cap)
-            c = self.counters
-            c['overruns'] += 1
-            c['dropped_time_ns'] += int(round((behind - cap) * 1e9))
-            self._event(out, 'overrun', f'{behind:.4g} s behind: integrated the last {cap:g} s '
-                        '(node.max_catch_up) and skipped the rest')
-
-    def _simulation_failed(self, exc: Exception, t: float, out: Output) -> None:
-        self.counters['simulation_errors'] += 1
-        sim = self.sim
-        self._event(out, 'simulation_error', f'simulation error: {exc}; keeping the last good '
-                    f'state (t = {sim.t:.6f} s) and continuing from t = {t:.6f} s')
-        sim.resync(t)
+        self._drive.hold_to(ns, self._time(ns), self._stale, out)
 
     def _go_stale(self, now_ns: int, out: Output) -> None:
         if not self._stale:
@@ -864,10 +591,8 @@ class RealtimePredictor:
         if self._rest_k >= self._rest_count:
             self._release(None, out, predict=False)
 
-    def _prediction(self, ns: int, held: bool) -> Prediction:
-        pos, vel, eff = self.sim.joint_state()
-        th1, th2, th4 = pos[0], pos[1], pos[3]
-        ref = self._held_ref if self.apply_compensation else th1
-        self.counters['predictions'] += 1
-        return Prediction(ns, th1, vel[0], pos[1:], vel[1:], eff, ref,
-                          th4 - ref * self._output_per_input, th2 - th1, held)
+    def _time(self, ns: int) -> float:
+        """Seconds since the time origin (the module doc's Time)."""
+        base = self._base
+        assert base is not None, 'no time origin before the first sample'
+        return (ns - base) * 1e-9

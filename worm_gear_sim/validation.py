@@ -1,0 +1,171 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Validation of parameter values: the one "type from the default" rule (:func:`value_kind`),
+the per-field checks (type, finiteness, range, choices, length) against a field's metadata,
+and the cross-field checks of a whole :class:`~worm_gear_sim.params.Config`.
+
+Whether a valid set can also be *simulated* is a separate question, answered by the model
+itself: :mod:`worm_gear_sim.usability`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import fields
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .params import Config
+
+__all__ = ['ConfigError', 'suggest', 'VALUE_KINDS', 'value_kind', 'field_default', 'coerce',
+           'validate']
+
+
+class ConfigError(ValueError):
+    """An invalid parameter value or configuration file; ``key`` names the bad parameter,
+    ``keys`` every parameter blamed (a whole-set rule of :mod:`~worm_gear_sim.usability` may
+    name several)."""
+
+    def __init__(self, key: str, message: str, keys: Iterable[str] = ()) -> None:
+        self.key = key
+        self.keys: tuple[str, ...] = tuple(keys) or ((key,) if key else ())
+        self.reason = message
+        super().__init__(f'{key}: {message}' if key else message)
+
+
+
+def suggest(key: str, known: Iterable[str]) -> str:
+    """`` (did you mean x?)`` for a mistyped name among ``known``, or ''."""
+    close = difflib.get_close_matches(key, list(known), n=1, cutoff=0.6)
+    return f' (did you mean {close[0]}?)' if close else ''
+
+
+#: The parameter kinds; a parameter's kind is the type of its default (:func:`value_kind`).
+VALUE_KINDS = ('bool', 'int', 'float', 'str', 'str_list', 'float_list')
+
+
+def value_kind(default: Any) -> str:
+    """The kind of a parameter, from its default: the one typing rule of the YAML loader,
+    ``--set`` parsing (:mod:`worm_gear_sim.config_io`) and the node's ROS parameters."""
+    if isinstance(default, bool):
+        return 'bool'
+    if isinstance(default, int):
+        return 'int'
+    if isinstance(default, float):
+        return 'float'
+    if isinstance(default, str):
+        return 'str'
+    if isinstance(default, (tuple, list)):
+        return 'str_list' if default and isinstance(default[0], str) else 'float_list'
+    raise TypeError(f'unsupported parameter default {default!r}')
+
+
+def field_default(f: dataclasses.Field) -> Any:
+    """The default of a dataclass field (given, or made by its factory)."""
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    factory = f.default_factory
+    if not callable(factory):
+        raise TypeError(f'field {f.name} has no default')
+    return factory()
+
+
+def coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
+    """Type-check one value against its field's kind (:func:`value_kind`) and metadata."""
+    kind = value_kind(default)
+    if kind == 'bool':
+        if not isinstance(value, bool):
+            raise ConfigError(key, f'must be true or false, got {value!r}')
+        return value
+    if kind == 'int':
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                value = int(value)
+            else:
+                raise ConfigError(key, f'must be an integer, got {value!r}')
+        _check_range(key, float(value), meta)
+        return value
+    if kind == 'float':
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(key, f'must be a number, got {value!r}')
+        value = float(value)
+        _check_range(key, value, meta)
+        return value
+    if kind == 'str':
+        if not isinstance(value, str):
+            raise ConfigError(key, f'must be a string, got {value!r}')
+        if meta.get('choices') and value not in meta['choices']:
+            raise ConfigError(key, f'must be one of {", ".join(meta["choices"])}; got {value!r}')
+        return value
+    if kind in ('str_list', 'float_list'):
+        if isinstance(value, (str, bytes)) or not hasattr(value, '__iter__'):
+            raise ConfigError(key, f'must be a list, got {value!r}')
+        value = tuple(value)
+        if meta.get('length') is not None and len(value) != meta['length']:
+            raise ConfigError(key, f'must have {meta["length"]} entries, got {len(value)}')
+        if kind == 'str_list':
+            if not all(isinstance(v, str) and v for v in value):
+                raise ConfigError(key, 'entries must be non-empty strings')
+            if len(set(value)) != len(value):
+                raise ConfigError(key, 'entries must be unique')
+            return value
+        out = []
+        for i, v in enumerate(value):
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise ConfigError(key, f'entry {i} must be a number, got {v!r}')
+            _check_range(f'{key}[{i}]', float(v), meta)
+            out.append(float(v))
+        return tuple(out)
+    raise ConfigError(key, f'unsupported type {type(default).__name__}')  # pragma: no cover
+
+
+def _check_range(key: str, value: float, meta: Mapping[str, Any]) -> None:
+    if not math.isfinite(value):
+        raise ConfigError(key, f'must be finite, got {value!r}')
+    lo, hi = meta.get('lo'), meta.get('hi')
+    if lo is not None:
+        if meta.get('lo_open') and value <= lo:
+            raise ConfigError(key, f'must be > {lo:g}, got {value!r}')
+        if value < lo:
+            raise ConfigError(key, f'must be >= {lo:g}, got {value!r}')
+    if hi is not None and value > hi:
+        raise ConfigError(key, f'must be <= {hi:g}, got {value!r}')
+
+
+def validate(cfg: Config) -> None:
+    """Per-field checks (types, finiteness, ranges, choices) of every section of ``cfg`` and
+    the cross-field checks; raises :class:`ConfigError` naming the key."""
+    for section in fields(cfg):
+        sec = section.name
+        obj = getattr(cfg, sec)
+        for f in fields(obj):
+            key = f'{sec}.{f.name}'
+            default = field_default(f)
+            coerce(key, getattr(obj, f.name), default, f.metadata)
+    integ = cfg.integrator
+    if not (2.0 * integ.newmark_beta >= integ.newmark_gamma - 1e-15):
+        raise ConfigError('integrator.newmark_beta', f'{integ.newmark_beta:g} with gamma '
+                          f'{integ.newmark_gamma:g} is only conditionally stable: need '
+                          '2*beta >= gamma >= 1/2')
+    inp = cfg.input
+    if inp.profile in ('trapezoidal', 's_curve') and 2.0 * inp.accel_time > inp.move_time:
+        raise ConfigError('input.accel_time', f'2*accel_time ({2 * inp.accel_time:g} s) must '
+                          f'not exceed move_time ({inp.move_time:g} s)')
+    if inp.profile == 'csv' and not inp.csv_path:
+        raise ConfigError('input.csv_path', 'is required when input.profile is csv')
+    g = cfg.geometry
+    if g.lead_angle == 0.0 and g.lead / (2 * math.pi) >= g.worm_pitch_radius:
+        raise ConfigError('geometry.lead', 'lead/2pi must be smaller than the worm pitch radius')
+    if g.gear_pitch_radius <= 0 or g.lead <= 0:  # pragma: no cover - range checks catch it
+        raise ConfigError('geometry.lead', 'must be > 0')
+    if cfg.integrator.time_step * cfg.node.publish_rate_hz > 1.0 + 1e-9:
+        raise ConfigError('integrator.time_step', 'must not exceed the node tick period '
+                          f'1/publish_rate_hz = {1.0 / cfg.node.publish_rate_hz:g} s')
+    if cfg.node.max_catch_up * cfg.node.publish_rate_hz < 1.0 - 1e-9:
+        # below one tick period the physics falls behind every tick and never catches up
+        raise ConfigError('node.max_catch_up', f'{cfg.node.max_catch_up:g} s must be at least '
+                          f'the tick period 1/publish_rate_hz = '
+                          f'{1.0 / cfg.node.publish_rate_hz:g} s')
