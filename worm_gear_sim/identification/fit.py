@@ -141,6 +141,15 @@ class FitOptions:
         return bool(fs), bool(gw), max(1, ns)
 
 
+#: A local fit that used up its evaluations counts as converged when its cost fell by less
+#: than STALL_COST over its last STALL_EVALS evaluations: statistically nothing (a change of
+#: one standard deviation in any parameter changes the cost by 0.5).  With the set-valued
+#: friction law the cost is noisy at its last digits and least_squares' own tolerances may
+#: never be met while it creeps along a flat valley.
+STALL_EVALS = 10
+STALL_COST = 0.1
+
+
 def _local_fit(problem: Problem, x0: np.ndarray, windows: Sequence[float | None],
                settings: LocalSettings) -> dict[str, Any]:
     lo, hi = problem.x_bounds
@@ -148,20 +157,32 @@ def _local_fit(problem: Problem, x0: np.ndarray, windows: Sequence[float | None]
     t0 = time.perf_counter()
     res = None
     stages: list[dict[str, Any]] = []
+    costs: list[float] = []
+
+    def fun(xf: np.ndarray, window: float | None) -> np.ndarray:
+        r = problem.residuals(xf, window)
+        costs.append(0.5 * float(r @ r))
+        return r
 
     def jac(xj: np.ndarray, window: float | None) -> np.ndarray:
         return problem.jacobian(xj, window, settings.diff_step)
 
     for w in windows:
-        res = least_squares(problem.residuals, x, jac=jac, bounds=(lo, hi), args=(w,),
+        costs.clear()
+        res = least_squares(fun, x, jac=jac, bounds=(lo, hi), args=(w,),
                             method=settings.method, max_nfev=settings.max_nfev, x_scale=1.0,
                             xtol=settings.xtol, ftol=settings.ftol, gtol=1e-8)
         x = res.x
+        last = (min(costs[:-STALL_EVALS]) - min(costs) if len(costs) > STALL_EVALS
+                else math.inf)
         stages.append({'window_s': w, 'cost': float(res.cost), 'nfev': int(res.nfev),
-                       'njev': int(res.njev or 0), 'status': int(res.status)})
+                       'njev': int(res.njev or 0), 'status': int(res.status),
+                       'last_decrease': last})
     assert res is not None
+    final = stages[-1]
     return {'x0': np.asarray(x0, float).tolist(), 'x': res.x.tolist(), 'cost': float(res.cost),
             'status': int(res.status), 'message': str(res.message),
+            'converged': final['status'] > 0 or final['last_decrease'] < STALL_COST,
             'nfev': sum(s['nfev'] + problem.n * s['njev'] for s in stages), 'stages': stages,
             'seconds': time.perf_counter() - t0}
 
