@@ -27,6 +27,7 @@ import os
 import platform
 import sys
 import time
+import warnings
 
 import numpy as np
 
@@ -34,6 +35,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'
 
 from worm_gear_sim import Config, Simulator, make_profile, simulate  # noqa: E402
 from worm_gear_sim.integrator import N_STATS, S_EVALS, S_SOLVES, advance  # noqa: E402
+from worm_gear_sim.modal import StepResolutionWarning  # noqa: E402
 from worm_gear_sim.model import mesh_forces  # noqa: E402
 
 OLD = {'friction.direction': 'regularized', 'integrator.worm_frequency_matching': False,
@@ -199,6 +201,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--quick', action='store_true', help='skip the Radau comparison')
     args = ap.parse_args(argv)
+    # the coarse rows are deliberate: the tables report each step's resolution themselves
+    warnings.simplefilter('ignore', StepResolutionWarning)
     print(f'# worm_gear_sim kernel benchmark  ({platform.processor() or platform.machine()}, '
           f'{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}, python '
           f'{platform.python_version()})')
