@@ -133,6 +133,7 @@ def check_output_size(dt: float, t_end: float, stride: int, out: Path, max_gb: f
 def cmd_simulate(args: argparse.Namespace) -> int:
     if args.bag:
         return _simulate_bag(args)
+    from ..model import DriveModel
     from ..plotting import plot_trajectory
     from ..profiles import Profile, SampledProfile, make_profile
     from ..records import read_csv
@@ -168,13 +169,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                              in_memory=bool(args.npz))
     t0 = time.perf_counter()
     out.parent.mkdir(parents=True, exist_ok=True)
+    model = DriveModel(cfg)           # built once: the run and its equilibrium
     if args.npz:
         import numpy as np
-        traj = simulate(cfg, profile, t_end, record_every=stride)
+        traj = simulate(model, profile, t_end, record_every=stride)
         traj.to_csv(out, header_comment=header(args) + note)
         np.savez(args.npz, allow_pickle=False, **traj.columns())
     else:                       # streamed: bounded memory; traj is a thinned copy
-        traj = simulate_to_csv(cfg, out, profile, t_end, record_every=stride,
+        traj = simulate_to_csv(model, out, profile, t_end, record_every=stride,
                                header_comment=header(args) + note)
     wall = time.perf_counter() - t0
     files = [out] + ([Path(args.npz)] if args.npz else [])
@@ -190,7 +192,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     try:
         t_move = move_end_time(cfg, profile)
         if traj.t[-1] > t_move:
-            eq = equilibrium(cfg, float(traj.theta1[-1]))
+            eq = equilibrium(model, float(traj.theta1[-1]))
             m = oscillation_metrics(traj, t_move, eq)
             say(args, f'after the move (t >= {t_move:g} s): max |theta2 - eq| = '
                 f'{m["amp2"]:.4e} rad, max |theta4 - eq| = {m["amp4"]:.4e} rad, theta4 '
