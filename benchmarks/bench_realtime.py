@@ -163,7 +163,8 @@ def main(argv: list[str] | None = None) -> int:
             sim.advance_to(a, b)
 
     t_sim = best(run_sim, rep)
-    print(f'simulator advance_to, 1 ms (100 steps) alone: {t_sim / n * 1e6:.1f} us')
+    steps = round(1e-3 / cfg.integrator.time_step)
+    print(f'simulator advance_to, 1 ms ({steps} steps) alone: {t_sim / n * 1e6:.1f} us')
 
     cases = [('push, corrections only (simulate=False)', cfg, dict(simulate=False)),
              ('push (P = 0)', cfg, {}),

@@ -67,7 +67,8 @@ def test_simulate_writes_csv_and_png(tmp_path, capsys):
     for c in ('t', 'theta1', 'theta2', 'theta3', 'theta4', 'omega2', 'omega4',
               'normal_force', 'mu', 'worm_error', 'output_error'):
         assert c in names
-    assert len(rows) == 1501                  # 3000 steps, every 2nd, plus t = 0
+    steps = round(0.03 / Config().integrator.time_step)     # the default step
+    assert len(rows) == steps // 2 + 1        # every 2nd step, plus t = 0
     assert_finite_columns(header, rows, header)
     assert float(rows[-1][0]) == pytest.approx(0.03)
     assert_png(out.with_suffix('.png'))

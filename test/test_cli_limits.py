@@ -16,7 +16,11 @@ from pathlib import Path
 
 import pytest
 
+from worm_gear_sim.params import Config
+from worm_gear_sim.simulation import KEEP_ROWS
+
 REPO = Path(__file__).resolve().parents[1]
+DT = Config().integrator.time_step
 
 
 def cli(*args, timeout=120):
@@ -82,15 +86,16 @@ def test_huge_end_time_is_refused_up_front(tmp_path):
     one_line_error(cli('simulate', '--end-time', '1e3', '--output-rate', '0',
                        '--max-csv-size', '1e6', '--npz',
                        tmp_path / 'x.npz', '-o', tmp_path / 'x.csv'), '--npz', 'max_bytes',
-                   '16 GB')
+                   f'{1e3 / DT:.2g} rows')           # every step of the default dt
 
 
 def test_long_run_streams_every_row(tmp_path):
     """A run longer than the plot's row budget: the CSV has every row, the summary says
     the plot/metrics used a thinned copy."""
     out = tmp_path / 'long.csv'
-    r = cli('simulate', '--end-time', '2.5', '--output-rate', '0', '-o', out, '--no-plot')
+    t_end = 1.0                               # 250000 steps of the default dt > KEEP_ROWS
+    r = cli('simulate', '--end-time', t_end, '--output-rate', '0', '-o', out, '--no-plot')
     assert r.returncode == 0, r.stderr
     rows = sum(1 for line in open(out) if not line.startswith('#')) - 1
-    assert rows == 250001
+    assert rows == round(t_end / DT) + 1 > KEEP_ROWS
     assert 'plot and metrics from' in r.stdout

@@ -13,6 +13,7 @@ default config as its base.
 from __future__ import annotations
 
 import math
+import zlib
 
 import numpy as np
 import pytest
@@ -26,6 +27,7 @@ from worm_gear_sim.identification import (
     check_record,
     fit_parameters,
     identify,
+    jacobian,
     measured_frequencies,
     predict,
     prediction_errors,
@@ -261,3 +263,36 @@ def test_record_that_does_not_move_relative_to_the_command(base):
                  measured={'theta4': np.zeros(100)})
     with pytest.raises(IdentificationError, match='follows the command exactly'):
         identify(base, [rec], [KG])
+
+
+class _StepNoise(Problem):
+    """r(x) = (3 x0, x0^2 + x1, x1 - 2 x0) plus, on x1 only, a jump of 1e-4 whenever its
+    last bits change (like a stick/slip decision): known derivatives, known noise."""
+
+    def __init__(self, base):
+        self.base = base
+        self.params = fit_parameters(base, [KG, MU])
+        self._last = None
+        self.n_evals = 0
+
+    def residuals(self, x, window=None):
+        x = np.asarray(x, float)
+        jump = 1e-3 * (zlib.crc32(x[1].tobytes()) / 2 ** 31 - 1.0)   # in [-1e-3, 1e-3)
+        return np.array([3 * x[0], x[0] ** 2 + x[1] + jump, x[1] - 2 * x[0] - jump])
+
+
+def test_jacobian_step_sees_through_decision_noise(base):
+    """A column whose difference quotient at DIFF_STEP is dominated by the jumps is taken with
+    a larger step (known derivative recovered); a smooth column keeps DIFF_STEP."""
+    from worm_gear_sim.identification import DIFF_STEP
+    from worm_gear_sim.identification.report import STEP_CONSISTENCY_WARN, resolved_jacobian
+    p = _StepNoise(base)
+    x = np.array([0.1, 0.05])
+    noisy = jacobian(p, x, DIFF_STEP)
+    assert np.linalg.norm(noisy[:, 1] - [0, 1, 1]) > 0.05      # the premise: h too small
+    J, steps, change = resolved_jacobian(p, x)
+    assert steps[0] == DIFF_STEP and steps[1] > DIFF_STEP
+    np.testing.assert_allclose(J[:, 0], [3, 0.2, -2], rtol=1e-6)
+    # error bound of the jumps at the chosen step: 1e-3 / h
+    np.testing.assert_allclose(J[:, 1], [0, 1, 1], atol=1e-3 / steps[1])
+    assert max(change) <= STEP_CONSISTENCY_WARN

@@ -114,7 +114,7 @@ def test_bag_records(tmp_path, truth):
     rec = _record(truth, TrapezoidalProfile(0.1131, 0.02, 0.004, 0.005), 3,
                   outputs=('theta2', 'theta4'))
     names = tuple(load_config().node.joint_names)
-    # epoch stamps with +-200 ns of jitter (off the model's 10 us grid)
+    # epoch stamps with +-200 ns of jitter (off the model's dt grid)
     jitter = np.random.default_rng(0).integers(-200, 201, rec.t.size)
     stamps = np.int64(1_700_000_000_000_000_000) + np.round(rec.t * 1e9).astype(np.int64) + \
         jitter

@@ -71,20 +71,28 @@ def test_energy_conserved_without_friction():
 TANH = {'friction.direction': 'regularized', 'integrator.worm_frequency_matching': False}
 
 
+@pytest.mark.parametrize('dt', [1e-5, Config().integrator.time_step], ids=['10us', 'default'])
 @pytest.mark.parametrize('over', [
     {'mesh.stiffness_model': 'linear', 'friction.model': 'constant', **TANH},
     {'mesh.stiffness_model': 'linear', **TANH},
 ], ids=['constant_mu', 'stribeck'])
-def test_friction_never_increases_energy(over):
+def test_friction_never_increases_energy(over, dt):
     """With the tanh friction law (linear mesh, so the mesh force has a potential) the energy
-    never increases after the input stops, to round-off, and really decreases."""
-    cfg = Config().replace(over)
+    never increases after the input stops beyond the Newton tolerance's noise, and really
+    decreases.  At 10 us no step gains more than 1e-12 E; the per-step dissipation shrinks
+    with the step while that noise does not, so at 4 us single steps reach 1.2e-12 E (at
+    sliding reversals; 4.5e-12 at 1 us): bounded here by the sum of all gains, measured
+    3.5e-12 E at 4 us against a loss of more than 0.1 E."""
+    cfg = Config().replace(dict(over, **{'integrator.time_step': dt}))
     sim = Simulator(cfg)
     prof = make_profile(cfg.input)
     sim.run(prof, 0.02)
     tr = sim.run(prof, 0.5)
     E = tr.energy(cfg)
-    assert np.diff(E).max() <= 1e-12 * E[0]
+    gains = np.diff(E).clip(min=0.0)
+    if dt == 1e-5:
+        assert gains.max() <= 1e-12 * E[0]
+    assert gains.sum() <= 1e-10 * E[0]
     assert E[-1] < 0.9 * E[0]
 
 
@@ -257,7 +265,10 @@ def test_ramp_tracking_without_load_has_no_static_error():
 def _ring_down(over, dt, horizon=0.5):
     from worm_gear_sim.simulation import ring_down
     cfg = Config().replace(dict(over, **{'integrator.time_step': dt}))
-    tr = simulate(cfg, t_end=0.02 + horizon, record_every=max(1, int(round(1e-5 / dt))))
+    n, k = round((0.02 + horizon) / dt), max(1, int(1e-5 / dt + 1e-9))
+    while n % k:                # a row about every 10 us, and one at the end of the run
+        k -= 1
+    tr = simulate(cfg, t_end=0.02 + horizon, record_every=k)
     eq = static_equilibrium(pack_parameters(cfg), float(tr.theta1[-1]))
     return ring_down(tr, 0.02, eq[2], horizon)
 
@@ -266,8 +277,8 @@ def test_ring_down_self_convergence_to_exact_stick():
     """The antenna's ring-down over 0.5 s after the 18-step move.  The tanh law converges
     to the exact-stick limit as its band shrinks (at steps that resolve the band), from
     viscous creep at the old default 1e-4 m/s; the set-valued law gives that limit at the
-    node's 10 us step and at 1 us (measured: tanh 4.9, 2.7, 1.19, 1.07 %; set-valued 1.07 %
-    at 10 us, 1.10 % at 1 us)."""
+    node's default step (4 us), at 10 us and at 1 us (measured: tanh 4.9, 2.7, 1.19, 1.07 %;
+    set-valued 1.07 % at 10 us, 1.10 % at 1 us)."""
     tanh = [_ring_down({'friction.direction': 'regularized',
                         'friction.regularization_velocity': v}, dt)
             for v, dt in ((1e-4, 1e-5), (1e-5, 1e-6), (1e-6, 1e-7), (1e-7, 2e-8))]
@@ -279,6 +290,8 @@ def test_ring_down_self_convergence_to_exact_stick():
     assert abs(sv10 - limit) <= 0.25 * limit, (sv10, limit)
     assert abs(sv1 - limit) <= 0.25 * limit, (sv1, limit)
     assert abs(sv10 - sv1) <= 0.10 * sv1, (sv10, sv1)
+    sv_default = _ring_down({}, Config().integrator.time_step)
+    assert abs(sv_default - limit) <= 0.25 * limit, (sv_default, limit)
 
 
 def test_stick_holds_a_static_load_inside_the_cone():
@@ -350,26 +363,7 @@ def test_set_valued_friction_dissipates():
 
 
 # ---- a resolved worm at the node's step ------------------------------------------------------
-@pytest.mark.parametrize('over', [
-    {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'},
-    {},
-], ids=['linear', 'nonlinear'])
-def test_default_step_resolves_the_worm_pointwise(over):
-    """At 5 us with the frequency-matched worm inertia and set-valued friction: theta2
-    within 5 % and theta4 within 0.1 % of their oscillation amplitudes, pointwise over the
-    move and 5 ms of ringing, against Newmark at 0.1 us (which agrees with Radau,
-    test_against_radau).  Measured: linear 0.35 % / 4e-6, nonlinear 2.9 % / 6e-5; at the
-    default 10 us 1.4 % / 11 % (matched), 31 % / 56 % (plain) for theta2."""
-    base = Config().replace(dict(over, **{'integrator.time_step': 5e-6}))
-    assert base.integrator.worm_frequency_matching
-    T = 0.025
-    ref = simulate(base.replace({'integrator.time_step': 1e-7}), t_end=T, record_every=50)
-    tr = simulate(base, t_end=T)
-    osc2, osc4 = np.abs(ref.worm_error).max(), np.abs(ref.output_error).max()
-    assert np.abs(tr.theta2 - ref.theta2).max() <= 0.05 * osc2
-    assert np.abs(tr.theta4 - ref.theta4).max() <= 1e-3 * osc4
-
-
+# (the default step's pointwise accuracy against Radau: test_against_radau)
 def test_frequency_matching_removes_the_worm_period_elongation():
     """Free worm oscillation (frictionless linear model, worm released from a twist): the
     average-acceleration rule stretches the 8.6 kHz period by (omega dt)^2/12 = 2.4 % at

@@ -52,7 +52,8 @@ def paper_move_samples(n_ticks: int, start: float = 0.002) -> np.ndarray:
 def batch(cfg: Config, times: np.ndarray, values: np.ndarray, interpolation='linear'):
     prof = SampledProfile(times, values, interpolation)
     sim = Simulator(cfg, theta1=float(values[0]), t0=0.0, interpolation=interpolation)
-    return sim.run(prof, t_end=float(times[-1]), record_every=100)
+    return sim.run(prof, t_end=float(times[-1]),
+                   record_every=round(1e-3 / cfg.integrator.time_step))      # each 1 ms tick
 
 
 # --------------------------------------------------------------------------------------
@@ -88,7 +89,8 @@ def test_end_to_end_matches_core_batch_simulation(ros_harness):
     eff = np.array([list(m.effort) for m in h.joint_states])
     assert eff.shape == (n, 4) and np.all(np.isfinite(eff)) and np.abs(eff[:, 3]).max() > 1.0
     assert list(h.joint_states[0].name) == list(Config().node.joint_names)
-    assert h.counters()['ticks'] == n and h.node.rt.counters['steps'] == (n - 1) * 100
+    per_tick = round(1e-3 / h.node.sim.dt)                  # 250 steps at 4 us
+    assert h.counters()['ticks'] == n and h.node.rt.counters['steps'] == (n - 1) * per_tick
 
 
 def test_compensation_applied_drives_reference_plus_feedforward(ros_harness):
@@ -244,11 +246,12 @@ def test_invalid_parameter_set_rejected_with_reason(ros_harness, params, words):
 
 def test_read_only_parameters_rejected(ros_harness):
     h = ros_harness()
+    dt0 = h.node.sim.dt
     for name, value in (('integrator.time_step', 2e-5), ('node.publish_rate_hz', 500.0),
                         ('node.joint_names', ['a', 'b', 'c', 'd'])):
         res = h.node.set_parameters([Parameter(name, value=value)])[0]
         assert not res.successful and 'read-only' in res.reason, (name, res.reason)
-    assert h.node.sim.dt == 1e-5
+    assert h.node.sim.dt == dt0 == 4e-6                   # the YAML's step, unchanged
     assert h.counters()['rejected_parameter_sets'] == 3
 
 
@@ -318,7 +321,7 @@ def test_command_burst_costs_one_tick_of_physics(ros_harness):
     assert 1 <= received <= 10_000
     assert h.tick_to(T0_NS + 2 * TICK_NS)
     c = h.counters()
-    assert c['steps'] - steps == 100                      # one tick at dt = 10 us
+    assert c['steps'] - steps == round(1e-3 / h.node.sim.dt)      # one tick: 250 steps
     assert c['commands_used'] == 3
     assert c['commands_merged'] + c['commands_dropped'] == received - 1
     assert h.joint_states[-1].position[0] == pytest.approx(last, abs=1e-15)
@@ -378,7 +381,7 @@ def test_wall_time_catch_up_is_capped(ros_harness):
     # the stall was dropped, not integrated: the simulated clock jumps (resync) and the
     # steps taken cover far less than the stalled time
     assert h.node.sim.t - t_before >= 0.3
-    assert 0 < c['steps'] - steps_before < 0.3 / 1e-5 / 2
+    assert 0 < c['steps'] - steps_before < 0.3 / h.node.sim.dt / 2
 
 
 # ---- diagnostics, QoS -------------------------------------------------------------------
@@ -641,8 +644,8 @@ def test_stream_clock_recovers_a_steady_grid():
 
 def test_command_queue_bounds_the_physics_of_a_burst(ros_harness):
     """40 commands at distinct /clock times within one tick: the 16 newest are samples,
-    the 24 oldest are dropped and counted; the tick makes 17 advance_to calls and 100
-    Newmark steps."""
+    the 24 oldest are dropped and counted; the tick makes 17 advance_to calls and one tick
+    of Newmark steps (250 at 4 us)."""
     h = ros_harness()
     run_ticks(h, [0.0, 0.0])
     calls = []
@@ -655,7 +658,7 @@ def test_command_queue_bounds_the_physics_of_a_burst(ros_harness):
     c = h.counters()
     assert c['commands_dropped'] == 24 and (c['commands_merged'] + c['commands_dropped']) == 24
     assert c['commands_used'] == 2 + 16
-    assert len(calls) == 17 and c['steps'] == 200
+    assert len(calls) == 17 and c['steps'] == round(2e-3 / h.node.sim.dt)     # two ticks
     assert h.joint_states[-1].position[0] == pytest.approx(values[-1], abs=1e-15)
     vals = {kv.key: kv.value for kv in h.node.diagnostic_statuses()[1].values}
     assert vals['commands_dropped'] == '24'

@@ -20,13 +20,16 @@ from worm_gear_sim.simulation import (
 
 FIELDS = ('t', 'theta1', 'theta1_dot', 'theta', 'omega', 'alpha', 'aux')
 
+DT = Config().integrator.time_step          # the default step
+
 
 def test_iter_run_chunks_equal_run_bit_for_bit():
     cfg = Config()
     prof = make_profile(cfg.input)
     whole = Simulator(cfg).run(prof, 0.03, record_every=3)
     parts = list(Simulator(cfg).iter_run(prof, 0.03, record_every=3, chunk_steps=1000))
-    assert len(parts) == 4 and all(len(p.t) <= 1000 // 3 + 1 for p in parts)
+    steps = round(0.03 / DT)                  # chunks of 999 steps (a multiple of 3)
+    assert len(parts) == -(-steps // 999) > 1 and all(len(p.t) <= 1000 // 3 + 1 for p in parts)
     joined = Trajectory.concatenate(parts)
     for f in FIELDS:
         assert np.array_equal(getattr(joined, f), getattr(whole, f)), f
@@ -51,12 +54,13 @@ def test_streamed_csv_equals_in_memory_csv(tmp_path):
     assert thin.t[-1] == full.t[-1] and thin.t[0] == 0.0
     k = int(round(thin.t[1] / (full.t[1] - full.t[0])))
     assert np.array_equal(thin.theta[:-1], full.theta[::k][:len(thin.t) - 1])
-    assert thin.stats['steps'] == 2500
+    assert thin.stats['steps'] == round(0.025 / DT)
 
 
 def test_huge_in_memory_run_is_refused_up_front():
-    """simulate(t_end=1e4) would record 1e9 rows (160 GB): refused at once, naming the
-    estimate, the limit and the ways out; nothing allocated, nothing integrated."""
+    """simulate(t_end=1e4) would record 2.5e9 rows (400 GB at the default 4 us): refused
+    at once, naming the estimate, the limit and the ways out; nothing allocated, nothing
+    integrated."""
     cfg = Config()
     tracemalloc.start()
     try:
@@ -67,7 +71,7 @@ def test_huge_in_memory_run_is_refused_up_front():
         tracemalloc.stop()
     msg = str(exc.value)
     assert 'GB' in msg and 'max_bytes' in msg and 'simulate_to_csv' in msg
-    assert f'{1e9 * ROW_BYTES / 1e9:.3g} GB' in msg
+    assert f'{round(1e4 / DT) * ROW_BYTES / 1e9:.3g} GB' in msg
     assert peak < 20e6
     # the limit is the caller's: a small run under a tiny limit is refused too
     with pytest.raises(ValueError, match='max_bytes'):
@@ -90,6 +94,6 @@ def test_streaming_memory_does_not_grow_with_duration(tmp_path):
 
     short, long_ = peak(0.05), peak(0.2)
     assert long_ < 1.3 * short + 200_000, (short, long_)
-    assert long_ < 0.5 * (0.2 / 1e-5) * ROW_BYTES         # below the whole run (3.2 MB)
+    assert long_ < 0.5 * (0.2 / DT) * ROW_BYTES           # below the whole run (8 MB)
     lines = sum(1 for line in open(tmp_path / 'run.csv') if not line.startswith('#'))
-    assert lines == 20001 + 1                              # header line + every row
+    assert lines == round(0.2 / DT) + 1 + 1                # header line + every row

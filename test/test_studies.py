@@ -99,8 +99,12 @@ def test_run_case_metrics(base):
     assert r['t_move'] == pytest.approx(0.02) and r['t_end'] == pytest.approx(0.07)
     assert r['half_pp4'] <= r['amp4'] * (1 + 1e-12)
     assert 0 < r['kernel_s'] <= r['case_s']
-    # the amplitude step from the modes: 10 us / 2 resolves the 8.6 kHz worm mode
-    assert r['steps'] == round(0.07 / 5e-6)
+    # the amplitude step from the modes (>= 20 steps per period of the 8.6 kHz worm mode):
+    # the default 4 us gives 29, kept; a 10 us base (11.6) is divided by 2
+    assert r['steps'] == round(0.07 / 4e-6)
+    r10 = S.run_case(base, {'input.end_time': 0.07, 'integrator.time_step': 1e-5})
+    assert r10['steps'] == round(0.07 / 5e-6)
+    assert r10['amp4'] == pytest.approx(r['amp4'], rel=0.01)
 
 
 def _fake_trajectory(t, theta1, theta):

@@ -207,16 +207,16 @@ def test_advance_to_rejects_non_finite_or_huge_inputs(args, word):
 
 
 def test_advance_to_huge_span_is_refused_up_front():
-    """advance_to(1e4) at dt = 10 us is 1e9 steps: a clear error naming the limit and how to
-    raise it, instantly, before any allocation or integration."""
+    """advance_to(1e4) at the default dt = 4 us is 2.5e9 steps: a clear error naming the
+    limit and how to raise it, instantly, before any allocation or integration."""
     sim = Simulator(Config())
     with pytest.raises(ValueError) as exc:
         sim.advance_to(1e4, 0.0)
     msg = str(exc.value)
-    assert 'max_steps' in msg and '1e+09 steps' in msg and 'iter_run' in msg
+    assert 'max_steps' in msg and f'{1e4 / sim.dt:.2g} steps' in msg and 'iter_run' in msg
     assert sim.t == 0.0
     # the limit is the caller's to raise; spans are integrated in bounded chunks
-    n = sim.advance_to(0.002, 0.0, max_steps=200)
+    n = sim.advance_to(200 * sim.dt, 0.0, max_steps=200)
     assert n == 200
     with pytest.raises(ValueError, match='max_steps'):
         sim.advance_to(1.0, 0.0, max_steps=200)
@@ -229,7 +229,8 @@ def test_advance_to_huge_span_is_refused_up_front():
     # integrates the unresolved gear of the second)
     ({'friction.regularization_velocity': 1e-10, 'friction.direction': 'regularized'},
      ['friction.regularization_velocity', 'near step']),
-    ({'geometry.gear_width': 6e-7, 'friction.direction': 'regularized'},
+    ({'geometry.gear_width': 6e-7, 'friction.direction': 'regularized',
+      'integrator.time_step': 1e-5},      # the gear mode at omega dt ~ 4 (at 10 us)
      ['not resolved', 'geometry.gear_width', 'omega dt']),
 ])
 def test_integration_failure_names_the_likely_cause(overrides, words):

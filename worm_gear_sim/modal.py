@@ -20,7 +20,8 @@ from .model import (
 from .params import ANGLE_LIMIT, Config
 
 __all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix',
-           'amplitude_time_step']
+           'amplitude_time_step', 'step_resolution', 'step_resolution_warning',
+           'StepResolutionWarning', 'STEPS_PER_PERIOD']
 
 
 def static_equilibrium(model: DriveModel | np.ndarray, theta1: float,
@@ -164,14 +165,53 @@ def damping_matrix(model: DriveModel | Config) -> np.ndarray:
     return np.ascontiguousarray(C)
 
 
-def amplitude_time_step(model: DriveModel | Config, steps_per_period: float = 20.0) -> float:
+#: Steps per period of the highest linearised mode (the worm on its shaft) that a step must
+#: give for pointwise theta2 and amplitude metrics: omega_max dt <= 2 pi / 20 = 0.314.  Measured
+#: (benchmarks/bench_step.py, frequency-matched worm): within it theta2 stayed within 3.6 % and
+#: theta4 within 0.03 % of their oscillation amplitudes pointwise on the 18-step move and its
+#: variants (stiffer and softer worm shaft, modules M1/M3, 16-32 ms moves, ramp, sawtooth
+#: mapping, tanh friction); a worm shaft twice as stiff at 5 us (16.5 steps per period) was
+#: 5.6 % off.  Not covered by the rule: theta4 without the flywheel (= theta3, 0.9 % at 4 us)
+#: and long sliding on the falling branch of Eq. 18 (a load torque, the paper's lead
+#: convention: 5-26 % even at 1 us), where the pointwise error does not come from the step's
+#: resolution of a mode.
+STEPS_PER_PERIOD = 20.0
+
+
+class StepResolutionWarning(UserWarning):
+    """The time step gives the highest mode fewer than STEPS_PER_PERIOD steps per period."""
+
+
+def step_resolution(model: DriveModel | Config) -> float:
+    """omega_max dt: the configured step against the highest linearised mode (the worm on
+    its shaft); 2 pi / (omega_max dt) steps per period of that mode."""
+    model = DriveModel.of(model)
+    return model.worm_frequency() * model.config.integrator.time_step
+
+
+def step_resolution_warning(model: DriveModel | Config) -> str:
+    """'' if ``integrator.time_step`` resolves the highest mode with at least
+    STEPS_PER_PERIOD steps per period, else a one-line warning (the rule of
+    :func:`amplitude_time_step`; a coarser step is allowed: the average-acceleration rule
+    is stable at any step, only theta2's pointwise accuracy degrades)."""
+    model = DriveModel.of(model)
+    x = step_resolution(model)
+    if not x > 2.0 * math.pi / STEPS_PER_PERIOD:
+        return ''
+    dt = model.config.integrator.time_step
+    return (f'integrator.time_step = {dt:g} s gives the highest mode ({x / (2 * math.pi * dt):.4g}'
+            f' Hz) {2 * math.pi / x:.1f} steps per period (< {STEPS_PER_PERIOD:g}, omega dt = '
+            f'{x:.3g}): theta2 can be more than 5 % of its oscillation off pointwise; use '
+            f'<= {amplitude_time_step(model):.3g} s for theta2 and amplitudes')
+
+
+def amplitude_time_step(model: DriveModel | Config,
+                        steps_per_period: float = STEPS_PER_PERIOD) -> float:
     """Time step for amplitude and pointwise metrics (studies, figures): the configured step
     divided by the smallest integer n that gives the highest linearised mode (the worm on its
     shaft, 8.6 kHz for Table 1) at least ``steps_per_period`` steps per period, so no metric
     depends on an unresolved mode.  An integer divisor keeps the grids of both steps aligned.
-    With worm_frequency_matching, 20 steps per period (5 us for Table 1) give theta2
-    pointwise within 5 % and theta4 within 0.1 % of their oscillation amplitudes against a
-    converged reference (test_integrator)."""
+    The default step (4 us, 29 steps per period for Table 1) needs no division."""
     model = DriveModel.of(model)
     f_top = model.worm_frequency() / (2.0 * math.pi)
     dt = model.config.integrator.time_step

@@ -8,6 +8,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,7 +43,12 @@ from .integrator import (
 from .integrator import (
     sliding_speed as record_aux_speed,
 )
-from .modal import damping_matrix, static_equilibrium
+from .modal import (
+    StepResolutionWarning,
+    damping_matrix,
+    static_equilibrium,
+    step_resolution_warning,
+)
 from .model import (
     AUX_CGKG,
     AUX_CWKW,
@@ -270,6 +276,10 @@ class Simulator:
         if check:   # ConfigError naming the keys unless the set can be simulated
             check_usable(config)
         self._set_model(DriveModel.of(model))
+        if check:   # allowed, but theta2 pointwise is not trustworthy (modal.STEPS_PER_PERIOD)
+            msg = step_resolution_warning(self.model)
+            if msg:
+                warnings.warn(msg, StepResolutionWarning, stacklevel=2)
         self.dt: float = config.integrator.time_step
         self.interpolation: str = interpolation or config.node.command_interpolation
         self._stats = np.zeros(N_STATS, dtype=np.int64)

@@ -34,7 +34,7 @@ from ..identification import (
     prediction_errors,
 )
 from ..params import Config
-from ..records import read_record
+from ..records import Record, read_record
 from .common import CliError, add_config_options, config_from_args, say
 
 __all__ = ['register', 'cmd_identify', 'parse_bounds', 'write_params_yaml']
@@ -112,7 +112,8 @@ def parse_bounds(items: Sequence[str]) -> dict[str, tuple[float, float]]:
     return out
 
 
-def _read(paths: Sequence[str], args: argparse.Namespace, cfg: Config, what: str) -> list:
+def _read(paths: Sequence[str], args: argparse.Namespace, cfg: Config,
+          what: str) -> list[Record]:
     recs = []
     for i, path in enumerate(paths):
         rec = read_record(path, columns=_columns(args.column), command_topic=args.command_topic,
@@ -186,7 +187,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         f'({res.strategy["n_starts"]} start(s), strategy {args.strategy})')
     say(args, res.table())
     report = res.to_dict()
-    report.update(command=' '.join(getattr(args, '_argv', []) or []),
+    report.update(command=' '.join(args._argv),
                   data=[str(p) for p in args.data], validate=[str(p) for p in args.validate],
                   output_yaml=None, base_config=args.config or 'package default')
     if held:

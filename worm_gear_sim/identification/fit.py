@@ -131,7 +131,7 @@ def _local_fit(problem: Problem, x0: np.ndarray, windows: Sequence[float | None]
     x = _interior(problem, x0)
     t0 = time.perf_counter()
     res = None
-    stages = []
+    stages: list[dict[str, Any]] = []
 
     def jac(xj: np.ndarray, window: float | None) -> np.ndarray:
         return problem.jacobian(xj, window, diff_step)

@@ -153,20 +153,21 @@ class Problem:
         return 0.5 * float(r @ r)
 
     def jacobian(self, x: np.ndarray, window: float | None = None, h: float = DIFF_STEP,
-                 central: bool = False) -> np.ndarray:
+                 central: bool = False, columns: Sequence[int] | None = None) -> np.ndarray:
         """d residuals / dx by finite differences with the absolute step ``h`` in x: forward
         (n evaluations; backward next to an upper bound) or ``central`` (2 n; one-sided next
-        to a bound)."""
+        to a bound); only ``columns`` if given (the others are NaN)."""
         x = np.asarray(x, float)
         lo, hi = self.x_bounds
         r0 = self.residuals(x, window)
-        J = np.empty((r0.size, x.size))
-        for i in range(x.size):
+        J = np.full((r0.size, x.size), np.nan)
+        for i in range(x.size) if columns is None else columns:
             e = np.zeros_like(x)
             e[i] = h
             up, down = x[i] + h <= hi[i], x[i] - h >= lo[i]
             if central and up and down:
-                J[:, i] = (self.residuals(x + e, window) - self.residuals(x - e, window)) / (2 * h)
+                J[:, i] = (self.residuals(x + e, window)
+                           - self.residuals(x - e, window)) / (2 * h)
             elif up:
                 J[:, i] = (self.residuals(x + e, window) - r0) / h
             else:
@@ -174,7 +175,8 @@ class Problem:
         return J
 
 
-def jacobian(problem: Problem, x: np.ndarray, h: float = DIFF_STEP) -> np.ndarray:
+def jacobian(problem: Problem, x: np.ndarray, h: float = DIFF_STEP,
+             columns: Sequence[int] | None = None) -> np.ndarray:
     """d residuals / dx over the whole records by central differences with step ``h`` in the
-    fitted coordinate (one-sided next to a bound): the Jacobian of the report."""
-    return problem.jacobian(x, None, h, central=True)
+    fitted coordinate (one-sided next to a bound)."""
+    return problem.jacobian(x, None, h, central=True, columns=columns)

@@ -188,8 +188,9 @@ def move_metrics(t: np.ndarray, e: np.ndarray, scenario: Scenario, mode_hz: floa
       antenna mode fitted out by least squares);
     - ``tracking_rms``: RMS of e while the reference moves at constant rate.
     """
-    t_move = scenario.move_end
-    t_cmd = t_move if command_end is None else max(command_end, t_move)
+    # a grid time k dt equals a sample time only to round-off (4 us x 512750 = 2.0509999..)
+    t_move = scenario.move_end - TIME_ROUNDING
+    t_cmd = t_move if command_end is None else max(command_end - TIME_ROUNDING, t_move)
     last = t >= t[-1] - static_window
     static = _static_offset(t[last], e[last], mode_hz)
     dev = np.abs(e - static)
@@ -202,7 +203,7 @@ def move_metrics(t: np.ndarray, e: np.ndarray, scenario: Scenario, mode_hz: floa
     elif t[-1] - t[outside[-1]] < SETTLE_HOLD:
         settle = math.inf          # still leaving the band near the end of the run
     else:
-        settle = float(t[outside[-1] + 1] - t_move)
+        settle = float(t[outside[-1] + 1] - scenario.move_end)
     mask = np.zeros(t.shape, bool)
     for a, b in scenario.constant_rate:
         mask |= (t >= a) & (t <= b)
@@ -210,6 +211,9 @@ def move_metrics(t: np.ndarray, e: np.ndarray, scenario: Scenario, mode_hz: floa
     return {'residual_peak': resid, 'post_move_peak': post, 'settling_time': settle,
             'static_error': abs(static), 'tracking_rms': rms}
 
+
+#: Times closer than this are the same instant (a grid time k dt against a sample time).
+TIME_ROUNDING = 1e-9
 
 #: Detuned plants for the robustness cases: +-20 % tooth stiffness, friction, flywheel.
 DETUNINGS = {
