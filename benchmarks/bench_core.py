@@ -119,9 +119,9 @@ def pointwise_accuracy(over: dict) -> tuple[float, float]:
 
 
 def ring_down_of(over: dict, horizon: float = 0.5) -> float:
-    """The antenna's ring-down over 0.5 s after the 18-step move (simulation.ring_down)."""
+    """The antenna's ring-down over 0.5 s after the 18-step move (trajectory.ring_down)."""
     from worm_gear_sim import DriveModel, static_equilibrium
-    from worm_gear_sim.simulation import ring_down
+    from worm_gear_sim.trajectory import ring_down
     model = DriveModel(Config().replace(over))
     dt = model.config.integrator.time_step
     n, k = round((0.02 + horizon) / dt), max(1, int(1e-5 / dt + 1e-9))

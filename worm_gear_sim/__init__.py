@@ -32,8 +32,8 @@ _EXPORTS: dict[str, str] = {
     'Profile': 'profiles', 'RampProfile': 'profiles', 'SampledProfile': 'profiles',
     'SCurveProfile': 'profiles', 'StepProfile': 'profiles', 'TrapezoidalProfile': 'profiles',
     'make_profile': 'profiles',
-    'SimState': 'simulation', 'SimulationError': 'simulation', 'Simulator': 'simulation',
-    'Trajectory': 'simulation', 'simulate': 'simulation', 'simulate_to_csv': 'simulation',
+    'SimState': 'trajectory', 'SimulationError': 'simulation', 'Simulator': 'simulation',
+    'Trajectory': 'trajectory', 'simulate': 'simulation', 'simulate_to_csv': 'simulation',
     'Compensator': 'compensation', 'feedforward_series': 'compensation',
     'RealtimePredictor': 'realtime',
     'resolve_config': 'config_io', 'params_document': 'config_io',
@@ -66,14 +66,8 @@ if TYPE_CHECKING:  # static analysers see the eager imports
         make_profile,
     )
     from .realtime import RealtimePredictor
-    from .simulation import (
-        SimState,
-        SimulationError,
-        Simulator,
-        Trajectory,
-        simulate,
-        simulate_to_csv,
-    )
+    from .simulation import SimulationError, Simulator, simulate, simulate_to_csv
+    from .trajectory import SimState, Trajectory
 
 
 def __getattr__(name: str) -> Any:

@@ -193,12 +193,6 @@ def friction_is_set_valued(p: np.ndarray) -> bool:
     return bool(p[P_FRIC_SET_VALUED] != 0.0)
 
 
-def contact_origins_deg(cfg: Config) -> tuple[float, float]:
-    """The calibrated origins x0 of the worm and gear contact positions of Eqs. 16-17 [deg]
-    (cycle means equal to the linear tooth stiffnesses; see docs/model-notes.md)."""
-    return DriveModel(cfg).contact_origins_deg
-
-
 class DriveModel:
     """The drive's model built once from a validated :class:`Config`: the Config, its
     derived quantities (:class:`Derived`: inertias, stiffnesses, l_w, ratio) and the packed
@@ -241,7 +235,8 @@ class DriveModel:
 
     @property
     def contact_origins_deg(self) -> tuple[float, float]:
-        """Calibrated origins x0 of the worm and gear contact positions (Eqs. 16-17) [deg]."""
+        """Calibrated origins x0 of the worm and gear contact positions of Eqs. 16-17 [deg]
+        (cycle means equal to the linear tooth stiffnesses; see docs/model-notes.md)."""
         return float(self.p[P_WORM_X0]), float(self.p[P_GEAR_X0])
 
     @property
