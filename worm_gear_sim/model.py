@@ -254,10 +254,6 @@ class DriveModel:
         """True when the tooth stiffnesses are constant (``mesh.stiffness_model: linear``)."""
         return bool(self.p[P_MESH_LINEAR] != 0.0)
 
-    def mass_matrix(self) -> np.ndarray:
-        """diag(J_w, J_g, J_4) of Eq. 15."""
-        return mass_matrix(self.p)
-
     def worm_frequency(self) -> float:
         """Highest linearised natural frequency [rad/s] (see :func:`worm_frequency`)."""
         return worm_frequency(self.p)
