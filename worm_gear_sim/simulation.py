@@ -123,8 +123,8 @@ class Simulator:
     set usable first (:func:`check_usable`, cached per Config).
     """
 
-    #: Default step limit of one :meth:`advance_to` call (1e8 steps: 1000 s at 10 us,
-    #: roughly half a minute of computation).
+    #: Default step limit of one :meth:`advance_to` call (1e8 steps: 400 s at the default
+    #: 4 us, roughly half a minute of computation).
     max_advance_steps: int = 10 ** 8
 
     def __init__(self, model: DriveModel | Config, theta1: float = 0.0, t0: float = 0.0,
