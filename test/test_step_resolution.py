@@ -5,9 +5,13 @@ and the studies' amplitude step; the default step satisfies it with a whole numb
 per 1 ms tick."""
 
 import math
+import signal
+import sys
+import time
 import warnings
 
 import pytest
+from processes import start_logged, stop_and_read
 
 from worm_gear_sim import Config, Simulator
 from worm_gear_sim.modal import (
@@ -56,3 +60,23 @@ def test_under_resolved_step_warns_and_names_the_way_out(over, f_hz):
     sim = Simulator(cfg, check=False)
     sim.advance_to(0.002, 0.01)
     assert sim.stats['failed_steps'] == 0
+
+
+def test_node_logs_an_under_resolved_step_through_ros(tmp_path, ros_subprocess_env):
+    """The node (as a process) with a coarse step: starts, says so once as a ROS warning
+    (not as Python's two-line warning on stderr), and ends quietly on SIGINT."""
+    pytest.importorskip('rclpy')
+    log_path = tmp_path / 'node.log'
+    proc, log = start_logged([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
+                              '-p', 'integrator.time_step:=1e-05'], ros_subprocess_env,
+                             log_path)
+    deadline = time.monotonic() + 90.0
+    while time.monotonic() < deadline and proc.poll() is None \
+            and 'ready: dt = 1e-05 s' not in log_path.read_text():
+        time.sleep(0.2)
+    rc, text = stop_and_read(proc, log, signal.SIGINT)
+    assert rc == 0, text
+    assert 'ready: dt = 1e-05 s' in text, text
+    notes = [ln for ln in text.splitlines() if 'steps per period' in ln]
+    assert len(notes) == 1 and '[WARN]' in notes[0] and '11.6 steps per period' in notes[0]
+    assert 'StepResolutionWarning' not in text and 'Traceback' not in text
