@@ -38,9 +38,6 @@ DEFERRED_BACK_EDGES = {
     # Names that moved out of params (load_config, default_config_path) still import from
     # there for one release, with a DeprecationWarning (params.__getattr__).
     (f'{ROOT}.params', f'{ROOT}.config_io'),
-    # compensation.feedforward_series, the offline twin, runs the real-time pipeline (which
-    # feeds the Compensator), so that live and offline corrections are one code path.
-    (f'{ROOT}.compensation', f'{ROOT}.realtime'),
 }
 
 
