@@ -3,7 +3,7 @@
 """Real-time benchmark of the ROS 2 node across two processes.
 
 Starts ``python -m worm_gear_sim.node --ros-args --params-file config/worm_gear_sim.yaml``
-(1 kHz ticks, dt = 10 us: the defaults) as a child process; this process streams
+(1 kHz ticks and the integrator step of that file) as a child process; this process streams
 ``worm_angle_command`` at 1 kHz (a radar slew: constant-rate triangle, +-0.5 rad of worm at
 0.5 rad/s, i.e. the antenna sweeping at ~9 mrad/s) and subscribes to ``joint_states`` and
 ``/diagnostics``.  Measured over ``--duration`` seconds after a warm-up:
@@ -21,7 +21,9 @@ noise: each command is the slew at its publish time (the probe's 1 kHz timer, no
 phase-locked to the node's); the correction of a constant-rate slew is 0 with the default
 drive (no load), so whatever ``~/feedforward`` shows on the constant-rate stretches (60 ms
 from each reversal on) is noise from the command timing; ``--command-timing`` and
-``--slew-rate`` set the case.
+``--slew-rate`` set the case.  ``--stamped`` runs the side-by-side benchmark of
+bench_node_stamped.py instead; the probe's code is node_probe.py, the per-tick costs
+node_costs.py.
 
     python benchmarks/bench_node.py                    # 60 s
     python benchmarks/bench_node.py --duration 20 --breakdown
@@ -35,21 +37,22 @@ import argparse
 import collections
 import math
 import os
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+from worm_gear_sim import load_config
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_node_stamped import stamped_main  # noqa: E402
+from node_costs import breakdown, empty_timer_cost, publish_cost  # noqa: E402
 from node_probe import (  # noqa: E402
+    PARAMS_FILE,
     Phases,
     lost_periods,
-    proc_cpu_seconds,
     slew,
     spin_until_done,
     start_node,
@@ -57,331 +60,6 @@ from node_probe import (  # noqa: E402
 )
 
 TARGET_CPU, TARGET_MISSED, TARGET_P99_MS = 0.15, 0.001, 1.5
-
-
-def breakdown(n_ticks: int = 2000) -> dict[str, float]:
-    """Per-tick costs [us] of the pieces of a tick, in-process (no DDS transport)."""
-    import rclpy
-    from std_msgs.msg import Float64
-
-    from worm_gear_sim.ros.node import WormGearSimNode
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'OFF'
-    ctx = rclpy.context.Context()
-    rclpy.init(context=ctx, domain_id=int(os.environ.get('ROS_DOMAIN_ID', '44')))
-    node = WormGearSimNode(context=ctx)
-    out: dict[str, float] = {}
-    try:
-        msg = Float64()
-        sim, comp = node.sim, node.compensator
-        # whole tick callback at the slew, wall time, without the executor
-        t0 = time.monotonic()
-        for i in range(n_ticks + 200):
-            if i == 200:
-                busy0, k0 = node.load.window['busy_ns'], node.counters['ticks']
-            msg.data = slew(time.monotonic() - t0)
-            node._on_command(msg)
-            node._on_tick()
-            while time.monotonic() - t0 < (i + 1) * 1e-3:
-                pass
-        out['tick callback (all below)'] = \
-            (node.load.window['busy_ns'] - busy0) / (node.counters['ticks'] - k0) / 1e3
-        # physics alone: 1 ms of the same slew per call
-        from worm_gear_sim.simulation import Simulator
-        s = Simulator(node.config, theta1=slew(0.0))
-        t, a = 0.0, time.perf_counter()
-        for _ in range(n_ticks):
-            t += 1e-3
-            s.advance_to(t, slew(t))
-        out['  Simulator.advance_to (100 Newmark steps)'] = \
-            (time.perf_counter() - a) / n_ticks * 1e6
-        if comp is not None:
-            from worm_gear_sim.compensation import Compensator
-            c = Compensator(node.config)
-            c.reset(slew(0.0), 0.0)
-            t, a = 0.0, time.perf_counter()
-            for _ in range(n_ticks):
-                t += 1e-3
-                c.update(t, slew(t))
-            out['  Compensator.update'] = (time.perf_counter() - a) / n_ticks * 1e6
-
-        def per(f) -> float:
-            a = time.perf_counter()
-            for _ in range(n_ticks):
-                f()
-            return (time.perf_counter() - a) / n_ticks * 1e6
-        out['  state + joint_torques'] = per(lambda: (sim.state, sim.joint_torques()))
-        out['  4 publishes (JointState + 3 Float64)'] = per(lambda: (
-            node._pub_js.publish(node._js), node._pub_err.publish(node._f_err),
-            node._pub_worm.publish(node._f_worm), node._pub_ff.publish(node._f_ff)))
-        out['  clock.now()'] = per(lambda: node.get_clock().now())
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
-    return out
-
-
-def empty_timer_cost(kind: str, seconds: float = 10.0) -> tuple[float, float, float]:
-    """An empty 1 kHz timer alone in a process with the given executor: (CPU [core],
-    missed ticks [%], remote JointState publish [us of CPU per message]).  The platform's
-    floor for the node's figures."""
-    code = f'''
-import time, rclpy
-from rclpy.node import Node
-from worm_gear_sim.ros.run import make_executor
-rclpy.init(domain_id={int(os.environ.get('ROS_DOMAIN_ID', '44')) + 1})
-n = Node('empty_timer'); ts = []
-n.create_timer(1e-3, lambda: ts.append(time.monotonic_ns()))
-ex = make_executor('{kind}'); ex.add_node(n)
-fut = rclpy.task.Future()
-ex.spin_until_future_complete(fut, timeout_sec=1.0)
-ts.clear()
-c0, w0 = time.process_time(), time.monotonic()
-while time.monotonic() - w0 < {seconds}:
-    ex.spin_until_future_complete(fut, timeout_sec=1.0)
-cpu = (time.process_time() - c0) / (time.monotonic() - w0)
-lost = 0
-for a, b in zip(ts, ts[1:]):
-    g = (b - a) / 1e6
-    if g > 1.5:
-        lost += round(g) - 1
-print(cpu, 100.0 * lost / (len(ts) + lost))
-'''
-    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                         timeout=seconds + 60, cwd=ROOT)
-    cpu, missed = (float(x) for x in out.stdout.split()[-2:])
-    return cpu, missed
-
-
-def publish_cost(n: int = 2000) -> float:
-    """CPU [us] per JointState published to a subscriber in another process (the
-    DDS/rclpy floor of one output topic at 1 kHz on this machine)."""
-    dom = int(os.environ.get('ROS_DOMAIN_ID', '44')) + 2
-    sub = subprocess.Popen([sys.executable, '-c', f'''
-import time, rclpy
-from sensor_msgs.msg import JointState
-rclpy.init(domain_id={dom})
-n = rclpy.create_node('pub_cost_sub')
-n.create_subscription(JointState, 'pub_cost', lambda m: None, 10)
-t0 = time.monotonic()
-try:
-    while time.monotonic() - t0 < 60:
-        rclpy.spin_once(n, timeout_sec=0.1)
-except Exception:
-    pass
-'''], cwd=ROOT)
-    code = f'''
-import time, rclpy
-from sensor_msgs.msg import JointState
-rclpy.init(domain_id={dom})
-n = rclpy.create_node('pub_cost_pub')
-p = n.create_publisher(JointState, 'pub_cost', 10)
-js = JointState(name=['a', 'b', 'c', 'd'], position=[0.1] * 4, velocity=[0.2] * 4,
-                effort=[0.3] * 4)
-t0 = time.monotonic()
-while p.get_subscription_count() == 0 and time.monotonic() - t0 < 30:
-    time.sleep(0.05)
-time.sleep(0.5)
-c0 = time.process_time()
-for _ in range({n}):
-    p.publish(js)
-    time.sleep(0.001)
-c1 = time.process_time()
-for _ in range({n}):
-    time.sleep(0.001)
-print(((c1 - c0) - (time.process_time() - c1)) / {n} * 1e6)
-'''
-    try:
-        out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                             timeout=120, cwd=ROOT)
-    finally:
-        sub.terminate()
-        sub.wait()
-    return float(out.stdout.split()[-1])
-
-
-STAMPED_TARGETS = dict(deviation=1e-6, answered=0.999, cpu=0.25, cpu_ratio=0.6, p99_ms=1.0)
-
-
-def stamped_main(args: argparse.Namespace) -> int:
-    """Two node processes side by side (namespaces /stamped and /float64), one probe.
-
-    Each probe timer callback publishes every 1 ms slot k that is due (a late callback
-    publishes the missed slots at once, as a servo catching up would): to /stamped a
-    ``worm_angle_reference`` (stamp = base + k ms on the ROS clock, theta1 = the 2 rad/s slew
-    with reversals at k ms) and to /float64 the same value as ``worm_angle_command``.  The
-    probe subscribes to /stamped's ``~/compensated_command`` and ``joint_states`` and to
-    /float64's ``joint_states`` and ``~/feedforward``.  Reported over the measured window:
-    the deviation of every received delta (compensated - theta1_ref) from
-    ``feedforward_series`` of all published (stamp, value) pairs, the answered fraction,
-    both nodes' CPU (utime + stime over wall time), publish -> compensated_command latency.
-    """
-    os.environ['ROS_DOMAIN_ID'] = str(args.domain_id)
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    import rclpy
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import JointState
-    from std_msgs.msg import Float64
-
-    from worm_gear_sim.compensation import feedforward_series
-    from worm_gear_sim.config_io import load_config
-    from worm_gear_sim.ros.run import make_executor
-
-    load0 = os.getloadavg()
-    cfg_path = ROOT / 'config' / 'worm_gear_sim.yaml'
-    cfg = load_config(cfg_path)
-    logs = tempfile.TemporaryDirectory(prefix='bench_node_')
-    started = {ns: start_node(Path(logs.name) / f'{ns}.log', executor=args.executor,
-                              ros_args=['-r', f'__ns:=/{ns}'])
-               for ns in ('stamped', 'float64')}
-    procs = {ns: p for ns, (p, _) in started.items()}
-    rclpy.init()
-    probe = rclpy.create_node('bench_probe')
-    reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-    pub_ref = probe.create_publisher(JointState, '/stamped/worm_angle_reference', reliable)
-    pub_cmd = probe.create_publisher(Float64, '/float64/worm_angle_command', QoSProfile(depth=10))
-    n_max = int((args.duration + args.warmup + 130.0) * 1000)
-    t_pub = np.full(n_max, np.nan)
-    x_pub = np.full(n_max, np.nan)
-    t_rx = np.full(n_max, np.nan)
-    cc = np.full(n_max, np.nan)
-    count = {'js_stamped': 0, 'js_float64': 0, 'ff_float64': 0, 'k': 0}
-    base = {'ns': 0}
-
-    def on_cc(msg: JointState) -> None:
-        now = time.monotonic()
-        k = (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec - base['ns']) // 1_000_000
-        if 0 <= k < n_max:
-            t_rx[k], cc[k] = now, msg.position[0]
-
-    def counter(key: str):
-        def cb(msg: Any) -> None:
-            count[key] += 1
-        return cb
-
-    probe.create_subscription(JointState, '/stamped/worm_gear_sim/compensated_command', on_cc,
-                              QoSProfile(depth=1000))
-    probe.create_subscription(JointState, '/stamped/joint_states', counter('js_stamped'),
-                              QoSProfile(depth=100))
-    probe.create_subscription(JointState, '/float64/joint_states', counter('js_float64'),
-                              QoSProfile(depth=100))
-    probe.create_subscription(Float64, '/float64/worm_gear_sim/feedforward',
-                              counter('ff_float64'), QoSProfile(depth=100))
-    from rclpy.parameter import Parameter
-    from rclpy.parameter_client import AsyncParameterClient
-    params = AsyncParameterClient(probe, '/stamped/worm_gear_sim')
-    set_times: list[float] = []
-    set_ok: list[bool] = []
-    ex = make_executor('events')
-    ex.add_node(probe)
-    done = rclpy.task.Future()
-    t_start = time.monotonic()
-    run: dict[str, Any] = {'phase': 'wait', 'error': ''}
-
-    def set_parameters(i: int) -> None:
-        fut = params.set_parameters([Parameter('friction.mu_kinetic',
-                                               value=0.0470713 + 1e-4 * (i % 7))])
-        set_times.append(time.monotonic())
-        fut.add_done_callback(lambda f: set_ok.append(
-            f.result() is not None and all(r.successful for r in f.result().results)))
-    msg = JointState(name=[cfg.node.joint_names[0]], position=[0.0])
-    fmsg = Float64()
-
-    def on_timer() -> None:
-        now = time.monotonic()
-        for ns, p in procs.items():
-            if p.poll() is not None:
-                run['error'] = f'node process {ns} exited'
-                done.set_result(True)
-                return
-        ph = run['phase']
-        if ph == 'wait':
-            if pub_ref.get_subscription_count() and pub_cmd.get_subscription_count() and \
-                    count['js_float64'] == 0:
-                run['phase'], run['t_warm'] = 'warm', now
-                base['ns'] = probe.get_clock().now().nanoseconds
-                run['mono0'] = now
-            elif now - t_start > 120.0:
-                run['error'] = 'the nodes did not subscribe within 120 s'
-                done.set_result(True)
-            return
-        if ph == 'warm' and now - run['t_warm'] >= args.warmup:
-            run['phase'], run['k0'], run['wall0'] = 'measure', count['k'], now
-            run['cpu0'] = {n: proc_cpu_seconds(p.pid) for n, p in procs.items()}
-        elif ph == 'measure' and args.param_sets and len(set_times) < args.param_sets and \
-                now - run['wall0'] >= (len(set_times) + 0.5) * args.duration / args.param_sets:
-            set_parameters(len(set_times))
-        elif ph == 'measure' and now - run['wall0'] >= args.duration:
-            run['cpu1'] = {n: proc_cpu_seconds(p.pid) for n, p in procs.items()}
-            run['wall1'], run['k1'] = now, count['k']
-            done.set_result(True)
-            return
-        due = int((now - run['mono0']) * 1000.0)      # slots due by now
-        k = count['k']
-        while k <= due and k < n_max:
-            x = slew(k * 1e-3, args.slew_rate)
-            st = base['ns'] + k * 1_000_000
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(st, 10**9)
-            msg.position[0] = x
-            t_pub[k], x_pub[k] = time.monotonic(), x
-            pub_ref.publish(msg)
-            fmsg.data = x
-            pub_cmd.publish(fmsg)
-            k += 1
-        count['k'] = k
-
-    probe.create_timer(1.0 / args.command_rate, on_timer)
-    try:
-        spin_until_done(ex, done, linger=0.5)     # then let the last answers arrive
-    finally:
-        errs = {ns: stop_node(p, log, timeout=30.0)[1] for ns, (p, log) in started.items()}
-        logs.cleanup()
-        ex.shutdown()
-        probe.destroy_node()
-        rclpy.try_shutdown()
-    if run['error']:
-        print(f'error: {run["error"]}\n' + '\n'.join(errs.values()), file=sys.stderr)
-        return 1
-    load1 = os.getloadavg()
-    n_all = count['k']
-    t = np.arange(n_all) * 1e-3
-    expected = feedforward_series(cfg, t, x_pub[:n_all])
-    win = slice(run['k0'], run['k1'])
-    sent = np.arange(n_all)[win]
-    got = ~np.isnan(cc[:n_all][win])
-    dev = np.abs(cc[:n_all][win][got] - x_pub[:n_all][win][got] - expected[win][got])
-    lat = (t_rx[:n_all][win] - t_pub[:n_all][win])[got] * 1e3
-    wall = run['wall1'] - run['wall0']
-    cpu = {n: (run['cpu1'][n] - run['cpu0'][n]) / wall for n in procs}
-    answered = got.mean() if sent.size else 0.0
-    ok_dev = float(np.mean(dev <= STAMPED_TARGETS['deviation'])) if dev.size else 0.0
-    tg = STAMPED_TARGETS
-    print(f'stamped vs Float64 node, {wall:.1f} s measured after {args.warmup:g} s warm-up, '
-          f'1 kHz slew {args.slew_rate:g} rad/s with reversals, {args.executor} executor; '
-          f'load average {load0[0]:.2f} before, {load1[0]:.2f} after (2 cores, shared)')
-    print(f'  samples published {sent.size}, compensated_command received {int(got.sum())}'
-          f' -> answered {100 * answered:.3f} %  (target >= {100 * tg["answered"]:g} %)')
-    print(f'  delta - feedforward_series: max {dev.max() if dev.size else float("nan"):.3g}'
-          f' rad, {100 * ok_dev:.3f} % <= {tg["deviation"]:g} rad  (target 100 %)')
-    print(f'  node CPU: stamped {cpu["stamped"]:.3f} core, Float64 {cpu["float64"]:.3f} core'
-          f' -> ratio {cpu["stamped"] / cpu["float64"]:.2f}  (targets <= {tg["cpu"]:g} core,'
-          f' <= {tg["cpu_ratio"]:g}x)')
-    if lat.size:
-        print(f'  publish -> compensated_command: p50 {np.percentile(lat, 50):.3f} ms, '
-              f'p99 {np.percentile(lat, 99):.3f} ms, max {lat.max():.2f} ms  '
-              f'(target p99 <= {tg["p99_ms"]:g} ms)')
-    if set_times:
-        tp = t_pub[:n_all][win][got]
-        near = np.zeros(tp.size, bool)
-        for ts in set_times:
-            near |= (tp >= ts) & (tp < ts + 0.05)
-        far = ~near
-        print(f'  {len(set_times)} parameter sets, {sum(set_ok)} accepted: latency p99 within '
-              f'50 ms after a set {np.percentile(lat[near], 99):.3f} ms ({int(near.sum())} '
-              f'samples), elsewhere {np.percentile(lat[far], 99):.3f} ms; max '
-              f'{lat[near].max():.2f} / {lat[far].max():.2f} ms')
-    print(f'  joint_states received: stamped {count["js_stamped"]}, Float64 '
-          f'{count["js_float64"]}; Float64 ~/feedforward {count["ff_float64"]}')
-    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -530,7 +208,8 @@ def main(argv: list[str] | None = None) -> int:
             math.nan
     load1 = os.getloadavg()
     print(f'worm_gear_sim node benchmark: {wall:.1f} s measured, executor {args.executor}, '
-          f'1 kHz ticks, dt = 10 us, commands at {args.command_rate:g} Hz (slew '
+          f'1 kHz ticks, dt = {load_config(PARAMS_FILE).integrator.time_step * 1e6:g} us, '
+          f'commands at {args.command_rate:g} Hz (slew '
           f'{args.slew_rate:g} rad/s)')
     print(f'machine: {os.cpu_count()} cores shared with other work; load average '
           f'{load0[0]:.2f} before, {load1[0]:.2f} after (1 min)')

@@ -18,7 +18,11 @@ time); the load average is printed because absolute figures depend on it.
   physics (100 Newmark steps), one Correction and one Prediction (with shaft torques),
   for the plain, preview and compensation-applied settings; and its parts: the simulator's
   ``advance_to`` for 1 ms alone and ``push`` with ``simulate=False`` (what
-  ``feedforward_series`` runs).
+  ``feedforward_series`` runs);
+* ``parameter change``: ``prepare`` + ``reconfigure`` of a running pipeline with a new
+  (already proven) parameter set, what the node does off and on its executor after a
+  parameter update: one ``DriveModel`` shared by the simulator's trial, the compensator's
+  design and the swap.
 
     python benchmarks/bench_realtime.py
     python benchmarks/bench_realtime.py --samples 5000 --repeats 9
@@ -29,6 +33,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import statistics
 import sys
 import time
 
@@ -163,7 +168,8 @@ def main(argv: list[str] | None = None) -> int:
             sim.advance_to(a, b)
 
     t_sim = best(run_sim, rep)
-    print(f'simulator advance_to, 1 ms (100 steps) alone: {t_sim / n * 1e6:.1f} us')
+    steps = round(1e-3 / cfg.integrator.time_step)
+    print(f'simulator advance_to, 1 ms ({steps} steps) alone: {t_sim / n * 1e6:.1f} us')
 
     cases = [('push, corrections only (simulate=False)', cfg, dict(simulate=False)),
              ('push (P = 0)', cfg, {}),
@@ -176,6 +182,16 @@ def main(argv: list[str] | None = None) -> int:
                 p.push(s, v, now_ns=s)
         t_p = best(run, rep)
         print(f'{name:40s} {t_p / n * 1e6:7.1f} us per sample')
+
+    rt = RealtimePredictor(cfg)
+    changes = [cfg.replace({'load.output_torque': 5.0 + 0.01 * (i + 1)}) for i in range(50)]
+    t_change = []
+    for c in changes:                   # proven sets: check_usable is a look-up here
+        t0 = time.perf_counter()
+        rt.reconfigure(rt.prepare(c))
+        t_change.append(time.perf_counter() - t0)
+    print(f'{"parameter change (prepare + reconfigure)":40s} '
+          f'{statistics.median(t_change[5:]) * 1e3:7.2f} ms (median of {len(changes) - 5})')
     return 0
 
 

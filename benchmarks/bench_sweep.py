@@ -6,9 +6,9 @@ and with 2 workers; cases/second, scaling, and per-case overhead beyond the kern
     python benchmarks/bench_sweep.py [--cases 200] [--end-time 0.5] [--workers 1,2]
 
 Each case is the default drive with a different mesh phase (``mesh.phase_offset``), run
-for ``--end-time`` seconds of simulated time at dt = 10 us, metrics computed in the worker
-(only ~30 numbers come back).  Figures are printed, never asserted.  The machine's load is
-printed before and after: other processes on the same cores distort the scaling.
+for ``--end-time`` seconds of simulated time at the default dt (4 us), metrics computed in
+the worker (only ~30 numbers come back).  Figures are printed, never asserted.  The machine's
+load is printed before and after: other processes on the same cores distort the scaling.
 """
 
 from __future__ import annotations

@@ -21,8 +21,19 @@
 set -euo pipefail
 
 cd "$(dirname "$0")/.."
+case "${1:-}" in
+    -h|--help) sed -n '5,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+esac
 DURATION="${1:-${DEMO_DURATION:-20}}"
 PATTERN="${2:-${DEMO_PATTERN:-paper}}"
+if ! [[ "$DURATION" =~ ^[0-9]+([.][0-9]+)?$ ]]; then
+    echo "run_demo.sh: DURATION_S must be a number of seconds, got '$DURATION' (see --help)" >&2
+    exit 2
+fi
+if [ "$PATTERN" != paper ] && [ "$PATTERN" != slew ]; then
+    echo "run_demo.sh: pattern must be paper or slew, got '$PATTERN' (see --help)" >&2
+    exit 2
+fi
 # shellcheck source=scripts/ros_distro.sh
 . scripts/ros_distro.sh                # ROS_DISTRO=kilted (.venv, default) | jazzy (.venv-jazzy)
 scripts/setup_env.sh                   # creates the venv and installs everything (first run)
@@ -53,7 +64,12 @@ stop_node() {
     fi
     wait "$NODE_PID" 2>/dev/null
 }
-trap 'stop_node || true' INT TERM
+# the node never outlives the script: also on its own error exit, a hang-up or a broken pipe
+trap 'stop_node || true' EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
+trap 'exit 129' HUP
+trap 'exit 141' PIPE
 
 set +e
 "$PY" -m worm_gear_sim.demo_commander "${DEMO_ARGS[@]}"
@@ -61,7 +77,7 @@ DEMO_RC=$?
 stop_node
 NODE_RC=$?
 set -e
-trap - INT TERM
+trap - EXIT
 echo "[demo] demo exit code $DEMO_RC, node exit code $NODE_RC"
 if [ "$DEMO_RC" -ne 0 ]; then exit "$DEMO_RC"; fi
 exit "$NODE_RC"

@@ -32,15 +32,9 @@ DEFERRED_BACK_EDGES = {
     (f'{ROOT}.params', f'{ROOT}.usability'),
     # A failed integration names its likely cause (usability.diagnose) in the SimulationError.
     (f'{ROOT}.simulation', f'{ROOT}.usability'),
-    # The start-up entry installs its signal handlers before importing the node's process
-    # (seconds of numpy/numba/rclpy imports), which then calls back into start-up.
-    (f'{WING}.startup', f'{WING}.run'),
     # Names that moved out of params (load_config, default_config_path) still import from
     # there for one release, with a DeprecationWarning (params.__getattr__).
     (f'{ROOT}.params', f'{ROOT}.config_io'),
-    # compensation.feedforward_series, the offline twin, runs the real-time pipeline (which
-    # feeds the Compensator), so that live and offline corrections are one code path.
-    (f'{ROOT}.compensation', f'{ROOT}.realtime'),
 }
 
 

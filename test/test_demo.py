@@ -293,3 +293,24 @@ def test_demo_stamped_slew_matches_the_offline_model(ros_subprocess_env, tmp_pat
     (dev,) = _numbers(r'live vs offline \(without feed-forward\): ringing differs by at '
                       r'most ([0-9.e+-]+) rad', out)
     assert dev < 0.5e-6, out
+
+
+SCRIPT = Path(__file__).resolve().parents[1] / 'scripts' / 'run_demo.sh'
+
+
+def test_run_demo_script_help_and_bad_arguments_before_any_set_up(tmp_path):
+    """README command #1: --help prints the usage, a bad duration or pattern is one line on
+    stderr and exit 2, checked before the venv set-up (VENV points at an empty directory,
+    which the set-up would fill: it must stay empty)."""
+    env = {**os.environ, 'VENV': str(tmp_path / 'venv')}
+    out = subprocess.run(['bash', str(SCRIPT), '--help'], capture_output=True, text=True,
+                         env=env, timeout=30)
+    assert out.returncode == 0 and 'scripts/run_demo.sh [DURATION_S] [paper|slew]' in out.stdout
+    for args, word in ((['abc'], "'abc'"), (['5', 'zigzag'], "'zigzag'"), (['-3'], "'-3'")):
+        r = subprocess.run(['bash', str(SCRIPT), *args], capture_output=True, text=True,
+                           env=env, timeout=30)
+        assert r.returncode == 2, (args, r.stdout, r.stderr)
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and word in lines[0] and 'run_demo.sh' in lines[0], r.stderr
+        assert 'Traceback' not in r.stderr and r.stdout == ''
+    assert not (tmp_path / 'venv').exists()

@@ -81,6 +81,34 @@ def test_mean_tooth_stiffness_over_a_mesh_cycle():
     assert k[:, 1].min() < 2.5e8 < k[:, 1].max()
 
 
+def test_drive_model_names_the_quantities_the_kernel_uses():
+    """DriveModel's named quantities against values worked out from the parameters by hand
+    (and the calibration against a numerical cycle mean), and the packed vector it shares
+    with the kernels equals a fresh packing."""
+    from worm_gear_sim import DriveModel
+    cfg = Config().replace({'geometry.module': 4.0, 'mesh.worm_tooth_stiffness_multiplier': 3.0})
+    m = DriveModel(cfg)
+    assert np.array_equal(m.p, pack_parameters(cfg)) and DriveModel.of(m) is m
+    cw, cg = m.linear_tooth_stiffness
+    assert cw == pytest.approx(3.5e8 * 3.0 * 4.0 / 2) and cg == pytest.approx(2.5e8 * 2)
+    assert m.linear_mesh_compliance == pytest.approx(1 / cw + 1 / cg)
+    assert m.output_per_input == pytest.approx(0.001 / 0.056, rel=1e-7)
+    assert m.rigid_motion == pytest.approx([1.0, 0.001 / 0.056, 0.001 / 0.056], rel=1e-7)
+    assert not m.mesh_is_linear and DriveModel(cfg.replace(
+        {'mesh.stiffness_model': 'linear'})).mesh_is_linear
+    assert m.friction_is_set_valued
+    for other in ({'friction.direction': 'regularized'}, {'friction.model': 'off'}):
+        assert not DriveModel(Config().replace(other)).friction_is_set_valued
+    # x0: the cosine mapping x = x0 + 180 (1 - cos s) deg gives cycle means c_w k_w, c_g k_g
+    x0w, x0g = DriveModel(Config()).contact_origins_deg
+    s = np.linspace(0.0, 2 * math.pi, 20001)[:-1]
+    x = 180.0 * (1 - np.cos(s))
+    for x0, a, b, mean in ((x0w, 19.38843319, 0.000656069, 3.5e8),
+                           (x0g, 19.64527077, -0.00055956, 2.5e8)):
+        k = 2.0 * math.exp(a) * (np.exp(b * (x0 + x)) + np.exp(b * (x0 + x + 360)))
+        assert k.mean() == pytest.approx(mean, rel=1e-9)
+
+
 def test_tooth_stiffness_scales_with_module():
     """M multiplies Eqs. 16-17; the calibration refers to the paper's M2."""
     phases = np.linspace(0, 2 * math.pi, 2001)[:-1]

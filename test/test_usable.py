@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from worm_gear_sim.config_io import load_config
 from worm_gear_sim.modal import modes
 from worm_gear_sim.params import (
     ANGLE_LIMIT,
@@ -19,7 +20,6 @@ from worm_gear_sim.params import (
     ConfigError,
     check_usable,
     config_from_mapping,
-    load_config,
 )
 from worm_gear_sim.simulation import Simulator, simulate
 from worm_gear_sim.usability import OMEGA_DT_MAX, SPRING_RATIO_MIN

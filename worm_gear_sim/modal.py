@@ -167,10 +167,14 @@ def damping_matrix(model: DriveModel | Config) -> np.ndarray:
 
 #: Steps per period of the highest linearised mode (the worm on its shaft) that a step must
 #: give for pointwise theta2 and amplitude metrics: omega_max dt <= 2 pi / 20 = 0.314.  Measured
-#: (benchmarks/bench_step.py): within it theta2 stayed within 3.6 % and theta4 within 0.01 % of
-#: their oscillation amplitudes pointwise on the 18-step move and its variants (stiffer and
-#: softer worm shaft, modules M1/M3, 16-32 ms moves, ramp); the only variant beyond it, a worm
-#: shaft twice as stiff at 5 us (17 steps per period), was 5.6 % off.
+#: (benchmarks/bench_step.py, frequency-matched worm): within it theta2 stayed within 3.6 % and
+#: theta4 within 0.03 % of their oscillation amplitudes pointwise on the 18-step move and its
+#: variants (stiffer and softer worm shaft, modules M1/M3, 16-32 ms moves, ramp, sawtooth
+#: mapping, tanh friction); a worm shaft twice as stiff at 5 us (16.5 steps per period) was
+#: 5.6 % off.  Not covered by the rule: theta4 without the flywheel (= theta3, 0.9 % at 4 us)
+#: and long sliding on the falling branch of Eq. 18 (a load torque, the paper's lead
+#: convention: 5-26 % even at 1 us), where the pointwise error does not come from the step's
+#: resolution of a mode.
 STEPS_PER_PERIOD = 20.0
 
 

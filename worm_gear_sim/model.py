@@ -193,12 +193,6 @@ def friction_is_set_valued(p: np.ndarray) -> bool:
     return bool(p[P_FRIC_SET_VALUED] != 0.0)
 
 
-def contact_origins_deg(cfg: Config) -> tuple[float, float]:
-    """The calibrated origins x0 of the worm and gear contact positions of Eqs. 16-17 [deg]
-    (cycle means equal to the linear tooth stiffnesses; see docs/model-notes.md)."""
-    return DriveModel(cfg).contact_origins_deg
-
-
 class DriveModel:
     """The drive's model built once from a validated :class:`Config`: the Config, its
     derived quantities (:class:`Derived`: inertias, stiffnesses, l_w, ratio) and the packed
@@ -241,7 +235,8 @@ class DriveModel:
 
     @property
     def contact_origins_deg(self) -> tuple[float, float]:
-        """Calibrated origins x0 of the worm and gear contact positions (Eqs. 16-17) [deg]."""
+        """Calibrated origins x0 of the worm and gear contact positions of Eqs. 16-17 [deg]
+        (cycle means equal to the linear tooth stiffnesses; see docs/model-notes.md)."""
         return float(self.p[P_WORM_X0]), float(self.p[P_GEAR_X0])
 
     @property
@@ -258,10 +253,6 @@ class DriveModel:
     def mesh_is_linear(self) -> bool:
         """True when the tooth stiffnesses are constant (``mesh.stiffness_model: linear``)."""
         return bool(self.p[P_MESH_LINEAR] != 0.0)
-
-    def mass_matrix(self) -> np.ndarray:
-        """diag(J_w, J_g, J_4) of Eq. 15."""
-        return mass_matrix(self.p)
 
     def worm_frequency(self) -> float:
         """Highest linearised natural frequency [rad/s] (see :func:`worm_frequency`)."""

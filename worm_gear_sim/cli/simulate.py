@@ -103,7 +103,8 @@ def check_output_size(dt: float, t_end: float, stride: int, out: Path, max_gb: f
     Raises CliError naming the estimate and the ways out."""
     import shutil
 
-    from ..simulation import ROW_BYTES, RUN_MEMORY_LIMIT, csv_bytes_estimate
+    from ..simulation import RUN_MEMORY_LIMIT
+    from ..trajectory import ROW_BYTES, csv_bytes_estimate
     if not max_gb > 0:
         raise CliError(f'--max-csv-size must be > 0 GB, got {max_gb:g}')
     steps = int(math.floor(t_end / dt + 1e-9))

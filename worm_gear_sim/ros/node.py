@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import inspect
 import time
+import warnings
 from typing import Any
 
 from rclpy.node import Node
@@ -56,6 +57,7 @@ from std_msgs.msg import Float64
 
 from ..command_timing import COMMAND_QUEUE_LENGTH, CommandQueue, StreamClock
 from ..config_io import load_config
+from ..modal import StepResolutionWarning, step_resolution_warning
 from ..model_check import ModelCheck
 from ..params import NODE_NAME, Config, ConfigError, config_from_mapping
 from ..realtime import STALE_PERIODS, Output, Prediction, RealtimePredictor
@@ -147,8 +149,10 @@ class WormGearSimNode(Node):
         values = declare_config(self, defaults if defaults is not None else file_defaults())
         types = {name: parameter_type(v) for name, v in values.items()}
         cfg = config_from_mapping(values, source='ROS parameters')
-        self.rt = RealtimePredictor(cfg, sim_time=self._clock.ros_time_is_active,
-                                    stale_margin=STALE_MARGIN)
+        with warnings.catch_warnings():     # logged below through ROS, not Python's stderr
+            warnings.simplefilter('ignore', StepResolutionWarning)
+            self.rt = RealtimePredictor(cfg, sim_time=self._clock.ros_time_is_active,
+                                        stale_margin=STALE_MARGIN)
         self._worm_input_joint = cfg.node.joint_names[0]
 
         self.counters: dict[str, Any] = dict(
@@ -219,6 +223,9 @@ class WormGearSimNode(Node):
             f'1:{self.rt.model.derived.ratio:.6g}; waiting for '
             f'{self.resolve_topic_name(REFERENCE_TOPIC)} (stamped) or '
             f'{self.resolve_topic_name(COMMAND_TOPIC)}')
+        step_note = step_resolution_warning(self.rt.model)
+        if step_note:                       # allowed, but theta2 is not trustworthy pointwise
+            self.get_logger().warning(step_note)
         if self.rt.compensator is None:
             self.get_logger().error(
                 f'feed-forward unavailable ({self.rt.compensation_error}); no corrections')

@@ -10,7 +10,7 @@ from typing import Any
 
 from ..params import Config
 from ..profiles import Profile
-from ..simulation import Trajectory
+from ..trajectory import Trajectory
 from .engine import case_config, run_case
 from .metrics import zero_crossing_frequency
 

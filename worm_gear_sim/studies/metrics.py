@@ -36,7 +36,7 @@ from ..modal import static_equilibrium
 from ..model import DriveModel
 from ..params import Config
 from ..profiles import Profile, SampledProfile, motion_span
-from ..simulation import Trajectory
+from ..trajectory import Trajectory
 
 __all__ = ['METRIC_COLUMNS', 'move_end_time', 'equilibrium', 'oscillation_metrics',
            'dominant_frequency', 'zero_crossing_frequency', 'rows_to_csv']
