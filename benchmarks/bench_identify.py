@@ -2,14 +2,17 @@
 # Licensed under the Apache License, Version 2.0
 """Identification benchmark: robustness of the search strategies and fit time.
 
-Test drives differ from the defaults; two are model VARIANTS (Table 1 lead angle, constant
-friction, the sawtooth contact mapping and another mesh phase; linear tooth stiffness and soft
-bearings) so that no fit can be exact.  Each is
+The base is the package config (exact stick-slip friction); the test drives differ from it,
+and three are model VARIANTS (Table 1 lead angle, constant friction, the sawtooth contact
+mapping and another mesh phase; the tanh friction law with its creep and another Stribeck
+curve; linear tooth stiffness and soft bearings) so that no fit can be exact.  Each is
 recorded as the paper's 18-step move (training) and a held-out S-curve move the other way,
 0.15 s at 10 kHz, theta4 measured by a 20-bit encoder (6 urad steps) plus 1 urad RMS noise.
 
     python benchmarks/bench_identify.py                 # timing: 4-parameter robust fit
     python benchmarks/bench_identify.py --compare       # strategies x drives table
+    python benchmarks/bench_identify.py --compare --strategies frequency+windows \
+        --diff-steps 1e-6 1e-3 --surrogate              # how to fit the stick-slip model
 
 Printed: per strategy and drive the held-out theta4 error (RMS of predicted - measured, and of
 predicted - noise-free truth) as % of the oscillation amplitude (half peak-to-peak of theta4 -

@@ -50,8 +50,8 @@ def stamped_main(args: argparse.Namespace) -> int:
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
 
-    from worm_gear_sim.compensation import feedforward_series
     from worm_gear_sim.config_io import load_config
+    from worm_gear_sim.realtime import feedforward_series
     from worm_gear_sim.ros.run import make_executor
 
     load0 = os.getloadavg()

@@ -27,20 +27,13 @@ ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'rosgraph_msgs', 'builtin_interfaces'
 PHYSICS = {f'{ROOT}.model', f'{ROOT}.integrator', 'numba', 'scipy'}
 #: Imports deferred into a function that close a loop on purpose; everything else is acyclic.
 DEFERRED_BACK_EDGES = {
-    # Config.replace / config_from_mapping prove a parameter set usable by running the
-    # model on it (params -> usability -> simulation -> params).
-    (f'{ROOT}.params', f'{ROOT}.usability'),
-    # A failed integration names its likely cause (usability.diagnose) in the SimulationError.
+    # A Simulator given a parameter set proves it usable (usability.check_usable) and names a
+    # failed integration's likely cause (usability.diagnose); the usability rules' trial runs
+    # an unchecked Simulator (check=False), so the check sits above the Simulator it uses.
     (f'{ROOT}.simulation', f'{ROOT}.usability'),
-    # The start-up entry installs its signal handlers before importing the node's process
-    # (seconds of numpy/numba/rclpy imports), which then calls back into start-up.
-    (f'{WING}.startup', f'{WING}.run'),
     # Names that moved out of params (load_config, default_config_path) still import from
     # there for one release, with a DeprecationWarning (params.__getattr__).
     (f'{ROOT}.params', f'{ROOT}.config_io'),
-    # compensation.feedforward_series, the offline twin, runs the real-time pipeline (which
-    # feeds the Compensator), so that live and offline corrections are one code path.
-    (f'{ROOT}.compensation', f'{ROOT}.realtime'),
 }
 
 

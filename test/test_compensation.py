@@ -7,16 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from worm_gear_sim.compensation import (
-    Compensator,
-    design_filter,
-    design_shaper,
-    feedforward_series,
-)
+from worm_gear_sim.compensation import Compensator, design_filter, design_shaper
 from worm_gear_sim.derived import derive
 from worm_gear_sim.modal import static_equilibrium
 from worm_gear_sim.model import pack_parameters
 from worm_gear_sim.params import Config
+from worm_gear_sim.realtime import feedforward_series
 
 LOADED = {'load.output_torque': 5.0, 'load.output_viscous_coefficient': 2.0}
 

@@ -17,8 +17,7 @@ pytest.importorskip('rclpy')
 
 from rclpy.parameter import Parameter  # noqa: E402
 
-from worm_gear_sim.compensation import feedforward_series  # noqa: E402
-from worm_gear_sim.realtime import RealtimePredictor  # noqa: E402
+from worm_gear_sim.realtime import RealtimePredictor, feedforward_series  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

@@ -13,11 +13,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st_
 
 from worm_gear_sim import Config, SampledProfile
-from worm_gear_sim.compensation import Compensator, feedforward_series
+from worm_gear_sim.compensation import Compensator
 from worm_gear_sim.modal import static_equilibrium
 from worm_gear_sim.model import pack_parameters
 from worm_gear_sim.params import ConfigError
-from worm_gear_sim.realtime import COUNTER_NAMES, RealtimePredictor, Reject
+from worm_gear_sim.realtime import COUNTER_NAMES, RealtimePredictor, Reject, feedforward_series
 from worm_gear_sim.simulation import Simulator
 
 EPOCH = 1_700_000_000_123_456_789          # ns: a ROS time stamp of 2023

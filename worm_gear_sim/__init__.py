@@ -34,7 +34,7 @@ _EXPORTS: dict[str, str] = {
     'make_profile': 'profiles',
     'SimState': 'trajectory', 'SimulationError': 'simulation', 'Simulator': 'simulation',
     'Trajectory': 'trajectory', 'simulate': 'simulation', 'simulate_to_csv': 'simulation',
-    'Compensator': 'compensation', 'feedforward_series': 'compensation',
+    'Compensator': 'compensation', 'feedforward_series': 'realtime',
     'RealtimePredictor': 'realtime',
     'resolve_config': 'config_io', 'params_document': 'config_io',
 }
@@ -50,7 +50,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # static analysers see the eager imports
-    from .compensation import Compensator, feedforward_series
+    from .compensation import Compensator
     from .config_io import load_config, params_document, resolve_config
     from .derived import Derived, derive
     from .modal import ModalResult, damping_matrix, modes, static_equilibrium
@@ -65,7 +65,7 @@ if TYPE_CHECKING:  # static analysers see the eager imports
         TrapezoidalProfile,
         make_profile,
     )
-    from .realtime import RealtimePredictor
+    from .realtime import RealtimePredictor, feedforward_series
     from .simulation import SimulationError, Simulator, simulate, simulate_to_csv
     from .trajectory import SimState, Trajectory
 

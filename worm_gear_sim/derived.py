@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .params import Config
+    from .schema import Parameters
 
 __all__ = ['Derived', 'derive']
 
@@ -41,7 +41,7 @@ class Derived:
     output_per_input: float      # l_w / r_g: rigid theta4 (and theta3) per theta1 [rad/rad]
 
 
-def derive(cfg: Config) -> Derived:
+def derive(cfg: Parameters) -> Derived:
     """Inertias (solid cylinders), shaft stiffnesses, lead per radian, ratio."""
     g, m, s = cfg.geometry, cfg.materials, cfg.shafts
     cyl = lambda rho, L, R: 0.5 * rho * math.pi * L * R ** 4  # noqa: E731

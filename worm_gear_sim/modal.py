@@ -17,7 +17,7 @@ from .model import (
     mass_matrix,
     rigid_motion_vector,
 )
-from .params import ANGLE_LIMIT, Config
+from .schema import ANGLE_LIMIT, Parameters
 
 __all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix',
            'amplitude_time_step', 'step_resolution', 'step_resolution_warning',
@@ -68,7 +68,7 @@ class ModalResult:
         return '\n'.join(lines)
 
 
-def modes(model: DriveModel | Config, theta1: float = 0.0, sliding_rate: float = 0.0,
+def modes(model: DriveModel | Parameters, theta1: float = 0.0, sliding_rate: float = 0.0,
           include_damping: bool = True) -> ModalResult:
     """Linearise Eq. 15 of ``model`` (a :class:`DriveModel` or a Config) about the static
     equilibrium at ``theta1`` (motor end held).
@@ -145,7 +145,7 @@ def _damped_modes(M: np.ndarray, K: np.ndarray, C: np.ndarray,
     return np.array([m[1] for m in modes_]), zeta
 
 
-def damping_matrix(model: DriveModel | Config) -> np.ndarray:
+def damping_matrix(model: DriveModel | Parameters) -> np.ndarray:
     """Structural damping C of ``model`` (a :class:`DriveModel` or a Config; acts on
     velocities relative to the rigid kinematic motion): Rayleigh alpha M + beta K0 plus modal
     damping M Phi diag(2 zeta w) Phi^T M, with K0 the frictionless stiffness at the mean mesh
@@ -182,14 +182,14 @@ class StepResolutionWarning(UserWarning):
     """The time step gives the highest mode fewer than STEPS_PER_PERIOD steps per period."""
 
 
-def step_resolution(model: DriveModel | Config) -> float:
+def step_resolution(model: DriveModel | Parameters) -> float:
     """omega_max dt: the configured step against the highest linearised mode (the worm on
     its shaft); 2 pi / (omega_max dt) steps per period of that mode."""
     model = DriveModel.of(model)
     return model.worm_frequency() * model.config.integrator.time_step
 
 
-def step_resolution_warning(model: DriveModel | Config) -> str:
+def step_resolution_warning(model: DriveModel | Parameters) -> str:
     """'' if ``integrator.time_step`` resolves the highest mode with at least
     STEPS_PER_PERIOD steps per period, else a one-line warning (the rule of
     :func:`amplitude_time_step`; a coarser step is allowed: the average-acceleration rule
@@ -205,7 +205,7 @@ def step_resolution_warning(model: DriveModel | Config) -> str:
             f'<= {amplitude_time_step(model):.3g} s for theta2 and amplitudes')
 
 
-def amplitude_time_step(model: DriveModel | Config,
+def amplitude_time_step(model: DriveModel | Parameters,
                         steps_per_period: float = STEPS_PER_PERIOD) -> float:
     """Time step for amplitude and pointwise metrics (studies, figures): the configured step
     divided by the smallest integer n that gives the highest linearised mode (the worm on its

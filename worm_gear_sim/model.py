@@ -47,7 +47,7 @@ from numba import njit
 from numpy.typing import ArrayLike
 
 from .derived import Derived, derive
-from .params import Config
+from .schema import Parameters
 
 # ---- packed parameter vector layout (compile-time constants for numba) -------------------
 P_JW, P_JG, P_J4 = 0, 1, 2
@@ -102,7 +102,7 @@ def _calibrated_origin(scale: float, b: float, target_mean: float,
     return math.log(target_mean / (scale * cycle_mean_factor)) / b
 
 
-def pack_parameters(cfg: Config, derived: Derived | None = None) -> np.ndarray:
+def pack_parameters(cfg: Parameters, derived: Derived | None = None) -> np.ndarray:
     """Flatten a Config (plus its derived quantities ``derived``, computed if not given)
     into the kernel's parameter vector (use :class:`DriveModel`: it does this once)."""
     d = derive(cfg) if derived is None else derived
@@ -205,13 +205,13 @@ class DriveModel:
 
     __slots__ = ('config', 'derived', 'p')
 
-    def __init__(self, config: Config) -> None:
+    def __init__(self, config: Parameters) -> None:
         self.config = config
         self.derived = derive(config)
         self.p = pack_parameters(config, self.derived)
 
     @classmethod
-    def of(cls, model: DriveModel | Config) -> DriveModel:
+    def of(cls, model: DriveModel | Parameters) -> DriveModel:
         """``model`` itself, or the model of a Config."""
         return model if isinstance(model, DriveModel) else cls(model)
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .params import ConfigError, InputProfile
+from .schema import ConfigError, InputProfile
 
 __all__ = ['Profile', 'StepProfile', 'RampProfile', 'TrapezoidalProfile', 'SCurveProfile',
            'SampledProfile', 'make_profile', 'motion_span']

@@ -58,8 +58,8 @@ from .model import (
     mechanical_energy,
     mesh_forces_mu,
 )
-from .params import ANGLE_LIMIT, Config, check_usable
 from .profiles import Profile, make_profile
+from .schema import ANGLE_LIMIT, Parameters
 from .trajectory import (  # re-exported: the results of a run, importable from here too
     ROW_BYTES,
     SimState,
@@ -127,10 +127,11 @@ class Simulator:
     #: 4 us, roughly half a minute of computation).
     max_advance_steps: int = 10 ** 8
 
-    def __init__(self, model: DriveModel | Config, theta1: float = 0.0, t0: float = 0.0,
+    def __init__(self, model: DriveModel | Parameters, theta1: float = 0.0, t0: float = 0.0,
                  interpolation: str | None = None, *, check: bool = True) -> None:
         config = model.config if isinstance(model, DriveModel) else model
         if check:   # ConfigError naming the keys unless the set can be simulated
+            from .usability import check_usable
             check_usable(config)
         self._set_model(DriveModel.of(model))
         if check:   # allowed, but theta2 pointwise is not trustworthy (modal.STEPS_PER_PERIOD)
@@ -178,7 +179,7 @@ class Simulator:
 
     def _set_model(self, model: DriveModel, C: np.ndarray | None = None) -> None:
         self.model = model
-        self.config: Config = model.config
+        self.config: Parameters = model.config
         self.p: np.ndarray = model.p          # the packed vector the kernels take
         self.C: np.ndarray = damping_matrix(model) if C is None else C
 
@@ -187,12 +188,13 @@ class Simulator:
         """The model's derived quantities (inertias, stiffnesses, l_w, ratio)."""
         return self.model.derived
 
-    def reconfigure(self, model: DriveModel | Config) -> None:
+    def reconfigure(self, model: DriveModel | Parameters) -> None:
         """Swap in new (already validated) parameters, keeping time, state and command.
         The time step cannot change (it is read-only in the node)."""
         config = model.config if isinstance(model, DriveModel) else model
         if config.integrator.time_step != self.dt:
             raise ValueError('integrator.time_step cannot change on a running simulator')
+        from .usability import check_usable
         check_usable(config)
         model = DriveModel.of(model)
         C = damping_matrix(model)
@@ -472,7 +474,7 @@ RUN_MEMORY_LIMIT = 2e9
 KEEP_ROWS = 200_000
 
 
-def simulate(model: DriveModel | Config, profile: Profile | None = None,
+def simulate(model: DriveModel | Parameters, profile: Profile | None = None,
              t_end: float | None = None, record_every: int = 1,
              theta1_initial: float | None = None,
              max_bytes: float | None = None) -> Trajectory:
@@ -488,7 +490,7 @@ def simulate(model: DriveModel | Config, profile: Profile | None = None,
     return sim.run(profile, t_end, record_every, max_bytes=max_bytes)
 
 
-def simulate_to_csv(model: DriveModel | Config, path: str | Path,
+def simulate_to_csv(model: DriveModel | Parameters, path: str | Path,
                     profile: Profile | None = None, t_end: float | None = None,
                     record_every: int = 1, theta1_initial: float | None = None,
                     header_comment: str = '', keep_rows: int = KEEP_ROWS,

@@ -7,7 +7,7 @@ pure data, no ROS imports.  The interface is described on docs/node.md."""
 
 from __future__ import annotations
 
-from .params import NODE_NAME
+from .schema import NODE_NAME
 
 __all__ = ['NODE_NAMESPACE', 'COMMAND_TOPIC', 'REFERENCE_TOPIC', 'JOINT_STATES_TOPIC',
            'MEASURED_TOPIC', 'POSITIONING_ERROR_TOPIC', 'WORM_ERROR_TOPIC', 'FEEDFORWARD_TOPIC',

@@ -27,8 +27,8 @@ from .model import (
     DriveModel,
     energy_series,
 )
-from .params import Config
 from .records import write_csv_header
+from .schema import Parameters
 
 __all__ = ['SimState', 'Trajectory', 'TrajectoryCsvWriter', 'CSV_FORMAT', 'ROW_BYTES',
            'csv_bytes_estimate', 'ring_down']
@@ -78,7 +78,7 @@ class Trajectory:
         """theta4 - theta1 l_w / r_g [rad]: antenna positioning error."""
         return self.theta[:, 2] - self.theta1 * self.output_per_input
 
-    def energy(self, model: DriveModel | Config) -> np.ndarray:
+    def energy(self, model: DriveModel | Parameters) -> np.ndarray:
         """Kinetic + shaft torsion + mesh energy 0.5 k_Y q^2 [J] at every row (``model``:
         the run's :class:`DriveModel` or Config)."""
         return energy_series(DriveModel.of(model).p, np.ascontiguousarray(self.theta),

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .params import ANGLE_LIMIT, Config, ConfigError
+from .schema import ANGLE_LIMIT, ConfigError, Parameters
 
 if TYPE_CHECKING:
     from .modal import ModalResult
@@ -79,7 +79,7 @@ _INERTIA = {
 }
 
 
-def check_usable(cfg: Config, changed: Iterable[str] | None = None) -> None:
+def check_usable(cfg: Parameters, changed: Iterable[str] | None = None) -> None:
     """Raise :class:`ConfigError` unless ``cfg`` can be simulated (see the module doc).
 
     ``changed``: the dotted keys just set (``Config.replace``); they are named first, and
@@ -104,16 +104,16 @@ def check_usable(cfg: Config, changed: Iterable[str] | None = None) -> None:
 
 
 _CACHE_SIZE = 512
-_USABLE: dict[Config, bool] = {}
+_USABLE: dict[Parameters, bool] = {}
 _LOCK = threading.Lock()
 
 
-def _differs_from_defaults(cfg: Config) -> tuple[str, ...]:
-    ref = Config().to_flat_dict()
+def _differs_from_defaults(cfg: Parameters) -> tuple[str, ...]:
+    ref = Parameters().to_flat_dict()
     return tuple(k for k, v in cfg.to_flat_dict().items() if ref[k] != v)
 
 
-def _blame(cfg: Config, changed: Sequence[str], suspects: Sequence[str],
+def _blame(cfg: Parameters, changed: Sequence[str], suspects: Sequence[str],
            why: str) -> ConfigError:
     """ConfigError on the most likely key: the changed suspects, else the changed keys, else
     the first suspect.  The message shows their values; ``keys`` holds all of them."""
@@ -126,7 +126,7 @@ def _blame(cfg: Config, changed: Sequence[str], suspects: Sequence[str],
     return err
 
 
-def _check(cfg: Config, changed: Sequence[str]) -> None:
+def _check(cfg: Parameters, changed: Sequence[str]) -> None:
     from .model import DriveModel, mesh_stiffness_y, tooth_stiffness
     try:
         model = DriveModel(cfg)
@@ -225,7 +225,7 @@ def _check(cfg: Config, changed: Sequence[str]) -> None:
         raise _trial_failure(cfg, changed, m, str(exc)) from None
 
 
-def _unresolved_mode(cfg: Config, m: ModalResult) -> tuple[str, tuple[str, ...]] | None:
+def _unresolved_mode(cfg: Parameters, m: ModalResult) -> tuple[str, tuple[str, ...]] | None:
     """(text, inertia keys) when the highest mode is beyond the step's Nyquist limit."""
     dt = cfg.integrator.time_step
     i = int(np.argmax(m.undamped_hz))
@@ -240,7 +240,7 @@ def _unresolved_mode(cfg: Config, m: ModalResult) -> tuple[str, tuple[str, ...]]
             f'check the {names[body]} inertia', _INERTIA[body])
 
 
-def _trial_failure(cfg: Config, changed: Sequence[str], m: ModalResult,
+def _trial_failure(cfg: Parameters, changed: Sequence[str], m: ModalResult,
                    what: str) -> ConfigError:
     """The trial move failed: name the unresolved mode if there is one (the usual cause:
     a tiny inertia or a huge stiffness puts a mode far above the step's Nyquist limit, where
@@ -252,7 +252,7 @@ def _trial_failure(cfg: Config, changed: Sequence[str], m: ModalResult,
     return _blame(cfg, changed, (), why)
 
 
-def diagnose(cfg: Config) -> str:
+def diagnose(cfg: Parameters) -> str:
     """Text for the message of :class:`~worm_gear_sim.simulation.SimulationError` with a
     usable ``cfg``: 'likely cause: ...' naming the parameters when a known cause applies (a
     mode beyond the step's Nyquist limit, a friction regularisation below 1e-8 m/s), else

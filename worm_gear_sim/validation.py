@@ -1,8 +1,9 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """Validation of parameter values: the one "type from the default" rule (:func:`value_kind`),
-the per-field checks (type, finiteness, range, choices, length) against a field's metadata,
-and the cross-field checks of a whole :class:`~worm_gear_sim.params.Config`.
+the per-field checks (type, finiteness, range, choices, length) against a field's metadata.
+The cross-field checks of a whole set are the schema's (:mod:`~worm_gear_sim.schema`,
+``validate``), which calls these per field.
 
 Whether a valid set can also be *simulated* is a separate question, answered by the model
 itself: :mod:`worm_gear_sim.usability`.
@@ -14,14 +15,9 @@ import dataclasses
 import difflib
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import fields
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from .params import Config
-
-__all__ = ['ConfigError', 'suggest', 'VALUE_KINDS', 'value_kind', 'field_default', 'coerce',
-           'validate']
+__all__ = ['ConfigError', 'suggest', 'VALUE_KINDS', 'value_kind', 'field_default', 'coerce']
 
 
 class ConfigError(ValueError):
@@ -133,39 +129,3 @@ def _check_range(key: str, value: float, meta: Mapping[str, Any]) -> None:
             raise ConfigError(key, f'must be >= {lo:g}, got {value!r}')
     if hi is not None and value > hi:
         raise ConfigError(key, f'must be <= {hi:g}, got {value!r}')
-
-
-def validate(cfg: Config) -> None:
-    """Per-field checks (types, finiteness, ranges, choices) of every section of ``cfg`` and
-    the cross-field checks; raises :class:`ConfigError` naming the key."""
-    for section in fields(cfg):
-        sec = section.name
-        obj = getattr(cfg, sec)
-        for f in fields(obj):
-            key = f'{sec}.{f.name}'
-            default = field_default(f)
-            coerce(key, getattr(obj, f.name), default, f.metadata)
-    integ = cfg.integrator
-    if not (2.0 * integ.newmark_beta >= integ.newmark_gamma - 1e-15):
-        raise ConfigError('integrator.newmark_beta', f'{integ.newmark_beta:g} with gamma '
-                          f'{integ.newmark_gamma:g} is only conditionally stable: need '
-                          '2*beta >= gamma >= 1/2')
-    inp = cfg.input
-    if inp.profile in ('trapezoidal', 's_curve') and 2.0 * inp.accel_time > inp.move_time:
-        raise ConfigError('input.accel_time', f'2*accel_time ({2 * inp.accel_time:g} s) must '
-                          f'not exceed move_time ({inp.move_time:g} s)')
-    if inp.profile == 'csv' and not inp.csv_path:
-        raise ConfigError('input.csv_path', 'is required when input.profile is csv')
-    g = cfg.geometry
-    if g.lead_angle == 0.0 and g.lead / (2 * math.pi) >= g.worm_pitch_radius:
-        raise ConfigError('geometry.lead', 'lead/2pi must be smaller than the worm pitch radius')
-    if g.gear_pitch_radius <= 0 or g.lead <= 0:  # pragma: no cover - range checks catch it
-        raise ConfigError('geometry.lead', 'must be > 0')
-    if cfg.integrator.time_step * cfg.node.publish_rate_hz > 1.0 + 1e-9:
-        raise ConfigError('integrator.time_step', 'must not exceed the node tick period '
-                          f'1/publish_rate_hz = {1.0 / cfg.node.publish_rate_hz:g} s')
-    if cfg.node.max_catch_up * cfg.node.publish_rate_hz < 1.0 - 1e-9:
-        # below one tick period the physics falls behind every tick and never catches up
-        raise ConfigError('node.max_catch_up', f'{cfg.node.max_catch_up:g} s must be at least '
-                          f'the tick period 1/publish_rate_hz = '
-                          f'{1.0 / cfg.node.publish_rate_hz:g} s')

@@ -94,6 +94,17 @@ STRATEGIES: dict[str, dict[str, Any]] = {
 }
 
 
+@dataclass(frozen=True)
+class LocalSettings:
+    """What one local fit needs (sent to the Dask workers)."""
+
+    max_nfev: int
+    diff_step: float
+    method: str
+    ftol: float
+    xtol: float
+
+
 @dataclass
 class FitOptions:
     """How :func:`identify` searches.  ``strategy`` presets (STRATEGIES) fill the three flags;
@@ -106,6 +117,8 @@ class FitOptions:
     seed: int = 0
     max_nfev: int = 100
     diff_step: float = DIFF_STEP   # finite-difference step in the fitted coordinate
+    ftol: float = 1e-8             # least_squares' tolerances of each local fit
+    xtol: float = 1e-8
     method: str = 'dogbox'     # least_squares method; trf creeps away from a start near a
     #                            bound (its step scales with the distance to the bound)
     workers: int | None = None
@@ -113,6 +126,9 @@ class FitOptions:
     serial: bool = False
     client: Any = None
     progress: bool = False
+
+    def local(self) -> LocalSettings:
+        return LocalSettings(self.max_nfev, self.diff_step, self.method, self.ftol, self.xtol)
 
     def resolved(self) -> tuple[bool, bool, int]:
         if self.strategy not in STRATEGIES:
@@ -125,27 +141,48 @@ class FitOptions:
         return bool(fs), bool(gw), max(1, ns)
 
 
+#: A local fit that used up its evaluations counts as converged when its cost fell by less
+#: than STALL_COST over its last STALL_EVALS evaluations: statistically nothing (a change of
+#: one standard deviation in any parameter changes the cost by 0.5).  With the set-valued
+#: friction law the cost is noisy at its last digits and least_squares' own tolerances may
+#: never be met while it creeps along a flat valley.
+STALL_EVALS = 10
+STALL_COST = 0.1
+
+
 def _local_fit(problem: Problem, x0: np.ndarray, windows: Sequence[float | None],
-               max_nfev: int, diff_step: float, method: str = 'dogbox') -> dict[str, Any]:
+               settings: LocalSettings) -> dict[str, Any]:
     lo, hi = problem.x_bounds
     x = _interior(problem, x0)
     t0 = time.perf_counter()
     res = None
     stages: list[dict[str, Any]] = []
+    costs: list[float] = []
+
+    def fun(xf: np.ndarray, window: float | None) -> np.ndarray:
+        r = problem.residuals(xf, window)
+        costs.append(0.5 * float(r @ r))
+        return r
 
     def jac(xj: np.ndarray, window: float | None) -> np.ndarray:
-        return problem.jacobian(xj, window, diff_step)
+        return problem.jacobian(xj, window, settings.diff_step)
 
     for w in windows:
-        res = least_squares(problem.residuals, x, jac=jac, bounds=(lo, hi), args=(w,),
-                            method=method, max_nfev=max_nfev, x_scale=1.0,
-                            xtol=1e-8, ftol=1e-8, gtol=1e-8)
+        costs.clear()
+        res = least_squares(fun, x, jac=jac, bounds=(lo, hi), args=(w,),
+                            method=settings.method, max_nfev=settings.max_nfev, x_scale=1.0,
+                            xtol=settings.xtol, ftol=settings.ftol, gtol=1e-8)
         x = res.x
+        last = (min(costs[:-STALL_EVALS]) - min(costs) if len(costs) > STALL_EVALS
+                else math.inf)
         stages.append({'window_s': w, 'cost': float(res.cost), 'nfev': int(res.nfev),
-                       'njev': int(res.njev or 0), 'status': int(res.status)})
+                       'njev': int(res.njev or 0), 'status': int(res.status),
+                       'last_decrease': last})
     assert res is not None
+    final = stages[-1]
     return {'x0': np.asarray(x0, float).tolist(), 'x': res.x.tolist(), 'cost': float(res.cost),
             'status': int(res.status), 'message': str(res.message),
+            'converged': final['status'] > 0 or final['last_decrease'] < STALL_COST,
             'nfev': sum(s['nfev'] + problem.n * s['njev'] for s in stages), 'stages': stages,
             'seconds': time.perf_counter() - t0}
 
@@ -165,9 +202,9 @@ def _interior(problem: Problem, x0: np.ndarray) -> np.ndarray:
     return x
 
 
-def _start_task(problem: Problem, x0: list[float], windows: list[float | None], max_nfev: int,
-                diff_step: float, index: int, method: str = 'dogbox') -> dict[str, Any]:
-    out = _local_fit(problem, np.asarray(x0), windows, max_nfev, diff_step, method)
+def _start_task(problem: Problem, x0: list[float], windows: list[float | None],
+                settings: LocalSettings, index: int) -> dict[str, Any]:
+    out = _local_fit(problem, np.asarray(x0), windows, settings)
     out['index'] = index
     return out
 
@@ -245,8 +282,7 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
         if opt.serial or (len(starts) == 1 and opt.client is None and opt.scheduler is None):
             start_bar()
             for i, x0 in enumerate(starts):
-                done(_start_task(problem, list(x0), list(windows), opt.max_nfev,
-                                 opt.diff_step, i, opt.method))
+                done(_start_task(problem, list(x0), list(windows), opt.local(), i))
         else:
             from ..studies.engine import _dask_client, warm_up
             with _dask_client(opt.client, opt.scheduler, opt.workers) as cl:
@@ -255,8 +291,8 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
                     raise ConnectionError('the Dask cluster has no workers')
                 pf = cl.scatter(problem, broadcast=True)
                 start_bar()
-                futs = [cl.submit(_start_task, pf, list(x0), list(windows), opt.max_nfev,
-                                  opt.diff_step, i, opt.method, pure=False)
+                futs = [cl.submit(_start_task, pf, list(x0), list(windows), opt.local(), i,
+                                  pure=False)
                         for i, x0 in enumerate(starts)]
                 try:
                     for fut in as_completed(futs):

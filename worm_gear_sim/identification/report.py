@@ -164,8 +164,9 @@ def resolved_jacobian(problem: Problem, x: np.ndarray
 def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
            ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The statistics and the verdict of the best of ``results`` (local fits, each with
-    ``x``, ``cost``, ``status``, ``message``, ``index``): returns (best, fields of
-    :class:`FitResult` other than strategy, starts, frequency_info and seconds)."""
+    ``x``, ``cost``, ``status``, ``message``, ``converged``, ``stages``, ``index``): returns
+    (best, fields of :class:`FitResult` other than strategy, starts, frequency_info and
+    seconds)."""
     params = problem.params
     best = min(results, key=lambda r: r['cost'] if math.isfinite(r['cost']) else np.inf)
     x = np.asarray(best['x'], float)
@@ -202,10 +203,11 @@ def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
                    'rms_before_rad': {k: v for k, v in a.items() if k != 'name'},
                    'rms_after_rad': {k: v for k, v in b.items() if k != 'name'}}
                   for a, b in zip(per_before, per_after)]
-    converged = best['status'] > 0
+    converged = bool(best['converged'])
     if not converged:
         problems.append(f'the fit did not converge within {max_nfev} evaluations '
-                        f'({best["message"]})')
+                        f'({best["message"]}; the cost still fell by '
+                        f'{best["stages"][-1]["last_decrease"]:.3g} over the last ones)')
     for o in problem.outputs:
         rel = rms_after[o] / problem.scale[o]
         if not math.isfinite(rel):

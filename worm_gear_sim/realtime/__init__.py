@@ -17,7 +17,7 @@ One object turns a stream of reference samples theta1_ref into
   /diagnostics.
 
 The node (``worm_gear_sim.ros``) only translates messages into these calls and back.
-``compensation.feedforward_series`` (the offline twin) drives the same object.
+``feedforward_series`` (the offline twin, :mod:`.offline`) drives the same object.
 
 Time
     Stamps are integer nanoseconds on the caller's clock (ROS time: epoch ~1.7e18 ns, or
@@ -109,12 +109,13 @@ node can run off the real-time path.
 
 The package: :mod:`.predictor` (the state machine of these rules), :mod:`.drive` (the
 simulator side: advance, catch-up, predictions), :mod:`.outputs` (what a call returns, the
-counter names); import from here.
+counter names), :mod:`.offline` (``feedforward_series``, the offline twin); import from here.
 """
 
+from .offline import feedforward_series
 from .outputs import COUNTER_NAMES, Correction, Event, Output, Prediction, Prepared, Reject
 from .predictor import CONFIRM_SAMPLES, STALE_MAX_INTERVAL, STALE_PERIODS, RealtimePredictor
 
-__all__ = ['RealtimePredictor', 'Correction', 'Prediction', 'Event', 'Output', 'Reject',
-           'Prepared', 'STALE_PERIODS', 'STALE_MAX_INTERVAL', 'CONFIRM_SAMPLES',
-           'COUNTER_NAMES']
+__all__ = ['RealtimePredictor', 'feedforward_series', 'Correction', 'Prediction', 'Event',
+           'Output', 'Reject', 'Prepared', 'STALE_PERIODS', 'STALE_MAX_INTERVAL',
+           'CONFIRM_SAMPLES', 'COUNTER_NAMES']

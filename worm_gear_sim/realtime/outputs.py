@@ -12,7 +12,7 @@ from enum import StrEnum
 
 from ..compensation import Compensator
 from ..model import DriveModel
-from ..params import Config
+from ..schema import Parameters
 
 __all__ = ['Reject', 'Correction', 'Prediction', 'Event', 'Output', 'Prepared',
            'COUNTER_NAMES']
@@ -108,7 +108,7 @@ class Prepared:
     error: str = ''          # compensator design failure (the swap keeps running without)
 
     @property
-    def config(self) -> Config:
+    def config(self) -> Parameters:
         return self.model.config
 
 

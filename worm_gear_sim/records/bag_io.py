@@ -128,8 +128,8 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     p = Path(path)
     where = str(p)
     if joint_names is None:
-        from ..params import Config
-        joint_names = tuple(Config().node.joint_names)
+        from ..schema import Parameters
+        joint_names = tuple(Parameters().node.joint_names)
     joint_names = tuple(joint_names)
     if len(joint_names) != 4:
         raise RecordError(f'joint names: need 4 (theta1..theta4), got {list(joint_names)}')

@@ -55,13 +55,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from ..config_io import load_config
-from ..derived import derive
 from ..params import Config
 from ..studies.demo_moves import (
     MoveSummary,
     MoveTracker,
     command_pattern,
-    first_mode_hz,
+    demo_plan,
     offline_moves,
     pattern_segments,
 )
@@ -99,11 +98,12 @@ class DemoCommander(Node):
         if interface not in ('stamped', 'float64'):
             raise ValueError(f'interface must be stamped or float64, got {interface!r}')
         self.cfg = config if config is not None else load_config()
-        self.output_per_input = derive(self.cfg).output_per_input
-        self.theta1 = command_pattern(pattern, self.cfg, move_period, slew_rate, slew_period)
-        self.segments = pattern_segments(pattern, self.cfg, move_period, slew_period)
+        plan = demo_plan(pattern, self.cfg, move_period, slew_rate, slew_period)
+        self.model = plan.model             # one model: ratio, ringing period, offline moves
+        self.output_per_input = plan.model.output_per_input
+        self.theta1, self.segments = plan.theta1, plan.segments
         # float64: samples timed on arrival, which a busy machine delays by tens of ms
-        self.tracker = MoveTracker(self.segments, first_mode_hz(self.cfg),
+        self.tracker = MoveTracker(self.segments, plan.mode_hz,
                                    max_gap=0.02 if interface == 'stamped' else 0.1)
         self.tracker.use_commands = False   # until the node says its feed-forward is applied
         self.pattern, self.interface, self.rate = pattern, interface, rate

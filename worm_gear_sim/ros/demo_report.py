@@ -106,10 +106,12 @@ def summary(node: Any, opts: argparse.Namespace, compensated: bool | None,
         return
     # the same moves through the core, offline: with and without the feed-forward
     t_end = moves[-1].start + node.segments.period + 1e-3
-    cfg = node.cfg
-    if node.node_preview is not None:        # the feed-forward the node computes
-        cfg = cfg.replace({'compensation.preview_time': node.node_preview})
-    off = {c: {m.index: m for m in offline_moves(cfg, node.theta1, node.segments, t_end,
+    model = node.model
+    if node.node_preview is not None and \
+            node.node_preview != node.cfg.compensation.preview_time:
+        # the feed-forward the node computes
+        model = node.cfg.replace({'compensation.preview_time': node.node_preview})
+    off = {c: {m.index: m for m in offline_moves(model, node.theta1, node.segments, t_end,
                                                  node.rate, c)} for c in (False, True)}
     same = [m for m in moves if m.index in off[False] and m.index in off[True]]
     if not same:

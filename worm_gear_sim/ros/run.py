@@ -23,14 +23,15 @@ from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 
 from ..params import ConfigError
-from . import startup
+from . import signals
 from .node import WormGearSimNode
+from .startup_errors import check_params_files, clean_rcl_message, config_error
 
 RCLError = _rclpy_impl.RCLError          # RCLInvalidROSArgsError derives from it
 
 __all__ = ['main', 'make_executor', 'spin_until_shutdown', 'STARTUP_CONFIG_ERRORS']
 
-#: Errors of the parameters given at start-up: one line and exit code 2 (``startup``).
+#: Errors of the parameters given at start-up: one line and exit code 2 (``startup_errors``).
 #: ValueError covers numerically unusable values (LinAlgError is one) until the core proves
 #: a set usable itself.
 STARTUP_CONFIG_ERRORS = (ConfigError, ParameterException, ValueError, ArithmeticError)
@@ -81,29 +82,29 @@ def main(args: list[str] | None = None) -> int:
     unknown or misspelt parameter, invalid or unusable value).  Portable across rclpy 7
     (Jazzy) and 9 (Kilted): ``rclpy.init`` + ``try/finally rclpy.try_shutdown()``.
     """
-    startup.install_signal_handlers()
+    signals.install_signal_handlers()
     argv = list(sys.argv if args is None else args)
-    bad = startup.check_params_files(argv)
+    bad = check_params_files(argv)
     if bad:
-        return startup.config_error(bad)
+        return config_error(bad)
     try:   # parses --ros-args, params files included: errors end here, before rclpy.init
         rest = remove_ros_args(args=argv)
     except RCLError as exc:
-        return startup.config_error(startup.clean_rcl_message(exc))
+        return config_error(clean_rcl_message(exc))
     opts = _parse_args(rest[1:])
     try:
         rclpy.init(args=argv)
     except RCLError as exc:
-        return startup.config_error(startup.clean_rcl_message(exc))
-    startup.set_phase('ros')        # from now on rclpy's handler shuts the context down
+        return config_error(clean_rcl_message(exc))
+    signals.set_phase('ros')        # from now on rclpy's handler shuts the context down
     try:
-        if startup.signalled():     # a start-up signal whose SystemExit got swallowed
+        if signals.signalled():     # a start-up signal whose SystemExit got swallowed
             return 0
         return _run(opts)
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
     finally:
-        startup.set_phase('stopping')
+        signals.set_phase('stopping')
         _quietly(rclpy.try_shutdown)
 
 
@@ -114,12 +115,12 @@ def _run(opts: argparse.Namespace) -> int:
     except STARTUP_CONFIG_ERRORS as exc:
         if not context.ok():        # a signal shut the context down during declaration
             return 0
-        return startup.config_error(f'invalid parameters: {exc}')
+        return config_error(f'invalid parameters: {exc}')
     except Exception:
         if not context.ok():
             return 0
         raise
-    if not context.ok() or startup.signalled():   # Ctrl-C / SIGTERM during the build
+    if not context.ok() or signals.signalled():   # Ctrl-C / SIGTERM during the build
         _quietly(node.destroy_node)
         return 0
     kind = opts.executor or node.config.node.executor
@@ -141,7 +142,7 @@ def _run(opts: argparse.Namespace) -> int:
         # The signal handler shut the context down while a callback was running (e.g. a
         # publish on a context being torn down): a normal shutdown.
     finally:
-        startup.set_phase('stopping')
+        signals.set_phase('stopping')
         _quietly(executor.shutdown, 1.0)
         _quietly(node.destroy_node)
     return 0

@@ -13,12 +13,12 @@ from typing import Any
 
 import numpy as np
 
-from ..compensation import feedforward_series
 from ..derived import derive
 from ..modal import modes
 from ..model import DriveModel
 from ..params import Config
 from ..profiles import SampledProfile, TrapezoidalProfile, motion_span
+from ..realtime import feedforward_series
 from ..simulation import simulate
 
 __all__ = ['Scenario', 'paper_step_scenario', 'radar_slew_scenario', 'run_scenario',

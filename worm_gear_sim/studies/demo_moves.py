@@ -21,12 +21,13 @@ from typing import Any
 import numpy as np
 
 from ..modal import modes
+from ..model import DriveModel
 from ..params import Config
 from ..profiles import TrapezoidalProfile
 from .compensation_eval import Scenario, move_metrics, run_scenario
 
 __all__ = ['PAPER_LEAD', 'command_pattern', 'Segments', 'pattern_segments', 'MoveSummary',
-           'MoveTracker', 'offline_moves', 'first_mode_hz']
+           'MoveTracker', 'offline_moves', 'first_mode_hz', 'DemoPlan', 'demo_plan']
 
 PAPER_LEAD = 0.05               # s of rest before the first paper move
 
@@ -167,18 +168,21 @@ class MoveTracker:
         return summary
 
 
-def offline_moves(cfg: Config, theta1: Callable[[Any], np.ndarray], seg: Segments,
-                  t_end: float, rate: float, compensated: bool) -> list[MoveSummary]:
+def offline_moves(model: DriveModel | Config, theta1: Callable[[Any], np.ndarray],
+                  seg: Segments, t_end: float, rate: float,
+                  compensated: bool) -> list[MoveSummary]:
     """The same reference, sampled at ``rate`` up to ``t_end``, through the core
-    (``run_scenario``: nonlinear plant, feed-forward of ``cfg`` when ``compensated``), cut
-    into the same moves as the live trace."""
+    (``run_scenario``: nonlinear plant, feed-forward of the same model when
+    ``compensated``), cut into the same moves as the live trace.  ``model``: a
+    :class:`DriveModel` or a Config."""
+    model = DriveModel.of(model)
     times = np.arange(0.0, t_end + 0.5 / rate, 1.0 / rate)
     x = np.asarray(theta1(times), float)
     sc = Scenario(name='demo', times=times, theta1_ref=x, move_end=float(times[0]),
                   constant_rate=())          # run_scenario's own metrics are not used
-    record = max(1, int(round(1.0 / (rate * cfg.integrator.time_step))))
-    run = run_scenario(cfg, sc, cfg if compensated else None, record_every=record)
-    tracker = MoveTracker(seg, first_mode_hz(cfg))
+    record = max(1, int(round(1.0 / (rate * model.config.integrator.time_step))))
+    run = run_scenario(model, sc, model if compensated else None, record_every=record)
+    tracker = MoveTracker(seg, first_mode_hz(model))
     if compensated:
         for ti, ci in zip(times, x + run.delta):
             tracker.add_command(float(ti), float(ci))
@@ -187,6 +191,27 @@ def offline_moves(cfg: Config, theta1: Callable[[Any], np.ndarray], seg: Segment
     return tracker.moves
 
 
-def first_mode_hz(cfg: Config) -> float:
+def first_mode_hz(model: DriveModel | Config) -> float:
     """The first natural frequency [Hz] of the drive (the metrics' ringing period)."""
-    return float(modes(cfg).frequencies_hz[0])
+    return float(modes(model).frequencies_hz[0])
+
+
+@dataclass(frozen=True)
+class DemoPlan:
+    """What the demo servo streams, built once from a Config (:func:`demo_plan`): one
+    :class:`DriveModel` (the output ratio, the ringing period, the offline moves), the
+    reference theta1(t), its moves and the drive's first natural frequency [Hz]."""
+
+    model: DriveModel
+    theta1: Callable[[Any], np.ndarray]
+    segments: Segments
+    mode_hz: float
+
+
+def demo_plan(pattern: str, cfg: Config, move_period: float = 0.5, slew_rate: float = 2.0,
+              slew_period: float = 2.0) -> DemoPlan:
+    """The demo servo's pattern and the one model of ``cfg`` it is measured with."""
+    model = DriveModel(cfg)
+    return DemoPlan(model, command_pattern(pattern, cfg, move_period, slew_rate, slew_period),
+                    pattern_segments(pattern, cfg, move_period, slew_period),
+                    first_mode_hz(model))

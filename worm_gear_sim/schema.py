@@ -1,0 +1,475 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Parameters of the worm-gear drive: the schema, typed and immutable.
+
+The bottom floor of the package: :class:`Parameters` (one frozen dataclass per YAML section,
+every parameter with unit, range, description; validated per field and across fields), the
+constants every floor shares (:data:`ANGLE_LIMIT`, :data:`NODE_NAME`) and
+:func:`sections_from_mapping`.  The model, the integrator, the simulator and the usability
+rules take a :class:`Parameters`; what users build is its subclass
+:class:`worm_gear_sim.params.Config`, whose builders (``config_from_mapping``,
+``Config.replace``, ``load_config``) also prove the set usable.  This module imports only
+:mod:`~worm_gear_sim.validation`.
+
+One YAML file (``config/worm_gear_sim.yaml``) in the ROS ``worm_gear_sim: ros__parameters:``
+layout holds every default; the dataclasses below carry the same defaults (a test checks
+that they agree).  Nested YAML groups become sections here and dotted ROS parameter names
+(``mesh.stiffness_model``) in the node.
+
+Every field carries metadata (description, unit, range, choices, read-only) so that the
+ROS node can declare descriptors and the CLI can print help from the same source.
+
+SI units and radians throughout (REP 103).  The other jobs around the schema live next
+door: value checks and the "type from the default" rule in :mod:`~worm_gear_sim.validation`
+(:class:`ConfigError` is re-exported here), whether a set can be simulated in
+:mod:`~worm_gear_sim.usability`, derived quantities (inertias, stiffnesses, l_w, ratio) in
+:mod:`~worm_gear_sim.derived`, YAML files in :mod:`~worm_gear_sim.config_io`
+(:func:`~worm_gear_sim.config_io.load_config`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from .validation import (
+    VALUE_KINDS,
+    ConfigError,
+    coerce,
+    field_default,
+    suggest,
+    value_kind,
+)
+
+__all__ = [
+    'ConfigError', 'Parameters', 'sections_from_mapping', 'NODE_NAME', 'ANGLE_LIMIT',
+    'SECTIONS', 'suggest', 'value_kind', 'VALUE_KINDS', 'Geometry', 'Materials', 'Shafts',
+    'Mesh', 'Friction', 'Damping', 'Load', 'Integrator', 'InputProfile', 'NodeSettings',
+    'CompensationSettings',
+]
+
+NODE_NAME = 'worm_gear_sim'
+DEG = math.pi / 180.0
+#: Largest |angle| [rad] the model accepts (commands, initial states, equilibria): at 1e9 rad
+#: the mesh phase and the approach q = l_w theta2 - r_g theta3 keep ~1e-7 of their resolution
+#: in double precision (a year of continuous slewing of the worm at 30 rad/s).
+ANGLE_LIMIT = 1e9
+# Mesh phase at which the mesh stiffness k_Y of the cosine contact mapping equals its mean
+# over the cycle (default parameters; test_model checks it)
+PHASE_AT_MEAN_STIFFNESS = 1.8373
+
+
+def _f(default: Any, description: str, unit: str = '', lo: float | None = None,
+       hi: float | None = None, lo_open: bool = False, choices: tuple[str, ...] = (),
+       read_only: bool = False, length: int | None = None) -> Any:
+    """Declare a parameter field with its metadata (single source for docs, ROS, checks)."""
+    meta = dict(description=description, unit=unit, lo=lo, hi=hi, lo_open=lo_open,
+                choices=choices, read_only=read_only, length=length)
+    if isinstance(default, list):
+        return field(default_factory=lambda: tuple(default), metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Worm-gear set geometry (Table 1, module M2). R in Table 1 is a radius."""
+
+    module: float = _f(2.0, 'Gear module M in mm: tooth stiffness scales with M (the M of '
+                       'Eqs. 16-17; the linear values are given at M = 2). Geometry is set '
+                       'separately', 'mm', 0.0, 50.0, lo_open=True)
+    worm_pitch_radius: float = _f(0.0158, 'Worm pitch radius r_w = R2', 'm', 0.0, 1.0,
+                                  lo_open=True)
+    worm_length: float = _f(0.015, 'Worm body length L2 (inertia J_w)', 'm', 0.0, 2.0,
+                            lo_open=True)
+    gear_pitch_radius: float = _f(0.056, 'Worm-gear pitch radius r_g = R3', 'm', 0.0, 5.0,
+                                  lo_open=True)
+    gear_width: float = _f(0.02, 'Worm-gear body width L3 (inertia J_g)', 'm', 0.0, 2.0,
+                           lo_open=True)
+    lead: float = _f(0.006283185, 'Worm lead per revolution (Table 1)', 'm/rev', 0.0, 1.0,
+                     lo_open=True)
+    lead_convention: str = _f('kinematic', 'kinematic: l_w = lead/2pi (ratio 1:56); paper: '
+                              'lead used as if per radian (reproduces the printed 0.0127 rad)',
+                              choices=('kinematic', 'paper'))
+    lead_angle: float = _f(0.0, 'Lead angle lambda; 0 derives tan(lambda) = l_w/r_w '
+                           '(conservative mesh). Table 1 prints 3deg41min = 0.064286 rad',
+                           'rad', 0.0, 0.8)
+    pressure_angle: float = _f(0.30543261909900765, 'Normal pressure angle phi_n (17deg30min)',
+                               'rad', 0.0, 0.8, lo_open=True)
+    flywheel_enabled: bool = _f(True, 'Flywheel J_4 on the gear shaft; false: the massless '
+                                'gear shaft ends free (assumption 8), theta4 = theta3 - '
+                                'T_load/K_g, plus shaft_end_inertia if set')
+    shaft_end_inertia: float = _f(0.0, 'Inertia on the free end of the gear shaft when '
+                                  'flywheel_enabled is false (a coupling, an encoder); 0 keeps '
+                                  'the paper\'s massless shaft: no extra degree of freedom',
+                                  'kg*m^2', 0.0, 1e3)
+    flywheel_radius: float = _f(0.12, 'Flywheel radius R5', 'm', 0.0, 5.0, lo_open=True)
+    flywheel_length: float = _f(0.03, 'Flywheel length L5', 'm', 0.0, 5.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Materials:
+    """Densities and elastic moduli."""
+
+    worm_density: float = _f(7850.0, 'Worm (Cr-Mo steel) density', 'kg/m^3', 0.0, 3e4,
+                             lo_open=True)
+    gear_density: float = _f(8800.0, 'Worm-gear (phosphor bronze) density', 'kg/m^3', 0.0,
+                             3e4, lo_open=True)
+    flywheel_density: float = _f(7850.0, 'Flywheel (steel) density', 'kg/m^3', 0.0, 3e4,
+                                 lo_open=True)
+    shaft_density: float = _f(7850.0, 'Shaft (steel) density, used by the shaft inertia '
+                              'fractions', 'kg/m^3', 0.0, 3e4, lo_open=True)
+    worm_shaft_shear_modulus: float = _f(77e9, 'Shear modulus G of the worm shaft', 'Pa',
+                                         0.0, 1e16, lo_open=True)
+    gear_shaft_shear_modulus: float = _f(77e9, 'Shear modulus G of the worm-gear shaft', 'Pa',
+                                         0.0, 1e16, lo_open=True)
+    youngs_modulus: float = _f(206e9, "Young's modulus E of both shafts (axial stiffness)",
+                               'Pa', 0.0, 1e16, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Shafts:
+    """Shafts (massless torsional springs, assumption 8) and bearings."""
+
+    worm_shaft_radius: float = _f(0.01534, 'Worm shaft radius R1', 'm', 0.0, 1.0, lo_open=True)
+    worm_shaft_length: float = _f(0.20, 'Worm shaft length L1', 'm', 0.0, 10.0, lo_open=True)
+    gear_shaft_radius: float = _f(0.0175, 'Worm-gear shaft radius R4', 'm', 0.0, 1.0,
+                                  lo_open=True)
+    gear_shaft_length: float = _f(0.37, 'Worm-gear shaft length L4', 'm', 0.0, 10.0,
+                                  lo_open=True)
+    worm_shaft_inertia_fraction: float = _f(0.0, 'Share of the worm shaft polar inertia lumped '
+                                            'on the worm (paper: 0, usual lumped value 1/3)',
+                                            '', 0.0, 1.0)
+    gear_shaft_inertia_fraction: float = _f(0.0, 'Share of the gear shaft polar inertia lumped '
+                                            'on the gear and on the flywheel end each', '',
+                                            0.0, 1.0)
+    worm_bearing_axial_stiffness: float = _f(2e8, 'Axial stiffness K_bTws of the worm bearing',
+                                             'N/m', 0.0, 1e14, lo_open=True)
+    gear_bearing_axial_stiffness: float = _f(2e8, 'Axial stiffness K_bTgs of the gear bearing',
+                                             'N/m', 0.0, 1e14, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """Tooth mesh stiffness, Eqs. (16)-(17)."""
+
+    stiffness_model: str = _f('nonlinear', 'nonlinear: Eqs. 16-17 over the mesh cycle; linear: '
+                              'constant tooth stiffnesses (paper Figs. 10-11)',
+                              choices=('nonlinear', 'linear'))
+    worm_tooth_stiffness_linear: float = _f(3.5e8, 'c_w k_w in linear mode', 'N/m', 0.0, 1e14,
+                                            lo_open=True)
+    gear_tooth_stiffness_linear: float = _f(2.5e8, 'c_g k_g in linear mode', 'N/m', 0.0, 1e14,
+                                            lo_open=True)
+    worm_fit_a: float = _f(19.38843319, 'a_w of Eq. 16', '', -100.0, 100.0)
+    worm_fit_b: float = _f(0.000656069, 'b_w of Eq. 16', '1/deg', -1.0, 1.0)
+    gear_fit_a: float = _f(19.64527077, 'a_g of Eq. 17', '', -100.0, 100.0)
+    gear_fit_b: float = _f(-0.00055956, 'b_g of Eq. 17', '1/deg', -1.0, 1.0)
+    calibrate_to_linear_mean: bool = _f(True, 'Shift the contact-position origin so that the '
+                                        'mean of Eqs. 16-17 over a mesh cycle equals the '
+                                        'linear values')
+    contact_mapping: str = _f('cosine', 'Contact positions x of Eqs. 16-17 over a mesh cycle '
+                              '(one worm revolution): cosine: x = x0 + 180(1 - cos s) deg, out '
+                              'along the fitted range and back, no jump at the tooth hand-over; '
+                              'sawtooth: x = x0 + s, jumps 27 % (worm) / 18 % (gear) at every '
+                              'hand-over', choices=('cosine', 'sawtooth'))
+    phase_offset: float = _f(PHASE_AT_MEAN_STIFFNESS, 'Mesh-cycle phase (worm rotation) at '
+                             'theta2 = theta3 = 0; the default starts the cosine mapping at '
+                             'the mean mesh stiffness', 'rad', 0.0, 2.0 * math.pi)
+    worm_tooth_stiffness_multiplier: float = _f(1.0, 'Multiplier on c_w k_w (Fig. 17 study)',
+                                                '', 0.0, 1e6, lo_open=True)
+    gear_tooth_stiffness_multiplier: float = _f(1.0, 'Multiplier on c_g k_g (Fig. 17 study)',
+                                                '', 0.0, 1e6, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Tooth friction, Eq. (18), in SI with the sliding velocity along the thread."""
+
+    model: str = _f('stribeck', 'stribeck: Eq. 18; constant: constant_coefficient; off',
+                    choices=('stribeck', 'constant', 'off'))
+    direction: str = _f('set_valued', 'set_valued: W_f in mu |W_n| Sgn(v_s), exact stick '
+                        '(|W_f| <= mu(0) |W_n|) and slip opposing sliding, solved in each '
+                        'Newton step; regularized: sgn(v_s) ~ tanh(v_s/v_eps), sticks by '
+                        'viscous creep; paper: fixed sign as printed in Eqs. 1-2 (cannot '
+                        'dissipate)', choices=('set_valued', 'regularized', 'paper'))
+    mu_kinetic: float = _f(0.0470713, 'mu at high sliding speed (Eq. 18 constant term)', '',
+                           0.0, 2.0)
+    mu_stribeck_drop: float = _f(0.1056549, 'mu(0) - mu_kinetic (Eq. 18 exponential term)', '',
+                                 0.0, 2.0)
+    stribeck_velocity: float = _f(0.07454, 'v_S in mu = mu_k + drop*exp(-sqrt(v/v_S)); '
+                                  '1/(0.223607*60) m/s reads Eq. 18 in m/min', 'm/s',
+                                  0.0, 1e3, lo_open=True)
+    constant_coefficient: float = _f(0.145, 'mu of the constant model (paper linear case)', '',
+                                     0.0, 2.0)
+    regularization_velocity: float = _f(1e-4, 'v_eps of tanh(v_s/v_eps) (direction: '
+                                        'regularized only)', 'm/s', 0.0, 1.0, lo_open=True)
+    cusp_velocity: float = _f(1e-7, 'v_c rounding the cusp of Eq. 18 at zero sliding speed '
+                              'in the set-valued law: sqrt(v) -> v/sqrt(v + v_c) (mu(0) and '
+                              'mu at v >> v_c unchanged)', 'm/s', 0.0, 1e-2, lo_open=True)
+    in_compliance: bool = _f(False, 'Keep the friction terms of KGWS (Eq. 10, as printed): '
+                             'friction loads the shaft bearings axially. Off by default: with '
+                             'them the mesh stores energy at each sliding reversal (up to '
+                             '1.6e-9 of E per step) instead of only dissipating')
+
+
+@dataclass(frozen=True)
+class Damping:
+    """Optional structural damping (assumption 10 of the paper: none)."""
+
+    rayleigh_alpha: float = _f(0.0, 'Mass-proportional damping alpha (relative to the rigid '
+                               'kinematic motion)', '1/s', 0.0, 1e6)
+    rayleigh_beta: float = _f(0.0, 'Stiffness-proportional damping beta', 's', 0.0, 1.0)
+    modal_damping_ratios: tuple = _f([0.0, 0.0, 0.0], 'Damping ratio of each linearised mode, '
+                                     'lowest first', '', 0.0, 1.0, length=3)
+
+
+@dataclass(frozen=True)
+class Load:
+    """External load on the output (antenna). The paper has none (defaults zero)."""
+
+    output_torque: float = _f(0.0, 'Constant external torque on theta4 (wind, unbalance)',
+                              'N*m', -1e5, 1e5)
+    output_viscous_coefficient: float = _f(0.0, 'Viscous bearing drag on theta4', 'N*m*s/rad',
+                                           0.0, 1e5)
+
+
+@dataclass(frozen=True)
+class Integrator:
+    """Newmark-beta with Newton-Raphson on the end-of-step state."""
+
+    time_step: float = _f(4e-6, 'Fixed Newmark step dt (4 us: 250 steps per 1 ms tick; '
+                          'theta2 pointwise within 5 % of its oscillation, theta4 within 0.1 %; '
+                          'warns below 20 steps per period of the highest mode)', 's', 0.0,
+                          1e-2, lo_open=True, read_only=True)
+    newmark_beta: float = _f(0.25, 'Newmark beta (1/4: average acceleration)', '', 0.0, 0.5,
+                             lo_open=True)
+    newmark_gamma: float = _f(0.5, 'Newmark gamma (1/2: no numerical damping)', '', 0.5, 1.0)
+    worm_frequency_matching: bool = _f(True, 'Scale the worm inertia in the Newmark step by '
+                                       '(x/tan x)^2, x = omega_w dt/2, so that the average-'
+                                       'acceleration rule gives the 8.6 kHz worm mode its exact '
+                                       'frequency (otherwise its period stretches 2.4 %/cycle '
+                                       'at 10 us); the physical inertia is used everywhere else',
+                                       read_only=True)
+    newton_rtol: float = _f(1e-9, 'Newton tolerance on the residual as acceleration error, '
+                            'relative to |acceleration|', '', 0.0, 1e-2, lo_open=True)
+    newton_atol: float = _f(1e-7, 'Newton tolerance on the residual as acceleration error, '
+                            'absolute', 'rad/s^2', 0.0, 1e3, lo_open=True)
+    newton_max_iterations: int = _f(12, 'Newton iterations before a step is subdivided', '',
+                                    1, 200)
+    max_subdivision_level: int = _f(10, 'A failing step is split in 2, 4, ... 2^level parts',
+                                    '', 0, 20)
+
+
+@dataclass(frozen=True)
+class InputProfile:
+    """Commanded worm angle theta1(t) for offline runs (the node takes it from a topic)."""
+
+    profile: str = _f('trapezoidal', 'step | ramp | trapezoidal | s_curve | csv',
+                      choices=('step', 'ramp', 'trapezoidal', 's_curve', 'csv'))
+    target_angle: float = _f(0.11309733552923255, 'Move size: 18 steps of 0.36 deg', 'rad',
+                             -1e4, 1e4)
+    start_time: float = _f(0.0, 'Time at which the move starts', 's', 0.0, 1e6)
+    move_time: float = _f(0.020, 'Duration of the move (ramp, trapezoidal, s_curve)', 's',
+                          0.0, 1e4, lo_open=True)
+    accel_time: float = _f(0.004, 'Acceleration (= deceleration) time of trapezoidal and '
+                           's_curve moves', 's', 0.0, 1e4, lo_open=True)
+    csv_path: str = _f('', 'CSV file with columns t, theta1 (profile: csv)')
+    end_time: float = _f(0.5, 'Simulated duration of offline runs', 's', 0.0, 1e6,
+                         lo_open=True)
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    """ROS node settings (read by worm_gear_sim.ros.node; pure data, no rclpy here)."""
+
+    publish_rate_hz: float = _f(1000.0, 'Tick (publish) rate', 'Hz', 1.0, 20000.0,
+                                read_only=True)
+    joint_names: tuple = _f(['worm_input_joint', 'worm_joint', 'worm_gear_joint',
+                             'antenna_joint'], 'JointState names for theta1..theta4',
+                            read_only=True, length=4)
+    executor: str = _f('events', 'events | single_threaded', choices=('events',
+                       'single_threaded'), read_only=True)
+    max_command_jump: float = _f(1.0, 'Largest accepted change of theta1 between two '
+                                 'commands', 'rad', 0.0, 1e4, lo_open=True)
+    max_command_abs: float = _f(1e4, 'Largest accepted |theta1|', 'rad', 0.0, ANGLE_LIMIT,
+                                lo_open=True)
+    max_catch_up: float = _f(0.05, 'Largest simulated time integrated in one tick; the rest '
+                             'is dropped and counted as an overrun', 's', 0.0, 10.0,
+                             lo_open=True)
+    command_interpolation: str = _f('linear', 'How theta1 moves between command samples: '
+                                    'linear, or hold (steps at the sample time)',
+                                    choices=('linear', 'hold'))
+    command_timing: str = _f('tick', 'Time of a command sample on the wall clock: tick (the '
+                             'tick that reads it; the newest command since the previous tick), '
+                             'reception (its reception time) or stream (reception times '
+                             'smoothed onto the steady rate of the stream); with use_sim_time '
+                             'always the /clock reading at reception',
+                             choices=('tick', 'reception', 'stream'))
+    compensation_applied: bool = _f(False, 'Predict the drive as if ~/feedforward were added '
+                                    'to the command')
+    diagnostic_period: float = _f(1.0, 'Period of /diagnostics', 's', 0.01, 60.0,
+                                  read_only=True)
+    residual_window: float = _f(1.0, 'Live model check: window of the RMS of measured - '
+                                'predicted (measured_joint_states)', 's', 0.0, 3600.0,
+                                lo_open=True, read_only=True)
+    residual_warn_rms: tuple = _f([1e-3, 1e-4, 1e-4], 'Live model check: /diagnostics turns '
+                                  'WARN when the windowed residual RMS of theta2, theta3 or '
+                                  'theta4 exceeds its entry', 'rad', 0.0, 1e3, lo_open=True,
+                                  length=3)
+
+
+@dataclass(frozen=True)
+class CompensationSettings:
+    """Feed-forward compensation (worm_gear_sim.compensation)."""
+
+    enabled: bool = _f(True, 'Compute the feed-forward correction')
+    quasi_static: bool = _f(True, 'Compensate compliance and friction wind-up')
+    shaper: str = _f('none', 'Input shaper in the reference filter: none | zv | zvd | ei '
+                     '(measured: none is best for tracking; zv/zvd/ei with lag_order 0 for '
+                     'robust point-to-point moves)', choices=('none', 'zv', 'zvd', 'ei'))
+    preview_time: float = _f(0.0, 'Preview horizon of future command samples', 's', 0.0, 1.0)
+    model_inverse: bool = _f(False, 'Also the 3rd/4th-derivative terms of the model inverse '
+                             '(gear and worm body inertia); needs a longer smoothing kernel')
+    smoothing_time: float = _f(0.0, 'Width of the B-spline that smooths the reference (gives '
+                               'its derivatives causally); 0: (degree+1) command periods '
+                               '1/node.publish_rate_hz', 's', 0.0, 0.1)
+    lag_order: int = _f(2, 'Lead of the reference filter: it tracks polynomials of this '
+                        'degree without lag (0: plain delay, 1: ramps, 2: parabolas)', '', 0, 2)
+
+
+SECTIONS: dict[str, type] = {
+    'geometry': Geometry,
+    'materials': Materials,
+    'shafts': Shafts,
+    'mesh': Mesh,
+    'friction': Friction,
+    'damping': Damping,
+    'load': Load,
+    'integrator': Integrator,
+    'input': InputProfile,
+    'node': NodeSettings,
+    'compensation': CompensationSettings,
+}
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """The whole parameter set; immutable; checked per field and across fields.  Users build
+    :class:`worm_gear_sim.params.Config` (this plus the usable check of its builders)."""
+
+    geometry: Geometry = field(default_factory=Geometry)
+    materials: Materials = field(default_factory=Materials)
+    shafts: Shafts = field(default_factory=Shafts)
+    mesh: Mesh = field(default_factory=Mesh)
+    friction: Friction = field(default_factory=Friction)
+    damping: Damping = field(default_factory=Damping)
+    load: Load = field(default_factory=Load)
+    integrator: Integrator = field(default_factory=Integrator)
+    input: InputProfile = field(default_factory=InputProfile)
+    node: NodeSettings = field(default_factory=NodeSettings)
+    compensation: CompensationSettings = field(default_factory=CompensationSettings)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    def to_flat_dict(self) -> dict[str, Any]:
+        """Dotted names (``'mesh.stiffness_model'``) to values, in declaration order."""
+        out: dict[str, Any] = {}
+        for sec in SECTIONS:
+            obj = getattr(self, sec)
+            for f in fields(obj):
+                v = getattr(obj, f.name)
+                out[f'{sec}.{f.name}'] = list(v) if isinstance(v, tuple) else v
+        return out
+
+    def to_nested_dict(self) -> dict[str, dict[str, Any]]:
+        """Sections to plain dicts (for JSON/YAML)."""
+        nested: dict[str, dict[str, Any]] = {}
+        for key, v in self.to_flat_dict().items():
+            sec, name = key.split('.', 1)
+            nested.setdefault(sec, {})[name] = v
+        return nested
+
+    @staticmethod
+    def metadata() -> dict[str, dict[str, Any]]:
+        """Dotted name -> field metadata (description, unit, lo, hi, choices, ...)."""
+        out = {}
+        for sec, cls in SECTIONS.items():
+            for f in fields(cls):
+                out[f'{sec}.{f.name}'] = dict(f.metadata)
+        return out
+
+
+def sections_from_mapping(data: Mapping[str, Any], source: str = '<mapping>'
+                          ) -> dict[str, Any]:
+    """The section objects (``{'mesh': Mesh(...), ...}``) of nested sections (the
+    ``ros__parameters`` content) or dotted keys, each value checked and coerced per field;
+    :class:`ConfigError` names an unknown section or key (with the closest valid name)."""
+    if not isinstance(data, Mapping):
+        raise ConfigError('', f'{source}: parameters must be a mapping, got {type(data).__name__}')
+    nested: dict[str, dict[str, Any]] = {}
+    for key, value in data.items():
+        if not isinstance(key, str):
+            raise ConfigError(str(key), 'parameter names must be strings')
+        if '.' in key:  # dotted form, as ROS would flatten it
+            sec, _, name = key.partition('.')
+            nested.setdefault(sec, {})[name] = value
+        elif isinstance(value, Mapping):
+            nested.setdefault(key, {}).update(value)
+        else:
+            raise ConfigError(key, 'unknown parameter' + suggest(key, SECTIONS)
+                              + f' (top level holds the sections {", ".join(SECTIONS)})')
+    known = Parameters.metadata()
+    kwargs: dict[str, Any] = {}
+    for sec, values in nested.items():
+        if sec not in SECTIONS:
+            raise ConfigError(sec, 'unknown section' + suggest(sec, SECTIONS))
+        cls = SECTIONS[sec]
+        names = {f.name: f for f in fields(cls)}
+        sec_kwargs = {}
+        for name, value in values.items():
+            key = f'{sec}.{name}'
+            if name not in names:
+                raise ConfigError(key, 'unknown parameter' + suggest(key, known))
+            f = names[name]
+            default = field_default(f)
+            sec_kwargs[name] = coerce(key, value, default, f.metadata)
+        kwargs[sec] = cls(**sec_kwargs)
+    return kwargs
+
+
+def validate(cfg: Parameters) -> None:
+    """Per-field checks (types, finiteness, ranges, choices) of every section of ``cfg`` and
+    the cross-field checks; raises :class:`ConfigError` naming the key."""
+    for section in fields(cfg):
+        sec = section.name
+        obj = getattr(cfg, sec)
+        for f in fields(obj):
+            key = f'{sec}.{f.name}'
+            default = field_default(f)
+            coerce(key, getattr(obj, f.name), default, f.metadata)
+    integ = cfg.integrator
+    if not (2.0 * integ.newmark_beta >= integ.newmark_gamma - 1e-15):
+        raise ConfigError('integrator.newmark_beta', f'{integ.newmark_beta:g} with gamma '
+                          f'{integ.newmark_gamma:g} is only conditionally stable: need '
+                          '2*beta >= gamma >= 1/2')
+    inp = cfg.input
+    if inp.profile in ('trapezoidal', 's_curve') and 2.0 * inp.accel_time > inp.move_time:
+        raise ConfigError('input.accel_time', f'2*accel_time ({2 * inp.accel_time:g} s) must '
+                          f'not exceed move_time ({inp.move_time:g} s)')
+    if inp.profile == 'csv' and not inp.csv_path:
+        raise ConfigError('input.csv_path', 'is required when input.profile is csv')
+    g = cfg.geometry
+    if g.lead_angle == 0.0 and g.lead / (2 * math.pi) >= g.worm_pitch_radius:
+        raise ConfigError('geometry.lead', 'lead/2pi must be smaller than the worm pitch radius')
+    if g.gear_pitch_radius <= 0 or g.lead <= 0:  # pragma: no cover - range checks catch it
+        raise ConfigError('geometry.lead', 'must be > 0')
+    if cfg.integrator.time_step * cfg.node.publish_rate_hz > 1.0 + 1e-9:
+        raise ConfigError('integrator.time_step', 'must not exceed the node tick period '
+                          f'1/publish_rate_hz = {1.0 / cfg.node.publish_rate_hz:g} s')
+    if cfg.node.max_catch_up * cfg.node.publish_rate_hz < 1.0 - 1e-9:
+        # below one tick period the physics falls behind every tick and never catches up
+        raise ConfigError('node.max_catch_up', f'{cfg.node.max_catch_up:g} s must be at least '
+                          f'the tick period 1/publish_rate_hz = '
+                          f'{1.0 / cfg.node.publish_rate_hz:g} s')
