@@ -27,10 +27,6 @@ ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'rosgraph_msgs', 'builtin_interfaces'
 PHYSICS = {f'{ROOT}.model', f'{ROOT}.integrator', 'numba', 'scipy'}
 #: Imports deferred into a function that close a loop on purpose; everything else is acyclic.
 DEFERRED_BACK_EDGES = {
-    # A Simulator given a parameter set proves it usable (usability.check_usable) and names a
-    # failed integration's likely cause (usability.diagnose); the usability rules' trial runs
-    # an unchecked Simulator (check=False), so the check sits above the Simulator it uses.
-    (f'{ROOT}.simulation', f'{ROOT}.usability'),
     # Names that moved out of params (load_config, default_config_path) still import from
     # there for one release, with a DeprecationWarning (params.__getattr__).
     (f'{ROOT}.params', f'{ROOT}.config_io'),
@@ -118,7 +114,7 @@ def test_the_graph_is_read():
     sources = {i.source for i in IMPORTS}
     assert {f'{ROOT}.simulation', f'{ROOT}.cli', f'{WING}.node'} <= sources
     edges = {(i.source, i.target) for i in IMPORTS}
-    assert (f'{ROOT}.simulation', f'{ROOT}.integrator') in edges
+    assert (f'{ROOT}.stepping', f'{ROOT}.integrator') in edges
     assert (f'{ROOT}.params', f'{ROOT}.usability') in edges
 
 

@@ -208,9 +208,9 @@ def _check(cfg: Parameters, changed: Sequence[str]) -> None:
         raise _blame(cfg, changed, (), 'the linearised natural frequencies are not finite')
 
     # Rule 4: trial (equilibrium finite and in range, a short ramp integrates)
-    from .simulation import SimulationError, Simulator
+    from .stepping import SimulationError, Stepper
     try:
-        sim = Simulator(model, theta1=0.0, check=False)
+        sim = Stepper(model, theta1=0.0)
         u0 = sim.state.theta
         if not (np.all(np.isfinite(u0)) and np.all(np.abs(u0) <= ANGLE_LIMIT)):
             raise _blame(cfg, changed, ('load.output_torque',), f'the static equilibrium '
