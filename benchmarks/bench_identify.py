@@ -11,6 +11,7 @@ recorded as the paper's 18-step move (training) and a held-out S-curve move the 
 
     python benchmarks/bench_identify.py                 # timing: 4-parameter robust fit
     python benchmarks/bench_identify.py --compare       # strategies x drives table
+    python benchmarks/bench_identify.py --coverage      # calibration of the 95 % intervals
     python benchmarks/bench_identify.py --compare --strategies frequency+windows \
         --diff-steps 1e-6 1e-3 --surrogate              # how to fit the stick-slip model
 
@@ -171,6 +172,37 @@ def compare(args) -> None:
     print(f'load average after {os.getloadavg()}')
 
 
+def coverage(args) -> None:
+    """Calibration of the 95 % intervals: the drive of test/test_identification.py (K_g x 1.3,
+    zeta_1 = 0.01) fitted (K_g, zeta_1) from ``--realisations`` noise draws, with Gaussian
+    noise and with a 20-bit encoder on top of 1 urad noise."""
+    base = load_config(args.config) if args.config else load_config()
+    kg, zeta = KEYS[0], KEYS[2]
+    truth = base.replace({kg: base.materials.gear_shaft_shear_modulus * 1.3,
+                          'damping.modal_damping_ratios': [0.01, 0.0, 0.0]})
+    true_values = np.array([truth.materials.gear_shaft_shear_modulus, 0.01])
+    print(f'load average {os.getloadavg()}; base friction.direction '
+          f'{base.friction.direction}; {args.realisations} noise realisations')
+    for label, noise, res_rad in (('Gaussian 2 urad', 2e-6, 0.0),
+                                  ('20-bit encoder + 1 urad', 1e-6, RESOLUTION)):
+        inside = np.zeros(2)
+        z = []
+        for seed in range(args.realisations):
+            rec = record_from_model(truth, TRAIN, DURATION, RATE, ('theta4',), noise_rad=noise,
+                                    resolution_rad=res_rad, seed=seed)
+            res = identify(base, [rec], [kg, zeta], options=FitOptions(strategy='frequency'))
+            inside += [lo <= v <= hi for v, (lo, hi) in zip(true_values, res.ci95)]
+            x = np.array([math.log(res.values[0] / base.materials.gear_shaft_shear_modulus),
+                          res.values[1] / 0.1])          # zeta: linear coordinate value / 0.1
+            x_true = np.array([math.log(1.3), 0.1])
+            z.append((x - x_true) / np.array(res.std_x))
+        z_rms = np.sqrt(np.mean(np.square(z), axis=0))
+        print(f'  {label:<24} truth inside the 95 % interval: K_g {inside[0]:.0f}/'
+              f'{args.realisations}, zeta_1 {inside[1]:.0f}/{args.realisations}; RMS of the '
+              f'normalised errors {z_rms[0]:.2f} / {z_rms[1]:.2f}')
+    print(f'load average after {os.getloadavg()}')
+
+
 def timing(args) -> None:
     base = load_config(args.config) if args.config else load_config()
     truth, _ = drives(base)['variant: lead angle, const mu, mapping']
@@ -207,6 +239,8 @@ def timing(args) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--compare', action='store_true', help='strategies x drives table')
+    ap.add_argument('--coverage', action='store_true', help='calibration of the intervals')
+    ap.add_argument('--realisations', type=int, default=20, help='noise draws (--coverage)')
     ap.add_argument('--strategies', nargs='*', help=f'subset of {", ".join(STRATEGIES)}')
     ap.add_argument('--serial', action='store_true', help='no Dask in --compare')
     ap.add_argument('--workers', type=int, default=None)
@@ -222,6 +256,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.compare:
         compare(args)
+    elif args.coverage:
+        coverage(args)
     else:
         timing(args)
 
