@@ -232,7 +232,7 @@ NOW = EPOCH + 10 * MS
     (1e300, NOW, NOW, Reject.OUT_OF_RANGE),
     (-2e4, NOW, NOW, Reject.OUT_OF_RANGE),
     (0.1, 0, NOW, Reject.ZERO_STAMP),
-    (0.1, -5, None, Reject.ZERO_STAMP),
+    (0.1, -5, None, Reject.NEGATIVE_STAMP),
     (0.1, NOW - 2 * 10**9, NOW, Reject.TOO_OLD),
     (0.1, NOW + 2 * 10**9, NOW, Reject.TOO_NEW),
     (5.0, NOW, NOW, Reject.JUMP),
@@ -248,10 +248,13 @@ def test_bad_samples_are_rejected_counted_and_leave_the_state(value, stamp, now,
     assert o.rejected is reason and not o.accepted
     assert not (o.corrections or o.predictions or o.events)
     c = p.counters
-    assert c['rejected_' + reason.value] == 1 and c['rejected_samples'] == 1
     assert (p.sim.t, p.last_delta, p.last_stamp_ns, p.pending) == before[1:]
     assert c['samples_accepted'] == before[0]['samples_accepted']
+    # a jump is a resync candidate until the chain breaks: counted once, then
+    assert c['rejected_samples'] + p.resync_candidates == 1
     assert p.push(EPOCH + 4 * MS, 0.1, now_ns=NOW).accepted   # alive
+    assert c['rejected_' + reason.value] == 1 and c['rejected_samples'] == 1
+    assert p.resync_candidates == 0
     assert set(c) == set(COUNTER_NAMES) and all(isinstance(v, int) for v in c.values())
 
 
@@ -275,7 +278,9 @@ def test_a_real_jump_is_confirmed_and_resynchronised():
     assert outs[2].accepted and kinds(outs[2]) == ['resync']
     assert [c.stamp_ns for c in outs[2].corrections] == [ns - 4 * MS, ns - 3 * MS,
                                                           ns - 2 * MS]
-    assert p.counters['resyncs'] == 1 and p.counters['rejected_jump'] == 3
+    # the spike is rejected; the three that confirmed the move are accepted, counted once
+    assert p.counters['resyncs'] == 1 and p.counters['rejected_jump'] == 1
+    assert p.counters['samples_accepted'] == 11 + 5 and p.counters['rejected_samples'] == 1
     assert p.sim.state.theta1 == 3.0
     assert abs(p.sim.state.theta[2] - 3.0 * p.sim.derived.output_per_input) < 1e-6
     assert outs[3].accepted and outs[4].accepted and not outs[4].events
@@ -592,7 +597,7 @@ def test_any_input_sequence_keeps_the_pipeline_finite_and_counted(ops, preview, 
     c = p.counters
     assert c['samples_received'] == stamped
     assert c['rejected_samples'] == sum(c['rejected_' + r.value] for r in Reject)
-    assert c['samples_accepted'] + c['rejected_samples'] >= stamped
+    assert c['samples_accepted'] + c['rejected_samples'] + p.resync_candidates >= stamped
     assert all(isinstance(v, int) and v >= 0 for v in c.values())
 
 
@@ -635,3 +640,173 @@ def test_float64_path_equals_the_twin_of_its_samples(seed, preview_us, timing):
         assert timing == 'stream' and np.sum(dev > 1e-9) <= 3 * p.counters['merged_samples']
     else:
         assert np.max(dev) <= 1e-9
+
+
+# ---- stamps that lag the clock: transport delay is no pause ----------------------------------
+NODE_STALE_MARGIN = 0.1            # s: the node's stale_margin (ros/node.py STALE_MARGIN)
+WATCH_NS = 20 * MS                 # the node's watch timer: hold(now) every 20 ms
+
+
+def _stream_with_lag(p: RealtimePredictor, st: np.ndarray, x: np.ndarray,
+                     arrival: np.ndarray) -> dict[int, float]:
+    """Push each sample at its arrival, hold() on the watch timer's grid in between (as
+    the node does); the corrections by stamp."""
+    live: dict[int, float] = {}
+    next_hold = int(arrival[0]) + WATCH_NS
+    for s, v, a in zip(st.tolist(), x.tolist(), arrival.tolist()):
+        while next_hold <= a:
+            live.update({c.stamp_ns: c.delta for c in p.hold(next_hold).corrections})
+            next_hold += WATCH_NS
+        o = p.push(s, v, now_ns=a)
+        assert o.accepted, (s, a, o.rejected)
+        live.update({c.stamp_ns: c.delta for c in o.corrections})
+    return live
+
+
+@pytest.mark.parametrize('lag_ms', [0, 90, 105, 150, 500, 'drift'])
+def test_lagging_stamps_are_all_accepted_and_equal_the_twin(lag_ms):
+    """A steady 1 kHz stream whose stamps lag the node's clock by a constant 90-500 ms,
+    or by a lag that grows (a sender falling behind: one sample per 1.07 ms of clock):
+    every sample accepted, never stale, no rest sample, the deltas those of
+    feedforward_series of the samples sent."""
+    rng = np.random.default_rng(7)
+    cfg = Config().replace(LOADED)
+    n = 3000
+    st, x = slew(n, rng, jitter_ns=0, rate=1.0, reverse_at=1700)
+    if lag_ms == 'drift':
+        arrival = EPOCH + np.arange(n, dtype=np.int64) * 1_070_000   # lag 0 -> 0.21 s
+    else:
+        arrival = st + lag_ms * MS
+    arrival = arrival + rng.integers(0, 300_000, n)                 # scheduling jitter
+    arrival = np.maximum.accumulate(arrival)
+    p = RealtimePredictor(cfg, stale_margin=NODE_STALE_MARGIN)
+    live = _stream_with_lag(p, st, x, arrival)
+    c = p.counters
+    assert c['samples_accepted'] == n and c['rejected_samples'] == 0
+    assert c['stale_events'] == 0 and c['rest_samples'] == 0
+    live.update({c.stamp_ns: c.delta for c in p.finish().corrections})
+    want = feedforward_series(cfg, st, x)
+    got = np.array([live[s] for s in st.tolist()])
+    assert np.max(np.abs(got - want)) <= 1e-9
+
+
+def test_a_lagging_stream_that_stops_goes_stale_on_its_own_time():
+    """Stamps 0.5 s behind the clock, then no sample: stale once the samples stop
+    arriving for G + margin; the held prediction is at the stream's time (its last stamp
+    plus the time since it arrived); the resumed stream equals the twin."""
+    cfg = Config().replace(LOADED)
+    lag = 500 * MS
+    p = RealtimePredictor(cfg, stale_margin=NODE_STALE_MARGIN)
+    st1 = EPOCH + np.arange(200, dtype=np.int64) * MS
+    x1 = 1e-3 * np.arange(200)
+    live = {}
+    for s, v in zip(st1.tolist(), x1.tolist()):
+        live.update({c.stamp_ns: c.delta for c in p.push(s, v, now_ns=s + lag).corrections})
+    last = int(st1[-1])
+    quiet = p.hold(last + lag + p.stale_after_ns + 50 * MS)      # arrivals stopped 53.5 ms
+    assert not p.stale and not quiet.predictions
+    t_hold = last + lag + p.stale_after_ns + 150 * MS
+    o = p.hold(t_hold)
+    assert p.stale and 'stream_stale' in kinds(o)     # (and an overrun: 0.25 s to hold)
+    assert o.predictions[-1].stamp_ns == t_hold - lag                 # the stream's time
+    live.update({c.stamp_ns: c.delta for c in o.corrections})
+    st2 = last + 400 * MS + np.arange(100, dtype=np.int64) * MS
+    x2 = x1[-1] + 1e-3 * np.arange(1, 101)
+    for s, v in zip(st2.tolist(), x2.tolist()):
+        o = p.push(s, v, now_ns=s + lag)
+        assert o.accepted
+        live.update({c.stamp_ns: c.delta for c in o.corrections})
+    live.update({c.stamp_ns: c.delta for c in p.finish().corrections})
+    st = np.concatenate([st1, st2])
+    want = feedforward_series(cfg, st, np.concatenate([x1, x2]))
+    assert max(abs(live[s] - w) for s, w in zip(st.tolist(), want)) <= 1e-9
+
+
+def test_switching_inputs_is_counted_not_a_clock_restart():
+    """The node reads ROS time for stamped references and the monotonic clock for
+    Float64 ticks: interleaving the two inputs switches the pipeline (``input_switches``),
+    never a false ``clock_restart``, and the last stamp stays on the stamped clock."""
+    p = RealtimePredictor(Config())
+    mono = 5_000 * MS                                # a monotonic clock: 5 s after boot
+    switches = 0
+    for k in range(40):
+        s = EPOCH + k * 10 * MS
+        assert p.push(s, 0.01, now_ns=s).accepted
+        p.push_command(mono + k * 10 * MS + MS, 0.01)
+        p.tick(mono + k * 10 * MS + 2 * MS)
+        switches += 2
+    c = p.counters
+    assert c['clock_restarts'] == 0
+    assert c['input_switches'] == switches - 1      # the first sample starts, not switches
+    assert c['commands_dropped'] == 0 and p.last_stamp_ns >= 0
+
+
+# ---- property: every stamped sample accepted or counted once; accepted == twin --------------
+@given(seed=st_.integers(0, 2**32 - 1), lag_ms=st_.integers(0, 600),
+       jitter_us=st_.sampled_from([0, 300, 3000]), preview_us=st_.sampled_from([0, 2000]),
+       disturb=st_.floats(0.0, 0.3))
+@settings(max_examples=40, deadline=None)
+def test_stamped_path_counts_every_sample_once_and_equals_the_twin(seed, lag_ms, jitter_us,
+                                                                    preview_us, disturb):
+    """Any stamp sequence: a constant lag of 0-600 ms, arrival jitter, bursts (arrivals
+    held back then released together), pauses of the stream, and isolated disturbances
+    (duplicates, late packets and stamps reversed by up to 0.3 s, spikes, NaN, zero and
+    negative stamps), with the node's watch timer calling hold().  Every sample is
+    accepted or counted under exactly one reason; the accepted samples' deltas equal
+    feedforward_series of exactly the accepted samples."""
+    rng = np.random.default_rng(seed)
+    cfg = Config().replace({'compensation.preview_time': preview_us * 1e-6, **LOADED})
+    n = 400
+    steps = np.full(n, MS, dtype=np.int64)
+    steps[rng.random(n) < 0.01] += rng.integers(50, 400, n)[0] * MS          # pauses
+    st = EPOCH + np.cumsum(steps)
+    x = np.cumsum(rng.normal(0.0, 1e-3, n))
+    arrival = st + lag_ms * MS + rng.integers(0, jitter_us * 1000 + 1, n)
+    burst = rng.random(n) < 0.02                       # a burst ends at sample i
+    for i in np.flatnonzero(burst):
+        arrival[max(0, i - 30):i] = arrival[i]
+    arrival = np.maximum.accumulate(arrival)
+    p = RealtimePredictor(cfg, simulate=False, stale_margin=NODE_STALE_MARGIN)
+    corrections = {}
+    sent = 0
+    next_hold = int(arrival[0])
+    prev_good = None
+
+    def take(out):
+        for c in out.corrections:
+            assert c.stamp_ns not in corrections
+            corrections[c.stamp_ns] = (c.theta1_ref, c.delta)
+
+    for i in range(n):
+        a = int(arrival[i])
+        while next_hold <= a:
+            take(p.hold(next_hold))
+            next_hold += WATCH_NS
+        if prev_good is not None and rng.random() < disturb:     # one isolated disturbance
+            kind = rng.integers(0, 6)
+            s, v = prev_good
+            bad = [(s, v),                                        # duplicate
+                   (s - int(rng.integers(1, 300)) * MS, v),        # late / reversed
+                   (s + MS // 2, v + 3.0),                         # spike
+                   (s + MS // 2, math.nan),
+                   (0, v), (-int(rng.integers(1, 10**9)), v)][kind]
+            o = p.push(bad[0], bad[1], now_ns=a)
+            sent += 1
+            assert not o.accepted and o.rejected is not None
+            take(o)
+        o = p.push(int(st[i]), float(x[i]), now_ns=a)
+        sent += 1
+        take(o)
+        if o.accepted:
+            prev_good = (int(st[i]), float(x[i]))
+    take(p.finish())
+    c = p.counters
+    assert c['samples_received'] == sent
+    assert c['rejected_samples'] == sum(c['rejected_' + r.value] for r in Reject)
+    assert c['samples_accepted'] + c['rejected_samples'] + p.resync_candidates == sent
+    assert c['resyncs'] == 0 and len(corrections) == c['samples_accepted']
+    acc = sorted(corrections)
+    assert c['samples_accepted'] >= n // 2
+    want = feedforward_series(cfg, np.array(acc, dtype=np.int64),
+                              [corrections[s][0] for s in acc])
+    assert max(abs(corrections[s][1] - w) for s, w in zip(acc, want)) <= 1e-9

@@ -54,12 +54,17 @@ Gaps, pauses and the stale stream
     k = 0..K-1, K covering the filter and the preview) are inserted before it.  They are
     fed to the compensator and the simulator but produce no :class:`Correction` (the servo
     never sent them).  ``hold(now_ns)``, called by the node's slow timer, declares the
-    stream stale when ``now_ns`` is more than G + ``stale_margin`` after the last sample:
-    it inserts the rest samples due by ``now_ns`` (the same ones a later sample would
-    insert, so the deltas stay those of the offline twin), releases the corrections that
-    were waiting for a preview, advances the simulator holding the last command up to
-    ``now_ns`` and returns that held prediction stamped ``now_ns``; ``stale`` is True
-    (event ``stream_stale`` once).  The next accepted sample ends it (``stream_resumed``).
+    stream stale when samples stopped ARRIVING: the stream's time is ``now_ns``, less the
+    lag of the last accepted sample's stamp behind its arrival when its stamp lagged
+    (transport and scheduling delay are normal: a steady stream whose stamps are 0.5 s old
+    is not a paused one); the stream is stale when its time is more than G +
+    ``stale_margin`` after the last sample.  Then ``hold`` inserts the rest samples due by
+    the stream's time (the same ones a later sample would insert, so the deltas stay those
+    of the offline twin), releases the corrections that were waiting for a preview,
+    advances the simulator holding the last command up to the stream's time and returns
+    that held prediction stamped with it; ``stale`` is True (event ``stream_stale``
+    once).  Samples older than the accepted window (``max_stamp_age``) are rejected as
+    ``too_old``.  The next accepted sample ends it (``stream_resumed``).
     A sample that arrives after its stale time with a stamp before an inserted rest sample
     is rejected (``out_of_order``): the only case where the live deltas can differ from
     the offline twin.
@@ -73,7 +78,10 @@ Resync policy (jumps and restarts)
     resynchronises: corrections waiting for a preview are released (the old reference
     rested), the simulator restarts at rest at the first candidate (static equilibrium)
     and the other candidates follow; counted in ``resyncs``, event ``resync``.  A single
-    outlier (a spike, a late packet) stays rejected.  A caller clock going backwards
+    outlier (a spike, a late packet) stays rejected.  A candidate is counted once, when
+    its fate is known: accepted with the confirmed resync, or rejected under its reason
+    when the chain breaks (until then it is one of ``resync_candidates``).
+    A caller clock going backwards
     (``now_ns`` earlier than the previous ``now_ns`` by more than 1 ms: a simulator reset,
     a looping bag with ``use_sim_time``) re-initialises at once: pending corrections of
     the old timeline are dropped (``corrections_dropped``), the next accepted sample
@@ -94,7 +102,10 @@ Float64 path (``push_command`` + ``tick``; ``std_msgs/Float64`` ``worm_angle_com
     The stream is stale after G without a command (no margin: tick stamps are never late).
     The pipeline serves one input at a time: a valid stamped sample after Float64 commands,
     or a tick with queued commands after stamped samples, restarts it on the other input
-    (event ``input_changed``); a tick without queued commands leaves a stamped stream alone.
+    (event ``input_changed``, counted in ``input_switches``); a tick without queued
+    commands leaves a stamped stream alone.  Each input has its own clock (``push`` and
+    ``hold``: the stamps' clock, ROS time in the node; ``tick``: the node's monotonic clock
+    or /clock): a switch is never a clock going back.
 
 Catch-up
     The simulator never integrates more than ``node.max_catch_up`` seconds for one sample

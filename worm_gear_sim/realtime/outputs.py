@@ -25,7 +25,8 @@ class Reject(StrEnum):
     INF = 'inf'
     OUT_OF_RANGE = 'out_of_range'     # |theta1_ref| > node.max_command_abs
     JUMP = 'jump'                     # change > node.max_command_jump (until confirmed)
-    ZERO_STAMP = 'zero_stamp'         # stamp <= 0 (unset header)
+    ZERO_STAMP = 'zero_stamp'         # stamp == 0 (unset header)
+    NEGATIVE_STAMP = 'negative_stamp'  # stamp < 0 (a negative header.stamp.sec)
     TOO_OLD = 'too_old'               # stamp < now - max_stamp_age
     TOO_NEW = 'too_new'               # stamp > now + max_stamp_lead
     DUPLICATE = 'duplicate'           # stamp equal to the last accepted sample's
@@ -118,6 +119,6 @@ COUNTER_NAMES = (
     'commands_received', 'commands_used', 'commands_merged', 'commands_restamped',
     'commands_dropped', 'merged_samples', 'rest_samples', 'corrections',
     'corrections_dropped', 'predictions', 'late_for_simulation', 'resyncs',
-    'clock_restarts', 'stale_events', 'overruns', 'dropped_time_ns', 'steps',
+    'clock_restarts', 'input_switches', 'stale_events', 'overruns', 'dropped_time_ns', 'steps',
     'simulation_errors', 'compensation_errors', 'reconfigurations', 'stream_relocks',
     'stream_outliers')

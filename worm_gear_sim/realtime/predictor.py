@@ -77,7 +77,7 @@ class RealtimePredictor:
         self._queue = CommandQueue()
         self._set_config(self._design(model))
         self._stream = StreamClock(float(self._period_ns))
-        self._last_now_ns: int | None = None
+        self._last_now_ns: dict[str, int] = {}    # per clock: 'stamped' | 'command'
         self._last_tick_ns = 0
         self._cmd: float | None = None             # last accepted Float64 command
         self._cmd_chain: list[float] = []
@@ -150,19 +150,21 @@ class RealtimePredictor:
         self._stream.reset()
         self._cmd = None
         self._cmd_chain = []
-        self._last_now_ns = None
+        self._last_now_ns = {}
 
     def _init_state(self) -> None:
+        self._drop_candidates()
         self._started = False
         self._mode = ''                          # 'stamped' | 'command' once started
         self._base: int | None = self._explicit_base
         self._last_ns = 0                        # last sample fed (real or rest) [ns]
         self._last_real_ns = 0                   # last accepted sample [ns]
         self._last_real_x = 0.0
+        self._last_arrival_ns = 0                # caller's clock at that sample [ns]
         self._gap_ns = self._gap0_ns             # G at the last accepted sample
         self._rest_k = 0                         # rest samples inserted after it
         self._pending: collections.deque = collections.deque()   # (ns, x, real)
-        self._chain: list[tuple[int, float]] = []
+        self._chain: list[tuple[int, float, Reject]] = []   # resync candidates
         self._stale = False
         self._delta = 0.0                        # last correction [rad]
         self._drive.clear()
@@ -225,10 +227,12 @@ class RealtimePredictor:
         stamp_ns = int(stamp_ns)
         x = float(theta1_ref)
         if now_ns is not None:
-            self._check_clock(int(now_ns), out)
+            self._check_clock(int(now_ns), out, 'stamped')
         reason = self._value_reason(x)
         if reason is None:
-            if stamp_ns <= 0:
+            if stamp_ns < 0:
+                reason = Reject.NEGATIVE_STAMP
+            elif stamp_ns == 0:
                 reason = Reject.ZERO_STAMP
             elif now_ns is not None and stamp_ns < now_ns - self.max_stamp_age_ns:
                 reason = Reject.TOO_OLD
@@ -248,31 +252,45 @@ class RealtimePredictor:
         if reason is not None:
             restart = reason is Reject.OUT_OF_ORDER and \
                 self._last_ns - stamp_ns > RESTART_MIN_BACK_NS    # not a late packet
-            if (reason is Reject.JUMP or restart) and self._candidate(stamp_ns, x):
-                self._resync(out)          # confirmed: this sample is accepted
+            if reason is Reject.JUMP or restart:
+                # a resync candidate: counted when its fate is known (accepted by a
+                # confirmed resync, or rejected when the chain breaks)
+                out.rejected = reason
+                if self._candidate(stamp_ns, x, reason):
+                    out.rejected = None
+                    self._resync(out)      # confirmed: the candidates are accepted
+                    self._last_arrival_ns = stamp_ns if now_ns is None else int(now_ns)
             else:
                 self._reject(out, reason)
             out.stale = self._stale
             return out
-        self._chain.clear()
+        self._drop_candidates()
         self._accept(stamp_ns, x, out, predict=True)
+        self._last_arrival_ns = stamp_ns if now_ns is None else int(now_ns)
         out.stale = self._stale
         return out
 
     def hold(self, now_ns: int) -> Output:
-        """Stamped path, from a slow timer: if the stream is stale (no sample for
-        G + ``stale_margin`` before ``now_ns``), insert the rest samples due, release the
-        corrections waiting for them, advance the simulator holding the last command up to
-        ``now_ns`` and return that held prediction.  Otherwise nothing."""
+        """Stamped path, from a slow timer: if the stream is stale (no sample has arrived
+        for G + ``stale_margin``, and the stream's time passed its last stamp by as much),
+        insert the rest samples due, release the corrections waiting for them, advance the
+        simulator holding the last command up to the stream's time and return that held
+        prediction.  Otherwise nothing.  The stream's time is ``now_ns``, less the lag of
+        the last sample's stamp behind its arrival when it lagged."""
         out = Output()
         now_ns = int(now_ns)
-        self._check_clock(now_ns, out)
+        self._check_clock(now_ns, out, 'stamped')
         if not self._started or self._mode != 'stamped':
             out.stale = self._stale
             return out
-        if now_ns - self._last_real_ns > self._gap_ns + self.stale_margin_ns:
-            self._go_stale(now_ns, out)
-            self._hold_to(now_ns, out)
+        # the stream's time now: ``now_ns`` less the lag of its last sample's stamp behind
+        # its arrival (transport and scheduling delay are no pause: a stream whose stamps
+        # lag is stale only when samples stop arriving)
+        lag = self._last_arrival_ns - self._last_real_ns
+        stream_ns = now_ns - lag if lag > 0 else now_ns
+        if stream_ns - self._last_real_ns > self._gap_ns + self.stale_margin_ns:
+            self._go_stale(stream_ns, out)
+            self._hold_to(stream_ns, out)
         out.stale = self._stale
         return out
 
@@ -349,7 +367,7 @@ class RealtimePredictor:
         command."""
         out = Output()
         now_ns = int(now_ns)
-        self._check_clock(now_ns, out)
+        self._check_clock(now_ns, out, 'command')
         if self._mode == 'stamped':
             if not len(self._queue):
                 return out                   # the stamped stream is in use: nothing to do
@@ -403,27 +421,47 @@ class RealtimePredictor:
         self.counters['rejected_samples'] += 1
         self.counters['rejected_' + reason.value] += 1
 
-    def _check_clock(self, now_ns: int, out: Output) -> bool:
-        """A caller clock that went backwards beyond the tolerance restarts the pipeline."""
-        last = self._last_now_ns
-        self._last_now_ns = now_ns if last is None else max(now_ns, last)
+    def _check_clock(self, now_ns: int, out: Output, path: str) -> bool:
+        """A caller clock that went backwards beyond the tolerance restarts the pipeline.
+        Each input path has its own clock (``path``: 'stamped' for ``push``/``hold``,
+        'command' for ``tick``): the node reads ROS time for one and the monotonic clock
+        for the other, so switching paths is not a clock going back."""
+        clocks = self._last_now_ns
+        last = clocks.get(path)
+        clocks[path] = now_ns if last is None else max(now_ns, last)
         if last is not None and now_ns < last - CLOCK_TOLERANCE_NS:
-            self._last_now_ns = now_ns
+            clocks[path] = now_ns
             self.counters['clock_restarts'] += 1
             self._restart(out, 'clock_restart', f'clock went backwards by '
                           f'{(last - now_ns) * 1e-9:.6g} s: the pipeline restarts')
             return True
         return False
 
-    def _candidate(self, ns: int, x: float) -> bool:
+    def _candidate(self, ns: int, x: float, reason: Reject) -> bool:
         """Keep a rejected sample as a resync candidate; True when confirmed."""
         ch = self._chain
         if ch:
-            pns, px = ch[-1]
+            pns, px, _ = ch[-1]
             if not (0 < ns - pns <= CHAIN_MAX_GAP_NS and abs(x - px) <= self._max_jump):
-                ch.clear()
-        ch.append((ns, x))
+                self._drop_candidates()
+        ch.append((ns, x, reason))
         return len(ch) >= self.confirm_samples
+
+    def _drop_candidates(self) -> None:
+        """The chain broke: its candidates are rejected, each under its own reason."""
+        ch = getattr(self, '_chain', None)
+        if ch:
+            c = self.counters
+            for _, _, reason in ch:
+                c['rejected_samples'] += 1
+                c['rejected_' + reason.value] += 1
+            ch.clear()
+
+    @property
+    def resync_candidates(self) -> int:
+        """Rejected-looking samples kept as resync candidates, not yet counted: each
+        ends accepted (a confirmed resync) or rejected (the chain breaks)."""
+        return len(self._chain)
 
     def _resync(self, out: Output) -> None:
         chain, self._chain = self._chain, []
@@ -437,10 +475,12 @@ class RealtimePredictor:
         mode = self._mode
         self._init_state()
         self._mode = mode
-        for ns, x in chain:
+        for ns, x, _ in chain:
             self._accept(ns, x, out, predict=True)
 
     def _restart(self, out: Output, kind: str, message: str, drop: bool = True) -> None:
+        if kind == 'input_changed':
+            self.counters['input_switches'] += 1
         if self._started:
             if drop:
                 self.counters['corrections_dropped'] += sum(

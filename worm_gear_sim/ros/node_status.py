@@ -23,7 +23,7 @@ HARDWARE_ID = 'worm_gear_sim'
 
 #: the pipeline's counters reported under 'simulation' and 'inputs'
 _SIMULATION_COUNTERS = ('predictions', 'steps', 'overruns', 'dropped_time_ns', 'resyncs',
-                        'clock_restarts', 'stale_events', 'late_for_simulation',
+                        'clock_restarts', 'input_switches', 'stale_events', 'late_for_simulation',
                         'simulation_errors')
 _INPUT_COUNTERS = ('samples_received', 'samples_accepted', 'rejected_samples',
                    *(f'rejected_{r}' for r in REJECT_REASONS),
@@ -110,6 +110,7 @@ def node_statuses(name: str, rt: RealtimePredictor, counters: Mapping[str, Any],
     in_vals['command_timing'] = command_timing
     in_vals['stale_after_ms'] = rt.stale_after_ns * 1e-6
     in_vals['last_stamp_ns'] = rt.last_stamp_ns
+    in_vals['resync_candidates'] = rt.resync_candidates
     in_vals['last_error'] = last_error
     in_level = diag.WARN if (rejected or rt.stale) else diag.OK
     in_msg = ', '.join(m for m in (
