@@ -124,3 +124,92 @@ def test_process_rejects_invalid_parameter_file(ros_subprocess_env, tmp_path):
     assert proc.returncode == 2, text
     assert 'friction.model' in text and 'coulomb' in text, text
     assert 'Traceback' not in text, text
+
+
+def _stamped_stream(probe, proc, pred, timeout: float) -> bool:
+    """Publish stamped references at ~1 kHz (stamps: the probe's clock, a slow sine) until
+    ``pred()``; False on timeout or if the process died."""
+    from builtin_interfaces.msg import Time
+    from sensor_msgs.msg import JointState
+    pub = probe.stamped_pub
+    clock = probe.node.get_clock()
+    msg = JointState()
+    msg.name = ['worm_input_joint']
+    msg.position = [0.0]
+    t0 = time.monotonic()
+    next_send = t0
+    while not pred():
+        now = time.monotonic()
+        if now - t0 > timeout or proc.poll() is not None:
+            return False
+        if now >= next_send:
+            ns = clock.now().nanoseconds
+            msg.header.stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
+            msg.position[0] = 0.1 * math.sin(2.0 * math.pi * (now - t0))
+            pub.publish(msg)
+            next_send += 1e-3
+        probe.executor.spin_once(timeout_sec=0.0)
+    return True
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM, signal.SIGINT,
+                                 signal.SIGTERM], ids=['int', 'term', 'int2', 'term2'])
+def test_signal_during_a_1khz_stamped_stream_exits_quietly(ros_dds_context, ros_subprocess_env,
+                                                           tmp_path, sig):
+    """Ctrl-C / SIGTERM while a 1 kHz stamped stream is answered: exit 0, no [FATAL] line,
+    no traceback (a publish on a context being torn down once printed both)."""
+    from sensor_msgs.msg import JointState
+    proc, log = start_logged(node_args(), ros_subprocess_env, tmp_path / 'node.log')
+    probe = Probe(ros_dds_context)
+    answers: list = []
+    probe.stamped_pub = probe.node.create_publisher(JointState, 'worm_angle_reference', 1000)
+    probe.node.create_subscription(JointState, '/worm_gear_sim/compensated_command',
+                                   answers.append, 1000)
+    try:
+        ok = _stamped_stream(probe, proc, lambda: len(answers) >= 200, START_TIMEOUT)
+        if ok:
+            n = len(answers)
+            proc.send_signal(sig)                   # mid-stream: the node is answering
+            _stamped_stream(probe, proc, lambda: False, 1.0)
+    finally:
+        probe.close()
+        rc, text = stop_and_read(proc, log, sig)
+    assert ok, f'no answers from the node process (rc {rc}):\n{text}'
+    assert n >= 200
+    assert rc == 0, text
+    assert 'FATAL' not in text and 'Traceback' not in text, text
+
+
+def test_bad_clock_messages_do_not_end_the_process(ros_dds_context, ros_subprocess_env,
+                                                   tmp_path):
+    """use_sim_time: /clock messages with a negative sec from another node on the domain
+    are rejected and logged; the process goes on answering on the good clock."""
+    from builtin_interfaces.msg import Time
+    from rosgraph_msgs.msg import Clock
+    proc, log = start_logged(node_args() + ['-p', 'use_sim_time:=true',
+                                            '--log-level', 'warn'],
+                             ros_subprocess_env, tmp_path / 'node.log')
+    probe = Probe(ros_dds_context)
+    clock_pub = probe.node.create_publisher(Clock, '/clock', 10)
+    ns = [1_000 * 10**9]
+
+    def good_clock_then_command(t: float) -> float:
+        ns[0] += 5_000_000
+        clock_pub.publish(Clock(clock=Time(sec=ns[0] // 10**9, nanosec=ns[0] % 10**9)))
+        return 0.0
+    try:
+        assert probe.spin_until(lambda: probe.node.count_subscribers('/clock') > 0,
+                                START_TIMEOUT)
+        for _ in range(5):
+            clock_pub.publish(Clock(clock=Time(sec=-7, nanosec=0)))
+            probe.spin_until(lambda: False, 0.05)
+        ok = probe.stream_until(lambda: len(probe.joint_states) >= 20, proc, START_TIMEOUT,
+                                good_clock_then_command)
+        alive = proc.poll() is None
+    finally:
+        probe.close()
+        rc, text = stop_and_read(proc, log, signal.SIGINT)
+    assert alive and ok, text
+    assert rc == 0, text
+    assert 'rejected /clock message: negative sec -7' in text, text
+    assert 'Traceback' not in text, text

@@ -288,3 +288,61 @@ def test_parameter_sets_are_built_off_the_sample_path(ros_harness):
     assert h.counters()['accepted_parameter_sets'] == 10
     assert h.spin_until(lambda: len(h.compensated) == 200)
     assert h.counters()['rejected_samples'] == 0
+
+
+class _FailingPublisher:
+    """A publisher whose publish() raises as rclpy's does when the middleware refuses a
+    message (``RCLError: Failed to publish``) for its first ``n`` calls."""
+
+    def __init__(self, pub, n: int):
+        self._pub, self.left, self.topic_name = pub, n, pub.topic_name
+
+    def publish(self, msg):
+        if self.left > 0:
+            self.left -= 1
+            raise RuntimeError('Failed to publish: error not set')
+        self._pub.publish(msg)
+
+    def get_subscription_count(self):
+        return self._pub.get_subscription_count()
+
+
+@pytest.mark.parametrize('which', ['_pub_cc', '_pub_js', '_pub_worm', '_pub_ff'])
+def test_a_failed_publish_is_counted_and_the_node_goes_on(ros_harness, which):
+    """publish() raising inside the reference callback (seen under parameter stress on
+    the joint_states and worm_error publishers) is logged and counted, never ends the
+    node; the pipeline's state and the later corrections are those of the offline twin."""
+    h = make(ros_harness)
+    setattr(h.node, which, _FailingPublisher(getattr(h.node, which), 5))
+    stamps = NOW_NS - 100 * MS + np.arange(40, dtype=np.int64) * MS
+    values = 0.01 + 1e-3 * np.arange(40)
+    assert h.references(zip(stamps.tolist(), values.tolist()))   # no exception escapes
+    c = h.counters()
+    assert c['publish_failures'] == 5 and c['samples_accepted'] == 40
+    assert 'publish on' in h.node.last_error and 'failed' in h.node.last_error
+    vals = {kv.key: kv.value for kv in h.node.diagnostic_statuses()[0].values}
+    assert vals['publish_failures'] == '5'
+    want = feedforward_series(h.node.config, stamps, values)
+    assert h.node.rt.last_delta == want[-1]
+    if which != '_pub_cc':
+        assert h.spin_until(lambda: len(h.compensated) == 40)
+        got = [m.position[0] for m in h.compensated]
+        np.testing.assert_allclose(got, values + want, rtol=0, atol=1e-12)
+
+
+def test_a_clock_message_that_is_no_time_is_rejected(ros_harness):
+    """With use_sim_time, a /clock message with a negative sec (or nanosec >= 1e9) made
+    rclpy's time source raise inside the executor and the process exit 1: now it is
+    rejected, counted and logged, the clock keeps its time and the node goes on."""
+    from builtin_interfaces.msg import Time
+    h = make(ros_harness)
+    before = h.node.get_clock().now().nanoseconds
+    for sec, nsec in ((-5, 0), (-2**31, 999_999_999)):
+        h.clock_pub.publish(h.Clock(clock=Time(sec=sec, nanosec=nsec)))
+        h.spin_for(0.1)                           # an exception would escape spin_once
+    assert h.counters()['rejected_clock_messages'] == 2
+    assert 'rejected /clock message: negative sec' in h.node.last_error
+    assert h.node.get_clock().now().nanoseconds == before
+    assert h.wait_clock(NOW_NS + 10 * MS)         # a good clock is taken again
+    assert h.reference(NOW_NS, 0.01)
+    assert h.node.rt.counters['samples_accepted'] == 1

@@ -62,6 +62,7 @@ from ..model_check import ModelCheck
 from ..params import NODE_NAME, Config, ConfigError, config_from_mapping
 from ..realtime import STALE_PERIODS, Output, Prediction, RealtimePredictor
 from . import diagnostics as diag
+from .clock_guard import guard_clock_source
 from .interface import (
     COMMAND_TOPIC,
     COMPENSATED_COMMAND_TOPIC,
@@ -158,7 +159,8 @@ class WormGearSimNode(Node):
         self.counters: dict[str, Any] = dict(
             **{f'rejected_{r}': 0 for r in NODE_REJECT_REASONS},
             ticks=0, missed_ticks=0, held_predictions=0, rejected_parameter_sets=0,
-            accepted_parameter_sets=0, parameter_build_errors=0)
+            accepted_parameter_sets=0, parameter_build_errors=0, rejected_clock_messages=0,
+            publish_failures=0)
         self.last_error = ''
         self._throttle = LogThrottle(LOG_THROTTLE_S)
         self.load = CallbackLoad(self.rt)
@@ -166,6 +168,7 @@ class WormGearSimNode(Node):
         self._last_mono_ns = 0
         self._last_watch_ns = 0
         self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
+        guard_clock_source(self, self._on_bad_clock)
 
         # --- ROS interfaces --------------------------------------------------------------
         qos_state = QoSProfile(depth=10)
@@ -181,17 +184,19 @@ class WormGearSimNode(Node):
                                              qos_overriding_options=overrides())
         self._pub_diag = self.create_publisher(diag.DiagnosticArray, DIAGNOSTICS_TOPIC, 1)
         self._sub_cmd = self.create_subscription(
-            Float64, COMMAND_TOPIC, self._on_command, qos_profile_sensor_data,
+            Float64, COMMAND_TOPIC, self._guard_message(self._on_command),
+            qos_profile_sensor_data,
             qos_overriding_options=overrides())
         self._check = ModelCheck(cfg.node.joint_names[1:], cfg.node.residual_window,
                                  cfg.node.residual_warn_rms)
         self._pub_res = self.create_publisher(JointState, RESIDUAL_TOPIC, qos_state)
         self._sub_meas = self.create_subscription(
-            JointState, MEASURED_TOPIC, self._on_measured, qos_profile_sensor_data,
+            JointState, MEASURED_TOPIC, self._guard_message(self._on_measured),
+            qos_profile_sensor_data,
             qos_overriding_options=overrides())
         self._res = JointState()
         self._sub_ref = self.create_subscription(
-            JointState, REFERENCE_TOPIC, self._on_reference,
+            JointState, REFERENCE_TOPIC, self._guard_message(self._on_reference),
             QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
             qos_overriding_options=overrides())
 
@@ -263,6 +268,40 @@ class WormGearSimNode(Node):
                 if context.ok():
                     raise
         return _timer_signature(guarded)
+
+    def _guard_message(self, callback: Any) -> Any:
+        """Subscription callback that ends quietly when Ctrl-C / SIGTERM shut the context
+        down while it runs; other errors propagate."""
+        context = self.context
+
+        def guarded(msg: Any) -> None:
+            try:
+                callback(msg)
+            except Exception:
+                if context.ok():
+                    raise
+        return guarded
+
+    def _publish(self, pub: Any, msg: Any) -> None:
+        """``pub.publish(msg)``; a failure is logged (throttled) and counted in
+        ``publish_failures`` and the callback goes on: a failed publish (the middleware
+        out of resources under load, a context shutting down) never ends the node nor
+        leaves the pipeline half-updated (it publishes only after the pipeline's step)."""
+        try:
+            pub.publish(msg)
+        except Exception as exc:  # noqa: BLE001 - RCLError and friends
+            if not self.context.ok():
+                return                              # shutting down: quiet
+            self.counters['publish_failures'] += 1
+            self._warn('publish_failed', f'publish on {pub.topic_name} failed '
+                       f'({type(exc).__name__}: {exc}); '
+                       f'{self.counters["publish_failures"]} so far')
+
+    def _on_bad_clock(self, problem: str) -> None:
+        """A /clock message that is no time (rclpy would raise in the executor)."""
+        self.counters['rejected_clock_messages'] += 1
+        self._warn('clock_rejected', f'rejected /clock message: {problem}; '
+                   f'{self.counters["rejected_clock_messages"]} so far')
 
     def _warn(self, cause: str, text: str) -> None:
         """Log ``text`` at most once per LOG_THROTTLE_S for each ``cause`` (a command
@@ -371,7 +410,7 @@ class WormGearSimNode(Node):
             self._handle(out, '', 0, stamp_ns=None if rt.sim_time else stamp.nanoseconds)
             if rt.compensator is not None and self._pub_ff.get_subscription_count():
                 self._f_ff.data = rt.last_delta   # the correction of the newest sample
-                self._pub_ff.publish(self._f_ff)
+                self._publish(self._pub_ff, self._f_ff)
         self.load.busy(t0)
 
     # ---- output ----------------------------------------------------------------------------
@@ -432,7 +471,7 @@ class WormGearSimNode(Node):
             r.header.stamp.sec, r.header.stamp.nanosec = divmod(stamp, _NS)
             r.name = joints
             r.position = residual.tolist()
-            self._pub_res.publish(r)
+            self._publish(self._pub_res, r)
 
     def _publish_corrections(self, corrections: list) -> None:
         """Stamped path: ~/compensated_command and ~/feedforward for each correction."""
@@ -443,10 +482,10 @@ class WormGearSimNode(Node):
             if pub_cc:
                 cc.header.stamp.sec, cc.header.stamp.nanosec = divmod(c.stamp_ns, _NS)
                 cc.position[0] = c.theta1_ref + c.delta
-                self._pub_cc.publish(cc)
+                self._publish(self._pub_cc, cc)
             if pub_ff:
                 ff.data = c.delta
-                self._pub_ff.publish(ff)
+                self._publish(self._pub_ff, ff)
 
     def _publish_prediction(self, p: Prediction, stamp_ns: int) -> None:
         js = self._js
@@ -455,13 +494,13 @@ class WormGearSimNode(Node):
             js.position = p.position
             js.velocity = p.velocity
             js.effort = p.effort
-            self._pub_js.publish(js)
+            self._publish(self._pub_js, js)
         if self._pub_err.get_subscription_count():
             self._f_err.data = p.positioning_error
-            self._pub_err.publish(self._f_err)
+            self._publish(self._pub_err, self._f_err)
         if self._pub_worm.get_subscription_count():
             self._f_worm.data = p.worm_error
-            self._pub_worm.publish(self._f_worm)
+            self._publish(self._pub_worm, self._f_worm)
 
     # ---- diagnostics -------------------------------------------------------------------------
     def diagnostic_statuses(self) -> list[diag.DiagnosticStatus]:
@@ -473,8 +512,8 @@ class WormGearSimNode(Node):
 
     def publish_diagnostics(self) -> None:
         self._params.swap_prepared()
-        self._pub_diag.publish(diag.array(self._clock.now().to_msg(),
-                                          self.diagnostic_statuses()))
+        self._publish(self._pub_diag, diag.array(self._clock.now().to_msg(),
+                                                 self.diagnostic_statuses()))
 
     def destroy_node(self) -> None:
         self._params.shutdown()

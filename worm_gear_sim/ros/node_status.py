@@ -31,7 +31,7 @@ _INPUT_COUNTERS = ('samples_received', 'samples_accepted', 'rejected_samples',
                    'commands_restamped', 'commands_dropped', 'merged_samples', 'rest_samples',
                    'stream_relocks', 'stream_outliers', 'reconfigurations')
 _PARAMETER_COUNTERS = ('rejected_parameter_sets', 'accepted_parameter_sets',
-                       'parameter_build_errors')
+                       'parameter_build_errors', 'rejected_clock_messages')
 
 
 class CallbackLoad:
@@ -96,14 +96,15 @@ def node_statuses(name: str, rt: RealtimePredictor, counters: Mapping[str, Any],
         'compute_load': w['busy_ns'] * 1e-9 / wall,
         'max_callback_cpu_ms': w['max_busy_ns'] * 1e-6, 'callbacks': w['calls'],
         'ticks': c['ticks'], 'missed_ticks': c['missed_ticks'],
-        'held_predictions': c['held_predictions'],
+        'held_predictions': c['held_predictions'], 'publish_failures': c['publish_failures'],
         'newton_subdivisions': st['subdivision_events'], 'newton_substeps': st['substeps'],
         'max_newton_solves_per_step': st['max_solves_per_step'],
         **{k: rc[k] for k in _SIMULATION_COUNTERS},
         'last_error': rt.last_error,
     }
     node_rejects = sum(c[f'rejected_{r}'] for r in NODE_REJECT_REASONS)
-    rejected = rc['rejected_samples'] + node_rejects + c['rejected_parameter_sets']
+    rejected = rc['rejected_samples'] + node_rejects + c['rejected_parameter_sets'] + \
+        c['rejected_clock_messages']
     in_vals = {k: rc[k] for k in _INPUT_COUNTERS}
     in_vals.update({f'rejected_{r}': c[f'rejected_{r}'] for r in NODE_REJECT_REASONS})
     in_vals.update({k: c[k] for k in _PARAMETER_COUNTERS})
