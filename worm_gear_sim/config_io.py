@@ -26,11 +26,19 @@ from typing import Any
 
 import yaml
 
+from .guarded_io import (
+    MAX_CONFIG_BYTES,
+    MAX_CONFIG_DEPTH,
+    GuardedFileError,
+    guarded_yaml_load,
+    read_text_file,
+)
 from .params import NODE_NAME, Config, ConfigError, config_from_mapping, suggest, value_kind
 
 __all__ = ['load_config', 'default_config_path', 'PARAMS_FORMAT', 'typed_value', 'parse_set',
            'check_key', 'params_document', 'load_params_json', 'load_any_config',
-           'resolve_config', 'params_json_dump', 'params_yaml_text']
+           'resolve_config', 'params_json_dump', 'params_yaml_text', 'read_config_text',
+           'safe_yaml_load', 'MAX_CONFIG_BYTES', 'MAX_CONFIG_DEPTH']
 
 PARAMS_FORMAT = 'worm_gear_sim.params/1'
 _RESERVED_JSON_KEYS = ('format', 'derived')
@@ -64,15 +72,7 @@ def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | N
     if path is None:
         path = default_config_path()
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError('', f'config file not found: {p}')
-    try:
-        doc = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        where = f' at line {mark.line + 1}, column {mark.column + 1}' if mark else ''
-        problem = getattr(exc, 'problem', None) or str(exc).splitlines()[0]
-        raise ConfigError('', f'{p}: broken YAML{where}: {problem}') from None
+    doc = safe_yaml_load(read_config_text(p), str(p))
     if doc is None:
         doc = {}
     params = _ros_parameters(doc, str(p), node_name)
@@ -192,6 +192,29 @@ def _close(a: Any, b: Any) -> bool:
     return a == b
 
 
+def read_config_text(path: str | Path) -> str:
+    """The text of a parameter file (:func:`~worm_gear_sim.guarded_io.read_text_file`:
+    size limit, UTF-8, no NUL); a ConfigError naming the file."""
+    p = Path(path)
+    if not p.exists():
+        raise ConfigError('', f'config file not found: {p}')
+    if p.is_dir():
+        raise ConfigError('', f'config path is a directory: {p}')
+    try:
+        return read_text_file(p, MAX_CONFIG_BYTES, 'a parameter file')
+    except GuardedFileError as exc:
+        raise ConfigError('', str(exc)) from None
+
+
+def safe_yaml_load(text: str, where: str) -> Any:
+    """YAML the guarded way (:func:`~worm_gear_sim.guarded_io.guarded_yaml_load`: no
+    aliases, limited nesting); a ConfigError naming ``where``."""
+    try:
+        return guarded_yaml_load(text, where)
+    except GuardedFileError as exc:
+        raise ConfigError('', str(exc)) from None
+
+
 def load_params_json(path: str | Path, doc: Mapping[str, Any] | None = None) -> Config:
     """Config from a ``params`` JSON: sections are the parameters; the ``derived`` block is
     checked against the values derived again (a mismatch is an error: derived quantities are
@@ -199,10 +222,12 @@ def load_params_json(path: str | Path, doc: Mapping[str, Any] | None = None) -> 
     p = Path(path)
     if doc is None:
         try:
-            doc = json.loads(p.read_text())
+            doc = json.loads(read_config_text(p))
         except json.JSONDecodeError as exc:
             raise ConfigError('', f'{p}: broken JSON at line {exc.lineno}, column '
                               f'{exc.colno}: {exc.msg}') from None
+        except RecursionError:
+            raise ConfigError('', f'{p}: JSON nested too deep') from None
     if not isinstance(doc, Mapping):
         raise ConfigError('', f'{p}: expected a JSON object of parameter sections')
     fmt = doc.get('format', PARAMS_FORMAT)
@@ -233,17 +258,13 @@ def load_any_config(path: str | Path | None) -> Config:
     if path is None:
         return load_config()
     p = Path(path)
-    if not p.exists():
-        raise ConfigError('', f'config file not found: {p}')
-    if p.is_dir():
-        raise ConfigError('', f'config path is a directory: {p}')
+    text = read_config_text(p)
     if p.suffix.lower() == '.json':
         return load_params_json(p)
-    text = p.read_text()
     if text.lstrip().startswith('{'):
         try:
             doc = json.loads(text)
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, RecursionError):
             doc = None
         if isinstance(doc, Mapping) and ('derived' in doc or 'format' in doc):
             return load_params_json(p, doc)

@@ -25,11 +25,13 @@ from typing import Any
 
 from ..config_io import params_document, params_yaml_text
 from ..identification import (
+    MAX_FIT_SAMPLES,
     MIN_SAMPLES,
     STRATEGIES,
     FitOptions,
     IdentificationError,
     check_record,
+    decimation,
     identify,
     prediction_errors,
 )
@@ -177,6 +179,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
     held = _read(args.validate, args, cfg, '--validate')
     for r in records + held:
         say(args, f'read {r.describe()}')
+        every = decimation(len(r.t))
+        if every > 1:
+            say(args, f'  {len(r.t)} samples: the fit uses every {every}th '
+                f'(at most {MAX_FIT_SAMPLES} per record)')
     opt = FitOptions(strategy=args.strategy, n_starts=args.starts, seed=args.seed,
                      max_nfev=args.max_nfev, workers=args.workers, scheduler=args.scheduler,
                      serial=args.serial, progress=not (args.no_progress or args.quiet))

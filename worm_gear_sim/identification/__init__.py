@@ -18,10 +18,12 @@ One module per job:
 
 from ..records import Record
 from .data import (
+    MAX_FIT_SAMPLES,
     MIN_SAMPLES,
     OUTPUTS,
     IdentificationError,
     check_record,
+    decimation,
     measured_frequencies,
     predict,
     record_from_model,
@@ -36,5 +38,5 @@ __all__ = [
     'FitParameter', 'fit_parameters', 'apply_values', 'check_record', 'predict', 'Problem',
     'FitOptions', 'FitResult', 'identify', 'validate', 'prediction_errors',
     'measured_frequencies', 'frequency_start', 'STRATEGIES', 'record_from_model', 'jacobian',
-    'DIFF_STEP',
+    'DIFF_STEP', 'MAX_FIT_SAMPLES', 'decimation',
 ]

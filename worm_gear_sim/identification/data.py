@@ -25,12 +25,15 @@ from ..records import Record
 from ..simulation import Simulator
 from ..studies import dominant_frequency
 
-__all__ = ['OUTPUTS', 'MIN_SAMPLES', 'IdentificationError', 'record_name', 'check_record',
+__all__ = ['OUTPUTS', 'MIN_SAMPLES', 'MAX_FIT_SAMPLES', 'decimation', 'IdentificationError',
+           'record_name', 'check_record',
            'normalised', 'motion_times', 'rigid_motion', 'predict', 'record_from_model',
            'measured_frequencies']
 
 OUTPUTS: tuple[str, ...] = ('theta2', 'theta3', 'theta4')
 MIN_SAMPLES = 20
+#: Samples per record a fit uses at most (a longer record keeps every k-th sample).
+MAX_FIT_SAMPLES = 200_000
 
 
 class IdentificationError(ValueError):
@@ -80,12 +83,23 @@ def check_record(rec: Record, index: int | None = None) -> None:
             raise IdentificationError(f'{nm}: {key} is not finite at sample {bad[0]}')
 
 
+def decimation(n: int) -> int:
+    """The stride that brings ``n`` samples to at most MAX_FIT_SAMPLES (1: none)."""
+    return max(1, -(-n // MAX_FIT_SAMPLES))
+
+
 def normalised(rec: Record, index: int) -> Record:
-    """A checked copy with contiguous float arrays and a name (``record N`` if it had none)."""
+    """A checked copy with contiguous float arrays and a name (``record N`` if it had none).
+    A record of more than MAX_FIT_SAMPLES samples keeps every k-th (:func:`decimation`):
+    the residuals compare the model with the record at its sample instants, so fewer
+    instants bound the memory and the cost per evaluation without biasing the fit (the
+    noise level is estimated on the samples kept)."""
     check_record(rec, index)
-    return Record(name=record_name(rec, index), t=np.ascontiguousarray(rec.t, float),
-                  theta1=np.ascontiguousarray(rec.theta1, float),
-                  measured={k: np.ascontiguousarray(v, float) for k, v in rec.measured.items()},
+    k = decimation(len(rec.t))
+    return Record(name=record_name(rec, index), t=np.ascontiguousarray(rec.t[::k], float),
+                  theta1=np.ascontiguousarray(rec.theta1[::k], float),
+                  measured={o: np.ascontiguousarray(v[::k], float)
+                            for o, v in rec.measured.items()},
                   t0_ns=rec.t0_ns)
 
 
@@ -125,8 +139,10 @@ def predict(model: DriveModel | Config, rec: Record,
         traj = sim.run(prof, t[0] + (k[-1] + 0.5) * dt, record_every=stride)
         rows = k // stride
         th = traj.theta[rows]
-    else:
-        traj = sim.run(prof, float(t[-1]) + dt, record_every=1)
+    else:   # samples off the step grid: record 8 times per sample interval (memory
+        # bounded by the samples, not the steps), interpolate linearly between
+        every = max(1, int(np.min(np.diff(t)) / dt) // 8) if t.size > 1 else 1
+        traj = sim.run(prof, float(t[-1]) + every * dt, record_every=every)
         th = np.column_stack([np.interp(t, traj.t, traj.theta[:, j]) for j in range(3)])
     return {name: th[:, j] for j, name in enumerate(OUTPUTS)}
 

@@ -17,6 +17,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from ..guarded_io import MAX_CONFIG_BYTES, GuardedFileError, guarded_yaml_load, read_text_file
 from ..topics import (
     COMMAND_TOPIC,
     COMPENSATED_COMMAND_TOPIC,
@@ -51,10 +52,23 @@ def _open_reader(path: Path) -> Any:
     from rosbags.rosbag2 import Reader, ReaderError
     if not path.exists():
         raise RecordError(f'{path}: bag not found')
+    meta = path / 'metadata.yaml'
+    if path.is_dir() and meta.is_file():
+        # rosbags' own parser has no limits and fails on an empty file with a TypeError:
+        # read it with the package's guarded loader first
+        try:
+            doc = guarded_yaml_load(read_text_file(meta, MAX_CONFIG_BYTES, 'a metadata.yaml'),
+                                    str(meta))
+        except GuardedFileError as exc:
+            raise RecordError(f'{path}: not a readable rosbag2 bag: {exc}') from None
+        if not isinstance(doc, dict) or not isinstance(
+                doc.get('rosbag2_bagfile_information'), dict):
+            raise RecordError(f'{path}: not a readable rosbag2 bag: {meta} is empty or has '
+                              'no rosbag2_bagfile_information')
     try:
         reader = Reader(path)
         reader.open()
-    except (ReaderError, OSError, ValueError, KeyError) as exc:
+    except (ReaderError, OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise RecordError(f'{path}: not a readable rosbag2 bag (sqlite3 or mcap): '
                           f'{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}'
                           ) from None

@@ -12,6 +12,7 @@ import csv
 import difflib
 import math
 import re
+from array import array
 from collections.abc import Mapping, Sequence
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
@@ -22,7 +23,7 @@ import numpy as np
 from .record import ANGLE_NAMES, MEASURED_NAMES, Record, RecordError
 
 __all__ = ['read_csv', 'write_csv_header', 'write_csv_columns', 'ANGLE_UNITS', 'TIME_UNITS',
-           'TIME_NAMES']
+           'TIME_NAMES', 'MAX_CSV_LINE_CHARS', 'MAX_CSV_ROWS']
 
 #: angle units accepted in a CSV header, factor to rad
 ANGLE_UNITS: dict[str, float] = {'rad': 1.0, 'mrad': 1e-3, 'urad': 1e-6, 'µrad': 1e-6,
@@ -35,6 +36,12 @@ TIME_NAMES = ('t', 'time', '__time')            # __time: PlotJuggler's CSV expo
 #: a unitless time column starting above this many "seconds" (year 5138) is refused:
 #: it is a stamp in ms/us/ns whose unit the header must name
 PLAUSIBLE_SECONDS = 1e11
+#: Limits of a CSV record: a longer line (a header of many thousand columns, a binary
+#: file) or more rows is a RecordError naming the limit.  Memory while reading: 8 bytes per
+#: value read (t and the columns used) plus one line: a 10-million-row record of 5
+#: columns takes 400 MB, the size of its file.
+MAX_CSV_LINE_CHARS = 65_536
+MAX_CSV_ROWS = 50_000_000
 
 
 def write_csv_header(fh: Any, names: Sequence[str], comment: str = '') -> None:
@@ -92,21 +99,46 @@ def read_csv(path: str | Path, *, columns: Mapping[str, str] | None = None,
     if p.is_dir():
         raise RecordError(f'{where}: is a directory (a rosbag2 bag? use --bag)')
     try:
-        text = p.read_text(encoding='utf-8-sig')
+        with open(p, encoding='utf-8-sig', newline='') as fh:
+            return _read_csv_stream(fh, p, columns or {}, name, min_samples,
+                                    require_measured)
     except UnicodeDecodeError:
         raise RecordError(f'{where}: not a text CSV file') from None
-    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines())
-             if ln.strip() and not ln.lstrip().startswith('#')]
-    if not lines:
+    except OSError as exc:
+        raise RecordError(f'{where}: cannot read ({exc.strerror or exc})') from None
+
+
+def _read_csv_stream(fh: Any, p: Path, columns: Mapping[str, str], name: str | None,
+                     min_samples: int, require_measured: bool) -> Record:
+    """read_csv on an open file, one line at a time: the memory is the columns' arrays
+    (8 bytes per value) plus one line, whatever the file's size."""
+    where = str(p)
+    line_no = 0
+
+    def lines() -> Any:
+        nonlocal line_no
+        for ln in fh:
+            line_no += 1
+            if len(ln) > MAX_CSV_LINE_CHARS:
+                raise RecordError(f'{where}: line {line_no}: {len(ln)} characters; a CSV line '
+                                  f'is at most {MAX_CSV_LINE_CHARS}')
+            if ln.strip() and not ln.lstrip().startswith('#'):
+                yield ln
+
+    rows = lines()
+    head = next(rows, None)
+    if head is None:
         raise RecordError(f'{where}: empty (no header, no data)')
-    head_no, head = lines[0]
+    if '\x00' in head:
+        raise RecordError(f'{where}: not a text CSV file')
+    head_no = line_no
     delim = next((d for d in (',', ';', '\t') if d in head), ',')
-    header = next(csv.reader([head], delimiter=delim))
+    header = _csv_row(head, delim, where, head_no)
     if all(_is_number(h) for h in header):
         raise RecordError(f'{where}: line {head_no}: no header line; the first line must '
                           "name the columns, e.g. 't [s],theta1 [rad]'")
     fields = [_split_header(h) for h in header]
-    roles = _assign_roles(fields, header, columns or {}, where)
+    roles = _assign_roles(fields, header, columns, where)
     units, scale = {}, {}
     for role, col in roles.items():
         unit = fields[col][1]
@@ -123,12 +155,17 @@ def read_csv(path: str | Path, *, columns: Mapping[str, str] | None = None,
             scale[role] = ANGLE_UNITS[unit]
         units[role] = unit
     n_fields = len(header)
-    times: list[Decimal] = []
-    values: dict[str, list[float]] = {r: [] for r in roles if r != 't'}
     t_col = roles['t']
+    sc = TIME_UNITS[units['t']]
+    t_rel = array('d')                         # seconds after the first sample
+    values: dict[str, array] = {r: array('d') for r in roles if r != 't'}
+    value_cols = [(roles[r], scale[r], vals, r) for r, vals in values.items()]
     prev: Decimal | None = None
-    for line_no, ln in lines[1:]:
-        row = next(csv.reader([ln], delimiter=delim))
+    first: Decimal | None = None
+    first_raw: Decimal | None = None
+    n = 0
+    for ln in rows:
+        row = _csv_row(ln, delim, where, line_no)
         if len(row) == n_fields + 1 and not row[-1].strip():
             row = row[:-1]                        # trailing delimiter
         if len(row) != n_fields:
@@ -147,10 +184,15 @@ def read_csv(path: str | Path, *, columns: Mapping[str, str] | None = None,
                 f'goes backwards (after {prev})'
             raise RecordError(f'{where}: line {line_no}, column {header[t_col].strip()!r}: '
                               f'time {cell} {what}; times must increase strictly')
+        if first is None:
+            first, first_raw = tv * sc, tv          # seconds, exact
         prev = tv
-        times.append(tv)
-        for role, vals in values.items():
-            col = roles[role]
+        n += 1
+        if n > MAX_CSV_ROWS:
+            raise RecordError(f'{where}: more than {MAX_CSV_ROWS} data rows; a record is at '
+                              f'most {MAX_CSV_ROWS} rows: decimate it first')
+        t_rel.append(float(tv * sc - first))
+        for col, k, vals, _role in value_cols:
             cell = row[col].strip()
             try:
                 v = float(cell)
@@ -161,19 +203,19 @@ def read_csv(path: str | Path, *, columns: Mapping[str, str] | None = None,
             if not math.isfinite(v):
                 raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
                                   f'{cell} is not a finite angle')
-            vals.append(v * scale[role])
-    if len(times) < min_samples:
-        raise RecordError(f'{where}: {len(times)} data row(s); a record needs at least '
+            vals.append(v * k)
+    if n < min_samples:
+        raise RecordError(f'{where}: {n} data row(s); a record needs at least '
                           f'{min_samples} samples')
-    sc = TIME_UNITS[units['t']]
-    first = times[0] * sc                                   # seconds, exact
+    assert first is not None and first_raw is not None
     if not fields[t_col][1] and abs(first) > PLAUSIBLE_SECONDS:
-        raise RecordError(f'{where}: column {header[t_col].strip()!r}: first time {times[0]} '
+        raise RecordError(f'{where}: column {header[t_col].strip()!r}: first time {first_raw} '
                           'is not a plausible time in seconds; name its unit in the header, '
                           "e.g. 't [ns]' or 't [ms]'")
-    t = np.array([float(tv * sc - first) for tv in times])
+    t = np.frombuffer(t_rel, dtype=float)
     t0_ns = int((first * 10 ** 9).to_integral_value())
-    measured = {r: np.asarray(values[r]) for r in MEASURED_NAMES if r in values}
+    cols = {r: np.frombuffer(v, dtype=float) for r, v in values.items()}
+    measured = {r: cols[r] for r in MEASURED_NAMES if r in cols}
     if require_measured and not measured:
         raise RecordError(f'{where}: no measured column (theta2, theta3 or theta4) in the '
                           f'header {", ".join(h.strip() for h in header)}')
@@ -181,8 +223,15 @@ def read_csv(path: str | Path, *, columns: Mapping[str, str] | None = None,
     src = {'kind': 'csv', 'path': str(p), 'units': units,
            'columns': {r: header[c].strip() for r, c in roles.items()},
            'ignored_columns': [header[i].strip() for i in range(n_fields) if i not in used]}
-    return Record(name=name or p.stem, t=t, theta1=np.asarray(values['theta1']),
+    return Record(name=name or p.stem, t=t, theta1=cols['theta1'],
                   measured=measured, t0_ns=t0_ns, source=src)
+
+
+def _csv_row(line: str, delim: str, where: str, line_no: int) -> list[str]:
+    try:
+        return next(csv.reader([line], delimiter=delim))
+    except (csv.Error, StopIteration) as exc:
+        raise RecordError(f'{where}: line {line_no}: not a CSV row ({exc})') from None
 
 
 def _is_number(text: str) -> bool:
