@@ -26,11 +26,7 @@ ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'rosgraph_msgs', 'builtin_interfaces'
 #: The wing gets the model's results through the core's modules, never from these.
 PHYSICS = {f'{ROOT}.model', f'{ROOT}.integrator', 'numba', 'scipy'}
 #: Imports deferred into a function that close a loop on purpose; everything else is acyclic.
-DEFERRED_BACK_EDGES = {
-    # Names that moved out of params (load_config, default_config_path) still import from
-    # there for one release, with a DeprecationWarning (params.__getattr__).
-    (f'{ROOT}.params', f'{ROOT}.config_io'),
-}
+DEFERRED_BACK_EDGES: set[tuple[str, str]] = set()
 
 
 @dataclass(frozen=True)

@@ -724,3 +724,31 @@ def test_wall_clock_command_timing(ros_harness):
     assert rms(published['stream']) < 0.05 * rms(published['reception'])
     assert rms(published['stream']) < 0.01 * rms(np.array(old))
     assert rms(published['tick']) < 0.9 * rms(np.array(old))
+
+
+def test_another_node_with_the_same_name_is_warned_about(ros_harness):
+    """Two nodes named /worm_gear_sim on one domain ran silently mixed: the node looks at
+    the graph after its start and warns (log, /diagnostics WARN, same_name_nodes)."""
+    from worm_gear_sim.ros.node import WormGearSimNode
+    h = ros_harness()
+    lines: list[str] = []
+    logger = h.node.get_logger()
+    warn = logger.warning
+    logger.warning = lambda m, *a, **k: (lines.append(m), warn(m, *a, **k))  # type: ignore
+    h.node._check_same_name()
+    assert h.node.counters['same_name_nodes'] == 0 and not lines
+    twin = WormGearSimNode(context=h.ctx)
+    try:
+        h.executor.add_node(twin)
+        assert h.spin_until(lambda: sum(1 for n in h.node.get_node_names_and_namespaces()
+                                        if n == ('worm_gear_sim', '/')) == 2, 10.0)
+        h.node._check_same_name()
+        assert h.node.counters['same_name_nodes'] == 1
+        assert any('1 other node(s) named /worm_gear_sim' in ln for ln in lines), lines
+        sim = h.node.diagnostic_statuses()[0]
+        vals = {kv.key: kv.value for kv in sim.values}
+        assert vals['same_name_nodes'] == '1'
+        assert 'other node(s) with this name' in sim.message
+    finally:
+        h.executor.remove_node(twin)
+        twin.destroy_node()

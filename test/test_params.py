@@ -66,17 +66,16 @@ def test_one_rigid_ratio_in_every_holder():
         assert rt.model is model and rt.sim is not None and rt.sim.model is model
 
 
-def test_moved_names_still_import_from_params_with_a_warning():
+def test_moved_names_say_where_they_went():
     """load_config, default_config_path (config_io) and derive, Derived (derived) moved
-    out of params; the old imports work for one release and say where they went."""
-    import worm_gear_sim.config_io as config_io
-    import worm_gear_sim.derived as derived
+    out of params; their one-release aliases are gone (with the params -> config_io import
+    that closed a loop), and the error names the new home."""
     import worm_gear_sim.params as params
-    for name, home in (('load_config', config_io), ('default_config_path', config_io),
-                       ('derive', derived), ('Derived', derived)):
-        with pytest.warns(DeprecationWarning, match=f'moved to {home.__name__}.{name}'):
-            assert getattr(params, name) is getattr(home, name)
-    with pytest.raises(AttributeError):
+    for name, home in (('load_config', 'config_io'), ('default_config_path', 'config_io'),
+                       ('derive', 'derived'), ('Derived', 'derived')):
+        with pytest.raises(AttributeError, match=f'moved to worm_gear_sim.{home}.{name}'):
+            getattr(params, name)
+    with pytest.raises(AttributeError, match='no attribute'):
         params.no_such_name  # noqa: B018
 
 

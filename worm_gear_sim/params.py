@@ -16,7 +16,6 @@ The schema's names (sections, :data:`ANGLE_LIMIT`, :data:`NODE_NAME`, :data:`SEC
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -105,20 +104,16 @@ def default_config() -> Config:
     return Config()
 
 
-#: Names that moved out of this module: where they live now (importing them from here
-#: still works, with a DeprecationWarning, for one release).
+#: Names that moved out of this module, and where they live now.  Their aliases here (one
+#: release with a DeprecationWarning) are gone, and with them the import of config_io from
+#: params that closed a loop; the error still says where to import them from.
 _MOVED = {'load_config': 'config_io', 'default_config_path': 'config_io',
           'derive': 'derived', 'Derived': 'derived'}
 
 
 def __getattr__(name: str) -> Any:
     home = _MOVED.get(name)
-    if home is None:
-        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
-    warnings.warn(f'worm_gear_sim.params.{name} moved to worm_gear_sim.{home}.{name}',
-                  DeprecationWarning, stacklevel=2)
-    if home == 'config_io':
-        from . import config_io
-        return getattr(config_io, name)
-    from . import derived
-    return getattr(derived, name)
+    if home is not None:
+        raise AttributeError(f'worm_gear_sim.params.{name} moved to '
+                             f'worm_gear_sim.{home}.{name}: import it from there')
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

@@ -92,6 +92,8 @@ WATCH_PERIOD = 0.02    # s: the slow timer that notices a paused stamped stream
 # s: lateness allowed to a stamped sample before the stream is declared stale (held output,
 # rest samples): scheduling stalls of a loaded sender shorter than this change nothing
 STALE_MARGIN = 0.1
+NAME_CHECK_PERIOD = 1.0  # s: look for other nodes of this name (discovery takes a moment)
+NAME_CHECKS = 5          # times after the start
 _NS = 1_000_000_000
 
 
@@ -160,7 +162,7 @@ class WormGearSimNode(Node):
             **{f'rejected_{r}': 0 for r in NODE_REJECT_REASONS},
             ticks=0, missed_ticks=0, held_predictions=0, rejected_parameter_sets=0,
             accepted_parameter_sets=0, parameter_build_errors=0, rejected_clock_messages=0,
-            publish_failures=0)
+            publish_failures=0, same_name_nodes=0)
         self.last_error = ''
         self._throttle = LogThrottle(LOG_THROTTLE_S)
         self.load = CallbackLoad(self.rt)
@@ -223,6 +225,10 @@ class WormGearSimNode(Node):
                                         self._guard)
         self._diag_timer = self.create_timer(cfg.node.diagnostic_period,
                                              self._guard(self.publish_diagnostics))
+        # another node of this name on the domain: discovery needs a moment, look twice
+        self._name_checks = 0
+        self._name_timer = self.create_timer(NAME_CHECK_PERIOD,
+                                             self._guard(self._check_same_name))
         self.get_logger().info(
             f'ready: dt = {self.sim.dt:g} s, {cfg.node.publish_rate_hz:g} Hz, ratio '
             f'1:{self.rt.model.derived.ratio:.6g}; waiting for '
@@ -296,6 +302,22 @@ class WormGearSimNode(Node):
             self._warn('publish_failed', f'publish on {pub.topic_name} failed '
                        f'({type(exc).__name__}: {exc}); '
                        f'{self.counters["publish_failures"]} so far')
+
+    def _check_same_name(self) -> None:
+        """Warn (and report on /diagnostics) when other nodes on the domain have this
+        node's fully qualified name: their topics, parameters and services would mix with
+        this node's, silently.  Runs NAME_CHECKS times after the start."""
+        me = (self.get_name(), self.get_namespace())
+        n = sum(1 for nn in self.get_node_names_and_namespaces() if nn == me) - 1
+        if n > self.counters['same_name_nodes']:
+            self.counters['same_name_nodes'] = n
+            self.get_logger().warning(
+                f'{n} other node(s) named {self.get_fully_qualified_name()} on this domain: '
+                'their topics, parameters and services mix with this one\'s; give each '
+                'drive its own name or namespace (ROS_DOMAIN_ID apart for separate setups)')
+        self._name_checks += 1
+        if self._name_checks >= NAME_CHECKS:
+            self._name_timer.cancel()
 
     def _on_bad_clock(self, problem: str) -> None:
         """A /clock message that is no time (rclpy would raise in the executor)."""

@@ -88,6 +88,9 @@ def node_statuses(name: str, rt: RealtimePredictor, counters: Mapping[str, Any],
                                  'value; publishing the held prediction')
     else:
         level, msg = diag.OK, 'running'
+    if c['same_name_nodes'] and level != diag.ERROR:
+        level, msg = diag.WARN, (f'{c["same_name_nodes"]} other node(s) with this name on '
+                                 'the domain: their topics and parameters mix with ours')
     sim_vals = {
         'input': mode or 'none', 'time_base': 'sim' if rt.sim_time else 'wall',
         'simulated_time_s': sim.t, 'stale': rt.stale,
@@ -97,6 +100,7 @@ def node_statuses(name: str, rt: RealtimePredictor, counters: Mapping[str, Any],
         'max_callback_cpu_ms': w['max_busy_ns'] * 1e-6, 'callbacks': w['calls'],
         'ticks': c['ticks'], 'missed_ticks': c['missed_ticks'],
         'held_predictions': c['held_predictions'], 'publish_failures': c['publish_failures'],
+        'same_name_nodes': c['same_name_nodes'],
         'newton_subdivisions': st['subdivision_events'], 'newton_substeps': st['substeps'],
         'max_newton_solves_per_step': st['max_solves_per_step'],
         **{k: rc[k] for k in _SIMULATION_COUNTERS},
