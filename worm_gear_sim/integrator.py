@@ -43,6 +43,7 @@ from .model import (
     P_FRIC_MODEL,
     P_FRIC_SET_VALUED,
     P_GAMMA,
+    P_GAP_HALF,
     P_J4,
     P_JG,
     P_JW_STEP,
@@ -69,7 +70,8 @@ from .model import (
 # stats vector layout (int64, cumulative)
 S_STEPS, S_SOLVES, S_EVALS, S_SUBDIV_EVENTS, S_SUBSTEPS, S_MAX_SOLVES, S_FAILED = range(7)
 S_VERIFIED = 7
-N_STATS = 8
+S_CONTACT_EVENTS = 8          # steps split at a contact event of the mesh clearance
+N_STATS = 9
 
 # controller state (float64, carried between calls): contraction estimate, steps since verify
 C_RHO, C_SINCE = 0, 1
@@ -182,6 +184,22 @@ def _residual_jacobian(p, C, c_a, c_v, x0, x1, x2, w0, w1, w2, a_0, a_1, a_2, th
 
 
 @njit(cache=True, error_model='numpy')
+def _contact_region(gap, q):
+    """+1 on the drive flank (q > gap), -1 on the coast flank, 0 inside the play."""
+    if q > gap:
+        return 1
+    if q < -gap:
+        return -1
+    return 0
+
+
+@njit(cache=True, error_model='numpy')
+def _in_play(p, u):
+    """Inside the mesh clearance (no tooth force, no friction): never without play."""
+    return abs(p[P_LW] * u[0] - p[P_RG] * u[1]) < p[P_GAP_HALF]
+
+
+@njit(cache=True, error_model='numpy')
 def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     """One Newmark step from (u0, v0, a0) (3-tuples).  Returns
     (ok, u, v, a, rho, since, n_solves, n_evals, verified)."""
@@ -190,6 +208,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     veps = p[P_VEPS]
     lw, rg = p[P_LW], p[P_RG]
     friction_on = p[P_FRIC_MODEL] != 0.0
+    gap = p[P_GAP_HALF]
     c_a, c_v, gdt, (us0, us1, us2), (vs0, vs1, vs2), (x0, x1, x2) = _newmark_start(
         p, u0, v0, a0, dt)
     vs_start = k_vs2 * v0[0] + k_vs3 * v0[1]
@@ -254,7 +273,11 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
             q_end = lw * x0 - rg * x1
             clear_of_stick = (vs_start * vs_end > 0.0 and abs(vs_start) > SMOOTH_ZONE * veps
                               and abs(vs_end) > SMOOTH_ZONE * veps)
-            if ((clear_of_stick or not friction_on) and q_start * q_end > 0.0
+            if gap > 0.0:       # with play: no contact event (loss, impact) in the step
+                same_contact = _contact_region(gap, q_start) == _contact_region(gap, q_end)
+            else:
+                same_contact = q_start * q_end > 0.0
+            if ((clear_of_stick or not friction_on) and same_contact
                     and _phase_cycle(p, x0, x1) == cycle_start):
                 return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), rho, since + 1.0,
                         n_solves, n_evals, False)
@@ -388,8 +411,8 @@ def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0):
                                                   lam0)
         ns += n1
         ne += e1
-        if ok and mode0 * (k2 * v[0] + k3 * v[1]) >= 0.0:
-            return True, u, v, a, ns, ne, mode0, mu
+        if ok and (mode0 * (k2 * v[0] + k3 * v[1]) >= 0.0 or _in_play(p, u)):
+            return True, u, v, a, ns, ne, mode0, mu     # (in the play: no friction to slip)
     ok_st, u_st, v_st, a_st, lam, n1, e1, s0, s1 = _sv_trial(p, C, u0, v0, a0, th1, th1dot,
                                                              dt, 0, lam0)
     ns += n1
@@ -410,7 +433,7 @@ def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0):
                                                   lam0)
         ns += n1
         ne += e1
-        if ok and s_try * (k2 * v[0] + k3 * v[1]) >= 0.0:
+        if ok and (s_try * (k2 * v[0] + k3 * v[1]) >= 0.0 or _in_play(p, u)):
             return True, u, v, a, ns, ne, s_try, mu
     if ok_st:
         # No mode is consistent over the whole step: the trapezoidal rule carries the old
@@ -460,6 +483,56 @@ def record_aux(p, u, v, theta1, mu, out):
 
 
 @njit(cache=True, error_model='numpy')
+def _split_at_contact(p, Ct, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, since, mode, mu,
+                      gap, qa, qb):
+    """Redo a step whose approach q crosses an edge of the clearance (+-gap) as two parts
+    split where it crosses: the crossing fraction by secant iterations on q (q at the end of
+    a part of length f dt), then the rest of the step.  Returns (ok, u, v, a, rho, since,
+    mode, mu, n_solves, n_evals); ok False leaves the caller's whole step in force."""
+    lw, rg = p[P_LW], p[P_RG]
+    ra = _contact_region(gap, qa)
+    if ra != 0:
+        edge = gap if ra > 0 else -gap          # leaving a flank
+    else:
+        edge = gap if qb > 0.0 else -gap        # reaching one
+    ns = 0
+    ne = 0
+    f_lo, g_lo = 0.0, qa - edge
+    f_hi, g_hi = 1.0, qb - edge
+    f = f_lo - g_lo * (f_hi - f_lo) / (g_hi - g_lo)
+    u1, v1, a1 = u0, v0, a0
+    rho1, since1, mode1, mu1 = rho, since, mode, mu
+    found = False
+    for _ in range(6):
+        f = min(max(f, 1e-6), 1.0 - 1e-6)
+        ok, u1, v1, a1, rho1, since1, n1, e1, _, mode1, mu1 = _step(
+            p, Ct, u0, v0, a0, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a), f * dt,
+            rho, since, mode, mu)
+        ns += n1
+        ne += e1
+        if not ok:
+            return False, u0, v0, a0, rho, since, mode, mu, ns, ne
+        g = lw * u1[0] - rg * u1[1] - edge
+        found = True
+        if abs(g) <= 1e-6 * gap:
+            break
+        if (g < 0.0) == (g_lo < 0.0):
+            f_lo, g_lo = f, g
+        else:
+            f_hi, g_hi = f, g
+        f = f_lo - g_lo * (f_hi - f_lo) / (g_hi - g_lo)
+    if not found:
+        return False, u0, v0, a0, rho, since, mode, mu, ns, ne
+    ok, u2, v2, a2, rho2, since2, n2, e2, _, mode2, mu2 = _step(
+        p, Ct, u1, v1, a1, th_b, td_b, (1.0 - f) * dt, rho1, since1, mode1, mu1)
+    ns += n2
+    ne += e2
+    if not ok:
+        return False, u0, v0, a0, rho, since, mode, mu, ns, ne
+    return True, u2, v2, a2, rho2, since2, mode2, mu2, ns, ne
+
+
+@njit(cache=True, error_model='numpy')
 def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, rec_a,
             rec_aux, stats, ctl):
     """Advance len(theta1)-1 steps of size dt; theta1[k] is the command at the start of
@@ -470,6 +543,8 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
     n_steps = theta1.shape[0] - 1
     Ct = (C[0, 0], C[0, 1], C[0, 2], C[1, 0], C[1, 1], C[1, 2], C[2, 0], C[2, 1], C[2, 2])
     max_level = int(p[P_MAXSUB])
+    gap = p[P_GAP_HALF]
+    lw, rg = p[P_LW], p[P_RG]
     uu = (u[0], u[1], u[2])
     vv = (v[0], v[1], v[2])
     aa = (a[0], a[1], a[2])
@@ -521,6 +596,22 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
             stats[S_FAILED] += 1
             status = STATUS_FAILED
             break
+        if gap > 0.0 and level == 1:
+            qa = lw * uu[0] - rg * uu[1]
+            qb = lw * un[0] - rg * un[1]
+            if _contact_region(gap, qa) != _contact_region(gap, qb):
+                # a contact event (loss, impact, re-engagement) inside the step: split the
+                # step where q crosses the flank's edge, so that each part is smooth (the
+                # trapezoidal rule then neither gains nor loses the contact's energy)
+                ok_e, ue, ve, ae, rho_e, since_e, mode_e, mu_e, ns, ne = _split_at_contact(
+                    p, Ct, uu, vv, aa, th_a, th_b, td_a, td_b, dt, rho, since, mode, mu,
+                    gap, qa, qb)
+                n_solves += ns
+                n_evals += ne
+                if ok_e:
+                    un, vn, an, rho, since, mode_n, mu_n = ue, ve, ae, rho_e, since_e, \
+                        mode_e, mu_e
+                    stats[S_CONTACT_EVENTS] += 1
         uu, vv, aa = un, vn, an
         mode, mu = mode_n, mu_n
         done += 1

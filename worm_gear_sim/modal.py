@@ -13,9 +13,12 @@ import scipy.linalg as sla
 from .model import (
     DriveModel,
     forces,
+    has_play,
     linear_stiffness,
     mass_matrix,
+    play_rest_shift,
     rigid_motion_vector,
+    without_play,
 )
 from .schema import ANGLE_LIMIT, Parameters
 
@@ -30,6 +33,8 @@ def static_equilibrium(model: DriveModel | np.ndarray, theta1: float,
     """Solve Q(u, 0, theta1) = 0 (at rest, so no sliding friction) by Newton's method;
     ``model``: a :class:`DriveModel` (or its packed vector)."""
     p = model.p if isinstance(model, DriveModel) else model
+    if has_play(p) and (u_guess is None or not play_rest_shift(p)[1]):
+        return _rest_with_play(p, theta1, tol, max_iter)    # unloaded: not a Newton problem
     u = rigid_motion_vector(p) * theta1 if u_guess is None else np.array(u_guess, float)
     v = np.zeros(3)
     for _ in range(max_iter):
@@ -39,6 +44,17 @@ def static_equilibrium(model: DriveModel | np.ndarray, theta1: float,
         if np.all(np.abs(du) <= tol * (1.0 + np.abs(u))):
             break
     return u
+
+
+def _rest_with_play(p: np.ndarray, theta1: float, tol: float, max_iter: int) -> np.ndarray:
+    """Rest with a mesh clearance: under a load torque on the loaded flank, without one on
+    ``mesh.initial_flank`` (:func:`~worm_gear_sim.model.play_rest_shift`)."""
+    shift, loaded = play_rest_shift(p)
+    if not loaded:
+        return rigid_motion_vector(p) * theta1 - shift
+    # the drive without play at rest, shifted onto the loaded flank: the same region
+    u = static_equilibrium(without_play(p), theta1, None, tol, max_iter) - shift
+    return static_equilibrium(p, theta1, u, tol, max_iter)
 
 
 #: Damping ratios below this are the round-off of the state-space eigenvalues (an undamped

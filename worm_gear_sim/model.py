@@ -69,7 +69,8 @@ P_MESH_COSINE = 46                                   # contact mapping: 1 cosine
 P_FRIC_SET_VALUED, P_MU_STATIC = 47, 48              # set-valued law; mu(0), the cone's edge
 P_VCUSP = 49                                         # Stribeck cusp rounding speed
 P_JW_STEP = 50                                       # worm inertia in the Newmark step
-N_PARAMS = 51
+P_GAP_HALF, P_INIT_FLANK = 51, 52     # half the play along q, r_g b / 2 [m]; +1/-1/0 flank
+N_PARAMS = 53
 
 # layout of the flat output of mesh_eval: Q (3), dQ/du (3x3 row-major), dQ/dv (3x3), aux
 O_Q, O_DQDU, O_DQDV, O_AUX = 0, 3, 12, 21
@@ -162,6 +163,8 @@ def pack_parameters(cfg: Parameters, derived: Derived | None = None) -> np.ndarr
     p[P_INV_VEPS] = 1.0 / fr.regularization_velocity
     p[P_INV_SQRT_VS] = 1.0 / math.sqrt(fr.stribeck_velocity)
     p[P_LIN_COMPLIANCE] = 1.0 / p[P_CWKW_LIN] + 1.0 / p[P_CGKG_LIN]
+    p[P_GAP_HALF] = 0.5 * g.gear_pitch_radius * mesh.backlash
+    p[P_INIT_FLANK] = {'drive': 1.0, 'coast': -1.0, 'center': 0.0}[mesh.initial_flank]
     p[P_JW_STEP] = p[P_JW]
     if integ.worm_frequency_matching:
         p[P_JW_STEP] = p[P_JW] * worm_inertia_factor(p, integ.time_step)
@@ -349,6 +352,46 @@ def friction_coefficient(p, v_s, q):
     return sq * mu * t, sq * d
 
 
+# ---- the mesh clearance: penetration of the flank in contact --------------------------------
+@njit(cache=True, error_model='numpy')
+def penetration(p, q):
+    """(q_e, dq_e/dq): the approach q = l_w theta2 - r_g theta3 less half the play h =
+    r_g b / 2 on the flank in contact (q - h for q > h, q + h for q < -h), 0 inside the
+    play (no tooth force, no friction).  Without play q_e = q exactly."""
+    h = p[P_GAP_HALF]
+    if h > 0.0:
+        if q > h:
+            return q - h, 1.0
+        if q < -h:
+            return q + h, 1.0
+        return 0.0, 0.0
+    return q, 1.0
+
+
+def has_play(p: np.ndarray) -> bool:
+    """The mesh has a clearance (``mesh.backlash`` > 0)."""
+    return bool(p[P_GAP_HALF] > 0.0)
+
+
+def without_play(p: np.ndarray) -> np.ndarray:
+    """A copy of the packed vector without the clearance."""
+    q = p.copy()
+    q[P_GAP_HALF] = 0.0
+    return q
+
+
+def play_rest_shift(p: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Where a drive with play rests: (shift of (theta2, theta3, theta4) to subtract from
+    the rest without play, loaded).  A load torque T_load > 0 turns the antenna back, so the
+    worm holds it on the drive flank (q > h); T_load < 0 on the coast flank; without a load
+    the flank of ``mesh.initial_flank`` (q = +h, -h, or 0 for center) with no tooth
+    force."""
+    load = float(p[P_TLOAD])
+    side = 1.0 if load > 0.0 else -1.0 if load < 0.0 else float(p[P_INIT_FLANK])
+    d = side * p[P_GAP_HALF] / p[P_RG]
+    return np.array([0.0, d, d]), load != 0.0
+
+
 # ---- Eqs. 7 and 10: compliance of the mesh along the contact normal -----------------------
 @njit(cache=True, error_model='numpy')
 def mesh_compliance(p, th2, th3, mu):
@@ -387,8 +430,9 @@ def mesh_forces_mu(p, th2, th3, th4, w4, theta1, mu):
     B = cphi * cl - mu * sl                                          # F_Y / W_n, Eq. 2
     kgws, dK_dphase, dK_dmu, cwkw, cgkg = mesh_compliance(p, th2, th3, mu)
     ikg = 1.0 / kgws
-    Wn = q * cl * ikg                                                # Eq. 9
-    dWn_dq = cl * ikg
+    qe, dqe = penetration(p, q)                                      # the play
+    Wn = qe * cl * ikg                                               # Eq. 9
+    dWn_dq = cl * ikg * dqe
     dWn_dK = -Wn * ikg
     dWn_dth2 = dWn_dq * lw + dWn_dK * dK_dphase * 0.5
     dWn_dth3 = -dWn_dq * rg + dWn_dK * dK_dphase * 0.5 * p[P_ZG]
@@ -471,7 +515,7 @@ def mesh_stiffness_y(p, theta2, theta3):
 def mechanical_energy(p, u, v, theta1):
     """Kinetic + shaft torsion + mesh energy 0.5 k_Y q^2 [J] (exact invariant of the
     frictionless linear model)."""
-    q = p[P_LW] * u[0] - p[P_RG] * u[1]
+    q, _ = penetration(p, p[P_LW] * u[0] - p[P_RG] * u[1])
     kin = 0.5 * (p[P_JW] * v[0] ** 2 + p[P_JG] * v[1] ** 2 + p[P_J4] * v[2] ** 2)
     shaft = 0.5 * p[P_KW] * (u[0] - theta1) ** 2 + 0.5 * p[P_KG] * (u[1] - u[2]) ** 2
     return kin + shaft + 0.5 * mesh_stiffness_y(p, u[0], u[1]) * q * q

@@ -180,6 +180,16 @@ class Mesh:
                                                 '', 0.0, 1e6, lo_open=True)
     gear_tooth_stiffness_multiplier: float = _f(1.0, 'Multiplier on c_g k_g (Fig. 17 study)',
                                                 '', 0.0, 1e6, lo_open=True)
+    backlash: float = _f(0.0, 'Total angular play b of the worm gear with the worm held: no '
+                         'tooth force and no friction while |q| < r_g b / 2 (q = l_w theta2 - '
+                         'r_g theta3); beyond it the flank in contact carries the mesh law of '
+                         'the penetration q -/+ r_g b / 2. At most half a tooth pitch '
+                         '(pi / z_g)', 'rad', 0.0, 0.1)
+    initial_flank: str = _f('drive', 'Where a drive with play starts at rest without a load '
+                            'torque: drive: on the flank the worm drives forward (q = +r_g b/2),'
+                            ' coast: on the other one (q = -r_g b/2), center: in the middle of '
+                            'the play. Under a load it rests on the loaded flank',
+                            choices=('drive', 'coast', 'center'))
 
 
 @dataclass(frozen=True)
@@ -465,6 +475,11 @@ def validate(cfg: Parameters) -> None:
         raise ConfigError('geometry.lead', 'lead/2pi must be smaller than the worm pitch radius')
     if g.gear_pitch_radius <= 0 or g.lead <= 0:  # pragma: no cover - range checks catch it
         raise ConfigError('geometry.lead', 'must be > 0')
+    half_pitch = 0.5 * g.lead / g.gear_pitch_radius     # pi / z_g, z_g = 2 pi r_g / lead
+    if cfg.mesh.backlash >= half_pitch:
+        raise ConfigError('mesh.backlash', f'{cfg.mesh.backlash:g} rad is more play than a '
+                          f'tooth pitch allows: at most half the gear pitch, pi / z_g = '
+                          f'{half_pitch:.6g} rad')
     if cfg.integrator.time_step * cfg.node.publish_rate_hz > 1.0 + 1e-9:
         raise ConfigError('integrator.time_step', 'must not exceed the node tick period '
                           f'1/publish_rate_hz = {1.0 / cfg.node.publish_rate_hz:g} s')

@@ -27,6 +27,7 @@ from .integrator import (
     C_SINCE,
     N_CTL,
     N_STATS,
+    S_CONTACT_EVENTS,
     S_EVALS,
     S_FAILED,
     S_MAX_SOLVES,
@@ -215,7 +216,8 @@ class Stepper:
                 'force_evaluations': int(s[S_EVALS]),
                 'subdivision_events': int(s[S_SUBDIV_EVENTS]),
                 'substeps': int(s[S_SUBSTEPS]), 'max_solves_per_step': int(s[S_MAX_SOLVES]),
-                'failed_steps': int(s[S_FAILED]), 'verified_steps': int(s[S_VERIFIED])}
+                'failed_steps': int(s[S_FAILED]), 'verified_steps': int(s[S_VERIFIED]),
+                'contact_events': int(s[S_CONTACT_EVENTS])}
 
     def forces(self) -> dict[str, float]:
         """Mesh quantities at the current state (W_n, mu, stiffnesses, F_X, F_Y, q); with
