@@ -752,3 +752,26 @@ def test_another_node_with_the_same_name_is_warned_about(ros_harness):
     finally:
         h.executor.remove_node(twin)
         twin.destroy_node()
+
+
+def test_backdrive_margin_is_published_and_warned_below_the_threshold(ros_harness):
+    """~/backdrive_margin and the 'back-drive' status: OK (self-locking, 2.6) with the
+    defaults; WARN, the node running, when a parameter set takes the friction below what
+    holds the load (margin < 1 is physics, not an error)."""
+    h = ros_harness({'load.output_torque': 5.0})
+    got: list[float] = []
+    h.probe.create_subscription(h.Float64, '/worm_gear_sim/backdrive_margin',
+                                lambda m: got.append(m.data), 10)
+    assert h.spin_until(lambda: h.node._pub_margin.get_subscription_count() > 0)
+    h.node.publish_diagnostics()
+    assert h.spin_until(lambda: got)
+    assert 2.0 < got[-1] < 3.0
+    st = h.node.diagnostic_statuses()[-1]
+    assert st.name.endswith('back-drive') and 'self-locking' in st.message
+    res = h.set_parameters([Parameter('friction.mu_kinetic', value=0.001),
+                            Parameter('friction.mu_stribeck_drop', value=0.01)])
+    assert res[0].successful
+    st = h.node.diagnostic_statuses()[-1]
+    vals = {kv.key: float(kv.value) for kv in st.values}
+    assert vals['margin'] < 1.0 and '< 1' in st.message
+    assert st.level in (b'\x01', 1)

@@ -191,6 +191,39 @@ def worm_inertia_factor(p: np.ndarray, dt: float) -> float:
     return (x / math.tan(x)) ** 2
 
 
+def holding_friction(p: np.ndarray, sliding_speed: float = 0.0) -> float:
+    """The friction coefficient the mesh offers at a sliding speed [m/s]: mu(0), the edge
+    of the stick cone, at rest; the law's mu(|v_s|) when sliding (Eq. 18 or constant; 0
+    with friction off)."""
+    model = p[P_FRIC_MODEL]
+    if model == FRICTION_OFF:
+        return 0.0
+    if model == FRICTION_CONSTANT:
+        return float(p[P_MU_CONST])
+    return float(p[P_MU_K] + p[P_MU_DROP] * math.exp(-math.sqrt(abs(sliding_speed) / p[P_VS])))
+
+
+def backdrive_friction(p: np.ndarray) -> float:
+    """The friction coefficient that just holds the worm when the motor lets go: with the
+    worm shaft torque gone, Eq. 11 leaves Q2 = -r_w (cos(phi_n) sin(lam) + mu cos(lam)) W_n,
+    zero only for |mu| = cos(phi_n) tan(lam), whatever the load (W_n)."""
+    return float(p[P_COSPHI] * p[P_SINL] / p[P_COSL])
+
+
+def backdrive_margin(p: np.ndarray, sliding_speed: float = 0.0) -> float:
+    """holding_friction / backdrive_friction: > 1 the worm holds the antenna if the motor
+    lets go (self-locking), < 1 the load would turn the worm back.  With Coulomb friction
+    it does not depend on the load's magnitude; it falls with the sliding speed on Eq. 18
+    (mu_kinetic < mu(0))."""
+    return holding_friction(p, sliding_speed) / backdrive_friction(p)
+
+
+def sliding_speed_of(p: np.ndarray, omega: ArrayLike) -> float:
+    """v_s = r_w cos(lam) theta2' + r_g sin(lam) theta3' [m/s] of a state's speeds."""
+    w = np.asarray(omega, float)
+    return float(p[P_RW] * p[P_COSL] * w[0] + p[P_RG] * p[P_SINL] * w[1])
+
+
 def friction_is_set_valued(p: np.ndarray) -> bool:
     """True when the packed parameters select the set-valued (stick-slip) friction law."""
     return bool(p[P_FRIC_SET_VALUED] != 0.0)
@@ -230,6 +263,12 @@ class DriveModel:
     def rigid_motion(self) -> np.ndarray:
         """u = (theta2, theta3, theta4) of the undeformed drive per unit theta1."""
         return rigid_motion_vector(self.p)
+
+    def backdrive_margin(self, omega: ArrayLike | None = None) -> float:
+        """Back-drive margin (:func:`backdrive_margin`) at rest, or at the sliding speed of
+        the speeds ``omega`` (theta2', theta3', theta4')."""
+        v = 0.0 if omega is None else sliding_speed_of(self.p, omega)
+        return backdrive_margin(self.p, v)
 
     @property
     def friction_is_set_valued(self) -> bool:

@@ -327,6 +327,10 @@ class NodeSettings:
                                   'WARN when the windowed residual RMS of theta2, theta3 or '
                                   'theta4 exceeds its entry', 'rad', 0.0, 1e3, lo_open=True,
                                   length=3)
+    backdrive_margin_warn: float = _f(1.2, '/diagnostics turns WARN when the back-drive '
+                                      'margin (~/backdrive_margin: the friction the mesh can '
+                                      'hold over what the load would need to turn the worm '
+                                      'if the motor let go) falls below this', '', 0.0, 1e3)
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ from .schema import NODE_NAME
 __all__ = ['NODE_NAMESPACE', 'COMMAND_TOPIC', 'REFERENCE_TOPIC', 'JOINT_STATES_TOPIC',
            'MEASURED_TOPIC', 'POSITIONING_ERROR_TOPIC', 'WORM_ERROR_TOPIC', 'FEEDFORWARD_TOPIC',
            'COMPENSATED_COMMAND_TOPIC', 'RESIDUAL_TOPIC', 'DIAGNOSTICS_TOPIC', 'FLOAT64',
+           'BACKDRIVE_MARGIN_TOPIC',
            'JOINT_STATE', 'private_topic']
 
 NODE_NAMESPACE = NODE_NAME          # the node's name: its ~/ topics live under it
@@ -25,6 +26,7 @@ WORM_ERROR_TOPIC = '~/worm_error'                  # out, Float64
 FEEDFORWARD_TOPIC = '~/feedforward'                # out, Float64 (delta)
 COMPENSATED_COMMAND_TOPIC = '~/compensated_command'  # out, JointState (theta1_ref + delta)
 RESIDUAL_TOPIC = '~/prediction_residual'           # out, JointState (measured - predicted)
+BACKDRIVE_MARGIN_TOPIC = '~/backdrive_margin'      # out, Float64 (> 1: the worm holds)
 DIAGNOSTICS_TOPIC = '/diagnostics'                 # out, diagnostic_msgs/DiagnosticArray
 
 FLOAT64 = 'std_msgs/msg/Float64'

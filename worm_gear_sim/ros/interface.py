@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from ..realtime import Reject
 from ..topics import (
+    BACKDRIVE_MARGIN_TOPIC,
     COMMAND_TOPIC,
     COMPENSATED_COMMAND_TOPIC,
     DIAGNOSTICS_TOPIC,
@@ -24,7 +25,7 @@ from ..topics import (
 __all__ = ['COMMAND_TOPIC', 'REFERENCE_TOPIC', 'REFERENCE_DEPTH', 'JOINT_STATES_TOPIC',
            'MEASURED_TOPIC', 'POSITIONING_ERROR_TOPIC', 'WORM_ERROR_TOPIC', 'FEEDFORWARD_TOPIC',
            'COMPENSATED_COMMAND_TOPIC', 'RESIDUAL_TOPIC', 'DIAGNOSTICS_TOPIC',
-           'REJECT_REASONS', 'NODE_REJECT_REASONS']
+           'BACKDRIVE_MARGIN_TOPIC', 'REJECT_REASONS', 'NODE_REJECT_REASONS']
 
 REFERENCE_DEPTH = 1000   # every sample matters to the filter: reliable, keep last 1000 (1 s
 #                          at 1 kHz: a stalled executor loses none)

@@ -64,6 +64,7 @@ from ..realtime import STALE_PERIODS, Output, Prediction, RealtimePredictor
 from . import diagnostics as diag
 from .clock_guard import guard_clock_source
 from .interface import (
+    BACKDRIVE_MARGIN_TOPIC,
     COMMAND_TOPIC,
     COMPENSATED_COMMAND_TOPIC,
     DIAGNOSTICS_TOPIC,
@@ -78,7 +79,7 @@ from .interface import (
     RESIDUAL_TOPIC,
     WORM_ERROR_TOPIC,
 )
-from .node_status import CallbackLoad, model_check_status, node_statuses
+from .node_status import CallbackLoad, backdrive_status, model_check_status, node_statuses
 from .param_updates import ParameterUpdates
 from .params_bridge import check_overrides, declare_config, parameter_type
 
@@ -192,6 +193,8 @@ class WormGearSimNode(Node):
         self._check = ModelCheck(cfg.node.joint_names[1:], cfg.node.residual_window,
                                  cfg.node.residual_warn_rms)
         self._pub_res = self.create_publisher(JointState, RESIDUAL_TOPIC, qos_state)
+        self._pub_margin = self.create_publisher(Float64, BACKDRIVE_MARGIN_TOPIC, qos_state)
+        self._f_margin = Float64()
         self._sub_meas = self.create_subscription(
             JointState, MEASURED_TOPIC, self._guard_message(self._on_measured),
             qos_profile_sensor_data,
@@ -528,12 +531,25 @@ class WormGearSimNode(Node):
     def diagnostic_statuses(self) -> list[diag.DiagnosticStatus]:
         """The statuses of /diagnostics (closes the load window)."""
         name = self.get_name()
+        margin, at_rest = self.backdrive_margins()
         return node_statuses(name, self.rt, self.counters, self.load, self._mode,
                              self.config.node.command_timing, self.last_error) + \
-            [model_check_status(name, self._check, self._clock.now().nanoseconds)]
+            [model_check_status(name, self._check, self._clock.now().nanoseconds),
+             backdrive_status(name, margin, at_rest, self.config.node.backdrive_margin_warn)]
+
+    def backdrive_margins(self) -> tuple[float, float]:
+        """(margin at the predicted state's sliding speed, margin at rest): the core's
+        DriveModel.backdrive_margin."""
+        model = self.rt.model
+        sim = self.rt.sim
+        now = model.backdrive_margin(sim.state.omega if self.rt.started else None)
+        return now, model.backdrive_margin()
 
     def publish_diagnostics(self) -> None:
         self._params.swap_prepared()
+        if self._pub_margin.get_subscription_count():
+            self._f_margin.data = self.backdrive_margins()[0]
+            self._publish(self._pub_margin, self._f_margin)
         self._publish(self._pub_diag, diag.array(self._clock.now().to_msg(),
                                                  self.diagnostic_statuses()))
 

@@ -17,7 +17,8 @@ from ..realtime import RealtimePredictor
 from . import diagnostics as diag
 from .interface import COMMAND_TOPIC, NODE_REJECT_REASONS, REFERENCE_TOPIC, REJECT_REASONS
 
-__all__ = ['CallbackLoad', 'node_statuses', 'model_check_status', 'HARDWARE_ID']
+__all__ = ['CallbackLoad', 'node_statuses', 'model_check_status', 'backdrive_status',
+           'HARDWARE_ID']
 
 HARDWARE_ID = 'worm_gear_sim'
 
@@ -146,3 +147,21 @@ def model_check_status(name: str, check: ModelCheck, now_ns: int) -> diag.Diagno
     st = check.status_ns(now_ns)
     level = {'OK': diag.OK, 'WARN': diag.WARN, 'STALE': diag.STALE}[st.level]
     return diag.status(name, 'model check', level, st.message, st.values, HARDWARE_ID)
+
+
+def backdrive_status(name: str, margin: float, margin_at_rest: float,
+                     warn_below: float) -> diag.DiagnosticStatus:
+    """Status 'back-drive': the margin now (at the predicted sliding speed) and at rest;
+    WARN below ``node.backdrive_margin_warn``.  A margin below 1 is physics (the model
+    shows the drive back-driven if the motor lets go), not a node error."""
+    level = diag.WARN if margin < warn_below else diag.OK
+    if margin < 1.0:
+        msg = (f'back-drive margin {margin:.3g} < 1: the load would turn the worm back if the '
+               'motor let go')
+    elif level == diag.WARN:
+        msg = f'back-drive margin {margin:.3g} below {warn_below:g}'
+    else:
+        msg = f'self-locking, margin {margin:.3g}'
+    return diag.status(name, 'back-drive', level, msg,
+                       {'margin': margin, 'margin_at_rest': margin_at_rest,
+                        'warn_below': warn_below}, HARDWARE_ID)
