@@ -311,3 +311,30 @@ def test_a_set_whose_highest_mode_the_step_cannot_resolve_is_rejected(overrides,
     for w in ('not resolved', 'Hz', 'integrator.time_step', 'omega dt'):
         assert w in msg, (w, msg)
     assert key in exc.value.keys or key in msg, msg
+
+
+def test_node_rejects_a_set_it_cannot_integrate_while_a_stream_runs(ros_harness):
+    """The set that was accepted and then failed 25 893 times live (a worm shaft of 1e-12 m
+    on a 1e-9 m module: its highest mode at GHz) is rejected by the parameter service with
+    the mode and the step named, at once; the stream goes on, no simulation error, and a
+    valid set is accepted after it."""
+    import time
+
+    from rclpy.parameter import Parameter
+    h = ros_harness(sim_time=False)
+    assert h.command(0.0)
+    assert h.spin_until(lambda: h.node.counters['ticks'] >= 5)
+    t0 = time.monotonic()
+    res = h.set_parameters([Parameter('shafts.worm_shaft_length', value=1e-12),
+                            Parameter('geometry.module', value=1e-9)])
+    took = time.monotonic() - t0
+    assert not res[0].successful and 'not resolved' in res[0].reason, res
+    assert 'Hz' in res[0].reason and 'integrator.time_step' in res[0].reason
+    assert took < 5.0, took
+    for k in range(1, 6):
+        assert h.command(0.001 * k)
+    ticks = h.node.counters['ticks']
+    assert h.spin_until(lambda: h.node.counters['ticks'] >= ticks + 5)
+    assert h.node.rt.counters['simulation_errors'] == 0
+    res = h.set_parameters([Parameter('friction.mu_kinetic', value=0.05)])
+    assert res[0].successful
