@@ -70,3 +70,19 @@ def test_the_antenna_creeps_exactly_when_the_margin_is_below_one(margin, creeps)
         assert moved > 1e-4, moved
     else:
         assert moved < 1e-6, moved       # the shaft's elastic relaxation: 9.8e-8 rad
+
+
+def test_the_params_document_reports_the_margin_and_reads_back(tmp_path):
+    """`worm-gear-sim params` (params_document) carries the margin at rest among the derived
+    quantities; a params JSON written with it reads back (its derived block is checked)."""
+    import json
+
+    from worm_gear_sim.config_io import load_params_json, params_document, params_json_dump
+    cfg = Config().replace({'friction.model': 'constant', 'friction.constant_coefficient': 0.03})
+    doc = params_document(cfg)
+    assert doc['derived']['backdrive_margin'] == pytest.approx(analytic(cfg), rel=1e-12)
+    assert doc['derived']['backdrive_margin'] < 1.0
+    f = tmp_path / 'p.json'
+    f.write_text(params_json_dump(doc, None))
+    assert json.loads(f.read_text())['derived']['backdrive_margin'] < 1.0
+    assert load_params_json(f) == cfg

@@ -166,7 +166,8 @@ def parse_set(items: Sequence[str] | None) -> dict[str, Any]:
 
 def params_document(cfg: Config) -> dict[str, Any]:
     """The fully resolved parameters: every config section plus a ``derived`` block
-    (inertias, stiffnesses, lead per radian, ratio, mesh calibration, linear modes)."""
+    (inertias, stiffnesses, lead per radian, ratio, mesh calibration, back-drive margin at
+    rest, linear modes)."""
     from .modal import modes
     from .model import DriveModel
     doc: dict[str, Any] = {'format': PARAMS_FORMAT}
@@ -174,6 +175,7 @@ def params_document(cfg: Config) -> dict[str, Any]:
     model = DriveModel(cfg)
     d = dataclasses.asdict(model.derived)
     d['worm_contact_origin_deg'], d['gear_contact_origin_deg'] = model.contact_origins_deg
+    d['backdrive_margin'] = model.backdrive_margin()     # at rest: > 1 self-locking
     try:
         d['natural_frequencies_hz'] = [float(f) for f in modes(model).undamped_hz]
     except Exception:  # noqa: BLE001 - informative only
