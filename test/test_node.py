@@ -776,3 +776,22 @@ def test_backdrive_margin_is_published_and_warned_below_the_threshold(ros_harnes
     vals = {kv.key: float(kv.value) for kv in st.values}
     assert vals['margin'] < 1.0 and '< 1' in st.message
     assert st.level in (b'\x01', 1)
+
+
+def test_play_can_be_set_live_and_the_drive_goes_on(ros_harness):
+    """mesh.backlash over the parameter service while commands flow: accepted, swapped in
+    between two samples, the simulation goes on through reversals without an error; a play
+    beyond half a tooth pitch is rejected naming the key."""
+    h = ros_harness(sim_time=False)
+    assert h.command(0.0)
+    assert h.spin_until(lambda: h.node.counters['ticks'] >= 5)
+    res = h.set_parameters([Parameter('mesh.backlash', value=2 * math.pi / (180 * 60) * 2)])
+    assert res[0].successful, res
+    assert h.node.config.mesh.backlash > 0
+    for k in range(1, 40):
+        assert h.command(0.02 * math.sin(k / 3.0))          # reversals through the play
+    ticks = h.node.counters['ticks']
+    assert h.spin_until(lambda: h.node.counters['ticks'] >= ticks + 5)
+    assert h.node.rt.counters['simulation_errors'] == 0
+    res = h.set_parameters([Parameter('mesh.backlash', value=0.06)])   # pi/z_g = 0.0561
+    assert not res[0].successful and 'mesh.backlash' in res[0].reason
