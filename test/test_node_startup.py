@@ -142,3 +142,68 @@ def test_early_signals_end_the_start_up_quietly(ros_subprocess_env):
             if p.returncode != 0 or 'Traceback' in text or 'Fatal' in text:
                 failures.append(f'{sig.name} after {delay:.3f} s: rc {p.returncode}\n{text}')
     assert not failures, '\n\n'.join(failures)
+
+
+# A process that sends itself a signal at one named point of the start-up and then runs the
+# node's entry point; the point is reached deterministically (an import hook, a wrapped
+# constructor), not by timing.
+_SELF_SIGNAL = r'''
+import importlib.abc, importlib.util, os, signal, sys
+where, signame = sys.argv[1], sys.argv[2]
+sig = getattr(signal, signame)
+if where.startswith('import:'):
+    target = where.split(':', 1)[1]
+    class Hook(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path, target_=None):
+            if name != target:
+                return None
+            sys.meta_path.remove(self)
+            spec = importlib.util.find_spec(name)
+            real = spec.loader.exec_module
+            def exec_module(module):
+                os.kill(os.getpid(), sig)
+                return real(module)
+            spec.loader.exec_module = exec_module
+            return spec
+    sys.meta_path.insert(0, Hook())
+from worm_gear_sim.ros.startup import node_main
+if where in ('init', 'build', 'declare'):
+    import rclpy
+    from worm_gear_sim.ros import node as node_module
+    if where == 'init':
+        real_init = rclpy.init
+        def init(**kw):
+            os.kill(os.getpid(), sig)
+            return real_init(**kw)
+        rclpy.init = init
+    elif where == 'build':
+        real_ctor = node_module.WormGearSimNode.__init__
+        def ctor(self, *a, **k):
+            os.kill(os.getpid(), sig)
+            real_ctor(self, *a, **k)
+        node_module.WormGearSimNode.__init__ = ctor
+    else:
+        real_declare = rclpy.node.Node.declare_parameters
+        def declare(self, *a, **k):
+            os.kill(os.getpid(), sig)
+            return real_declare(self, *a, **k)
+        rclpy.node.Node.declare_parameters = declare
+sys.argv = ['worm_gear_sim_node', '--ros-args', '--params-file', sys.argv[3]]
+sys.exit(node_main())
+'''
+
+
+@pytest.mark.parametrize('where', ['import:numba', 'import:rclpy._rclpy_pybind11',
+                                   'import:rclpy.executors', 'init', 'build', 'declare'])
+def test_a_signal_at_each_point_of_the_start_up_ends_it_quietly(where, ros_subprocess_env):
+    """SIGINT and SIGTERM at the imports (the process ends at once, nothing unwound), during
+    rclpy.init and the node's construction (recorded; rclpy's handlers are installed only
+    once the node is built): exit code 0 promptly, no traceback, no [FATAL], no abort."""
+    for signame in ('SIGINT', 'SIGTERM'):
+        run = subprocess.run([sys.executable, '-c', _SELF_SIGNAL, where, signame, str(CONFIG)],
+                             cwd=ROOT, env=ros_subprocess_env, capture_output=True, text=True,
+                             timeout=60)
+        text = run.stdout + run.stderr
+        assert run.returncode == 0, f'{where} {signame}: rc {run.returncode}\n{text}'
+        assert 'Traceback' not in text and 'FATAL' not in text and 'free(' not in text, text
+        assert 'spinning with' not in text, f'{where} {signame}: the node went on\n{text}'

@@ -19,6 +19,8 @@ import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
+from rclpy.signals import SignalHandlerOptions
+from rclpy.signals import install_signal_handlers as install_rclpy_signal_handlers
 from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 
@@ -92,14 +94,17 @@ def main(args: list[str] | None = None) -> int:
     except RCLError as exc:
         return config_error(clean_rcl_message(exc))
     opts = _parse_args(rest[1:])
+    # From here until the node is built a signal is only recorded (.signals, phase 'init'):
+    # rclpy's handler, which shuts every context down from its own thread, is installed
+    # only when the node exists, so it never races rclpy.init or the node's construction.
+    signals.set_phase('init')
     try:
-        rclpy.init(args=argv)
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:
-        return config_error(clean_rcl_message(exc))
-    signals.set_phase('ros')        # from now on rclpy's handler shuts the context down
-    try:
-        if signals.signalled():     # a start-up signal whose SystemExit got swallowed
+        if signals.signalled():
             return 0
+        return config_error(clean_rcl_message(exc))
+    try:
         return _run(opts)
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
@@ -113,14 +118,14 @@ def _run(opts: argparse.Namespace) -> int:
     try:
         node = WormGearSimNode()
     except STARTUP_CONFIG_ERRORS as exc:
-        if not context.ok():        # a signal shut the context down during declaration
+        if signals.signalled():     # Ctrl-C / SIGTERM came first: a quiet exit
             return 0
         return config_error(f'invalid parameters: {exc}')
-    except Exception:
-        if not context.ok():
-            return 0
-        raise
-    if not context.ok() or signals.signalled():   # Ctrl-C / SIGTERM during the build
+    # rclpy's handlers from now on (they chain to .signals, which ignores the 'ros' phase):
+    # installed first, checked second, so that no signal falls between the two.
+    signals.set_phase('ros')
+    install_rclpy_signal_handlers(SignalHandlerOptions.ALL)
+    if signals.signalled() or not context.ok():   # Ctrl-C / SIGTERM during the build
         _quietly(node.destroy_node)
         return 0
     kind = opts.executor or node.config.node.executor

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import sys
 
-from .signals import install_signal_handlers, signalled
+from .signals import install_signal_handlers
 
 __all__ = ['node_main']
 
@@ -25,15 +25,9 @@ __all__ = ['node_main']
 def node_main(args: list[str] | None = None) -> int:
     """Entry point of ``worm_gear_sim_node``: handlers first, then import and run the node."""
     install_signal_handlers()
-    try:
-        from .run import main  # numpy, scipy, numba, rclpy: seconds on a loaded machine
-    except BaseException:
-        # The handler's SystemExit can reach us wrapped by the import machinery: as
-        # "ImportError: initialization failed" from a C extension's module initialisation
-        # (rclpy's pybind11 module) or as a RuntimeError from a class's __set_name__.
-        if signalled():
-            return 0
-        raise
+    # A signal during these imports ends the process at once (exit 0, see .signals): the
+    # imports are never unwound half-way through a C extension's initialisation.
+    from .run import main  # numpy, scipy, numba, rclpy: seconds on a loaded machine
     return main(args)
 
 
