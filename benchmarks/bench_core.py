@@ -71,7 +71,8 @@ def kernel_ns_per_step(cfg: Config, t_end: float = 0.5, repeats: int = 7):
         st = np.zeros(N_STATS, dtype=np.int64)
         ctl = sim._ctl.copy()
         t0 = time.perf_counter()
-        advance(sim.p, sim.C, sim._u, sim._v, sim._a, th, td, dt, 0, e3, e3, e3, ea, st, ctl)
+        advance(sim.p, sim.C, sim._u, sim._v, sim._a, th, td, dt, 0, e3, e3, e3, ea, st, ctl,
+                np.empty(0))
         best = min(best, time.perf_counter() - t0)
     return best / n * 1e9, st[S_SOLVES] / n, st[S_EVALS] / n
 

@@ -13,6 +13,7 @@ from scipy.integrate import solve_ivp
 
 from worm_gear_sim import Config, SampledProfile, simulate
 from worm_gear_sim.derived import derive
+from worm_gear_sim.load import LoadSignal
 from worm_gear_sim.model import P_CGKG_LIN, P_CWKW_LIN, DriveModel, pack_parameters
 from worm_gear_sim.params import ConfigError
 
@@ -107,10 +108,10 @@ def test_halving_the_step_converges():
     assert errs[2] <= 1e-3 * scale, (errs, scale)
 
 
-def _radau_with_play(cfg: Config, prof: SampledProfile, breaks, times):
+def _radau_with_play(cfg: Config, prof: SampledProfile, breaks, times, load=None):
     """The drive with play written out here (linear mesh, no friction), integrated by Radau
     from contact event to contact event (events at q = +-r_g b / 2) and between the kinks
-    of the command."""
+    of the command (and of ``load``, a load torque signal in place of the constant)."""
     d = derive(cfg)
     p = pack_parameters(cfg)
     g = cfg.geometry
@@ -130,7 +131,8 @@ def _radau_with_play(cfg: Config, prof: SampledProfile, breaks, times):
         wn = pen * cl / kgws
         Q2 = -rw * cphi * sl * wn - d.K_w * (y[0] - th1)
         Q3 = rg * cphi * cl * wn - d.K_g * (y[1] - y[2])
-        Q4 = -d.K_g * (y[2] - y[1]) - cout * y[5] - T
+        Q4 = -d.K_g * (y[2] - y[1]) - cout * y[5] - \
+            (T if load is None else float(load.torque(np.array([t]))[0]))
         return np.array([y[3], y[4], y[5], Q2 / M[0], Q3 / M[1], Q4 / M[2]])
 
     def edge(sign):
@@ -178,6 +180,40 @@ def test_play_agrees_with_an_event_driven_radau_solution():
     tr = simulate(cfg, profile=prof, t_end=breaks[-1], record_every=40)
     ref = _radau_with_play(cfg, prof, breaks, tr.t)
     for j in (0, 2):
+        err = np.max(np.abs(tr.theta[:, j] - ref[:, j]))
+        assert err <= 0.01 * np.ptp(ref[:, j]), (j, err, np.ptp(ref[:, j]))
+
+
+class _SineLoad(LoadSignal):
+    """A smooth reversing load torque A sin(2 pi f t) (a LoadSignal of the caller's own)."""
+
+    def __init__(self, amplitude: float, freq: float) -> None:
+        self.amplitude, self.freq = amplitude, freq
+
+    def torque(self, t):
+        return self.amplitude * np.sin(2 * np.pi * self.freq * np.asarray(t, float))
+
+
+def test_play_under_a_reversing_load_agrees_with_an_event_driven_radau_solution():
+    """The worm held still, 2 arcmin of play, a load torque reversing at 20 Hz (+-8 N m):
+    the antenna is thrown from flank to flank through the play by the load alone (the gear
+    rattles: ~19 contact events).  Newmark (0.5 us) against Radau with the contact events
+    located: theta2, theta3, theta4 within 1 % of their range (measured: 0.3 %, 2e-5,
+    3e-6; theta2 is the worm's 1e-5 rad response to the impacts)."""
+    b = 2 * ARCMIN
+    cfg = Config().replace({'mesh.backlash': b, 'mesh.stiffness_model': 'linear',
+                            'friction.model': 'off', 'load.output_torque': 0.0,
+                            'load.output_viscous_coefficient': 0.5,
+                            'mesh.initial_flank': 'center', 'integrator.time_step': 5e-7,
+                            'integrator.worm_frequency_matching': False})
+    load = _SineLoad(8.0, 20.0)
+    t_end = 0.03
+    prof = SampledProfile(np.array([0.0, t_end]), np.array([0.0, 0.0]), 'linear')
+    tr = simulate(cfg, profile=prof, t_end=t_end, record_every=40, load=load)
+    assert tr.stats['contact_events'] >= 2            # it really crosses the play
+    assert np.ptp(tr.theta[:, 1]) > b                 # the gear swings through all of it
+    ref = _radau_with_play(cfg, prof, (0.0, t_end), tr.t, load=load)
+    for j in (0, 1, 2):
         err = np.max(np.abs(tr.theta[:, j] - ref[:, j]))
         assert err <= 0.01 * np.ptp(ref[:, j]), (j, err, np.ptp(ref[:, j]))
 

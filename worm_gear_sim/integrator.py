@@ -60,6 +60,7 @@ from .model import (
     P_RTOL,
     P_RW,
     P_SINL,
+    P_TLOAD,
     P_VEPS,
     P_ZG,
     mesh_forces,
@@ -534,13 +535,20 @@ def _split_at_contact(p, Ct, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, since,
 
 @njit(cache=True, error_model='numpy')
 def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, rec_a,
-            rec_aux, stats, ctl):
+            rec_aux, stats, ctl, load):
     """Advance len(theta1)-1 steps of size dt; theta1[k] is the command at the start of
-    step k and theta1[k+1] at its end (theta1_dot likewise).  Updates u, v, a in place and
-    only with fully converged steps.  Every ``record_stride`` steps (if > 0) the end state is
+    step k and theta1[k+1] at its end (theta1_dot likewise).  ``load``: the load torque on
+    the antenna [N m] on the same grid (load[k+1] at the end of step k, linear within it),
+    or an empty array for the constant ``p[P_TLOAD]``.  Updates u, v, a in place and only
+    with fully converged steps.  Every ``record_stride`` steps (if > 0) the end state is
     written to rec_* (row j after step (j+1)*stride).  ``ctl`` carries the Newton
     controller state between calls.  Returns (steps done, status)."""
     n_steps = theta1.shape[0] - 1
+    varying = load.shape[0] > 0
+    if varying:
+        p = p.copy()                 # the caller's vector keeps its constant load
+        if load.shape[0] < n_steps + 1:
+            return 0, STATUS_NONFINITE
     Ct = (C[0, 0], C[0, 1], C[0, 2], C[1, 0], C[1, 1], C[1, 2], C[2, 0], C[2, 1], C[2, 2])
     max_level = int(p[P_MAXSUB])
     gap = p[P_GAP_HALF]
@@ -565,6 +573,12 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
         if not (math.isfinite(th_b) and math.isfinite(td_b)):
             status = STATUS_NONFINITE
             break
+        if varying:
+            ld_a, ld_b = load[k], load[k + 1]
+            if not math.isfinite(ld_b):
+                status = STATUS_NONFINITE
+                break
+            p[P_TLOAD] = ld_b                                      # Eq. 6 (+ load), at t_k+1
         ok, un, vn, an, rho, since, ns, ne, ver, mode_n, mu_n = _step(
             p, Ct, uu, vv, aa, th_b, td_b, dt, rho, since, mode, mu)
         n_solves += ns
@@ -581,6 +595,8 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
             ok = True
             for j in range(n_sub):
                 f = (j + 1.0) / n_sub
+                if varying:
+                    p[P_TLOAD] = ld_a + f * (ld_b - ld_a)
                 ok, us, vs, as_, rho, since, ns, ne, ver, mode_n, mu_n = _step(
                     p, Ct, us, vs, as_, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a),
                     h, rho, since, mode_n, mu_n)
@@ -592,6 +608,8 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 stats[S_SUBSTEPS] += 1
             un, vn, an = us, vs, as_
             level += 1
+        if varying:
+            p[P_TLOAD] = ld_b
         if not ok:
             stats[S_FAILED] += 1
             status = STATUS_FAILED
@@ -681,4 +699,4 @@ def advance_segment(p, C, u, v, a, theta1_now, theta1_dot_now, t0, k0, dt, n, cm
         td[j] = slope
     empty3 = np.empty((0, 3))
     return advance(p, C, u, v, a, th, td, dt, 0, empty3, empty3, empty3,
-                   np.empty((0, N_AUX)), stats, ctl)
+                   np.empty((0, N_AUX)), stats, ctl, np.empty(0))

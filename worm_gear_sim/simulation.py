@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .load import LoadSignal
 from .modal import StepResolutionWarning, step_resolution_warning
 from .model import DriveModel
 from .profiles import Profile, make_profile
@@ -90,24 +91,35 @@ KEEP_ROWS = 200_000
 def simulate(model: DriveModel | Parameters, profile: Profile | None = None,
              t_end: float | None = None, record_every: int = 1,
              theta1_initial: float | None = None,
-             max_bytes: float | None = None) -> Trajectory:
+             max_bytes: float | None = None, load: LoadSignal | None = None) -> Trajectory:
     """Batch run of ``model`` (a :class:`DriveModel` or a Config) from rest: the config's
     input profile (or ``profile``) to ``t_end``, in memory (up-front ValueError beyond
-    ``max_bytes``, see :meth:`Simulator.run`; long runs: :func:`simulate_to_csv`)."""
+    ``max_bytes``, see :meth:`Simulator.run`; long runs: :func:`simulate_to_csv`).
+    ``load``: a load torque signal (:mod:`worm_gear_sim.load`) in place of the constant
+    ``load.output_torque``; the drive starts at rest under its value at t = 0."""
     config = model.config if isinstance(model, DriveModel) else model
     profile = profile if profile is not None else make_profile(config.input)
     t_end = config.input.end_time if t_end is None else t_end
+    sim = _at_rest(model, profile, theta1_initial, load)
+    return sim.run(profile, t_end, record_every, max_bytes=max_bytes, load=load)
+
+
+def _at_rest(model: DriveModel | Parameters, profile: Profile, theta1_initial: float | None,
+             load: LoadSignal | None) -> Simulator:
+    """A simulator at rest at the profile's first command, under the load at t = 0."""
     th0 = float(profile.theta1(np.array([0.0]))[0]) if theta1_initial is None else \
         theta1_initial
     sim = Simulator(model, theta1=th0)
-    return sim.run(profile, t_end, record_every, max_bytes=max_bytes)
+    if load is not None:
+        sim.reset(th0, load_torque=float(load.torque(np.array([0.0]))[0]))
+    return sim
 
 
 def simulate_to_csv(model: DriveModel | Parameters, path: str | Path,
                     profile: Profile | None = None, t_end: float | None = None,
                     record_every: int = 1, theta1_initial: float | None = None,
                     header_comment: str = '', keep_rows: int = KEEP_ROWS,
-                    chunk_steps: int = 1 << 16) -> Trajectory:
+                    chunk_steps: int = 1 << 16, load: LoadSignal | None = None) -> Trajectory:
     """:func:`simulate` streamed to a CSV file in chunks: memory stays bounded whatever the
     duration.  Returns a thinned Trajectory (every k-th recorded row, at most about
     ``keep_rows`` rows, always the last) for plots and metrics; the file has every
@@ -115,9 +127,7 @@ def simulate_to_csv(model: DriveModel | Parameters, path: str | Path,
     config = model.config if isinstance(model, DriveModel) else model
     profile = profile if profile is not None else make_profile(config.input)
     t_end = config.input.end_time if t_end is None else t_end
-    th0 = float(profile.theta1(np.array([0.0]))[0]) if theta1_initial is None else \
-        theta1_initial
-    sim = Simulator(model, theta1=th0)
+    sim = _at_rest(model, profile, theta1_initial, load)
     n_total, stride = sim._plan(t_end, record_every)
     n_rows = n_total // stride + 1
     keep = max(1, -(-n_rows // max(1, int(keep_rows))))     # ceil
@@ -125,7 +135,7 @@ def simulate_to_csv(model: DriveModel | Parameters, path: str | Path,
     row = 0
     last = None
     with TrajectoryCsvWriter(path, header_comment) as w:
-        for part in sim.iter_run(profile, t_end, stride, chunk_steps):
+        for part in sim.iter_run(profile, t_end, stride, chunk_steps, load=load):
             w.write(part)
             idx = np.arange(row, row + len(part.t))
             sel = (idx % keep) == 0

@@ -46,6 +46,7 @@ from .integrator import (
 from .integrator import (
     sliding_speed as record_aux_speed,
 )
+from .load import LOAD_LIMIT, LoadSignal, load_grid
 from .modal import (
     damping_matrix,
     static_equilibrium,
@@ -54,6 +55,7 @@ from .model import (
     AUX_FX,
     AUX_FY,
     N_AUX,
+    P_TLOAD,
     DriveModel,
     generalized_forces,
     mechanical_energy,
@@ -99,6 +101,8 @@ def _finite_vector(name: str, x: ArrayLike, limit: float, unit: str) -> np.ndarr
     return arr
 
 
+_NO_LOAD = np.empty(0)      # the kernel's "constant load p[P_TLOAD]"
+
 #: advance_to integrates long spans in chunks of this many steps (1 MB of command samples).
 ADVANCE_CHUNK = 1 << 16
 
@@ -132,21 +136,27 @@ class Stepper:
 
     # ---- state ---------------------------------------------------------------------------
     def reset(self, theta1: float = 0.0, t0: float = 0.0, theta: ArrayLike | None = None,
-              omega: ArrayLike | None = None) -> None:
+              omega: ArrayLike | None = None, *, load_torque: float | None = None) -> None:
         """Start at time t0 with command theta1; by default at rest in static equilibrium.
-        Raises ValueError (state unchanged) for a non-finite or out-of-range input: angles
-        beyond ANGLE_LIMIT, rates beyond RATE_LIMIT, or a state whose acceleration is not
-        finite."""
+        ``load_torque`` [N m]: the load at t0 when a load signal drives the run (default:
+        the model's constant ``load.output_torque``): the rest and the initial acceleration
+        are taken under it.  Raises ValueError (state unchanged) for a non-finite or
+        out-of-range input: angles beyond ANGLE_LIMIT, rates beyond RATE_LIMIT, or a state
+        whose acceleration is not finite."""
         theta1 = _finite_scalar('reset: theta1', theta1, ANGLE_LIMIT, 'rad')
         t0 = _finite_scalar('reset: t0', t0, TIME_LIMIT, 's')
+        p = self.p
+        if load_torque is not None:
+            p = p.copy()
+            p[P_TLOAD] = _finite_scalar('reset: load_torque', load_torque, LOAD_LIMIT, 'N m')
         if theta is None:
-            u = static_equilibrium(self.p, theta1)
+            u = static_equilibrium(p, theta1)
         else:
             u = _finite_vector('reset: theta', theta, ANGLE_LIMIT, 'rad')
         v = np.zeros(3) if omega is None else _finite_vector('reset: omega', omega,
                                                              RATE_LIMIT, 'rad/s')
         a = np.zeros(3)
-        consistent_acceleration(self.p, self.C, u, v, theta1, 0.0, a)
+        consistent_acceleration(p, self.C, u, v, theta1, 0.0, a)
         if not (np.all(np.isfinite(u)) and np.all(np.abs(u) <= ANGLE_LIMIT)
                 and np.all(np.isfinite(a))):
             raise ValueError(f'reset: the state at theta1 = {theta1:g} rad is not finite '
@@ -324,9 +334,11 @@ class Stepper:
         return self._cmd_value + slope * (grid - self._cmd_t)
 
     def _run_kernel(self, th: np.ndarray, td: np.ndarray, stride: int, ru: np.ndarray,
-                    rv: np.ndarray, ra: np.ndarray, raux: np.ndarray) -> None:
+                    rv: np.ndarray, ra: np.ndarray, raux: np.ndarray,
+                    load: np.ndarray | None = None) -> None:
         done, status = advance(self.p, self.C, self._u, self._v, self._a, th, td, self.dt,
-                               stride, ru, rv, ra, raux, self._stats, self._ctl)
+                               stride, ru, rv, ra, raux, self._stats, self._ctl,
+                               _NO_LOAD if load is None else load)
         self._after_kernel(done, status, float(th[done]), float(td[done]))
 
     def _after_kernel(self, done: int, status: int, theta1_last: float,
@@ -341,9 +353,12 @@ class Stepper:
 
     # ---- batch ---------------------------------------------------------------------------
     def run(self, profile: Profile, t_end: float, record_every: int = 1,
-            chunk_steps: int = 1 << 18, max_bytes: float | None = None) -> Trajectory:
+            chunk_steps: int = 1 << 18, max_bytes: float | None = None,
+            load: LoadSignal | None = None) -> Trajectory:
         """Integrate the profile from the current state to ``t_end`` and record every
-        ``record_every`` steps (row 0 = current state), all in memory.
+        ``record_every`` steps (row 0 = current state), all in memory.  ``load``: a load
+        torque signal on the antenna (:mod:`worm_gear_sim.load`) in place of the model's
+        constant ``load.output_torque``.
 
         Raises ValueError before integrating when the recorded rows would take more than
         ``max_bytes`` (default :data:`RUN_MEMORY_LIMIT`): stream long runs with
@@ -365,7 +380,7 @@ class Stepper:
         aux_rec = np.empty((n_rec + 1, N_AUX))
         self._row0(t_rec, th_rec, td_rec, u_rec, v_rec, a_rec, aux_rec)
         row = 1
-        for m, fill in self._chunks(profile, n_total, stride, chunk_steps):
+        for m, fill in self._chunks(profile, n_total, stride, chunk_steps, load):
             sl = slice(row, row + m)
             fill(t_rec[sl], th_rec[sl], td_rec[sl], u_rec[sl], v_rec[sl], a_rec[sl],
                  aux_rec[sl])
@@ -378,11 +393,13 @@ class Stepper:
                           profile=profile.describe(), stats=self.stats)
 
     def iter_run(self, profile: Profile, t_end: float, record_every: int = 1,
-                 chunk_steps: int = 1 << 16) -> Iterator[Trajectory]:
-        """:meth:`run` as a stream: yields Trajectory chunks of at most ``chunk_steps //
-        record_every`` rows (the first starts with the current state), so memory stays
-        bounded whatever ``t_end`` is.  Concatenated, the chunks equal :meth:`run` bit for
-        bit.  Stopping the iteration early leaves the simulator at the last chunk's end."""
+                 chunk_steps: int = 1 << 16,
+                 load: LoadSignal | None = None) -> Iterator[Trajectory]:
+        """:meth:`run` as a stream (``load`` as there): yields Trajectory chunks of at
+        most ``chunk_steps // record_every`` rows (the first starts with the current
+        state), so memory stays bounded whatever ``t_end`` is.  Concatenated, the chunks
+        equal :meth:`run` bit for bit.  Stopping the iteration early leaves the simulator
+        at the last chunk's end."""
         n_total, stride = self._plan(t_end, record_every)
         first = True
         desc, ratio = profile.describe(), self.model.output_per_input
@@ -396,7 +413,7 @@ class Stepper:
                               omega=arrs[4], alpha=arrs[5], aux=arrs[6], output_per_input=ratio,
                               profile=desc, stats=self.stats)
 
-        for m, fill in self._chunks(profile, n_total, stride, chunk_steps):
+        for m, fill in self._chunks(profile, n_total, stride, chunk_steps, load):
             off = 1 if first else 0
             arrs = make(m + off)
             if first:
@@ -427,8 +444,8 @@ class Stepper:
         u_rec[0], v_rec[0], a_rec[0] = self._u, self._v, self._a
         record_aux(self.p, self._u, self._v, self._theta1, self._ctl[C_MU], aux_rec[0])
 
-    def _chunks(self, profile: Profile, n_total: int, stride: int,
-                chunk_steps: int) -> Iterator[tuple[int, Callable[..., None]]]:
+    def _chunks(self, profile: Profile, n_total: int, stride: int, chunk_steps: int,
+                load: LoadSignal | None = None) -> Iterator[tuple[int, Callable[..., None]]]:
         """Yield (rows, fill) per chunk of whole strides; ``fill(t, th, td, u, v, a, aux)``
         integrates the chunk writing its recorded rows into the given arrays."""
         chunk = max(stride, (int(chunk_steps) // stride) * stride)
@@ -444,7 +461,8 @@ class Stepper:
                 grid = self._t0 + ks * self.dt
                 th = np.concatenate(([self._theta1], profile.theta1(grid)))
                 td = np.concatenate(([self._theta1_dot], profile.theta1_dot(grid)))
-                self._run_kernel(th, td, stride, u_rec, v_rec, a_rec, aux_rec)
+                self._run_kernel(th, td, stride, u_rec, v_rec, a_rec, aux_rec,
+                                 load_grid(load, self.t, grid))
                 idx = np.arange(1, m + 1) * stride
                 t_rec[:], th_rec[:], td_rec[:] = grid[idx - 1], th[idx], td[idx]
 

@@ -17,6 +17,22 @@ DEFAULT_OUTPUT_RATE = 10_000.0   # Hz: resolves the 94.5 Hz and 1.56 kHz modes, 
 MAX_CSV_GB = 2.0                 # default --max-csv-size [GB]
 
 
+def wind_from_arg(text: str) -> Any:
+    """``MEAN,INTENSITY[,TIME_SCALE[,SEED]]`` -> a WindLoad; CliError naming the option."""
+    from ..load import WindLoad
+    parts = [x.strip() for x in str(text).split(',')]
+    if not 2 <= len(parts) <= 4:
+        raise CliError(f'--wind {text!r}: give MEAN,INTENSITY[,TIME_SCALE[,SEED]], e.g. '
+                       '--wind 20,0.15,2,7')
+    try:
+        mean, intensity = float(parts[0]), float(parts[1])
+        scale = float(parts[2]) if len(parts) > 2 else 1.0
+        seed = int(parts[3]) if len(parts) > 3 else 0
+        return WindLoad(mean, intensity, scale, seed)
+    except ValueError as exc:
+        raise CliError(f'--wind {text!r}: {exc}') from None
+
+
 def register(sub: Any) -> None:
     """Add the ``simulate`` command to the subparsers ``sub``."""
     p = sub.add_parser('simulate', help='one run: CSV time series and PNG plot',
@@ -34,8 +50,12 @@ def register(sub: Any) -> None:
                      'prediction as a bag (--bag-out) and CSV, stamped on the recording\'s '
                      'clock')
     p.add_argument('--column', action='append', default=[], metavar='ROLE=NAME',
-                   help='--csv: read ROLE (t, theta1..theta4) from the column NAME, e.g. '
-                   'theta1=/worm_angle_command/data (repeatable)')
+                   help='--csv: read ROLE (t, theta1..theta4, load_torque) from the column '
+                   'NAME, e.g. theta1=/worm_angle_command/data (repeatable)')
+    p.add_argument('--wind', metavar='MEAN,INTENSITY[,TIME_SCALE[,SEED]]',
+                   help='a gusting wind load on the antenna in place of load.output_torque: '
+                   'mean torque [N m], turbulence intensity sigma_u/U (0..1), correlation '
+                   'time [s] (default 1), seed (default 0); docs/load.md')
     p.add_argument('--output', '-o', default='simulation.csv', metavar='CSV',
                    help='output CSV (default: %(default)s)')
     p.add_argument('--plot', metavar='PNG', help='plot file (default: the CSV name with .png)')
@@ -134,6 +154,7 @@ def check_output_size(dt: float, t_end: float, stride: int, out: Path, max_gb: f
 def cmd_simulate(args: argparse.Namespace) -> int:
     if args.bag:
         return _simulate_bag(args)
+    from ..load import SampledLoad
     from ..model import DriveModel
     from ..plotting import plot_trajectory
     from ..profiles import Profile, SampledProfile, make_profile
@@ -143,6 +164,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.column and not args.input_csv:
         raise CliError('--column needs --csv')
     cfg = config_from_args(args)
+    load = wind_from_arg(args.wind) if args.wind else None
     out = Path(args.output)
     if out.suffix.lower() != '.csv':
         raise CliError(f'--output must end in .csv, got {out}')
@@ -153,6 +175,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         rec = read_csv(cfg.input.csv_path, columns=_columns(args.column))
         profile = SampledProfile(rec.t, rec.theta1, source=cfg.input.csv_path)
         say(args, f'input: {rec.describe()}')
+        if rec.load_torque is not None:
+            if load is not None:
+                raise CliError(f'--wind and the load_torque column of {cfg.input.csv_path}: '
+                               'give one load')
+            load = SampledLoad(rec.t, rec.load_torque, source=cfg.input.csv_path)
         cols = ', '.join(f'{r} = {c!r}' for r, c in rec.source['columns'].items())
         say(args, f'columns: {cols}' + (f'; ignored: {", ".join(rec.source["ignored_columns"])}'
                                         if rec.source['ignored_columns'] else ''))
@@ -171,14 +198,17 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     out.parent.mkdir(parents=True, exist_ok=True)
     model = DriveModel(cfg)           # built once: the run and its equilibrium
+    if load is not None:
+        say(args, f'load: {load.describe()} (in place of load.output_torque)')
+        note += f'\nload torque on the antenna: {load.describe()}'
     if args.npz:
         import numpy as np
-        traj = simulate(model, profile, t_end, record_every=stride)
+        traj = simulate(model, profile, t_end, record_every=stride, load=load)
         traj.to_csv(out, header_comment=header(args) + note)
         np.savez(args.npz, allow_pickle=False, **traj.columns())
     else:                       # streamed: bounded memory; traj is a thinned copy
         traj = simulate_to_csv(model, out, profile, t_end, record_every=stride,
-                               header_comment=header(args) + note)
+                               header_comment=header(args) + note, load=load)
     wall = time.perf_counter() - t0
     files = [out] + ([Path(args.npz)] if args.npz else [])
     if not args.no_plot:
@@ -192,7 +222,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         f'{rate_text}')
     try:
         t_move = move_end_time(cfg, profile)
-        if traj.t[-1] > t_move:
+        if traj.t[-1] > t_move and load is None:   # the rest is the constant load's
             eq = equilibrium(model, float(traj.theta1[-1]))
             m = oscillation_metrics(traj, t_move, eq)
             say(args, f'after the move (t >= {t_move:g} s): max |theta2 - eq| = '

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..load import LoadSignal, SampledLoad
 from ..model import DriveModel
 from ..params import Config
 from ..profiles import Profile, SampledProfile, motion_span
@@ -100,7 +101,9 @@ def normalised(rec: Record, index: int) -> Record:
                   theta1=np.ascontiguousarray(rec.theta1[::k], float),
                   measured={o: np.ascontiguousarray(v[::k], float)
                             for o, v in rec.measured.items()},
-                  t0_ns=rec.t0_ns)
+                  t0_ns=rec.t0_ns,
+                  load_torque=None if rec.load_torque is None else
+                  np.ascontiguousarray(rec.load_torque[::k], float))
 
 
 def motion_times(t: np.ndarray, th1: np.ndarray) -> tuple[float, float]:
@@ -119,10 +122,12 @@ def predict(model: DriveModel | Config, rec: Record,
             t_end: float | None = None) -> dict[str, np.ndarray]:
     """The model's theta2, theta3, theta4 at the record's sample times up to ``t_end``.
 
-    Starts at rest in static equilibrium at theta1[0], command interpolated linearly between
-    the samples.  Raises SimulationError if the integration fails."""
+    Starts at rest in static equilibrium at theta1[0] (under the record's load torque at
+    t[0] when it has one), command (and load) interpolated linearly between the samples.
+    Raises SimulationError if the integration fails."""
     t = np.asarray(rec.t, float)
     th1 = np.asarray(rec.theta1, float)
+    load = None if rec.load_torque is None else SampledLoad(t, rec.load_torque)
     if t_end is not None:
         n = int(np.searchsorted(t, t_end, side='right'))
         t, th1 = t[:max(n, 2)], th1[:max(n, 2)]
@@ -131,18 +136,20 @@ def predict(model: DriveModel | Config, rec: Record,
     steps = (t - t[0]) / dt
     ks = np.rint(steps)
     sim = Simulator(model, theta1=float(th1[0]), t0=float(t[0]), interpolation='linear')
+    if load is not None:
+        sim.reset(float(th1[0]), float(t[0]), load_torque=float(load.values[0]))
     prof = SampledProfile(t, th1, 'linear')
     if np.all(np.abs(steps - ks) < 1e-6):
         k = ks.astype(np.int64)
         stride = int(np.gcd.reduce(np.diff(k))) if k.size > 1 else 1
         stride = max(stride, 1)
-        traj = sim.run(prof, t[0] + (k[-1] + 0.5) * dt, record_every=stride)
+        traj = sim.run(prof, t[0] + (k[-1] + 0.5) * dt, record_every=stride, load=load)
         rows = k // stride
         th = traj.theta[rows]
     else:   # samples off the step grid: record 8 times per sample interval (memory
         # bounded by the samples, not the steps), interpolate linearly between
         every = max(1, int(np.min(np.diff(t)) / dt) // 8) if t.size > 1 else 1
-        traj = sim.run(prof, float(t[-1]) + every * dt, record_every=every)
+        traj = sim.run(prof, float(t[-1]) + every * dt, record_every=every, load=load)
         th = np.column_stack([np.interp(t, traj.t, traj.theta[:, j]) for j in range(3)])
     return {name: th[:, j] for j, name in enumerate(OUTPUTS)}
 
@@ -150,14 +157,18 @@ def predict(model: DriveModel | Config, rec: Record,
 def record_from_model(cfg: DriveModel | Config, profile: Profile, t_end: float,
                       sample_rate: float = 1e4, outputs: Sequence[str] = ('theta4',),
                       noise_rad: float = 0.0, resolution_rad: float = 0.0, seed: int = 0,
-                      name: str = '') -> Record:
+                      name: str = '', load: LoadSignal | None = None) -> Record:
     """A synthetic record of the model (for tests, benchmarks and trying the fit): the profile
     sampled at ``sample_rate`` from 0 to ``t_end``, each output plus Gaussian noise
-    ``noise_rad`` (RMS) and quantised to ``resolution_rad`` (an encoder's step; 0: none)."""
+    ``noise_rad`` (RMS) and quantised to ``resolution_rad`` (an encoder's step; 0: none).
+    ``load``: a load torque signal, sampled into the record's ``load_torque`` and applied
+    (linear between the samples, as :func:`predict` applies a record's load)."""
     n = int(math.floor(t_end * sample_rate + 1e-9)) + 1
     t = np.arange(n) / sample_rate
     th1 = np.asarray(profile.theta1(t), float)
-    pred = predict(cfg, Record(name=name, t=t, theta1=th1, measured={'theta4': th1}))
+    tl = None if load is None else np.asarray(load.torque(t), float)
+    pred = predict(cfg, Record(name=name, t=t, theta1=th1, measured={'theta4': th1},
+                               load_torque=tl))
     rng = np.random.default_rng(seed)
     meas = {}
     for o in outputs:
@@ -165,7 +176,7 @@ def record_from_model(cfg: DriveModel | Config, profile: Profile, t_end: float,
         if resolution_rad > 0:
             y = np.round(y / resolution_rad) * resolution_rad
         meas[o] = y
-    return Record(name=name, t=t, theta1=th1, measured=meas)
+    return Record(name=name, t=t, theta1=th1, measured=meas, load_torque=tl)
 
 
 def measured_frequencies(base: DriveModel | Config, records: Sequence[Record]

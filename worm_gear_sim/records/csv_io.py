@@ -20,14 +20,21 @@ from typing import Any
 
 import numpy as np
 
+from ..load import LOAD_LIMIT
 from .record import ANGLE_NAMES, MEASURED_NAMES, Record, RecordError
 
 __all__ = ['read_csv', 'write_csv_header', 'write_csv_columns', 'ANGLE_UNITS', 'TIME_UNITS',
+           'TORQUE_UNITS', 'LOAD_NAME',
            'TIME_NAMES', 'MAX_CSV_LINE_CHARS', 'MAX_CSV_ROWS']
 
 #: angle units accepted in a CSV header, factor to rad
 ANGLE_UNITS: dict[str, float] = {'rad': 1.0, 'mrad': 1e-3, 'urad': 1e-6, 'µrad': 1e-6,
                                  'deg': math.pi / 180.0}
+#: torque units accepted in a CSV header (the ``load_torque`` column), factor to N m
+TORQUE_UNITS: dict[str, float] = {'N*m': 1.0, 'N.m': 1.0, 'N m': 1.0, 'Nm': 1.0, 'N·m': 1.0,
+                                  'mN*m': 1e-3, 'mNm': 1e-3, 'kN*m': 1e3, 'kNm': 1e3}
+#: the CSV column of a load torque signal on the antenna
+LOAD_NAME = 'load_torque'
 #: time units accepted in a CSV header, factor to s (exact decimals)
 TIME_UNITS: dict[str, Decimal] = {'s': Decimal(1), 'ms': Decimal('1e-3'),
                                   'us': Decimal('1e-6'), 'µs': Decimal('1e-6'),
@@ -83,9 +90,11 @@ def read_csv(path: str | Path, *, columns: Mapping[str, str] | None = None,
     """Read a CSV record whose header names its columns.
 
     Required: a time column ``t`` (also ``time`` or PlotJuggler's ``__time``) and
-    ``theta1``; optional ``theta2``, ``theta3``, ``theta4``.  A unit in brackets or
-    parentheses after the name is converted (time: s, ms, us, ns; angles: rad, mrad, urad,
-    deg); without one, SI (s, rad) is assumed.  ``columns`` maps a role to a header name
+    ``theta1``; optional ``theta2``, ``theta3``, ``theta4`` and ``load_torque`` (the load
+    on the antenna, positive turning it back).  A unit in brackets or parentheses after the
+    name is converted (time: s, ms, us, ns; angles: rad, mrad, urad, deg; torque: N*m,
+    mN*m, kN*m); without one, SI (s, rad, N m) is assumed; a load beyond +-1e5 N m is an
+    error.  ``columns`` maps a role to a header name
     (``{'theta1': '/worm_angle_command/data'}``).  Other columns are ignored and listed in
     ``source['ignored_columns']``.  Lines starting with '#' are comments.  Times become
     relative to the first sample, read as exact decimals (epoch stamps keep their
@@ -147,6 +156,12 @@ def _read_csv_stream(fh: Any, p: Path, columns: Mapping[str, str], name: str | N
             if unit not in TIME_UNITS:
                 raise RecordError(f'{where}: column {header[col].strip()!r}: unknown time unit '
                                   f'{unit!r} (use one of {", ".join(TIME_UNITS)})')
+        elif role == LOAD_NAME:
+            unit = unit or 'N*m'
+            if unit not in TORQUE_UNITS:
+                raise RecordError(f'{where}: column {header[col].strip()!r}: unknown torque '
+                                  f'unit {unit!r} (use one of {", ".join(TORQUE_UNITS)})')
+            scale[role] = TORQUE_UNITS[unit]
         else:
             unit = unit or 'rad'
             if unit not in ANGLE_UNITS:
@@ -201,8 +216,12 @@ def _read_csv_stream(fh: Any, p: Path, columns: Mapping[str, str], name: str | N
                 raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
                                   f'{what}') from None
             if not math.isfinite(v):
+                what = 'load torque' if _role == LOAD_NAME else 'angle'
                 raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
-                                  f'{cell} is not a finite angle')
+                                  f'{cell} is not a finite {what}')
+            if _role == LOAD_NAME and abs(v * k) > LOAD_LIMIT:
+                raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
+                                  f'load torque {cell} is beyond +-{LOAD_LIMIT:g} N m')
             vals.append(v * k)
     if n < min_samples:
         raise RecordError(f'{where}: {n} data row(s); a record needs at least '
@@ -224,7 +243,7 @@ def _read_csv_stream(fh: Any, p: Path, columns: Mapping[str, str], name: str | N
            'columns': {r: header[c].strip() for r, c in roles.items()},
            'ignored_columns': [header[i].strip() for i in range(n_fields) if i not in used]}
     return Record(name=name or p.stem, t=t, theta1=cols['theta1'],
-                  measured=measured, t0_ns=t0_ns, source=src)
+                  measured=measured, t0_ns=t0_ns, source=src, load_torque=cols.get(LOAD_NAME))
 
 
 def _csv_row(line: str, delim: str, where: str, line_no: int) -> list[str]:
@@ -245,7 +264,7 @@ def _is_number(text: str) -> bool:
 def _assign_roles(fields: list[tuple[str, str]], header: list[str],
                   columns: Mapping[str, str], where: str) -> dict[str, int]:
     """Column index of each role (t, theta1..theta4) by header name."""
-    known = ('t',) + ANGLE_NAMES
+    known = ('t',) + ANGLE_NAMES + (LOAD_NAME,)
     for role in columns:
         if role not in known:
             raise RecordError(f'column mapping {role!r}: unknown role (one of '

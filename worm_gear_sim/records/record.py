@@ -34,7 +34,9 @@ class Record:
     ``t`` [s] is relative to ``t0_ns`` (the source clock at t = 0; 0 when the source times
     started at 0) and strictly increasing; ``theta1`` [rad] is the command at ``t``;
     ``measured`` maps a subset of ``theta2``, ``theta3``, ``theta4`` to angles [rad] at
-    ``t``.  When the command came as a separate stream (a bag), ``command_stamps_ns``
+    ``t``; ``load_torque`` [N m] the load on the antenna at ``t`` when it was recorded or
+    designed (None: the model's constant).  When the command came as a separate stream
+    (a bag), ``command_stamps_ns``
     (absolute, int64) and ``command_values`` [rad] hold its raw samples in arrival order,
     invalid ones included, as a live node would have received them; ``t``/``theta1`` then
     hold the valid samples sorted by stamp (or the command interpolated at the measurement
@@ -51,6 +53,9 @@ class Record:
     command_values: np.ndarray | None = None
     source: dict[str, Any] = field(default_factory=dict)
     command_receive_ns: np.ndarray | None = None
+    #: load torque on the antenna [N m] at ``t`` (a CSV's ``load_torque`` column), or None:
+    #: the model's constant ``load.output_torque``
+    load_torque: np.ndarray | None = None
 
     @property
     def is_epoch(self) -> bool:

@@ -1,0 +1,169 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Load torque on the antenna (theta4) that varies in time: T_load(t) [N m], positive
+turning the antenna back (the sign of ``load.output_torque``, Eq. 6 + load).
+
+* :class:`SampledLoad`: a recorded or designed series (a CSV column ``load_torque``),
+  linear between samples, held before the first and after the last;
+* :class:`WindLoad`: gusts on a dish from a documented model (below), reproducible from a
+  seed.
+
+Both give ``torque(t)`` on arrays; the integrator takes the values on its own grid
+(:func:`worm_gear_sim.integrator.advance`, ``load[k+1]`` at the end of step k) and
+:func:`worm_gear_sim.simulation.simulate` starts the drive at rest under ``torque(0)``.
+
+Wind model (docs/load.md).  The aerodynamic torque on a dish goes with the square of the
+wind speed, U + u(t), so with the gust ratio x(t) = u(t)/U
+
+    T_load(t) = T_mean (1 + x(t))^2 / (1 + I^2)
+
+whose mean is T_mean.  x is a stationary Gauss-Markov (Ornstein-Uhlenbeck) process of
+standard deviation I (the turbulence intensity sigma_u / U) and correlation time tau (the
+integral length scale over the mean speed, L_u / U): one-sided spectrum
+
+    S_x(f) = 4 I^2 tau / (1 + (2 pi f tau)^2),
+
+the first-order (Dryden-type) gust spectrum.  It is sampled exactly on a grid of
+``tau / 50`` (at most 1 ms): x_{n+1} = a x_n + I sqrt(1 - a^2) e_n, a = exp(-h / tau),
+e_n standard normal from ``numpy.random.default_rng(seed)``, x_0 drawn from the
+stationary law; values in between are linear.  The same seed gives the same gusts
+whatever the span asked and in whatever pieces it is asked.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+__all__ = ['LoadSignal', 'SampledLoad', 'WindLoad', 'LOAD_LIMIT', 'load_grid']
+
+#: Largest |load torque| [N m] a signal may take (the range of ``load.output_torque``).
+LOAD_LIMIT = 1e5
+
+
+class LoadSignal:
+    """T_load(t) [N m] on arrays of times [s]."""
+
+    name = 'load'
+
+    def torque(self, t: ArrayLike) -> np.ndarray:
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        return self.name
+
+
+class SampledLoad(LoadSignal):
+    """A sampled load torque series, linear between samples; before the first sample the
+    first value, after the last the last value.  Non-finite values, |T| > LOAD_LIMIT or
+    times that do not increase strictly: ValueError naming the sample."""
+
+    name = 'sampled load'
+
+    def __init__(self, times: ArrayLike, values: ArrayLike, source: str = '') -> None:
+        t = np.asarray(times, float).reshape(-1)
+        y = np.asarray(values, float).reshape(-1)
+        if t.size == 0 or y.shape != t.shape:
+            raise ValueError(f'load torque: need equal-length time and torque series, got '
+                             f'{t.size} times and {y.size} values')
+        bad = np.flatnonzero(~np.isfinite(t) | ~np.isfinite(y) | (np.abs(y) > LOAD_LIMIT))
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(f'load torque: sample {i} (t = {t[i]!r} s, T = {y[i]!r} N m) is '
+                             f'not finite or beyond +-{LOAD_LIMIT:g} N m')
+        back = np.flatnonzero(np.diff(t) <= 0)
+        if back.size:
+            i = int(back[0]) + 1
+            raise ValueError(f'load torque: sample {i} at t = {t[i]!r} s does not follow '
+                             f'the previous one ({t[i - 1]!r} s); times must increase')
+        self.times, self.values, self.source = t, y, source
+
+    def torque(self, t: ArrayLike) -> np.ndarray:
+        return np.interp(np.asarray(t, float), self.times, self.values)
+
+    def describe(self) -> str:
+        src = f' from {self.source}' if self.source else ''
+        return (f'load torque sampled at {self.times.size} points, '
+                f'{self.values.min():.4g} to {self.values.max():.4g} N m{src}')
+
+
+class WindLoad(LoadSignal):
+    """Wind gusts on the antenna (module docstring): mean torque ``mean`` [N m],
+    turbulence intensity ``intensity`` (sigma_u / U, 0 to 1), correlation time
+    ``time_scale`` [s] (L_u / U), random ``seed``."""
+
+    name = 'wind'
+
+    def __init__(self, mean: float, intensity: float, time_scale: float = 1.0,
+                 seed: int = 0) -> None:
+        mean, intensity, time_scale = float(mean), float(intensity), float(time_scale)
+        if not (math.isfinite(mean) and abs(mean) <= LOAD_LIMIT / 4.0):
+            raise ValueError(f'wind: mean torque {mean!r} N m must be finite and within '
+                             f'+-{LOAD_LIMIT / 4.0:g} N m')
+        if not (math.isfinite(intensity) and 0.0 <= intensity <= 1.0):
+            raise ValueError(f'wind: gust intensity {intensity!r} must be in [0, 1] '
+                             '(sigma_u / U; 0.1 to 0.3 near the ground)')
+        if not (math.isfinite(time_scale) and 1e-3 <= time_scale <= 1e4):
+            raise ValueError(f'wind: time scale {time_scale!r} s must be in [1e-3, 1e4] s')
+        if int(seed) < 0:
+            raise ValueError(f'wind: seed {seed!r} must be >= 0')
+        self.mean, self.intensity, self.time_scale, self.seed = \
+            mean, intensity, time_scale, int(seed)
+        self.h = min(time_scale / 50.0, 1e-3)               # grid of the gust process [s]
+        self._a = math.exp(-self.h / time_scale)
+        self._rng = np.random.default_rng(self.seed)
+        self._x = np.array([intensity * float(self._rng.standard_normal())])
+
+    def _extend(self, n: int) -> None:
+        """Grow the gust ratio series to at least n points (in order: the same seed gives
+        the same series whatever the pieces asked)."""
+        have = self._x.size
+        if n <= have:
+            return
+        m = max(n - have, have)                       # amortised doubling
+        e = self._rng.standard_normal(m) * (self.intensity * math.sqrt(1.0 - self._a ** 2))
+        from scipy.signal import lfilter
+        # x_{n+1} = a x_n + e_n, started from the last value
+        x, _ = lfilter([1.0], [1.0, -self._a], e, zi=[self._a * self._x[-1]])
+        self._x = np.concatenate((self._x, x))
+
+    def gust_ratio(self, t: ArrayLike) -> np.ndarray:
+        """x(t) = u(t) / U at times >= 0 (held at x(0) before 0)."""
+        tt = np.clip(np.asarray(t, float), 0.0, None)
+        if tt.size == 0:
+            return tt
+        top = float(np.max(tt))
+        if not math.isfinite(top) or top > 1e7:
+            raise ValueError(f'wind: time {top!r} s out of range (0 to 1e7 s)')
+        self._extend(int(math.ceil(top / self.h)) + 2)
+        s = tt / self.h
+        i = np.minimum(np.floor(s).astype(np.int64), self._x.size - 2)
+        f = s - i
+        return self._x[i] * (1.0 - f) + self._x[i + 1] * f
+
+    def torque(self, t: ArrayLike) -> np.ndarray:
+        x = self.gust_ratio(t)
+        return self.mean * (1.0 + x) ** 2 / (1.0 + self.intensity ** 2)
+
+    def spectrum(self, f: ArrayLike) -> np.ndarray:
+        """One-sided spectrum of the gust ratio x [1/Hz] at frequencies f [Hz]."""
+        f = np.asarray(f, float)
+        return 4.0 * self.intensity ** 2 * self.time_scale / \
+            (1.0 + (2.0 * math.pi * f * self.time_scale) ** 2)
+
+    def describe(self) -> str:
+        return (f'wind: mean {self.mean:.4g} N m, gust intensity {self.intensity:.3g}, time '
+                f'scale {self.time_scale:.3g} s, seed {self.seed}')
+
+
+def load_grid(signal: LoadSignal | None, t_now: float, grid: np.ndarray) -> np.ndarray:
+    """The load on the integrator's grid: [T(t_now), T(grid...)], or an empty array for
+    the model's constant load (``signal`` None)."""
+    if signal is None:
+        return np.empty(0)
+    out = np.empty(grid.size + 1)
+    out[0] = float(signal.torque(np.array([t_now]))[0])
+    out[1:] = signal.torque(grid)
+    return out
