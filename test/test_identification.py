@@ -296,3 +296,31 @@ def test_jacobian_step_sees_through_decision_noise(base):
     # error bound of the jumps at the chosen step: 1e-3 / h
     np.testing.assert_allclose(J[:, 1], [0, 1, 1], atol=1e-3 / steps[1])
     assert max(change) <= STEP_CONSISTENCY_WARN
+
+
+# ---- outputs judged one by one: sampling ---------------------------------------------------
+def test_sampling_check_names_an_output_whose_mode_is_above_its_nyquist(base):
+    """theta2 at 10 kHz (worm mode 8.6 kHz above Nyquist): not observable, named with the
+    mode and the rate it needs; at 25 kHz observable; theta3 and theta4 observable at 10
+    kHz.  Only theta2 records: the problem refuses with that reason."""
+    from worm_gear_sim.identification.observability import sampling_advice, sampling_check
+    slow = record_from_model(base, TRAIN, 0.15, 1e4, ('theta2', 'theta3', 'theta4'),
+                             name='slow')
+    fast = record_from_model(base, TRAIN, 0.05, 2.5e4, ('theta2',), name='fast')
+    v = sampling_check(base, [slow])
+    assert not v['theta2'].observable and v['theta2'].share_above_nyquist > 0.3
+    assert v['theta2'].mode_hz == pytest.approx(modes(base).frequencies_hz[2], rel=1e-6)
+    assert '8588 Hz mode' in v['theta2'].describe() and '21470 Hz' in v['theta2'].describe()
+    assert v['theta3'].observable and v['theta4'].observable
+    assert sampling_check(base, [fast])['theta2'].observable
+    advice = sampling_advice(base)
+    assert advice['theta2'] > 2 * 8588 and advice['theta4'] < 1000
+    only2 = Record(name='only2', t=slow.t, theta1=slow.theta1,
+                   measured={'theta2': slow.measured['theta2']})
+    with pytest.raises(IdentificationError, match='no measured output is observable'):
+        Problem(base, fit_parameters(base, [KG]), [only2])
+    p = Problem(base, fit_parameters(base, [KG]), [slow])
+    assert p.outputs == ['theta3', 'theta4'] and 'theta2' in p.left_out
+    assert all('theta2' not in r.measured for r in p.records)
+    forced = Problem(base, fit_parameters(base, [KG]), [slow], outputs=['theta2', 'theta4'])
+    assert forced.outputs == ['theta2', 'theta4'] and 'theta3' in forced.left_out

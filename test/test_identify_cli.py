@@ -126,6 +126,15 @@ def test_bag_records(tmp_path, truth):
     out = tmp_path / 'fit.yaml'
     assert main(['identify', str(bag), '--fit', f'{KG},{ZETA}', '-o', str(out), *FAST]) == 0
     report = json.loads(out.with_suffix('.json').read_text())
+    # theta2 sampled at 10 kHz: its 8.6 kHz worm mode lies above Nyquist, so it is named
+    # and left out; chosen explicitly (--outputs) it is fitted too (here the records come
+    # from the model itself, so even its aliased samples match)
+    assert set(report['rms_after_rad']) == {'theta4'}
+    assert 'not observable' in report['output_verdicts']['theta2']
+    assert report['output_verdicts']['theta4'] == 'matched'
+    assert main(['identify', str(bag), '--fit', f'{KG},{ZETA}', '-o', str(out), *FAST,
+                 '--outputs', 'theta2,theta4']) == 0
+    report = json.loads(out.with_suffix('.json').read_text())
     assert set(report['rms_after_rad']) == {'theta2', 'theta4'}
     est = {p['key']: p for p in report['parameters']}
     assert est[KG]['estimate'] == pytest.approx(truth.materials.gear_shaft_shear_modulus,
@@ -243,3 +252,40 @@ def test_node_loads_the_fitted_yaml(fitted, ros_dds_context, ros_subprocess_env,
         ex.shutdown()
         node.destroy_node()
     assert rc == 0 and 'Traceback' not in text, text
+
+
+def test_an_aliased_output_is_named_and_the_others_still_give_a_yaml(tmp_path, capsys):
+    """A drive that differs from the model where no fitted key reaches (a shorter, stiffer
+    worm shaft: its worm mode moves), theta2 and theta4 sampled at 10 kHz: theta2's worm
+    mode is above its Nyquist frequency, so no model can follow its phase.  The fit names
+    theta2 as not observable (with the mode and the rate it needs), fits theta4, and writes
+    the YAML; forced to fit theta2 too, the same fit is refused for theta2 (not matched)."""
+    base = load_config()
+    flat = base.to_flat_dict()
+    truth = base.replace({KG: flat[KG] * 1.2, 'damping.modal_damping_ratios': [0.01, 0, 0],
+                          'shafts.worm_shaft_length': flat['shafts.worm_shaft_length'] * 0.7})
+    rec = _record(truth, TrapezoidalProfile(0.1131, 0.02, 0.004, 0.005), 5,
+                  outputs=('theta2', 'theta4'))
+    data = _csv(tmp_path / 'drive.csv', rec)
+    out = tmp_path / 'fit.yaml'
+    assert main(['identify', str(data), '--fit', f'{KG},{ZETA}', '-o', str(out), *FAST]) == 0
+    printed = capsys.readouterr().out
+    report = json.loads(out.with_suffix('.json').read_text())
+    verdict = report['output_verdicts']
+    assert verdict['theta4'] == 'matched' and report['trustworthy']
+    assert 'not observable at this sampling' in verdict['theta2']
+    assert '10000 Hz' in verdict['theta2'] and '8588 Hz mode' in verdict['theta2'], verdict
+    assert 'not observable' in printed and out.exists()
+    assert 'theta2: not observable' in out.read_text()          # named in the YAML's header
+    est = {p['key']: p['estimate'] for p in report['parameters']}
+    assert est[KG] == pytest.approx(flat[KG] * 1.2, rel=0.02)
+    forced = tmp_path / 'forced.yaml'
+    rc = main(['identify', str(data), '--fit', f'{KG},{ZETA}', '-o', str(forced), *FAST,
+               '--outputs', 'theta2,theta4'])
+    report = json.loads(forced.with_suffix('.json').read_text())
+    assert rc == 2 and not forced.exists()
+    assert report['output_verdicts']['theta2'].startswith('not matched'), report
+    for bad, words in (('theta5', 'choose among'), ('theta3', 'not measured')):
+        rc = main(['identify', str(data), '--fit', KG, '-o', str(tmp_path / 'b.yaml'), *FAST,
+                   '--outputs', bad])
+        assert rc == 2 and words in capsys.readouterr().err

@@ -63,6 +63,10 @@ def register(subparsers: Any) -> None:
                    help='held-out records: prediction error of the fitted model')
     p.add_argument('--bounds', action='append', default=[], metavar='KEY=LO:HI',
                    help='narrower bounds (and multi-start box) for a fitted key')
+    p.add_argument('--outputs', metavar='LIST', help='the measured outputs to fit, e.g. '
+                   'theta4 or theta2,theta4 (default: every measured output observable at '
+                   'its sampling; one whose motion lies above its Nyquist frequency is named '
+                   'and left out, docs/identification.md)')
     g = p.add_argument_group('search')
     g.add_argument('--strategy', choices=list(STRATEGIES), default='robust',
                    help='robust (default): frequency start + growing windows + multi-start; '
@@ -187,7 +191,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
                      max_nfev=args.max_nfev, workers=args.workers, scheduler=args.scheduler,
                      serial=args.serial, progress=not (args.no_progress or args.quiet))
     t0 = time.perf_counter()
-    res = identify(cfg, records, keys, bounds=bounds, options=opt)
+    outputs = [o.strip() for o in args.outputs.split(',') if o.strip()] \
+        if args.outputs else None
+    res = identify(cfg, records, keys, bounds=bounds, options=opt, outputs=outputs)
     wall = time.perf_counter() - t0
     say(args, f'fitted {len(keys)} parameter(s) to {len(records)} record(s) in {wall:.1f} s '
         f'({res.strategy["n_starts"]} start(s), strategy {args.strategy})')
@@ -223,6 +229,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
                   f'base: {report["base_config"]}; created {time.strftime("%Y-%m-%d %H:%M:%S")}']
         for k, v, (lo, hi) in zip(res.keys, res.values, res.ci95):
             header.append(f'{k} = {v:.9g}  (95 % interval {lo:.6g} .. {hi:.6g})')
+        for o, v in res.output_verdicts.items():
+            header.append(v if v.startswith(o) else f'{o}: {v}')
         if not res.trustworthy:
             header.append('NOT TRUSTWORTHY (written with --force): ' + '; '.join(res.problems))
         write_params_yaml(res.config, out, header)

@@ -71,6 +71,11 @@ def cmd_modes(args: argparse.Namespace) -> int:
     print(f'dt = {dt:g} s: ' + '; '.join(
         f'mode {r["mode"]} {r["steps_per_period"]:.1f} steps/period, Newmark period '
         f'elongation {100 * r["period_elongation"]:.2f} %' for r in rows))
+    from ..identification.observability import ADVISED_SAMPLES_PER_PERIOD, sampling_advice
+    advice = sampling_advice(cfg)
+    print(f'sample rates to measure each angle for identify ({ADVISED_SAMPLES_PER_PERIOD:g} '
+          'samples per period of the highest mode that moves it): '
+          + ', '.join(f'{o} >= {f:.0f} Hz' for o, f in advice.items()))
     if args.output:
         from ..studies import rows_to_csv
         out = Path(args.output)
@@ -80,7 +85,8 @@ def cmd_modes(args: argparse.Namespace) -> int:
     if args.json:
         doc = {'theta1': args.theta1, 'sliding_rate': args.sliding_rate,
                'operating_point': [float(x) for x in res.operating_point], 'modes': rows,
-               'M': res.M.tolist(), 'K': res.K.tolist(), 'C': res.C.tolist()}
+               'M': res.M.tolist(), 'K': res.K.tolist(), 'C': res.C.tolist(),
+               'advised_sample_rate_hz': {o: float(f) for o, f in advice.items()}}
         params_json_dump(doc, args.json)
         print(f'wrote {args.json}')
     if args.plot:

@@ -226,13 +226,16 @@ def _starts(problem: Problem, x_first: list[np.ndarray], n_starts: int, seed: in
 def identify(base: Config, records: Sequence[Record], keys: Sequence[str], *,
              bounds: Mapping[str, tuple[float, float]] | None = None,
              options: FitOptions | None = None,
-             on_start_done: Callable[[dict], None] | None = None) -> FitResult:
-    """Fit ``keys`` of ``base`` to the records jointly (see the module docstring)."""
+             on_start_done: Callable[[dict], None] | None = None,
+             outputs: Sequence[str] | None = None) -> FitResult:
+    """Fit ``keys`` of ``base`` to the records jointly (see the module docstring).
+    ``outputs``: the measured outputs to fit (default: those observable at their sampling;
+    the others are named in the result's ``output_verdicts``)."""
     t_begin = time.perf_counter()
     opt = options or FitOptions()
     use_freq, use_windows, n_starts = opt.resolved()
     params = fit_parameters(base, keys, bounds)
-    problem = Problem(base, params, records)
+    problem = Problem(base, params, records, outputs)
     x_base = np.zeros(problem.n)
     freq_info: dict[str, Any] = {}
     first = []

@@ -22,6 +22,7 @@ stays below 1 %.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -39,6 +40,7 @@ from .data import (
     predict,
     rigid_motion,
 )
+from .observability import sampling_check
 from .parameters import FitParameter, apply_values
 
 __all__ = ['DIFF_STEP', 'Problem', 'jacobian']
@@ -51,14 +53,47 @@ class Problem:
     """Records + base config + fitted keys -> weighted residual vector r(x)."""
 
     def __init__(self, base: Config, params: Sequence[FitParameter],
-                 records: Sequence[Record]):
+                 records: Sequence[Record], outputs: Sequence[str] | None = None):
+        """``outputs``: the measured outputs to fit (None: every measured output that is
+        observable at its sampling, :mod:`.observability`)."""
         if not records:
             raise IdentificationError('no records to fit')
         self.base = base
         self.params = list(params)
         self.records = [normalised(r, i) for i, r in enumerate(records)]
         rigid = rigid_motion(base)
-        self.outputs = [o for o in OUTPUTS if any(o in r.measured for r in self.records)]
+        measured = [o for o in OUTPUTS if any(o in r.measured for r in self.records)]
+        self.sampling = sampling_check(base, self.records)
+        #: outputs measured but not fitted, with the reason
+        self.left_out: dict[str, str] = {}
+        if outputs is None:
+            self.outputs = [o for o in measured if self.sampling[o].observable]
+            self.left_out = {o: self.sampling[o].describe() for o in measured
+                             if not self.sampling[o].observable}
+            if not self.outputs:
+                raise IdentificationError(
+                    'no measured output is observable at its sampling: '
+                    + '; '.join(self.left_out.values())
+                    + ' (--outputs fits them anyway)')
+        else:
+            chosen = list(dict.fromkeys(str(o).strip() for o in outputs))
+            unknown = [o for o in chosen if o not in OUTPUTS]
+            if unknown or not chosen:
+                raise IdentificationError(f'outputs {", ".join(unknown) or "(none)"}: choose '
+                                          f'among {", ".join(OUTPUTS)}')
+            missing = [o for o in chosen if o not in measured]
+            if missing:
+                raise IdentificationError(f'outputs {", ".join(missing)}: not measured in the '
+                                          f'records (measured: {", ".join(measured)})')
+            self.outputs = [o for o in OUTPUTS if o in chosen]
+            self.left_out = {o: f'{o}: not fitted (not among the chosen outputs)'
+                             for o in measured if o not in chosen}
+        # the records as the fit sees them: the fitted outputs only (an aliased output would
+        # also mislead the frequency start and the time windows)
+        self.records = [replace(r, measured={o: v for o, v in r.measured.items()
+                                             if o in self.outputs})
+                        for r in self.records]
+        self.records = [r for r in self.records if r.measured]
         self.scale: dict[str, float] = {}
         for o in self.outputs:
             j = OUTPUTS.index(o)

@@ -66,6 +66,9 @@ class FitResult:
     base_config: Config = field(repr=False)
     step_consistency: list[float] = field(default_factory=list)
     jacobian_steps: list[float] = field(default_factory=list)
+    #: every measured output: 'matched', 'not matched: ...', or why it was not fitted
+    #: ('... not observable at this sampling ...', 'not fitted ...')
+    output_verdicts: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -85,6 +88,7 @@ class FitResult:
             'trustworthy': self.trustworthy, 'problems': self.problems,
             'warnings': self.warnings, 'strategy': self.strategy, 'starts': self.starts,
             'frequency_start': self.frequency_info, 'seconds': self.seconds,
+            'output_verdicts': self.output_verdicts,
         }
 
     def table(self) -> str:
@@ -92,6 +96,9 @@ class FitResult:
         for k, u, b, v, (lo, hi) in zip(self.keys, self.units, self.base_values, self.values,
                                         self.ci95):
             lines.append(f'{k:<44} {b:>12.6g} {v:>12.6g} [{lo:>11.6g}, {hi:>11.6g}]  {u}')
+        if self.output_verdicts:
+            lines.append('outputs: ' + '; '.join(
+                v if v.startswith(o) else f'{o}: {v}' for o, v in self.output_verdicts.items()))
         lines.append('residual RMS per output [rad] (before -> after, % of the residual scale):')
         for o in self.rms_after:
             s = self.scale[o]
@@ -237,14 +244,18 @@ def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
         problems.append(f'the fit did not converge within {max_nfev} evaluations '
                         f'({best["message"]}; the cost still fell by '
                         f'{best["stages"][-1]["last_decrease"]:.3g} over the last ones)')
+    verdicts: dict[str, str] = {}
     for o in problem.outputs:
         rel = rms_after[o] / problem.scale[o]
+        verdicts[o] = 'matched'
         if not math.isfinite(rel):
             problems.append(f'the fitted model cannot be simulated on every record ({o})')
+            verdicts[o] = 'not matched: the fitted model cannot be simulated on every record'
         elif rel > 0.25 and rms_after[o] > 3.0 * problem.noise[o]:
             problems.append(f'{o}: residual RMS {100 * rel:.0f} % of the measured motion '
                             f'(> 25 %) and {rms_after[o] / max(problem.noise[o], 1e-300):.1f}'
                             ' x the noise level: the model does not match the records')
+            verdicts[o] = f'not matched: residual RMS {100 * rel:.0f} % of the measured motion'
         elif rms_after[o] > rms_before[o] * 1.0001:
             warnings.append(f'{o}: residual RMS grew ({rms_before[o]:.3g} -> '
                             f'{rms_after[o]:.3g} rad)')
@@ -301,7 +312,10 @@ def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
         correlation=np.where(np.isfinite(corr), corr, np.nan).tolist(),
         rms_before=rms_before, rms_after=rms_after, scale=dict(problem.scale),
         noise=dict(problem.noise), per_record=per_record, cost=float(0.5 * r @ r),
-        converged=converged, trustworthy=not problems, problems=problems, warnings=warnings,
+        converged=converged, trustworthy=not problems, problems=problems,
+        warnings=warnings + list(problem.left_out.values()),
+        output_verdicts={o: verdicts.get(o) or problem.left_out[o]
+                         for o in OUTPUTS if o in verdicts or o in problem.left_out},
         config=model_fit.config, base_config=problem.base,
         step_consistency=[float(s) for s in step_change], jacobian_steps=steps)
 
