@@ -814,3 +814,92 @@ def test_stamped_path_counts_every_sample_once_and_equals_the_twin(seed, lag_ms,
     want = feedforward_series(cfg, np.array(acc, dtype=np.int64),
                               [corrections[s][0] for s in acc])
     assert max(abs(corrections[s][1] - w) for s, w in zip(acc, want)) <= 1e-9
+
+
+# ---- a load torque arriving live (push_load) ---------------------------------------------
+def _live_with_load(cfg, st, x, lt, lv, bad=()):
+    """Push the references and the load samples in stamp order (a load sample goes out
+    when its stamp is due, 2 ms ahead of the reference of that time); ``bad``: (stamp,
+    value) load samples pushed right after the first reference."""
+    p = RealtimePredictor(cfg, compensate=False)
+    j = 0
+    reasons = []
+    preds = []
+    for i, (s, v) in enumerate(zip(st, x)):
+        while j < len(lt) and lt[j] <= s + 2 * MS:
+            assert p.push_load(int(lt[j]), float(lv[j]), now_ns=int(s)) is None
+            j += 1
+        o = p.push(int(s), float(v), now_ns=int(s) + 150_000)
+        assert o.accepted
+        preds += o.predictions
+        if i == 0:
+            reasons = [p.push_load(int(b), float(bv), now_ns=int(s) + 150_000)
+                       for b, bv in bad]
+    return p, preds, reasons
+
+
+def test_a_live_load_equals_the_offline_load_signal():
+    """References at 1 kHz (jittered) and a load torque at 100 Hz on the load topic: the
+    predictions equal the batch simulator with the same references and a SampledLoad of
+    the same samples held from their stamps (the live rule); the load changes the
+    prediction."""
+    from worm_gear_sim.load import SampledLoad
+    cfg = Config()
+    rng = np.random.default_rng(7)
+    st, x = slew(300, rng, jitter_ns=200_000)
+    lt = st[0] + np.arange(0, 40) * 10 * MS - 1 * MS          # first one before the stream
+    lv = 4.0 + 3.0 * np.sin(2 * np.pi * 5.0 * (lt - st[0]) * 1e-9)
+    p, preds, _ = _live_with_load(cfg, st, x, lt, lv)
+    assert p.counters['load_samples_accepted'] == np.count_nonzero(lt <= st[-1] + 2 * MS)
+    assert p.counters['late_load_samples'] == 0 and p.counters['rejected_load_samples'] == 0
+    t = (st - st[0]) * 1e-9
+    tl = (lt - st[0]) * 1e-9
+    tl[0] = 0.0                  # the sample before the stream: the load at its start
+    sim = Simulator(cfg, theta1=float(x[0]))
+    sim.reset(float(x[0]), load_torque=float(lv[0]))
+    traj = sim.run(SampledProfile(t, x), t[-1], record_every=1,
+                   load=SampledLoad(tl, lv, interpolation='hold'))
+    k = np.floor(t / cfg.integrator.time_step + 1e-9).astype(int)
+    th4 = np.array([q.theta[2] for q in preds])
+    np.testing.assert_allclose(th4, traj.theta4[k[:len(preds)]], rtol=0, atol=1e-12)
+    bare = Simulator(cfg, theta1=float(x[0])).run(SampledProfile(t, x), t[-1],
+                                                  record_every=1)
+    assert np.max(np.abs(bare.theta4[k] - traj.theta4[k])) > 1e-5
+    assert p.load_torque == float(lv[np.searchsorted(tl, p.sim.t, side='right') - 1])
+
+
+@pytest.mark.parametrize('stamp_off, value, reason', [
+    (5 * MS, math.nan, Reject.NAN), (5 * MS, math.inf, Reject.INF),
+    (5 * MS, 2e5, Reject.OUT_OF_RANGE), (None, 1.0, Reject.ZERO_STAMP),
+    ('neg', 1.0, Reject.NEGATIVE_STAMP), (-2 * 10 ** 9, 1.0, Reject.TOO_OLD),
+    (3 * 10 ** 9, 1.0, Reject.TOO_NEW), (-1 * MS, 1.0, Reject.DUPLICATE),
+    (-6 * MS, 1.0, Reject.OUT_OF_ORDER)])
+def test_bad_load_samples_are_rejected_counted_and_leave_the_state(stamp_off, value, reason):
+    """Each bad load sample (pushed after the first reference, whose load sample came 1 ms
+    before it): rejected with its reason, counted under rejected_load_<reason>, and the
+    predictions equal those of the same run without it."""
+    cfg = Config()
+    st, x = slew(60, np.random.default_rng(3), jitter_ns=0)
+    lt = st[0] + np.arange(0, 8) * 10 * MS - 1 * MS
+    lv = np.linspace(1.0, 6.0, lt.size)
+    stamp = 0 if stamp_off is None else -7 if stamp_off == 'neg' else int(st[0]) + stamp_off
+    ok, want, _ = _live_with_load(cfg, st, x, lt, lv)
+    p, got, reasons = _live_with_load(cfg, st, x, lt, lv, bad=[(stamp, value)])
+    assert reasons == [reason]
+    c = p.counters
+    assert c['rejected_load_' + reason.value] == 1 and c['rejected_load_samples'] == 1
+    assert c['load_samples_accepted'] == ok.counters['load_samples_accepted']
+    assert [q.theta for q in got] == [q.theta for q in want]
+    assert set(c) == set(COUNTER_NAMES)
+
+
+def test_a_late_load_sample_applies_from_the_simulators_time():
+    p = RealtimePredictor(Config(), compensate=False)
+    for k in range(20):
+        p.push(EPOCH + k * MS, 0.0, now_ns=EPOCH + k * MS)
+    t_sim = p.sim.t
+    assert p.push_load(EPOCH + 5 * MS, 7.0, now_ns=EPOCH + 20 * MS) is None
+    assert p.counters['late_load_samples'] == 1 and p.sim.t == t_sim
+    assert p.load_torque == 7.0
+    p.push(EPOCH + 20 * MS, 0.0, now_ns=EPOCH + 20 * MS)
+    assert p.load_torque == 7.0

@@ -56,13 +56,20 @@ class LoadSignal:
 
 
 class SampledLoad(LoadSignal):
-    """A sampled load torque series, linear between samples; before the first sample the
-    first value, after the last the last value.  Non-finite values, |T| > LOAD_LIMIT or
-    times that do not increase strictly: ValueError naming the sample."""
+    """A sampled load torque series: ``interpolation='linear'`` between samples (default),
+    or ``'hold'`` (each sample applies from its time to the next: what the node does with
+    the live ``load_torque`` topic); before the first sample the first value, after the
+    last the last value.  Non-finite values, |T| > LOAD_LIMIT or times that do not
+    increase strictly: ValueError naming the sample."""
 
     name = 'sampled load'
 
-    def __init__(self, times: ArrayLike, values: ArrayLike, source: str = '') -> None:
+    def __init__(self, times: ArrayLike, values: ArrayLike, source: str = '',
+                 interpolation: str = 'linear') -> None:
+        if interpolation not in ('linear', 'hold'):
+            raise ValueError(f'load torque: interpolation must be linear or hold, got '
+                             f'{interpolation!r}')
+        self.interpolation = interpolation
         t = np.asarray(times, float).reshape(-1)
         y = np.asarray(values, float).reshape(-1)
         if t.size == 0 or y.shape != t.shape:
@@ -81,7 +88,11 @@ class SampledLoad(LoadSignal):
         self.times, self.values, self.source = t, y, source
 
     def torque(self, t: ArrayLike) -> np.ndarray:
-        return np.interp(np.asarray(t, float), self.times, self.values)
+        t = np.asarray(t, float)
+        if self.interpolation == 'hold':
+            i = np.searchsorted(self.times, t, side='right') - 1
+            return self.values[np.clip(i, 0, None)]
+        return np.interp(t, self.times, self.values)
 
     def describe(self) -> str:
         src = f' from {self.source}' if self.source else ''

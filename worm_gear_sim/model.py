@@ -412,6 +412,18 @@ def has_play(p: np.ndarray) -> bool:
     return bool(p[P_GAP_HALF] > 0.0)
 
 
+def load_torque_of(p: np.ndarray) -> float:
+    """The constant load torque on the antenna of a packed vector [N m]."""
+    return float(p[P_TLOAD])
+
+
+def with_load_torque(p: np.ndarray, torque: float) -> np.ndarray:
+    """A copy of the packed vector with another constant load torque [N m]."""
+    q = p.copy()
+    q[P_TLOAD] = torque
+    return q
+
+
 def without_play(p: np.ndarray) -> np.ndarray:
     """A copy of the packed vector without the clearance."""
     q = p.copy()

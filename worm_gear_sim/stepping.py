@@ -55,11 +55,12 @@ from .model import (
     AUX_FX,
     AUX_FY,
     N_AUX,
-    P_TLOAD,
     DriveModel,
     generalized_forces,
+    load_torque_of,
     mechanical_energy,
     mesh_forces_mu,
+    with_load_torque,
 )
 from .profiles import Profile
 from .schema import ANGLE_LIMIT, Parameters
@@ -101,7 +102,7 @@ def _finite_vector(name: str, x: ArrayLike, limit: float, unit: str) -> np.ndarr
     return arr
 
 
-_NO_LOAD = np.empty(0)      # the kernel's "constant load p[P_TLOAD]"
+_NO_LOAD = np.empty(0)      # the kernel's "the model's constant load"
 
 #: advance_to integrates long spans in chunks of this many steps (1 MB of command samples).
 ADVANCE_CHUNK = 1 << 16
@@ -132,6 +133,7 @@ class Stepper:
         self._stats = np.zeros(N_STATS, dtype=np.int64)
         # Newton controller: contraction, steps since verify; friction mode and mu_eff
         self._ctl = np.zeros(N_CTL)
+        self._load_t, self._load_v = np.empty(0), np.empty(0)   # push_load's samples
         self.reset(theta1, t0)
 
     # ---- state ---------------------------------------------------------------------------
@@ -139,16 +141,20 @@ class Stepper:
               omega: ArrayLike | None = None, *, load_torque: float | None = None) -> None:
         """Start at time t0 with command theta1; by default at rest in static equilibrium.
         ``load_torque`` [N m]: the load at t0 when a load signal drives the run (default:
-        the model's constant ``load.output_torque``): the rest and the initial acceleration
-        are taken under it.  Raises ValueError (state unchanged) for a non-finite or
-        out-of-range input: angles beyond ANGLE_LIMIT, rates beyond RATE_LIMIT, or a state
-        whose acceleration is not finite."""
+        the load of :meth:`push_load`'s samples at t0 if any, which holds from t0 until
+        the next later sample, else the model's constant ``load.output_torque``): the rest
+        and the initial acceleration are taken under it.  Raises ValueError (state
+        unchanged) for a non-finite or out-of-range input: angles beyond ANGLE_LIMIT, rates
+        beyond RATE_LIMIT, or a state whose acceleration is not finite."""
         theta1 = _finite_scalar('reset: theta1', theta1, ANGLE_LIMIT, 'rad')
         t0 = _finite_scalar('reset: t0', t0, TIME_LIMIT, 's')
         p = self.p
+        live = self._load_t.size > 0
+        if load_torque is None and live:   # pushed load samples: the load at t0 holds on
+            load_torque = float(self._held_load(np.array([t0]))[0])
         if load_torque is not None:
-            p = p.copy()
-            p[P_TLOAD] = _finite_scalar('reset: load_torque', load_torque, LOAD_LIMIT, 'N m')
+            p = with_load_torque(p, _finite_scalar('reset: load_torque', load_torque,
+                                                   LOAD_LIMIT, 'N m'))
         if theta is None:
             u = static_equilibrium(p, theta1)
         else:
@@ -164,6 +170,10 @@ class Stepper:
         self._t0 = t0
         self._k = 0
         self._u, self._v, self._a = u, v, a
+        if live:     # the samples before t0 are done with; the later ones stay
+            later = self._load_t > t0
+            self._load_t = np.concatenate(([t0], self._load_t[later]))
+            self._load_v = np.concatenate(([load_torque_of(p)], self._load_v[later]))
         self._theta1 = theta1
         self._theta1_dot = 0.0
         self._cmd_t = self._t0
@@ -310,14 +320,68 @@ class Stepper:
                     self.p, self.C, self._u, self._v, self._a, self._theta1,
                     self._theta1_dot, self._t0, self._k, self.dt, m, self._cmd_t,
                     self._cmd_value if slope != 0.0 else theta1, slope, t_target,
-                    theta1, self._stats, self._ctl)
+                    theta1, self._stats, self._ctl, self._load_on_grid(m))
                 self._after_kernel(done, status,
                                    self._segment_value(done, theta1, slope, t_target), slope)
                 left -= m
+            self._trim_load()
         if t_target > self._cmd_t or n > 0:
             self._cmd_t = max(t_target, self._cmd_t)
             self._cmd_value = theta1
         return max(n, 0)
+
+    # ---- a load torque that arrives in real time ------------------------------------------
+    def push_load(self, t: float, torque: float) -> bool:
+        """A load torque sample [N m] at time ``t`` for :meth:`advance_to`: it applies from
+        ``t`` until the next sample's time (zero-order hold: causal, so a live stream needs
+        no look-ahead; ``SampledLoad(..., interpolation='hold')`` is its offline twin);
+        before the first sample the load is the model's constant ``load.output_torque``.
+        Times must increase (ValueError otherwise).  A sample at or before the simulator's
+        time applies from its time on (returns False: it came late); True otherwise."""
+        t = _finite_scalar('push_load: t', t, TIME_LIMIT, 's')
+        torque = _finite_scalar('push_load: torque', torque, LOAD_LIMIT, 'N m')
+        lt, lv = self._load_t, self._load_v
+        if lt.size and t <= lt[-1]:
+            raise ValueError(f'push_load: t = {t!r} s is not after the last load sample '
+                             f'({lt[-1]!r} s)')
+        now = self.t
+        if t <= now:           # late: from now on
+            self._load_t, self._load_v = np.array([now]), np.array([torque])
+            return False
+        if not lt.size:        # the constant until the first sample
+            lt, lv = np.array([now]), np.array([self.load_torque])
+        self._load_t, self._load_v = np.append(lt, t), np.append(lv, torque)
+        return True
+
+    def hold_load(self, torque: float) -> None:
+        """The load torque [N m] from the simulator's time on, held (replaces every pushed
+        sample)."""
+        torque = _finite_scalar('hold_load: torque', torque, LOAD_LIMIT, 'N m')
+        self._load_t, self._load_v = np.array([self.t]), np.array([torque])
+
+    @property
+    def load_torque(self) -> float:
+        """The load torque on the antenna at the simulator's time [N m]."""
+        if self._load_t.size:
+            return float(self._held_load(np.array([self.t]))[0])
+        return load_torque_of(self.p)
+
+    def _held_load(self, t: np.ndarray) -> np.ndarray:
+        i = np.searchsorted(self._load_t, t, side='right') - 1
+        return self._load_v[np.clip(i, 0, None)]
+
+    def _load_on_grid(self, m: int) -> np.ndarray:
+        if not self._load_t.size:
+            return _NO_LOAD
+        grid = self._t0 + (self._k + np.arange(m + 1)) * self.dt
+        return self._held_load(grid)
+
+    def _trim_load(self) -> None:
+        """Drop the load samples the simulator has passed (keep the one before now)."""
+        lt = self._load_t
+        i = int(np.searchsorted(lt, self.t, side='right')) - 1
+        if i > 0:
+            self._load_t, self._load_v = lt[i:], self._load_v[i:]
 
     def resync(self, t: float) -> None:
         """Jump the simulated clock to ``t`` without integrating (dropped catch-up time)."""

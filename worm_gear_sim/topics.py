@@ -12,7 +12,7 @@ from .schema import NODE_NAME
 __all__ = ['NODE_NAMESPACE', 'COMMAND_TOPIC', 'REFERENCE_TOPIC', 'JOINT_STATES_TOPIC',
            'MEASURED_TOPIC', 'POSITIONING_ERROR_TOPIC', 'WORM_ERROR_TOPIC', 'FEEDFORWARD_TOPIC',
            'COMPENSATED_COMMAND_TOPIC', 'RESIDUAL_TOPIC', 'DIAGNOSTICS_TOPIC', 'FLOAT64',
-           'BACKDRIVE_MARGIN_TOPIC',
+           'BACKDRIVE_MARGIN_TOPIC', 'LOAD_TORQUE_TOPIC',
            'JOINT_STATE', 'private_topic']
 
 NODE_NAMESPACE = NODE_NAME          # the node's name: its ~/ topics live under it
@@ -21,6 +21,7 @@ COMMAND_TOPIC = 'worm_angle_command'               # in, std_msgs/Float64 (unsta
 REFERENCE_TOPIC = 'worm_angle_reference'           # in, sensor_msgs/JointState (stamped)
 JOINT_STATES_TOPIC = 'joint_states'                # out, theta1..theta4, rates, torques
 MEASURED_TOPIC = 'measured_joint_states'           # in, the drive's encoders (model check)
+LOAD_TORQUE_TOPIC = 'load_torque'                  # in, JointState: effort of the antenna
 POSITIONING_ERROR_TOPIC = '~/positioning_error'    # out, Float64
 WORM_ERROR_TOPIC = '~/worm_error'                  # out, Float64
 FEEDFORWARD_TOPIC = '~/feedforward'                # out, Float64 (delta)

@@ -121,4 +121,8 @@ COUNTER_NAMES = (
     'corrections_dropped', 'predictions', 'late_for_simulation', 'resyncs',
     'clock_restarts', 'input_switches', 'stale_events', 'overruns', 'dropped_time_ns', 'steps',
     'simulation_errors', 'compensation_errors', 'reconfigurations', 'stream_relocks',
-    'stream_outliers')
+    'stream_outliers',
+    # the load torque input (push_load): the same rules as the reference samples
+    'load_samples_received', 'load_samples_accepted', 'rejected_load_samples',
+    *(f'rejected_load_{r.value}' for r in Reject if r is not Reject.JUMP),
+    'late_load_samples')

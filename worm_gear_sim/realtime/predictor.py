@@ -14,6 +14,7 @@ import math
 
 from ..command_timing import CommandQueue, StreamClock
 from ..compensation import Compensator
+from ..load import LOAD_LIMIT
 from ..model import DriveModel
 from ..params import Config
 from ..simulation import Simulator
@@ -29,6 +30,10 @@ CHAIN_MAX_GAP_NS = 50_000_000  # candidates further apart do not confirm each ot
 RESTART_MIN_BACK_NS = 100_000_000  # a stamp this much older may start a new timeline
 CLOCK_TOLERANCE_NS = 1_000_000  # now_ns may step back this much without a restart
 INFO_EVENTS = ('started', 'stream_resumed')
+
+
+#: Load torque samples kept from before the first reference (the newest; 10 s at 100 Hz).
+LOAD_PENDING = 1000
 
 
 class RealtimePredictor:
@@ -167,6 +172,9 @@ class RealtimePredictor:
         self._chain: list[tuple[int, float, Reject]] = []   # resync candidates
         self._stale = False
         self._delta = 0.0                        # last correction [rad]
+        self._last_load_ns: int | None = None    # last accepted load sample [ns]
+        # load samples before the start: (stamp [ns], N m), the newest LOAD_PENDING
+        self._load_pending: collections.deque = collections.deque(maxlen=LOAD_PENDING)
         self._drive.clear()
 
     # ---- properties --------------------------------------------------------------------
@@ -269,6 +277,63 @@ class RealtimePredictor:
         self._last_arrival_ns = stamp_ns if now_ns is None else int(now_ns)
         out.stale = self._stale
         return out
+
+    def push_load(self, stamp_ns: int, torque: float, *, now_ns: int | None = None
+                  ) -> Reject | None:
+        """A stamped load torque sample on the antenna [N m] (positive turning it back, the
+        sign of ``load.output_torque``), applied to the simulated drive in stamp order with
+        the references: linear between load samples, held after the last; before the first
+        the constant ``load.output_torque``.  The rules of :meth:`push` for stamps and
+        values (NaN, inf, beyond +-LOAD_LIMIT, zero or negative stamp, outside the stamp
+        window of ``now_ns``, a duplicate or earlier stamp than the last load sample's):
+        rejected, counted under ``rejected_load_<reason>``, nothing changed; returns the
+        reason (None: accepted).  A sample stamped before the simulator's time applies from
+        that time on (``late_load_samples``); one before the first reference is kept and
+        applied when the simulation starts."""
+        c = self.counters
+        c['load_samples_received'] += 1
+        stamp_ns = int(stamp_ns)
+        x = float(torque)
+        reason: Reject | None = None
+        if math.isnan(x):
+            reason = Reject.NAN
+        elif math.isinf(x):
+            reason = Reject.INF
+        elif abs(x) > LOAD_LIMIT:
+            reason = Reject.OUT_OF_RANGE
+        elif stamp_ns < 0:
+            reason = Reject.NEGATIVE_STAMP
+        elif stamp_ns == 0:
+            reason = Reject.ZERO_STAMP
+        elif now_ns is not None and stamp_ns < int(now_ns) - self.max_stamp_age_ns:
+            reason = Reject.TOO_OLD
+        elif now_ns is not None and stamp_ns > int(now_ns) + self._lead_ns:
+            reason = Reject.TOO_NEW
+        elif self._last_load_ns is not None and stamp_ns == self._last_load_ns:
+            reason = Reject.DUPLICATE
+        elif self._last_load_ns is not None and stamp_ns < self._last_load_ns:
+            reason = Reject.OUT_OF_ORDER
+        if reason is not None:
+            c['rejected_load_samples'] += 1
+            c['rejected_load_' + reason.value] += 1
+            return reason
+        self._last_load_ns = stamp_ns
+        c['load_samples_accepted'] += 1
+        if self.sim is None:
+            return None
+        if not self._started:               # applied when the simulation starts
+            self._load_pending.append((stamp_ns, x))
+            return None
+        if not self.sim.push_load(self._time(stamp_ns), x):
+            c['late_load_samples'] += 1
+        return None
+
+    @property
+    def load_torque(self) -> float:
+        """The load torque on the simulated antenna now [N m]."""
+        if self.sim is None:
+            return float(self.config.load.output_torque)
+        return self.sim.load_torque
 
     def hold(self, now_ns: int) -> Output:
         """Stamped path, from a slow timer: if the stream is stale (no sample has arrived
@@ -534,7 +599,22 @@ class RealtimePredictor:
             except Exception as exc:  # noqa: BLE001 - a compensator bug must not stop us
                 self._compensation_failed(exc, Output())
         self._delta = d
+        pending = self._load_pending
+        if pending and self.sim is not None:
+            # the load at the start (the last sample stamped at or before it, else the
+            # first): the drive starts at rest under it; the later ones follow in order
+            before = [v for ns_l, v in pending if ns_l <= ns]
+            self.sim.hold_load(before[-1] if before else pending[0][1])
+        elif self.sim is not None and self.counters['load_samples_accepted']:
+            # a restart: the samples of the previous time origin are dropped, their
+            # latest value holds
+            self.sim.hold_load(self.sim.load_torque)
         self._drive.start(x + d if self.apply_compensation else x, x, t)
+        if pending and self.sim is not None:
+            for ns_l, v in pending:
+                if ns_l > ns:
+                    self.sim.push_load((ns_l - self._base) * 1e-9, v)
+            pending.clear()
         self._started = True
         self._last_ns = ns
         if not self._mode:

@@ -15,6 +15,7 @@ from ..topics import (
     DIAGNOSTICS_TOPIC,
     FEEDFORWARD_TOPIC,
     JOINT_STATES_TOPIC,
+    LOAD_TORQUE_TOPIC,
     MEASURED_TOPIC,
     POSITIONING_ERROR_TOPIC,
     REFERENCE_TOPIC,
@@ -25,9 +26,11 @@ from ..topics import (
 __all__ = ['COMMAND_TOPIC', 'REFERENCE_TOPIC', 'REFERENCE_DEPTH', 'JOINT_STATES_TOPIC',
            'MEASURED_TOPIC', 'POSITIONING_ERROR_TOPIC', 'WORM_ERROR_TOPIC', 'FEEDFORWARD_TOPIC',
            'COMPENSATED_COMMAND_TOPIC', 'RESIDUAL_TOPIC', 'DIAGNOSTICS_TOPIC',
-           'BACKDRIVE_MARGIN_TOPIC', 'REJECT_REASONS', 'NODE_REJECT_REASONS']
+           'BACKDRIVE_MARGIN_TOPIC', 'LOAD_TORQUE_TOPIC', 'REJECT_REASONS',
+           'NODE_REJECT_REASONS']
 
 REFERENCE_DEPTH = 1000   # every sample matters to the filter: reliable, keep last 1000 (1 s
 #                          at 1 kHz: a stalled executor loses none)
 REJECT_REASONS = tuple(r.value for r in Reject)          # the pipeline's (core) reasons
-NODE_REJECT_REASONS = ('empty_position', 'wrong_joint')  # message-level, checked by the node
+NODE_REJECT_REASONS = ('empty_position', 'wrong_joint',   # message-level, checked by the
+                       'load_empty_effort', 'load_wrong_joint')   # node

@@ -70,6 +70,7 @@ from .interface import (
     DIAGNOSTICS_TOPIC,
     FEEDFORWARD_TOPIC,
     JOINT_STATES_TOPIC,
+    LOAD_TORQUE_TOPIC,
     MEASURED_TOPIC,
     NODE_REJECT_REASONS,
     POSITIONING_ERROR_TOPIC,
@@ -200,6 +201,11 @@ class WormGearSimNode(Node):
             qos_profile_sensor_data,
             qos_overriding_options=overrides())
         self._res = JointState()
+        self._antenna_joint = cfg.node.joint_names[3]
+        self._sub_load = self.create_subscription(
+            JointState, LOAD_TORQUE_TOPIC, self._guard_message(self._on_load),
+            QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
+            qos_overriding_options=overrides())
         self._sub_ref = self.create_subscription(
             JointState, REFERENCE_TOPIC, self._guard_message(self._on_reference),
             QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
@@ -359,6 +365,31 @@ class WormGearSimNode(Node):
         out = self.rt.push(stamp, x, now_ns=self._clock.now().nanoseconds)
         self._handle(out, REFERENCE_TOPIC, stamp, value=x)
         self.load.busy(t0)
+
+    def _on_load(self, msg: JointState) -> None:
+        """One stamped load torque sample on the antenna (effort[0], N m): to the pipeline,
+        which applies it in stamp order with the references."""
+        effort = msg.effort
+        if len(effort) == 0:
+            self._reject_load('load_empty_effort', 'no effort[0]')
+            return
+        names = msg.name
+        if len(names) and names[0] != self._antenna_joint:
+            self._reject_load('load_wrong_joint', f'joint {names[0]!r}; the load acts on '
+                              f'{self._antenna_joint!r}')
+            return
+        st = msg.header.stamp
+        stamp = st.sec * _NS + st.nanosec
+        reason = self.rt.push_load(stamp, effort[0], now_ns=self._clock.now().nanoseconds)
+        if reason is not None:
+            n = self.rt.counters['rejected_load_' + reason.value]
+            self._warn('load_' + reason.value, f'rejected {LOAD_TORQUE_TOPIC}: '
+                       f'load_{reason.value}; {n} so far')
+
+    def _reject_load(self, reason: str, text: str) -> None:
+        self.counters['rejected_' + reason] += 1
+        self._warn(reason, f'rejected {LOAD_TORQUE_TOPIC}: {reason} ({text}); '
+                   f'{self.counters["rejected_" + reason]} so far')
 
     def _reject_message(self, reason: str, text: str) -> None:
         self.counters['rejected_' + reason] += 1

@@ -30,7 +30,10 @@ _INPUT_COUNTERS = ('samples_received', 'samples_accepted', 'rejected_samples',
                    *(f'rejected_{r}' for r in REJECT_REASONS),
                    'commands_received', 'commands_used', 'commands_merged',
                    'commands_restamped', 'commands_dropped', 'merged_samples', 'rest_samples',
-                   'stream_relocks', 'stream_outliers', 'reconfigurations')
+                   'stream_relocks', 'stream_outliers', 'reconfigurations',
+                   'load_samples_received', 'load_samples_accepted', 'rejected_load_samples',
+                   *(f'rejected_load_{r}' for r in REJECT_REASONS if r != 'jump'),
+                   'late_load_samples')
 _PARAMETER_COUNTERS = ('rejected_parameter_sets', 'accepted_parameter_sets',
                        'parameter_build_errors', 'rejected_clock_messages')
 
@@ -109,7 +112,7 @@ def node_statuses(name: str, rt: RealtimePredictor, counters: Mapping[str, Any],
     }
     node_rejects = sum(c[f'rejected_{r}'] for r in NODE_REJECT_REASONS)
     rejected = rc['rejected_samples'] + node_rejects + c['rejected_parameter_sets'] + \
-        c['rejected_clock_messages']
+        c['rejected_clock_messages'] + rc['rejected_load_samples']
     in_vals = {k: rc[k] for k in _INPUT_COUNTERS}
     in_vals.update({f'rejected_{r}': c[f'rejected_{r}'] for r in NODE_REJECT_REASONS})
     in_vals.update({k: c[k] for k in _PARAMETER_COUNTERS})
@@ -117,6 +120,7 @@ def node_statuses(name: str, rt: RealtimePredictor, counters: Mapping[str, Any],
     in_vals['stale_after_ms'] = rt.stale_after_ns * 1e-6
     in_vals['last_stamp_ns'] = rt.last_stamp_ns
     in_vals['resync_candidates'] = rt.resync_candidates
+    in_vals['load_torque_nm'] = rt.load_torque
     in_vals['last_error'] = last_error
     in_level = diag.WARN if (rejected or rt.stale) else diag.OK
     in_msg = ', '.join(m for m in (
