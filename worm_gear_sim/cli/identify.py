@@ -229,8 +229,9 @@ def cmd_identify(args: argparse.Namespace) -> int:
                   f'base: {report["base_config"]}; created {time.strftime("%Y-%m-%d %H:%M:%S")}']
         for k, v, (lo, hi) in zip(res.keys, res.values, res.ci95):
             header.append(f'{k} = {v:.9g}  (95 % interval {lo:.6g} .. {hi:.6g})')
-        for o, v in res.output_verdicts.items():
-            header.append(v if v.startswith(o) else f'{o}: {v}')
+        for out_name, verdict in res.output_verdicts.items():
+            header.append(verdict if verdict.startswith(out_name) else
+                          f'{out_name}: {verdict}')
         if not res.trustworthy:
             header.append('NOT TRUSTWORTHY (written with --force): ' + '; '.join(res.problems))
         write_params_yaml(res.config, out, header)
