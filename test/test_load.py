@@ -227,3 +227,20 @@ def test_the_cli_runs_a_csv_load_column_and_a_wind(tmp_path, capsys):
     assert cli_main(base + ['--csv', str(path), '--wind', '20,0.1', '-o',
                             str(tmp_path / 'y.csv')]) == 2
     assert 'give one load' in capsys.readouterr().err
+
+
+def test_the_play_and_gust_studies_measure_what_the_feedforward_cannot_cover():
+    """sweep play / gust in small: without play the feed-forward cuts the slew's antenna
+    error > 10x; with 2 arcmin of play (blind to it) much less, and the static error is
+    about half the play; compensated, the error grows with the gust intensity."""
+    from worm_gear_sim.studies.play_gust import ARCMIN, gust_rows, play_rows
+    rows = {(r['x'], r['series']): r for r in play_rows(Config(), (0.0, 2.0))}
+    off0, on0 = rows[0.0, 'uncompensated'], rows[0.0, 'compensated']
+    off2, on2 = rows[2.0, 'uncompensated'], rows[2.0, 'compensated']
+    assert off0['rms_err4'] > 10 * on0['rms_err4']
+    assert off2['rms_err4'] > off0['rms_err4'] and on2['rms_err4'] > 5 * on0['rms_err4']
+    assert abs(on2['static_err4']) == pytest.approx(ARCMIN, rel=0.2)   # half of 2 arcmin
+    gust = {(r['x'], r['series']): r for r in gust_rows(Config(), (0.0, 0.2), seeds=(1,))}
+    # compensated, the gusts are what is left (the uncompensated error is dominated by the
+    # mean wind-up, which one seed's gusts can raise or lower)
+    assert gust[0.2, 'compensated']['rms_err4'] > 3 * gust[0.0, 'compensated']['rms_err4']

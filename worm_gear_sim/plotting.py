@@ -178,3 +178,25 @@ def plot_modes(result: Any, path: str | Path, title: str = '') -> Path:
         a.grid(True, alpha=0.3)
     fig.suptitle(title or 'Linearised modes (max |entry| = 1)', fontsize=10)
     return _save(fig, path)
+
+
+def plot_error_study(rows: Sequence[Mapping[str, Any]], path: str | Path, title: str,
+                     x_label: str) -> Path:
+    """Antenna error RMS (whole run, reversal) and static error per case, one line per
+    series (uncompensated / compensated): ``sweep play`` and ``sweep gust``."""
+    fig, ax = _new(1, 3, (13.0, 4.2))
+    series = dict.fromkeys(str(r['series']) for r in rows)
+    panels = (('rms_err4', 'RMS antenna error, whole slew [rad]'),
+              ('reversal_rms_err4', 'RMS antenna error, reversal [rad]'),
+              ('static_err4', '|static error| after the stop [rad]'))
+    for a, (key, label) in zip(ax[0], panels):
+        for s in series:
+            rs = [r for r in rows if r['series'] == s]
+            a.semilogy([r['x'] for r in rs], [max(abs(r[key]), 1e-12) for r in rs], 'o-',
+                       label=s)
+        a.set_xlabel(x_label)
+        a.set_ylabel(label)
+        a.grid(True, which='both', alpha=0.3)
+        a.legend()
+    fig.suptitle(title)
+    return _save(fig, path)

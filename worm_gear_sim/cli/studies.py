@@ -44,7 +44,9 @@ def register(sub: Any) -> None:
                        'on a Dask LocalCluster with one worker process per core by default.')
     add_config_options(p)
     p.add_argument('study', nargs='*', metavar='STUDY',
-                   help=f'{", ".join(PAPER_STUDIES)} or all')
+                   help=f'{", ".join(PAPER_STUDIES)} or all; or play / gust: the antenna '
+                   'error on the radar slew against the mesh play / the gust intensity, '
+                   'with and without the feed-forward')
     p.add_argument('--param', metavar='PATH[,PATH]', help='sweep this dotted parameter '
                    '(several comma-separated paths get the same value)')
     p.add_argument('--values', metavar='V1,V2,...', help='values for --param')
@@ -174,10 +176,47 @@ def _with_compare(study, spec: str, cfg: Config):
                                title=f'{study.title}; compare {key}')
 
 
+#: studies of the antenna error on the radar slew (worm_gear_sim.studies.play_gust)
+ERROR_STUDIES = {
+    'play': ('antenna error against the mesh play (radar slew, 2 N m load)',
+             'mesh.backlash [arcmin]'),
+    'gust': ('antenna error against the gust intensity (radar slew, 5 N m mean wind, '
+             '0.2 s gusts, 3 seeds)', 'turbulence intensity sigma_u / U')}
+
+
+def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> None:
+    """``sweep play`` / ``sweep gust``: CSV, PNG and a table per study."""
+    from ..plotting import plot_error_study
+    from ..studies import rows_to_csv
+    from ..studies.play_gust import PLAY_GUST_COLUMNS, gust_rows, play_rows
+    outdir = Path(args.out_dir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    for n in names:
+        t0 = time.perf_counter()
+        rows = play_rows(cfg) if n == 'play' else gust_rows(cfg)
+        title, x_label = ERROR_STUDIES[n]
+        csv_path, png_path = outdir / f'{n}.csv', outdir / f'{n}.png'
+        rows_to_csv(rows, PLAY_GUST_COLUMNS, csv_path)
+        plot_error_study(rows, png_path, title, x_label)
+        say(args, f'\n{title} ({time.perf_counter() - t0:.1f} s)')
+        say(args, fmt_table(rows, [('series', 'series', ''), ('label', 'case', ''),
+                                     ('rms_err4', 'RMS err4 [rad]', '.3e'),
+                                     ('reversal_rms_err4', 'reversal RMS [rad]', '.3e'),
+                                     ('static_err4', 'static [rad]', '.3e')]))
+        say(args, f'wrote {csv_path}, {png_path}')
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     from ..plotting import plot_sweep
     from ..studies import ENVELOPE_COLUMNS, envelope_rows, rows_to_csv, run_cases
     cfg = config_from_args(args)
+    special = [n for n in (args.study or []) if n in ERROR_STUDIES]
+    if special:
+        if len(special) != len(args.study) or args.param or args.compare:
+            raise CliError(f'{", ".join(ERROR_STUDIES)} run alone (no other study, --param '
+                           'or --compare)')
+        _error_studies(args, cfg, list(dict.fromkeys(special)))
+        return 0
     if args.workers is not None and args.workers < 1:
         raise CliError('--workers must be >= 1 (use --serial to run in this process)')
     if args.serial and args.scheduler:

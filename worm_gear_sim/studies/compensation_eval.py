@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..derived import derive
+from ..load import LoadSignal
 from ..modal import modes
 from ..model import DriveModel
 from ..params import Config
@@ -138,17 +139,20 @@ class CompensationRun:
 
 def run_scenario(plant: DriveModel | Config, scenario: Scenario,
                  compensator: DriveModel | Config | None,
-                 record_every: int = 10) -> CompensationRun:
+                 record_every: int = 10, load: LoadSignal | None = None) -> CompensationRun:
     """Simulate ``plant`` (nonlinear, with friction) driven by the scenario's reference,
     plus the feed-forward of a compensator designed on ``compensator`` (None: without
     compensation); both a :class:`DriveModel` or a Config.  The command is streamed at the
-    scenario's sample times and joined by straight lines, as the node does."""
+    scenario's sample times and joined by straight lines, as the node does.  ``load``: a
+    load torque signal on the plant in place of its constant (the compensator knows only
+    its own ``load.output_torque``)."""
     plant = DriveModel.of(plant)
     t, x = scenario.times, scenario.theta1_ref
     delta = feedforward_series(compensator, t, x) if compensator is not None \
         else np.zeros_like(x)
     traj = simulate(plant, SampledProfile(t, x + delta), t_end=scenario.t_end,
-                    record_every=record_every, theta1_initial=float(x[0] + delta[0]))
+                    record_every=record_every, theta1_initial=float(x[0] + delta[0]),
+                    load=load)
     output_per_input = traj.output_per_input
     ref = np.interp(traj.t, t, x)
     err = traj.theta[:, 2] - ref * output_per_input

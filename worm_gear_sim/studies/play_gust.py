@@ -1,0 +1,85 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Antenna error against the mesh play and against the gust intensity, with and without the
+feed-forward (``worm-gear-sim sweep play gust``).
+
+Both run the radar slew of :func:`~.compensation_eval.radar_slew_scenario` (track, reverse at
+the acceleration limit, track back, stop, hold) on a plant that is the base config with the
+play or the wind, uncompensated and with the compensator designed on that same plant's
+config (it knows the play's size only as a parameter it does not use, and the wind's mean
+torque as ``load.output_torque``).  Metrics of the antenna error theta4 - theta1_ref l_w /
+r_g: RMS over the whole run, RMS over the reversal (from the end of the first tracking
+phase to 100 ms into the second), and the mean over the last 50 ms (the static error).
+
+* Play: ``mesh.backlash`` over ``PLAYS_ARCMIN`` under ``PLAY_LOAD`` (a load torque smaller
+  than the reversal's inertia torque, so the mesh changes flank at the reversal).
+* Gusts: the wind model of :mod:`worm_gear_sim.load` with mean ``GUST_MEAN`` and time scale
+  ``GUST_TIME_SCALE`` over ``GUST_INTENSITIES``, averaged over ``GUST_SEEDS``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..load import WindLoad
+from ..params import Config
+from .compensation_eval import radar_slew_scenario, run_scenario
+
+__all__ = ['ARCMIN', 'PLAYS_ARCMIN', 'GUST_INTENSITIES', 'play_rows', 'gust_rows',
+           'PLAY_GUST_COLUMNS']
+
+ARCMIN = math.pi / 180.0 / 60.0
+PLAYS_ARCMIN = (0.0, 0.5, 1.0, 2.0, 3.0, 5.0)
+PLAY_LOAD = {'load.output_torque': 2.0, 'load.output_viscous_coefficient': 2.0}
+GUST_INTENSITIES = (0.0, 0.05, 0.1, 0.2, 0.3)
+GUST_MEAN = 5.0             # N m: the radar scenarios' steady wind torque
+GUST_TIME_SCALE = 0.2       # s: gusts that vary within the 0.64 s slew
+GUST_SEEDS = (1, 2, 3)
+PLAY_GUST_COLUMNS = ['study', 'series', 'label', 'x', 'rms_err4', 'reversal_rms_err4',
+                     'static_err4', 'max_err4', 'runs']
+
+
+def _metrics(run: Any) -> dict[str, float]:
+    sc = run.scenario
+    t, e = run.trajectory.t, run.error
+    rev = (t > sc.constant_rate[0][1]) & (t < sc.constant_rate[1][0] + 0.1)
+    last = t > t[-1] - 0.05
+    return {'rms_err4': float(np.sqrt(np.mean(e ** 2))),
+            'reversal_rms_err4': float(np.sqrt(np.mean(e[rev] ** 2))),
+            'static_err4': float(np.mean(e[last])), 'max_err4': float(np.max(np.abs(e)))}
+
+
+def play_rows(base: Config, plays_arcmin: Sequence[float] = PLAYS_ARCMIN) -> list[dict]:
+    """Rows of the play study (module docstring)."""
+    rows = []
+    for b in plays_arcmin:
+        plant = base.replace({**PLAY_LOAD, 'mesh.backlash': float(b) * ARCMIN})
+        sc = radar_slew_scenario(plant)
+        for series, comp in (('uncompensated', None), ('compensated', plant)):
+            m = _metrics(run_scenario(plant, sc, comp))
+            rows.append({'study': 'play', 'series': series, 'label': f'{b:g} arcmin',
+                         'x': float(b), 'runs': 1, **m})
+    return rows
+
+
+def gust_rows(base: Config, intensities: Sequence[float] = GUST_INTENSITIES,
+              seeds: Sequence[int] = GUST_SEEDS) -> list[dict]:
+    """Rows of the gust study (module docstring): metrics averaged over the seeds (the
+    static error as the mean of its magnitude)."""
+    plant = base.replace({'load.output_torque': GUST_MEAN,
+                          'load.output_viscous_coefficient': 2.0})
+    sc = radar_slew_scenario(plant)
+    rows = []
+    for inten in intensities:
+        for series, comp in (('uncompensated', None), ('compensated', plant)):
+            ms = [_metrics(run_scenario(plant, sc, comp, load=WindLoad(
+                GUST_MEAN, float(inten), GUST_TIME_SCALE, int(seed)))) for seed in seeds]
+            m = {k: float(np.mean([abs(x[k]) if k == 'static_err4' else x[k] for x in ms]))
+                 for k in ms[0]}
+            rows.append({'study': 'gust', 'series': series, 'label': f'I = {inten:g}',
+                         'x': float(inten), 'runs': len(ms), **m})
+    return rows
