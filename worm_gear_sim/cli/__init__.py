@@ -37,6 +37,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     'modes',         # modes, params
     'compensate',    # compensate
     'identify',      # identify
+    'calibrate',     # calibrate
 )
 
 

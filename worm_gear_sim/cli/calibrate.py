@@ -1,0 +1,179 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""``calibrate`` command: excite, record, fit, validate and write the fitted parameters in one
+command (:mod:`worm_gear_sim.identification.calibrate`).
+
+    worm-gear-sim calibrate --fit KEY[,KEY...] -o FITTED.yaml --plant PLANT.yaml
+                            [--max-angle RAD] [--max-rate RAD/S] [--max-accel RAD/S2]
+                            [--duration S] [--sample-rate HZ] [--noise RAD] [--encoder-bits N]
+    worm-gear-sim calibrate ... --export-excitation EXCITATION.csv
+
+``--plant``: a simulated drive (a params file such as ``-o`` writes, or any config) stands in
+for the real one, so the whole loop runs on a fresh machine.  ``--export-excitation``: write
+the designed moves as one CSV command series for a servo outside ROS; record the drive's
+response and fit it with ``identify``.  Writes FITTED.yaml only when the calibration is
+accepted (trustworthy fit and held-out theta4 within ``--accept`` of its amplitude), and
+always the report FITTED.json and the before/after figure FITTED.png; exit status 2 when not
+accepted (nothing written that a node would load).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+from ..config_io import load_config
+from ..identification import FitOptions
+from ..params import ConfigError
+from .common import CliError, add_config_options, config_from_args, say
+from .identify import _jsonable, write_params_yaml
+
+__all__ = ['register', 'cmd_calibrate']
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``calibrate`` command."""
+    p = subparsers.add_parser(
+        'calibrate', help='excite, record, fit, validate, write: one-command calibration',
+        description='Design an excitation within the limits (steps out and back, a small '
+        'step; a held-out S-curve), run it on the drive (--plant: a simulated drive), fit '
+        'the chosen parameters, validate on the held-out move, and write the fitted params '
+        'file when accepted. See docs/identification.md, "Calibrate in one command".')
+    add_config_options(p, end_time=False)
+    p.add_argument('--fit', action='append', required=True, metavar='KEY[,KEY...]',
+                   help='parameters to fit (as for identify; repeatable)')
+    p.add_argument('--output', '-o', required=True, metavar='FITTED.yaml',
+                   help='fitted parameter file (written when accepted); report beside it')
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument('--plant', metavar='PLANT.yaml', help='a simulated drive standing in '
+                     'for the real one (a params file)')
+    src.add_argument('--export-excitation', metavar='CSV', help='only write the designed '
+                     'excitation as one command series (t, theta1) for a servo outside ROS')
+    g = p.add_argument_group('limits of the excitation (worm angle theta1)')
+    g.add_argument('--max-angle', type=float, default=0.12, metavar='RAD',
+                   help='travel each way from the start (default: %(default)s rad)')
+    g.add_argument('--max-rate', type=float, default=6.0, metavar='RAD/S',
+                   help='(default: %(default)s rad/s)')
+    g.add_argument('--max-accel', type=float, default=1500.0, metavar='RAD/S2',
+                   help='(default: %(default)s rad/s^2)')
+    g.add_argument('--duration', type=float, default=2.0, metavar='S',
+                   help='longest total time of the moves (default: %(default)s s)')
+    g.add_argument('--start', type=float, default=0.0, metavar='RAD',
+                   help='the current worm angle (default: %(default)s)')
+    r = p.add_argument_group('recording (--plant)')
+    r.add_argument('--sample-rate', type=float, default=1e4, metavar='HZ',
+                   help='encoder sample rate (default: %(default)g Hz)')
+    r.add_argument('--measure', default='theta4', metavar='LIST',
+                   help='measured angles, e.g. theta4 or theta2,theta4 (default: theta4)')
+    r.add_argument('--noise', type=float, default=1e-6, metavar='RAD',
+                   help='encoder noise RMS (default: %(default)g rad)')
+    r.add_argument('--encoder-bits', type=int, default=20, metavar='N',
+                   help='encoder resolution 2 pi / 2^N (default: %(default)s; 0: none)')
+    r.add_argument('--seed', type=int, default=0, help='noise seed')
+    p.add_argument('--outputs', metavar='LIST', help='outputs to fit (as for identify)')
+    p.add_argument('--accept', type=float, default=0.05, metavar='SHARE',
+                   help='accept when the held-out theta4 RMS error is within this share of '
+                   'its amplitude (default: %(default)s)')
+    p.add_argument('--serial', action='store_true', help='fit in this process (no Dask)')
+    p.add_argument('--workers', type=int, metavar='N', help='Dask worker processes')
+    p.add_argument('--no-plot', action='store_true', help='skip the figure')
+    p.set_defaults(func=cmd_calibrate)
+
+
+def _limits(args: argparse.Namespace) -> Any:
+    from ..identification.calibrate import Limits
+    return Limits(args.max_angle, args.max_rate, args.max_accel, args.duration, args.start)
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from ..identification.calibrate import (
+        calibrate,
+        design_excitation,
+        excitation_series,
+        plant_runner,
+    )
+    cfg = config_from_args(args)
+    keys = [k.strip() for item in args.fit for k in item.split(',') if k.strip()]
+    out = Path(args.output)
+    if out.suffix.lower() not in ('.yaml', '.yml'):
+        raise CliError(f'-o {out}: the fitted parameter file must end in .yaml')
+    if not (math.isfinite(args.sample_rate) and args.sample_rate > 0):
+        raise CliError(f'--sample-rate {args.sample_rate!r}: must be a positive number')
+    if not (math.isfinite(args.accept) and 0 < args.accept < 1):
+        raise CliError(f'--accept {args.accept!r}: a share between 0 and 1')
+    limits = _limits(args)
+    moves = design_excitation(limits)          # IdentificationError: exit 2, one line
+    for m in moves:
+        say(args, f'move {m.name} ({m.role}): {m.profile.describe()}, {m.t_end:.3f} s')
+    if args.export_excitation:
+        import numpy as np
+
+        from ..records import write_csv_columns
+        t, x = excitation_series(moves, args.sample_rate)
+        path = write_csv_columns(args.export_excitation, ['t[s]', 'theta1[rad]'],
+                                 np.column_stack([t, x]), comment=(
+                                     'worm_gear_sim calibration excitation: '
+                                     + ', '.join(f'{m.name} ({m.role})' for m in moves)))
+        say(args, f'wrote {path}: stream it to the servo, record theta1 and the encoders, '
+            'then: worm-gear-sim identify RECORD --fit ... (hold out validate_scurve)')
+        return 0
+    try:
+        plant = load_config(args.plant)
+    except (ConfigError, OSError) as exc:
+        raise CliError(f'--plant {args.plant}: {exc}') from None
+    measure = tuple(o.strip() for o in args.measure.split(',') if o.strip())
+    res_bits = 2 * math.pi / 2 ** args.encoder_bits if args.encoder_bits > 0 else 0.0
+    run = plant_runner(plant, args.sample_rate, measure, args.noise, res_bits, args.seed)
+    outputs = [o.strip() for o in args.outputs.split(',')] if args.outputs else None
+    opt = FitOptions(strategy='robust', serial=args.serial, workers=args.workers)
+    t0 = time.perf_counter()
+    res = calibrate(cfg, keys, limits, run, options=opt, outputs=outputs,
+                    accept_rel=args.accept)
+    wall = time.perf_counter() - t0
+    say(args, res.fit.table())
+    for row_b, row_a in zip(res.validation_before, res.validation_after):
+        for o in row_a:
+            if o != 'name':
+                say(args, f'held-out {row_a["name"]}: {o} RMS {100 * row_b[o]["rel"]:.2f} % '
+                    f'-> {100 * row_a[o]["rel"]:.2f} % of its amplitude '
+                    f'{row_a[o]["amplitude_rad"]:.3g} rad')
+    stem = out.with_suffix('')
+    out.parent.mkdir(parents=True, exist_ok=True)
+    report = res.fit.to_dict()
+    report.update(command=' '.join(getattr(args, '_argv', [])), plant=args.plant,
+                  limits={k: getattr(limits, k) for k in ('max_angle', 'max_rate',
+                                                          'max_accel', 'duration', 'start')},
+                  moves=[{'name': m.name, 'role': m.role, 'profile': m.profile.describe(),
+                          'duration_s': m.t_end} for m in res.moves],
+                  validation={'before': res.validation_before, 'after': res.validation_after},
+                  accepted=res.accepted, reasons=res.reasons, seconds=wall,
+                  output_yaml=None)
+    figures = []
+    if not args.no_plot:
+        from ..identification.plot import plot_fit
+        figures.append(str(plot_fit(res.held_out + res.train, cfg, res.config,
+                                    stem.with_suffix('.png'),
+                                    'calibrate: held-out move and training moves')))
+    report['figures'] = figures
+    if res.accepted:
+        header = [f'worm_gear_sim parameters calibrated by: worm-gear-sim calibrate '
+                  f'(plant {args.plant}); created {time.strftime("%Y-%m-%d %H:%M:%S")}',
+                  f'held-out theta4 RMS {100 * res.worst_held_out():.2f} % of its amplitude']
+        for k, v, (lo, hi) in zip(res.fit.keys, res.fit.values, res.fit.ci95):
+            header.append(f'{k} = {v:.9g}  (95 % interval {lo:.6g} .. {hi:.6g})')
+        write_params_yaml(res.config, out, header)
+        report['output_yaml'] = str(out)
+    json_path = stem.with_suffix('.json')
+    json_path.write_text(json.dumps(_jsonable(report), indent=2, allow_nan=True) + '\n')
+    say(args, f'calibrated {len(keys)} parameter(s) in {wall:.1f} s; wrote {json_path}'
+        + (f', {out}' if res.accepted else '') + (f', {", ".join(figures)}' if figures
+                                                   else ''))
+    if not res.accepted:
+        raise CliError(f'calibration not accepted: {res.reasons[0]}; no YAML written '
+                       f'(report: {json_path}); the previous parameters stay in use')
+    return 0
+
