@@ -81,6 +81,9 @@ def test_calibrate_on_a_plant_with_five_parameters_changed(tmp_path, capsys):
     before = report['validation']['before'][0]['theta4']['rel']
     assert rel <= 0.03 and before > 10 * rel, (rel, before)
     assert report['seconds'] < 120
+    bound = report['prediction_bound'][0]
+    assert report['validation']['after'][0]['theta4']['rms_rad'] <= bound['bound_rad']
+    assert bound['bound_rad'] < 5 * report['validation']['after'][0]['theta4']['rms_rad']
     fitted = load_config(out)
     assert fitted.damping.modal_damping_ratios[0] == pytest.approx(0.012, rel=0.1)
     assert 'held-out theta4 RMS' in out.read_text()
@@ -98,6 +101,9 @@ def test_calibrate_on_a_drive_with_another_friction_law():
                     plant_runner(plant, 1e4, ('theta4',), 1e-6, 2 * math.pi / 2 ** 20))
     assert res.accepted, res.reasons
     assert res.worst_held_out() <= 0.03, res.worst_held_out()
+    # the 95 % bound on the held-out prediction error holds under the structural mismatch
+    err = res.validation_after[0]['theta4']['rms_rad']
+    assert res.bounds and res.bounds[0].covers(err), (res.bounds, err)
 
 
 def test_what_is_not_accepted_writes_no_yaml(tmp_path, capsys):

@@ -324,3 +324,23 @@ def test_sampling_check_names_an_output_whose_mode_is_above_its_nyquist(base):
     assert all('theta2' not in r.measured for r in p.records)
     forced = Problem(base, fit_parameters(base, [KG]), [slow], outputs=['theta2', 'theta4'])
     assert forced.outputs == ['theta2', 'theta4'] and 'theta3' in forced.left_out
+
+
+def test_the_report_says_when_the_intervals_are_not_meaningful(base):
+    """Residuals that are not white (lag-1 autocorrelation > 0.5) mean the model misses
+    something no fitted key covers: the report says the parameter intervals are not
+    meaningful.  A plant with another friction law and flywheel (fit: gear-shaft modulus
+    and damping), fine encoder: warned; the same fit on an exact plant: not warned."""
+    truth = _set(base, kg=1.2, zeta=0.01)
+    wrong = _set(truth, rho=0.9, friction__model='stribeck',
+                 friction__direction='regularized')
+    got = {}
+    for name, plant in (('exact', truth), ('mismatch', wrong)):
+        recs = [record_from_model(plant, TrapezoidalProfile(a, 0.02, 0.004, 0.005), 0.15, 1e4,
+                                  ('theta4',), noise_rad=1e-7, seed=i)
+                for i, a in enumerate((0.11, -0.05))]
+        res = identify(base, recs, [KG, ZETA],
+                       options=FitOptions(strategy='frequency+windows', serial=True))
+        got[name] = [w for w in res.warnings if 'not meaningful' in w]
+    assert not got['exact'], got
+    assert got['mismatch'] and 'autocorrelation' in got['mismatch'][0], got

@@ -141,6 +141,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                 say(args, f'held-out {row_a["name"]}: {o} RMS {100 * row_b[o]["rel"]:.2f} % '
                     f'-> {100 * row_a[o]["rel"]:.2f} % of its amplitude '
                     f'{row_a[o]["amplitude_rad"]:.3g} rad')
+    for b, row in zip(res.bounds, res.validation_after):
+        say(args, f'95 % bound on the theta4 RMS prediction error over a {b.duration:.3g} s '
+            f'move: {b.bound_rad:.3g} rad (misfit {b.misfit_rad:.3g}, parameters '
+            f'{b.spread_rad:.3g}); held-out {row["name"]}: {row["theta4"]["rms_rad"]:.3g} rad'
+            f' ({"within" if b.covers(row["theta4"]["rms_rad"]) else "OUTSIDE"})')
     stem = out.with_suffix('')
     out.parent.mkdir(parents=True, exist_ok=True)
     report = res.fit.to_dict()
@@ -150,6 +155,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   moves=[{'name': m.name, 'role': m.role, 'profile': m.profile.describe(),
                           'duration_s': m.t_end} for m in res.moves],
                   validation={'before': res.validation_before, 'after': res.validation_after},
+                  prediction_bound=[{'output': b.output, 'level': b.level,
+                                     'duration_s': b.duration, 'bound_rad': b.bound_rad,
+                                     'misfit_rad': b.misfit_rad, 'spread_rad': b.spread_rad}
+                                    for b in res.bounds],
                   accepted=res.accepted, reasons=res.reasons, seconds=wall,
                   output_yaml=None)
     figures = []

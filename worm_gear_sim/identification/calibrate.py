@@ -198,6 +198,8 @@ class CalibrationResult:
     validation_after: list[dict[str, Any]]
     accepted: bool
     reasons: list[str] = field(default_factory=list)     # why not accepted
+    #: the 95 % bound on the held-out moves' theta4 RMS prediction error (.uncertainty)
+    bounds: list[Any] = field(default_factory=list)
 
     @property
     def config(self) -> Config:
@@ -238,7 +240,12 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
             if not e['rel'] <= accept_rel:
                 reasons.append(f'held-out {row["name"]}: {o} RMS {100 * e["rel"]:.2f} % of '
                                f'its amplitude (> {100 * accept_rel:g} %)')
-    return CalibrationResult(moves, train, held, res, before, after, not reasons, reasons)
+    bounds = []
+    if 'theta4' in res.output_verdicts and res.output_verdicts['theta4'] == 'matched':
+        from .uncertainty import prediction_bound
+        bounds = [prediction_bound(res, train, h) for h in held]
+    return CalibrationResult(moves, train, held, res, before, after, not reasons, reasons,
+                             bounds)
 
 
 def _check_followed(rec: Record, move: Move) -> None:

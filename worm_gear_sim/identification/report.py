@@ -27,6 +27,10 @@ __all__ = ['CORRELATION_WARN', 'Z95', 'FitResult', 'assess', 'residual_rms',
            'prediction_errors', 'validate']
 
 CORRELATION_WARN = 0.95
+#: Lag-1 autocorrelation of an output's residuals above which they are not white: the model
+#: misses something the parameters cannot cover, and the intervals (which assume white
+#: residuals and an exact model) are too narrow.
+RESIDUAL_AUTOCORRELATION_WARN = 0.5
 Z95 = 1.959963984540054
 #: A Jacobian column that changes by more than this between the steps h and 4 h is not
 #: resolved at h: the parameter's effect is at the level of the stick-slip decisions' noise.
@@ -115,6 +119,27 @@ class FitResult:
         for p in self.problems:
             lines.append(f'NOT TRUSTWORTHY: {p}')
         return '\n'.join(lines)
+
+
+def residual_autocorrelation(problem: Problem, x: np.ndarray) -> dict[str, float]:
+    """Lag-1 autocorrelation of each fitted output's residuals (pooled over the records,
+    within each record)."""
+    model = DriveModel(problem.config(x))
+    num: dict[str, float] = {o: 0.0 for o in problem.outputs}
+    den: dict[str, float] = {o: 0.0 for o in problem.outputs}
+    for r in problem.records:
+        try:
+            pred = predict(model, r)
+        except (SimulationError, ValueError):
+            continue
+        for o in problem.outputs:
+            if o not in r.measured:
+                continue
+            e = pred[o] - r.measured[o]
+            e = e - e.mean()
+            num[o] += float(e[1:] @ e[:-1])
+            den[o] += float(e @ e)
+    return {o: num[o] / den[o] for o in problem.outputs if den[o] > 0}
 
 
 def residual_rms(problem: Problem, model: DriveModel | Config
@@ -259,6 +284,14 @@ def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
         elif rms_after[o] > rms_before[o] * 1.0001:
             warnings.append(f'{o}: residual RMS grew ({rms_before[o]:.3g} -> '
                             f'{rms_after[o]:.3g} rad)')
+    for o, rho in residual_autocorrelation(problem, x).items():
+        if rho > RESIDUAL_AUTOCORRELATION_WARN:
+            warnings.append(f'{o}: the residuals are correlated (lag-1 autocorrelation '
+                            f'{rho:.2f}): the model misses something no fitted parameter '
+                            'covers, so the 95 % parameter intervals (which assume an exact '
+                            'model and white residuals) are too narrow and not meaningful; '
+                            'judge the fit by its held-out prediction error and the '
+                            'prediction bound (calibrate)')
     for i in range(n):
         for j in range(i + 1, n):
             c = corr[i, j]
