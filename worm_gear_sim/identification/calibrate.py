@@ -158,7 +158,8 @@ def excitation_series(moves: Sequence[Move], sample_rate: float) -> tuple[np.nda
     ``sample_rate``: what a servo outside ROS streams (``calibrate --export-excitation``).
     Each move starts where the previous one ended, so ``step_back`` and the held-out move
     go back towards the start."""
-    ts, xs = [], []
+    ts: list[np.ndarray] = []
+    xs: list[np.ndarray] = []
     t0 = 0.0
     offset = 0.0
     for m in moves:
