@@ -108,6 +108,16 @@ def test_halving_the_step_converges():
     assert errs[2] <= 1e-3 * scale, (errs, scale)
 
 
+def _radau_play_config(b: float) -> Config:
+    """The drive the event-driven Radau checks use: linear mesh, no friction, play ``b``,
+    centred at the start, a little antenna drag, 0.5 us steps."""
+    return Config().replace({'mesh.backlash': b, 'mesh.stiffness_model': 'linear',
+                             'friction.model': 'off', 'load.output_torque': 0.0,
+                             'load.output_viscous_coefficient': 0.5,
+                             'mesh.initial_flank': 'center', 'integrator.time_step': 5e-7,
+                             'integrator.worm_frequency_matching': False})
+
+
 def _radau_with_play(cfg: Config, prof: SampledProfile, breaks, times, load=None):
     """The drive with play written out here (linear mesh, no friction), integrated by Radau
     from contact event to contact event (events at q = +-r_g b / 2) and between the kinks
@@ -170,11 +180,7 @@ def test_play_agrees_with_an_event_driven_radau_solution():
     leaving one flank and striking the other: Newmark (0.5 us) against Radau with the
     contact events located, theta2 and theta4 within 1 % of their range."""
     b = 2 * ARCMIN
-    cfg = Config().replace({'mesh.backlash': b, 'mesh.stiffness_model': 'linear',
-                            'friction.model': 'off', 'load.output_torque': 0.0,
-                            'load.output_viscous_coefficient': 0.5,
-                            'mesh.initial_flank': 'center', 'integrator.time_step': 5e-7,
-                            'integrator.worm_frequency_matching': False})
+    cfg = _radau_play_config(b)
     breaks = (0.0, 0.005, 0.01, 0.015)
     prof = SampledProfile(np.array(breaks), np.array([0.0, 0.15, -0.05, -0.05]), 'linear')
     tr = simulate(cfg, profile=prof, t_end=breaks[-1], record_every=40)
@@ -201,11 +207,7 @@ def test_play_under_a_reversing_load_agrees_with_an_event_driven_radau_solution(
     located: theta2, theta3, theta4 within 1 % of their range (measured: 0.3 %, 2e-5,
     3e-6; theta2 is the worm's 1e-5 rad response to the impacts)."""
     b = 2 * ARCMIN
-    cfg = Config().replace({'mesh.backlash': b, 'mesh.stiffness_model': 'linear',
-                            'friction.model': 'off', 'load.output_torque': 0.0,
-                            'load.output_viscous_coefficient': 0.5,
-                            'mesh.initial_flank': 'center', 'integrator.time_step': 5e-7,
-                            'integrator.worm_frequency_matching': False})
+    cfg = _radau_play_config(b)
     load = _SineLoad(8.0, 20.0)
     t_end = 0.03
     prof = SampledProfile(np.array([0.0, t_end]), np.array([0.0, 0.0]), 'linear')

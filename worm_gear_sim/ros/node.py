@@ -348,20 +348,13 @@ class WormGearSimNode(Node):
         and prediction(s) published, all in this callback."""
         t0 = time.thread_time_ns()
         self._params.swap_prepared()
-        pos = msg.position
-        if len(pos) == 0:
-            self._reject_message('empty_position', 'no position[0]')
+        sample = self._one_joint_sample(msg, msg.position, 'position', self._worm_input_joint,
+                                        '', self._reject_message)
+        if sample is None:
             return
-        names = msg.name
-        if len(names) and names[0] != self._worm_input_joint:
-            self._reject_message('wrong_joint', f'joint {names[0]!r}; this node takes '
-                                 f'{self._worm_input_joint!r}')
-            return
-        st = msg.header.stamp
-        stamp = st.sec * _NS + st.nanosec
+        stamp, x = sample
         if self._mode != 'stamped':
             self._enter_mode('stamped')
-        x = pos[0]
         out = self.rt.push(stamp, x, now_ns=self._clock.now().nanoseconds)
         self._handle(out, REFERENCE_TOPIC, stamp, value=x)
         self.load.busy(t0)
@@ -369,22 +362,32 @@ class WormGearSimNode(Node):
     def _on_load(self, msg: JointState) -> None:
         """One stamped load torque sample on the antenna (effort[0], N m): to the pipeline,
         which applies it in stamp order with the references."""
-        effort = msg.effort
-        if len(effort) == 0:
-            self._reject_load('load_empty_effort', 'no effort[0]')
+        sample = self._one_joint_sample(msg, msg.effort, 'effort', self._antenna_joint,
+                                        'load_', self._reject_load)
+        if sample is None:
             return
-        names = msg.name
-        if len(names) and names[0] != self._antenna_joint:
-            self._reject_load('load_wrong_joint', f'joint {names[0]!r}; the load acts on '
-                              f'{self._antenna_joint!r}')
-            return
-        st = msg.header.stamp
-        stamp = st.sec * _NS + st.nanosec
-        reason = self.rt.push_load(stamp, effort[0], now_ns=self._clock.now().nanoseconds)
+        stamp, torque = sample
+        reason = self.rt.push_load(stamp, torque, now_ns=self._clock.now().nanoseconds)
         if reason is not None:
             n = self.rt.counters['rejected_load_' + reason.value]
             self._warn('load_' + reason.value, f'rejected {LOAD_TORQUE_TOPIC}: '
                        f'load_{reason.value}; {n} so far')
+
+    @staticmethod
+    def _one_joint_sample(msg: JointState, values: Any, field: str, joint: str, prefix: str,
+                          reject: Any) -> tuple[int, float] | None:
+        """(stamp [ns], values[0]) of a one-joint JointState sample, or None after
+        ``reject(prefix + reason, text)``: no ``field[0]`` (``empty_<field>``) or a
+        ``name[0]`` other than ``joint`` (``wrong_joint``)."""
+        if len(values) == 0:
+            reject(f'{prefix}empty_{field}', f'no {field}[0]')
+            return None
+        names = msg.name
+        if len(names) and names[0] != joint:
+            reject(f'{prefix}wrong_joint', f'joint {names[0]!r}; this input takes {joint!r}')
+            return None
+        st = msg.header.stamp
+        return st.sec * _NS + st.nanosec, values[0]
 
     def _reject_load(self, reason: str, text: str) -> None:
         self.counters['rejected_' + reason] += 1
