@@ -613,7 +613,7 @@ class RealtimePredictor:
         if pending and self.sim is not None:
             for ns_l, v in pending:
                 if ns_l > ns:
-                    self.sim.push_load((ns_l - self._base) * 1e-9, v)
+                    self.sim.push_load(self._time(ns_l), v)
             pending.clear()
         self._started = True
         self._last_ns = ns
