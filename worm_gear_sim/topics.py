@@ -12,7 +12,8 @@ from .schema import NODE_NAME
 __all__ = ['NODE_NAMESPACE', 'COMMAND_TOPIC', 'REFERENCE_TOPIC', 'JOINT_STATES_TOPIC',
            'MEASURED_TOPIC', 'POSITIONING_ERROR_TOPIC', 'WORM_ERROR_TOPIC', 'FEEDFORWARD_TOPIC',
            'COMPENSATED_COMMAND_TOPIC', 'RESIDUAL_TOPIC', 'DIAGNOSTICS_TOPIC', 'FLOAT64',
-           'BACKDRIVE_MARGIN_TOPIC', 'LOAD_TORQUE_TOPIC',
+           'BACKDRIVE_MARGIN_TOPIC', 'LOAD_TORQUE_TOPIC', 'TRAJECTORY_TOPIC',
+           'COMPENSATED_TRAJECTORY_TOPIC',
            'JOINT_STATE', 'private_topic']
 
 NODE_NAMESPACE = NODE_NAME          # the node's name: its ~/ topics live under it
@@ -28,6 +29,8 @@ FEEDFORWARD_TOPIC = '~/feedforward'                # out, Float64 (delta)
 COMPENSATED_COMMAND_TOPIC = '~/compensated_command'  # out, JointState (theta1_ref + delta)
 RESIDUAL_TOPIC = '~/prediction_residual'           # out, JointState (measured - predicted)
 BACKDRIVE_MARGIN_TOPIC = '~/backdrive_margin'      # out, Float64 (> 1: the worm holds)
+TRAJECTORY_TOPIC = 'reference_trajectory'         # in, trajectory_msgs/JointTrajectory
+COMPENSATED_TRAJECTORY_TOPIC = '~/compensated_trajectory'  # out, JointTrajectory (dense)
 DIAGNOSTICS_TOPIC = '/diagnostics'                 # out, diagnostic_msgs/DiagnosticArray
 
 FLOAT64 = 'std_msgs/msg/Float64'

@@ -31,6 +31,7 @@ the move's amplitude of the straight-line path, and drives the antenna to ringin
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,7 +43,8 @@ from .profiles import SampledProfile
 from .realtime import feedforward_series
 from .simulation import simulate
 
-__all__ = ['jtc_sample', 'compensate_trajectory', 'CompensatedTrajectory',
+__all__ = ['jtc_sample', 'compensate_trajectory', 'CompensatedTrajectory', 'Trajectory',
+           'TrajectoryCompensator', 'TrajectoryRejected', 'TRAJECTORY_REJECT_REASONS',
            'MAX_TRAJECTORY_POINTS', 'MAX_TRAJECTORY_DURATION']
 
 #: The longest trajectory accepted: waypoints, and seconds (a tracking pass is minutes).
@@ -50,32 +52,53 @@ MAX_TRAJECTORY_POINTS = 100_000
 MAX_TRAJECTORY_DURATION = 3600.0
 
 
+class TrajectoryRejected(ValueError):
+    """A trajectory refused whole: ``reason`` (one of :data:`TRAJECTORY_REJECT_REASONS`,
+    the node's counter ``rejected_trajectory_<reason>``) and a one-line message."""
+
+    def __init__(self, reason: str, text: str) -> None:
+        super().__init__(f'trajectory: {text}')
+        self.reason = reason
+
+
+#: Why a trajectory is refused (each a counter of the node).
+TRAJECTORY_REJECT_REASONS = ('empty', 'unknown_joint', 'duplicate_joint', 'length_mismatch',
+                             'not_finite', 'not_increasing', 'too_long', 'past_stamp',
+                             'command_limits')
+
+
 def _check(times: np.ndarray, pos: np.ndarray, vel: np.ndarray | None,
            acc: np.ndarray | None) -> None:
+    """Waypoints of one or more joints (``pos``: (n,) or (n, joints)); TrajectoryRejected
+    naming the first problem."""
     n = times.size
     if n == 0:
-        raise ValueError('trajectory: no waypoints')
+        raise TrajectoryRejected('empty', 'no waypoints')
     if n > MAX_TRAJECTORY_POINTS:
-        raise ValueError(f'trajectory: {n} waypoints, more than {MAX_TRAJECTORY_POINTS}')
+        raise TrajectoryRejected('too_long', f'{n} waypoints, more than '
+                                 f'{MAX_TRAJECTORY_POINTS}')
     for name, arr in (('positions', pos), ('velocities', vel), ('accelerations', acc)):
         if arr is None:
             continue
-        if arr.shape != times.shape:
-            raise ValueError(f'trajectory: {arr.size} {name} for {n} waypoints')
-        bad = np.flatnonzero(~np.isfinite(arr))
+        if arr.shape[:1] != times.shape or arr.shape != pos.shape:
+            raise TrajectoryRejected('length_mismatch', f'{arr.shape[0]} {name} for {n} '
+                                     'waypoints' if arr.shape[:1] != times.shape else
+                                     f'{name} of shape {arr.shape}, positions {pos.shape}')
+        bad = np.flatnonzero(~np.isfinite(arr.reshape(n, -1)).all(axis=1))
         if bad.size:
-            raise ValueError(f'trajectory: {name}[{int(bad[0])}] is not finite')
+            raise TrajectoryRejected('not_finite', f'{name}[{int(bad[0])}] is not finite')
     if acc is not None and vel is None:
-        raise ValueError('trajectory: accelerations without velocities')
+        raise TrajectoryRejected('length_mismatch', 'accelerations without velocities')
     if not np.all(np.isfinite(times)) or times[0] < 0:
-        raise ValueError('trajectory: time_from_start must be finite and >= 0')
+        raise TrajectoryRejected('not_increasing',
+                                 'time_from_start must be finite and >= 0')
     back = np.flatnonzero(np.diff(times) <= 0)
     if back.size:
-        raise ValueError(f'trajectory: time_from_start[{int(back[0]) + 1}] does not '
-                         'increase')
+        raise TrajectoryRejected('not_increasing', f'time_from_start[{int(back[0]) + 1}] '
+                                 'does not increase')
     if times[-1] > MAX_TRAJECTORY_DURATION:
-        raise ValueError(f'trajectory: {times[-1]:g} s, longer than '
-                         f'{MAX_TRAJECTORY_DURATION:g} s')
+        raise TrajectoryRejected('too_long', f'{times[-1]:g} s, longer than '
+                                 f'{MAX_TRAJECTORY_DURATION:g} s')
 
 
 def jtc_sample(times: ArrayLike, positions: ArrayLike, t: ArrayLike,
@@ -157,16 +180,18 @@ def compensate_trajectory(model: DriveModel | Config, times: ArrayLike,
                           positions: ArrayLike, velocities: ArrayLike | None = None,
                           accelerations: ArrayLike | None = None,
                           start_position: float | None = None, settle: float = 0.1,
-                          predict: bool = True) -> CompensatedTrajectory:
+                          predict: bool = True, rate: float | None = None
+                          ) -> CompensatedTrajectory:
     """Compensate a trajectory (module docstring).  The dense output runs from 0 to the
     last waypoint plus ``settle`` seconds (the correction's filter and the ringing after
-    the move); ``predict`` also simulates the drive on the raw and the compensated command
-    (the antenna errors)."""
+    the move) at ``rate`` [Hz] (default: the drive's ``node.publish_rate_hz``);
+    ``predict`` also simulates the drive on the raw and the compensated command (the
+    antenna errors)."""
     m = DriveModel.of(model)
-    rate = m.config.node.publish_rate_hz
+    rate = m.config.node.publish_rate_hz if rate is None else float(rate)
     tw = np.asarray(times, float).reshape(-1)
     if tw.size == 0:
-        raise ValueError('trajectory: no waypoints')
+        raise TrajectoryRejected('empty', 'no waypoints')
     if not (math.isfinite(settle) and settle >= 0):
         raise ValueError(f'settle = {settle!r} s: must be >= 0')
     t_end = float(tw[-1]) + settle
@@ -187,3 +212,171 @@ def compensate_trajectory(model: DriveModel | Config, times: ArrayLike,
             th4 = np.interp(t, tr.t, tr.theta[:, 2])
             setattr(out, field, th4 - ref * ratio)
     return out
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A ``trajectory_msgs/JointTrajectory`` as arrays: ``time_from_start`` (n,) [s],
+    ``positions`` (n, joints) [rad], ``velocities`` and ``accelerations`` (n, joints) or
+    None, ``stamp_ns`` the header stamp (0: start on reception, the controller's rule)."""
+
+    joint_names: tuple[str, ...]
+    time_from_start: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+    accelerations: np.ndarray | None = None
+    stamp_ns: int = 0
+
+    @classmethod
+    def from_points(cls, joint_names: Sequence[str], times: Sequence[float],
+                    positions: Sequence[Sequence[float]],
+                    velocities: Sequence[Sequence[float]] | None = None,
+                    accelerations: Sequence[Sequence[float]] | None = None,
+                    stamp_ns: int = 0) -> Trajectory:
+        """From per-point lists as a message carries them.  A point's velocities
+        (accelerations) are empty or one per joint, and given on every point or on none:
+        else TrajectoryRejected ``length_mismatch`` (the controller would reject it too)."""
+        names = tuple(joint_names)
+        n, nj = len(times), len(names)
+        if nj == 0:
+            raise TrajectoryRejected('empty', 'no joint names')
+
+        def table(rows: Sequence[Sequence[float]] | None, what: str,
+                  optional: bool) -> np.ndarray | None:
+            if rows is None:
+                return None
+            sizes = {len(r) for r in rows}
+            if optional and sizes == {0}:
+                return None
+            if sizes != {nj}:
+                bad = next(i for i, r in enumerate(rows) if len(r) != nj)
+                raise TrajectoryRejected('length_mismatch', f'point {bad} has '
+                                         f'{len(rows[bad])} {what} for {nj} joints')
+            return np.array(rows, float).reshape(n, nj)
+
+        if len(positions) != n:
+            raise TrajectoryRejected('length_mismatch', f'{len(positions)} points of '
+                                     f'positions for {n} times')
+        if n > MAX_TRAJECTORY_POINTS:
+            raise TrajectoryRejected('too_long', f'{n} waypoints, more than '
+                                     f'{MAX_TRAJECTORY_POINTS}')
+        return cls(names, np.asarray(times, float).reshape(n),
+                   table(positions, 'positions', False) if n else np.empty((0, nj)),
+                   table(velocities, 'velocities', True) if n else None,
+                   table(accelerations, 'accelerations', True) if n else None,
+                   int(stamp_ns))
+
+
+def _column(a: np.ndarray | None, k: int) -> np.ndarray | None:
+    return None if a is None else a[:, k]
+
+
+@dataclass
+class TrajectoryResult:
+    """What :meth:`TrajectoryCompensator.compensate` returns: the dense compensated
+    ``trajectory`` (same joints in the same order, same stamp), the start instant it was
+    timed from (``start_ns``) and each joint's :class:`CompensatedTrajectory`."""
+
+    trajectory: Trajectory
+    start_ns: int
+    axes: dict[str, CompensatedTrajectory]
+
+
+class TrajectoryCompensator:
+    """Compensated trajectories for one drive or several (a pedestal): ``drives`` maps each
+    drive's worm input joint name to its model (or Config).  Built once; the node and the
+    offline tools call the same :meth:`compensate`.
+
+    A trajectory may name any of the drives' joints, each once (a subset is allowed: the
+    others keep what they do).  It is split by joint, each joint compensated with its own
+    drive (:func:`compensate_trajectory` on a common grid at the highest
+    ``node.publish_rate_hz`` of the drives) and merged back in the trajectory's order.
+
+    Replacement, as the controller does it: a trajectory starts at its header stamp (0:
+    at ``now_ns``, its reception); each joint starts from the position this object last
+    sent for it at that instant (the previous compensated trajectory's reference there, or
+    its last point once it has ended), or from the trajectory's first waypoint when nothing
+    was sent yet.  The drive is taken to be at rest at the start: a replacement in the
+    middle of a move restarts the correction's filter from rest at the held reference
+    (docs/compensation.md).
+    """
+
+    def __init__(self, drives: Mapping[str, DriveModel | Config], settle: float = 0.1
+                 ) -> None:
+        if not drives:
+            raise ValueError('TrajectoryCompensator: no drives')
+        self.drives = {str(j): DriveModel.of(m) for j, m in drives.items()}
+        self.rate = max(m.config.node.publish_rate_hz for m in self.drives.values())
+        self.settle = float(settle)
+        # per joint: (start_ns, reference times [s from start], reference positions)
+        self._sent: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        return tuple(self.drives)
+
+    def check(self, traj: Trajectory, now_ns: int | None = None) -> None:
+        """TrajectoryRejected naming the first problem (:data:`TRAJECTORY_REJECT_REASONS`):
+        no joints or points, unknown or repeated joints, ragged or non-finite values,
+        time_from_start not increasing, too long, or wholly in the past of ``now_ns``."""
+        names = traj.joint_names
+        if not names:
+            raise TrajectoryRejected('empty', 'no joint names')
+        seen: set[str] = set()
+        for name in names:
+            if name in seen:
+                raise TrajectoryRejected('duplicate_joint', f'joint {name!r} named twice')
+            seen.add(name)
+            if name not in self.drives:
+                raise TrajectoryRejected('unknown_joint', f'unknown joint {name!r} (this '
+                                         f'node drives {", ".join(self.drives)})')
+        _check(traj.time_from_start, traj.positions, traj.velocities, traj.accelerations)
+        if traj.stamp_ns < 0:
+            raise TrajectoryRejected('past_stamp', f'negative stamp {traj.stamp_ns} ns')
+        if now_ns is not None and traj.stamp_ns and \
+                traj.stamp_ns + int(traj.time_from_start[-1] * 1e9) < now_ns:
+            late = (now_ns - traj.stamp_ns) / 1e9 - traj.time_from_start[-1]
+            raise TrajectoryRejected('past_stamp', f'ends {late:.3g} s before now')
+
+    def with_drives(self, drives: Mapping[str, DriveModel | Config]) -> TrajectoryCompensator:
+        """The same with new models (a parameter set), keeping what was sent."""
+        new = TrajectoryCompensator(drives, self.settle)
+        new._sent = {j: v for j, v in self._sent.items() if j in new.drives}
+        return new
+
+    def start_position(self, joint: str, start_ns: int) -> float | None:
+        """The position last sent for ``joint`` at ``start_ns`` (None: nothing sent)."""
+        sent = self._sent.get(joint)
+        if sent is None:
+            return None
+        t0, t, ref = sent
+        return float(np.interp((start_ns - t0) / 1e9, t, ref))
+
+    def compensate(self, traj: Trajectory, now_ns: int = 0, predict: bool = False
+                   ) -> TrajectoryResult:
+        """Check, split, compensate and merge ``traj`` (class docstring); remembers what it
+        sent for the next trajectory's start.  ``predict``: also the antenna errors."""
+        self.check(traj, now_ns)
+        start_ns = traj.stamp_ns or now_ns
+        axes: dict[str, CompensatedTrajectory] = {}
+        for k, joint in enumerate(traj.joint_names):
+            try:
+                axes[joint] = compensate_trajectory(
+                    self.drives[joint], traj.time_from_start, traj.positions[:, k],
+                    _column(traj.velocities, k), _column(traj.accelerations, k),
+                    start_position=self.start_position(joint, start_ns),
+                    settle=self.settle, predict=predict, rate=self.rate)
+            except TrajectoryRejected:
+                raise
+            except ValueError as exc:      # node.max_command_abs / max_command_jump
+                raise TrajectoryRejected('command_limits', f'joint {joint!r}: {exc}') \
+                    from None
+        for joint, ct in axes.items():
+            self._sent[joint] = (start_ns, ct.t, ct.reference)
+        first = axes[traj.joint_names[0]]
+        dense = Trajectory(traj.joint_names, first.t,
+                           np.column_stack([axes[j].position for j in traj.joint_names]),
+                           np.column_stack([axes[j].velocity for j in traj.joint_names]),
+                           np.column_stack([axes[j].acceleration for j in traj.joint_names]),
+                           traj.stamp_ns)
+        return TrajectoryResult(dense, start_ns, axes)

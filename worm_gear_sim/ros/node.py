@@ -31,6 +31,11 @@ Interface (SI units, rad; relative, remappable names; docs/node.md):
   (JointState, the measurement's stamp, measured - predicted per measured joint) and a
   ``model check`` status on /diagnostics that turns WARN when a joint's residual RMS over
   ``node.residual_window`` exceeds its ``node.residual_warn_rms``;
+* ``reference_trajectory`` (in, trajectory_msgs/JointTrajectory of the worm input joint,
+  reliable, keep last 10) and ``~/compensated_trajectory`` (out, the same joint, header
+  and timing, dense at ``node.publish_rate_hz``: reference + correction, meant to be
+  remapped to a joint_trajectory_controller's ``~/joint_trajectory``; :mod:`.trajectory_bridge`,
+  the core's :class:`~worm_gear_sim.trajectories.TrajectoryCompensator`);
 * ``/diagnostics``: counters of the pipeline and of this node, stale-stream status;
 * every model parameter is a declared ROS parameter (dotted names of
   :meth:`Config.to_flat_dict`), validated by the core (:meth:`Config.replace`, which proves
@@ -83,6 +88,7 @@ from .interface import (
 from .node_status import CallbackLoad, backdrive_status, model_check_status, node_statuses
 from .param_updates import ParameterUpdates
 from .params_bridge import check_overrides, declare_config, parameter_type
+from .trajectory_bridge import TrajectoryBridge
 
 __all__ = ['WormGearSimNode', 'LogThrottle', 'file_defaults', 'COMMAND_TOPIC',
            'REFERENCE_TOPIC', 'REFERENCE_DEPTH', 'JOINT_STATES_TOPIC', 'REJECT_REASONS',
@@ -218,6 +224,12 @@ class WormGearSimNode(Node):
         self._cc.name = [self._worm_input_joint]
         self._cc.position = [0.0]
         self._f_err, self._f_worm, self._f_ff = Float64(), Float64(), Float64()
+
+        # trajectories of the worm input joint (a ros2_control joint_trajectory_controller's
+        # language): compensated whole on a worker thread (.trajectory_bridge)
+        self.trajectories = TrajectoryBridge(
+            self, lambda: {self.rt.model.config.node.joint_names[0]: self.rt.model}, self.counters,
+            self._warn, self._publish, self._guard_message)
 
         check_overrides(self)
 
@@ -589,4 +601,5 @@ class WormGearSimNode(Node):
 
     def destroy_node(self) -> None:
         self._params.shutdown()
+        self.trajectories.shutdown()
         super().destroy_node()
