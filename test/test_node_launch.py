@@ -14,9 +14,9 @@ ROOT = Path(__file__).resolve().parent.parent
 LAUNCH = ROOT / 'launch' / 'worm_gear_sim.launch.py'
 
 
-def launch_constants() -> dict[str, object]:
-    """Module-level NAME = <literal or os.path.join of literals> of the launch file."""
-    tree = ast.parse(LAUNCH.read_text(), filename=str(LAUNCH))
+def launch_constants(path: Path = LAUNCH) -> dict[str, object]:
+    """Module-level NAME = <literal or os.path.join of literals> of a launch file."""
+    tree = ast.parse(path.read_text(), filename=str(path))
     out: dict[str, object] = {}
     for node in tree.body:
         if isinstance(node, ast.Assign) and len(node.targets) == 1 and \
@@ -57,3 +57,14 @@ def test_launch_file_names_the_installed_executables_and_files():
     for arg in ('params_file', 'demo', 'demo_pattern', 'robot_state_publisher'):
         assert f"DeclareLaunchArgument('{arg}'" in text, arg
     compile(text, str(LAUNCH), 'exec')
+
+
+def test_pedestal_launch_file_runs_the_pedestal_executable_on_the_installed_file():
+    path = ROOT / 'launch' / 'pedestal.launch.py'
+    c = launch_constants(path)
+    assert 'generate_launch_description' in c['functions']
+    assert console_scripts()[c['EXECUTABLE']] == 'worm_gear_sim.ros.startup:pedestal_main'
+    assert (ROOT / c['PEDESTAL']).is_file() and c['PEDESTAL'] == 'config/pedestal.yaml'
+    text = path.read_text()
+    assert "DeclareLaunchArgument('pedestal_file'" in text and "'--pedestal'" in text
+    compile(text, str(path), 'exec')

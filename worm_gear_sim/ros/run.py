@@ -64,17 +64,26 @@ def spin_until_shutdown(executor: Any, context: Any = None, slice_s: float = 1.0
         executor.spin_until_future_complete(never, timeout_sec=slice_s)
 
 
-def _parse_args(argv: list[str]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(
-        prog='worm_gear_sim_node',
-        description='Worm-gear drive model in real time (parameters: --ros-args '
-                    '--params-file config/worm_gear_sim.yaml).')
+def _parse_args(argv: list[str], pedestal: bool) -> argparse.Namespace:
+    if pedestal:
+        ap = argparse.ArgumentParser(
+            prog='worm_gear_sim_pedestal',
+            description='N worm drives (a pedestal: azimuth and elevation) in one process: '
+                        'one node per drive in its namespace, plus the pedestal node that '
+                        'splits and merges multi-joint trajectories (docs/pedestal.md).')
+        ap.add_argument('--pedestal', default=None, metavar='PEDESTAL.yaml',
+                        help='the drives (default: the package\'s config/pedestal.yaml)')
+    else:
+        ap = argparse.ArgumentParser(
+            prog='worm_gear_sim_node',
+            description='Worm-gear drive model in real time (parameters: --ros-args '
+                        '--params-file config/worm_gear_sim.yaml).')
     ap.add_argument('--executor', choices=('events', 'single_threaded'), default=None,
                     help='override the node.executor parameter')
     return ap.parse_args(argv)
 
 
-def main(args: list[str] | None = None) -> int:
+def main(args: list[str] | None = None, pedestal: bool = False) -> int:
     """Entry point of ``worm_gear_sim_node`` and ``python -m worm_gear_sim.node`` (through
     :func:`worm_gear_sim.ros.startup.node_main`, which installs the signal handlers before
     the heavy imports).
@@ -93,7 +102,7 @@ def main(args: list[str] | None = None) -> int:
         rest = remove_ros_args(args=argv)
     except RCLError as exc:
         return config_error(clean_rcl_message(exc))
-    opts = _parse_args(rest[1:])
+    opts = _parse_args(rest[1:], pedestal)
     # From here until the node is built a signal is only recorded (.signals, phase 'init'):
     # rclpy's handler, which shuts every context down from its own thread, is installed
     # only when the node exists, so it never races rclpy.init or the node's construction.
@@ -105,7 +114,7 @@ def main(args: list[str] | None = None) -> int:
             return 0
         return config_error(clean_rcl_message(exc))
     try:
-        return _run(opts)
+        return _run(opts, pedestal)
     except (KeyboardInterrupt, ExternalShutdownException):
         return 0
     finally:
@@ -113,10 +122,18 @@ def main(args: list[str] | None = None) -> int:
         _quietly(rclpy.try_shutdown)
 
 
-def _run(opts: argparse.Namespace) -> int:
+def _build(opts: argparse.Namespace, pedestal: bool) -> list[Any]:
+    """The process's nodes: one drive, or a pedestal's drives and its trajectory node."""
+    if not pedestal:
+        return [WormGearSimNode()]
+    from .pedestal import build_pedestal
+    return build_pedestal(opts.pedestal)
+
+
+def _run(opts: argparse.Namespace, pedestal: bool = False) -> int:
     context = rclpy.get_default_context()
     try:
-        node = WormGearSimNode()
+        nodes = _build(opts, pedestal)
     except STARTUP_CONFIG_ERRORS as exc:
         if signals.signalled():     # Ctrl-C / SIGTERM came first: a quiet exit
             return 0
@@ -125,8 +142,10 @@ def _run(opts: argparse.Namespace) -> int:
     # installed first, checked second, so that no signal falls between the two.
     signals.set_phase('ros')
     install_rclpy_signal_handlers(SignalHandlerOptions.ALL)
+    node = nodes[0]
     if signals.signalled() or not context.ok():   # Ctrl-C / SIGTERM during the build
-        _quietly(node.destroy_node)
+        for n in nodes:
+            _quietly(n.destroy_node)
         return 0
     kind = opts.executor or node.config.node.executor
     executor = make_executor(kind)
@@ -135,7 +154,8 @@ def _run(opts: argparse.Namespace) -> int:
     # ticks.
     gc.collect()
     gc.freeze()
-    executor.add_node(node)
+    for n in nodes:
+        executor.add_node(n)
     node.get_logger().info(f'spinning with the {kind} executor')
     try:
         spin_until_shutdown(executor, context)
@@ -149,7 +169,8 @@ def _run(opts: argparse.Namespace) -> int:
     finally:
         signals.set_phase('stopping')
         _quietly(executor.shutdown, 1.0)
-        _quietly(node.destroy_node)
+        for n in nodes:
+            _quietly(n.destroy_node)
     return 0
 
 

@@ -19,7 +19,7 @@ import sys
 
 from .signals import install_signal_handlers
 
-__all__ = ['node_main']
+__all__ = ['node_main', 'pedestal_main']
 
 
 def node_main(args: list[str] | None = None) -> int:
@@ -29,6 +29,13 @@ def node_main(args: list[str] | None = None) -> int:
     # imports are never unwound half-way through a C extension's initialisation.
     from .run import main  # numpy, scipy, numba, rclpy: seconds on a loaded machine
     return main(args)
+
+
+def pedestal_main(args: list[str] | None = None) -> int:
+    """Entry point of ``worm_gear_sim_pedestal`` (:mod:`.pedestal`): the same start-up."""
+    install_signal_handlers()
+    from .run import main
+    return main(args, pedestal=True)
 
 
 if __name__ == '__main__':  # pragma: no cover - python -m worm_gear_sim.ros.startup
