@@ -139,3 +139,28 @@ def test_the_pedestal_process_splits_compensates_and_merges_like_the_twin(
     np.testing.assert_allclose(got_az.positions[:, 0], want.positions[:, 1], rtol=0,
                                atol=1e-9)
     assert math.isfinite(float(got.positions.sum()))
+
+
+@pytest.mark.ros
+def test_the_pass_demo_streams_a_pass_through_the_pedestal_process(ros_subprocess_env,
+                                                                    tmp_path):
+    """scripts/run_pass.sh's two processes: every trajectory comes back equal to its twin
+    and the table shows both axes' pointing error cut (exit 0)."""
+    import subprocess
+    proc, log = start_logged(
+        [sys.executable, '-c', 'import sys; from worm_gear_sim.ros.startup import '
+         'pedestal_main; sys.exit(pedestal_main())'], ros_subprocess_env,
+        tmp_path / 'pedestal.log')
+    try:
+        demo = subprocess.run(
+            [sys.executable, '-m', 'worm_gear_sim.ros.pass_demo', '--duration', '6',
+             '-o', str(tmp_path / 'pass')], env=ros_subprocess_env, capture_output=True,
+            text=True, timeout=240)
+    finally:
+        rc, text = stop_and_read(proc, log, signal.SIGINT)
+    assert demo.returncode == 0, demo.stdout + demo.stderr
+    assert rc == 0 and 'Traceback' not in text, text
+    assert '1/1 compensated trajectories received' in demo.stdout, demo.stdout
+    twin = float(demo.stdout.split('offline twin: ')[1].split()[0])
+    assert twin <= 1e-9
+    assert (tmp_path / 'pass' / 'pass.png').is_file()

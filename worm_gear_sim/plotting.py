@@ -14,7 +14,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-__all__ = ['plot_trajectory', 'plot_experiment', 'plot_sweep', 'plot_modes', 'plot_traces']
+__all__ = ['plot_trajectory', 'plot_experiment', 'plot_sweep', 'plot_modes', 'plot_traces',
+           'plot_pass']
 
 _DPI = 100
 _STYLES = ('-o', '-s', '-^', '-D', '-v', '-x', '-*', '-P')
@@ -199,4 +200,29 @@ def plot_error_study(rows: Sequence[Mapping[str, Any]], path: str | Path, title:
         a.grid(True, which='both', alpha=0.3)
         a.legend()
     fig.suptitle(title)
+    return _save(fig, path)
+
+
+def plot_pass(result: Any, path: str | Path, title: str = '') -> Path:
+    """A tracking pass (:mod:`worm_gear_sim.studies.tracking_pass`): per axis, the antenna
+    angle, the pointing error with and without compensation, and the compensated error on
+    its own scale."""
+    joints = list(result.raw_error)
+    fig, ax = _new(3, len(joints), (5.0 * len(joints), 8.5))
+    t = result.t
+    for k, j in enumerate(joints):
+        a = ax[0, k]
+        a.plot(t, result.reference[j], lw=1, color='k')
+        a.set_ylabel('antenna reference [rad]')
+        a.set_title(f'{j}', fontsize=9)
+        a = ax[1, k]
+        a.plot(t, result.raw_error[j] * 1e6, lw=0.8, label='raw trajectory')
+        a.plot(t, result.compensated_error[j] * 1e6, lw=0.8, label='compensated')
+        a.set_ylabel('pointing error [urad]')
+        a.legend(loc='best', fontsize=8)
+        a = ax[2, k]
+        a.plot(t, result.compensated_error[j] * 1e6, lw=0.8, color='C1')
+        a.set_ylabel('compensated error [urad]')
+        a.set_xlabel('t [s]')
+    fig.suptitle(title or 'worm_gear_sim: tracking pass', fontsize=10)
     return _save(fig, path)

@@ -47,6 +47,9 @@ __all__ = ['jtc_sample', 'compensate_trajectory', 'CompensatedTrajectory', 'Traj
            'TrajectoryCompensator', 'TrajectoryRejected', 'TRAJECTORY_REJECT_REASONS',
            'MAX_TRAJECTORY_POINTS', 'MAX_TRAJECTORY_DURATION']
 
+#: Seconds of the replaced trajectory's command the correction's filter runs through at a
+#: hand-over (longer than the drive's transients take to decay: 0.2 s at the defaults).
+HANDOVER_HISTORY = 1.0
 #: The longest trajectory accepted: waypoints, and seconds (a tracking pass is minutes).
 MAX_TRAJECTORY_POINTS = 100_000
 MAX_TRAJECTORY_DURATION = 3600.0
@@ -180,13 +183,17 @@ def compensate_trajectory(model: DriveModel | Config, times: ArrayLike,
                           positions: ArrayLike, velocities: ArrayLike | None = None,
                           accelerations: ArrayLike | None = None,
                           start_position: float | None = None, settle: float = 0.1,
-                          predict: bool = True, rate: float | None = None
+                          predict: bool = True, rate: float | None = None,
+                          history: tuple[ArrayLike, ArrayLike] | None = None
                           ) -> CompensatedTrajectory:
     """Compensate a trajectory (module docstring).  The dense output runs from 0 to the
     last waypoint plus ``settle`` seconds (the correction's filter and the ringing after
-    the move) at ``rate`` [Hz] (default: the drive's ``node.publish_rate_hz``);
-    ``predict`` also simulates the drive on the raw and the compensated command (the
-    antenna errors)."""
+    the move) at ``rate`` [Hz] (default: the drive's ``node.publish_rate_hz``).
+    ``history``: (times [s, < 0, increasing], reference) the drive was commanded before
+    this trajectory's start (a replaced trajectory): the correction's filter runs through
+    them first, so a hand-over in the middle of a move continues the correction instead of
+    restarting it from rest.  ``predict`` also simulates the drive on the raw and the
+    compensated command (the antenna errors; from rest at the start)."""
     m = DriveModel.of(model)
     rate = m.config.node.publish_rate_hz if rate is None else float(rate)
     tw = np.asarray(times, float).reshape(-1)
@@ -198,7 +205,15 @@ def compensate_trajectory(model: DriveModel | Config, times: ArrayLike,
     n = int(math.floor(t_end * rate + 1e-9)) + 1
     t = np.arange(n) / rate
     ref, vref, aref = jtc_sample(tw, positions, t, velocities, accelerations, start_position)
-    delta = feedforward_series(m, t, ref)
+    if history is not None and np.size(history[0]):
+        th = np.asarray(history[0], float).reshape(-1)
+        xh = np.asarray(history[1], float).reshape(-1)
+        if th.shape != xh.shape or not th[-1] < 0:
+            raise ValueError('history: equal-length times < 0 and references')
+        ns = np.round(np.concatenate((th, t)) * 1e9).astype(np.int64)
+        delta = feedforward_series(m, ns, np.concatenate((xh, ref)))[th.size:]
+    else:
+        delta = feedforward_series(m, t, ref)
     dt = 1.0 / rate
     ddelta = np.gradient(delta, dt) if n > 2 else np.zeros(n)
     dddelta = np.gradient(ddelta, dt) if n > 2 else np.zeros(n)
@@ -296,18 +311,22 @@ class TrajectoryCompensator:
     at ``now_ns``, its reception); each joint starts from the position this object last
     sent for it at that instant (the previous compensated trajectory's reference there, or
     its last point once it has ended), or from the trajectory's first waypoint when nothing
-    was sent yet.  The drive is taken to be at rest at the start: a replacement in the
-    middle of a move restarts the correction's filter from rest at the held reference
-    (docs/compensation.md).
+    was sent yet.  The correction continues through a hand-over: its filter first runs
+    through the last ``history`` seconds of the reference sent before (at rest when
+    nothing was sent), so trajectories streamed back to back, each replacing the last in
+    the middle of a move, are compensated as one long trajectory would be (the difference
+    is what is left after ``history`` seconds of the drive's transients; measured in
+    test_trajectories.py).
     """
 
-    def __init__(self, drives: Mapping[str, DriveModel | Config], settle: float = 0.1
-                 ) -> None:
+    def __init__(self, drives: Mapping[str, DriveModel | Config], settle: float = 0.1,
+                 history: float = HANDOVER_HISTORY) -> None:
         if not drives:
             raise ValueError('TrajectoryCompensator: no drives')
         self.drives = {str(j): DriveModel.of(m) for j, m in drives.items()}
         self.rate = max(m.config.node.publish_rate_hz for m in self.drives.values())
         self.settle = float(settle)
+        self.history = float(history)
         # per joint: (start_ns, reference times [s from start], reference positions)
         self._sent: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
 
@@ -340,7 +359,7 @@ class TrajectoryCompensator:
 
     def with_drives(self, drives: Mapping[str, DriveModel | Config]) -> TrajectoryCompensator:
         """The same with new models (a parameter set), keeping what was sent."""
-        new = TrajectoryCompensator(drives, self.settle)
+        new = TrajectoryCompensator(drives, self.settle, self.history)
         new._sent = {j: v for j, v in self._sent.items() if j in new.drives}
         return new
 
@@ -351,6 +370,24 @@ class TrajectoryCompensator:
             return None
         t0, t, ref = sent
         return float(np.interp((start_ns - t0) / 1e9, t, ref))
+
+    def commanded_before(self, joint: str, start_ns: int
+                         ) -> tuple[np.ndarray, np.ndarray] | None:
+        """(times [s, < 0], reference) sent for ``joint`` in the ``history`` seconds before
+        ``start_ns``, on the command grid (None: nothing sent, or at rest then)."""
+        sent = self._sent.get(joint)
+        if sent is None or self.history <= 0:
+            return None
+        t0, t, ref = sent
+        k = np.arange(-int(round(self.history * self.rate)), 0)
+        th = k / self.rate
+        th = th[(start_ns - t0) / 1e9 + th >= 0]       # not before the previous start
+        if th.size == 0:
+            return None
+        xh = np.interp((start_ns - t0) / 1e9 + th, t, ref)
+        if np.ptp(xh) == 0.0:
+            return None                                 # held: at rest, nothing to carry
+        return th, xh
 
     def compensate(self, traj: Trajectory, now_ns: int = 0, predict: bool = False
                    ) -> TrajectoryResult:
@@ -365,7 +402,8 @@ class TrajectoryCompensator:
                     self.drives[joint], traj.time_from_start, traj.positions[:, k],
                     _column(traj.velocities, k), _column(traj.accelerations, k),
                     start_position=self.start_position(joint, start_ns),
-                    settle=self.settle, predict=predict, rate=self.rate)
+                    settle=self.settle, predict=predict, rate=self.rate,
+                    history=self.commanded_before(joint, start_ns))
             except TrajectoryRejected:
                 raise
             except ValueError as exc:      # node.max_command_abs / max_command_jump

@@ -38,6 +38,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     'compensate',    # compensate
     'identify',      # identify
     'calibrate',     # calibrate
+    'tracking_pass',  # pass
 )
 
 
