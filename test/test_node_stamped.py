@@ -417,3 +417,19 @@ def test_the_load_torque_topic_drives_the_prediction_and_rejects_bad_samples(ros
     assert h.node.sim.t == t_sim and rt.load_torque == load
     vals = {kv.key: kv.value for kv in h.node.diagnostic_statuses()[1].values}
     assert vals['rejected_load_nan'] == '1' and vals['load_samples_accepted'] == str(lt.size)
+
+
+def test_monitoring_topics_run_at_their_own_rate_and_corrections_at_the_samples(ros_harness):
+    """node.monitor_rate_hz = 100: joint_states at most every 10 ms of prediction stamps
+    while ~/compensated_command answers every 1 kHz sample."""
+    h = make(ros_harness, {'node.monitor_rate_hz': 100.0})
+    n = 300
+    stamps = NOW_NS - 400 * MS + np.arange(n) * MS
+    values = slew((stamps - stamps[0]) * 1e-9)
+    assert h.references(zip(stamps.tolist(), values.tolist()))
+    assert h.spin_until(lambda: len(h.compensated) == n)
+    h.spin_for(0.2)
+    js = np.array([stamp_ns(m) for m in h.joint_states])
+    assert 25 <= js.size <= 31, js.size
+    assert np.all(np.diff(js) >= 10 * MS)
+    assert len(h.positioning_error) == js.size

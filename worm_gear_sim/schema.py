@@ -320,6 +320,11 @@ class NodeSettings:
                                     'to the command')
     diagnostic_period: float = _f(1.0, 'Period of /diagnostics', 's', 0.01, 60.0,
                                   read_only=True)
+    monitor_rate_hz: float = _f(0.0, 'Largest rate of the monitoring topics (joint_states, '
+                                '~/positioning_error, ~/worm_error), by the stamps of the '
+                                'predictions; 0.0: one message per prediction.  The '
+                                'per-sample outputs (~/compensated_command, ~/feedforward) '
+                                'are not limited', 'Hz', 0.0, 1e6)
     residual_window: float = _f(1.0, 'Live model check: window of the RMS of measured - '
                                 'predicted (measured_joint_states)', 's', 0.0, 3600.0,
                                 lo_open=True, read_only=True)

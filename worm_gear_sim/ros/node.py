@@ -177,6 +177,7 @@ class WormGearSimNode(Node):
         self._mode = ''                          # 'stamped' | 'command' once input came
         self._last_mono_ns = 0
         self._last_watch_ns = 0
+        self._last_monitor_ns = -(1 << 62)       # stamp of the last monitoring message
         self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
         guard_clock_source(self, self._on_bad_clock)
 
@@ -512,8 +513,14 @@ class WormGearSimNode(Node):
             if self._pub_js.get_subscription_count() or \
                     self._pub_err.get_subscription_count() or \
                     self._pub_worm.get_subscription_count():
+                rate = self.config.node.monitor_rate_hz
                 for p in preds:
-                    self._publish_prediction(p, p.stamp_ns if stamp_ns is None else stamp_ns)
+                    ns = p.stamp_ns if stamp_ns is None else stamp_ns
+                    if rate > 0.0:               # monitoring at its own rate (by stamps)
+                        if 0 <= ns - self._last_monitor_ns < 1e9 / rate:
+                            continue
+                        self._last_monitor_ns = ns
+                    self._publish_prediction(p, ns)
             if preds[-1].held and self._mode == 'stamped':
                 self.counters['held_predictions'] += len(preds)
         if self._mode == 'stamped':
