@@ -24,8 +24,9 @@ reference + ``feedforward_series`` exactly; the ringing after the move falls 263
 the raw trajectory; read back with the controller's rules at 20 kHz the output stays
 within 0.48 % (cubic: positions and velocities) / 0.63 % (quintic: with accelerations) of
 the move's amplitude of the straight-line path, and drives the antenna to ringing 473x /
-352x below the raw trajectory's.  Not built yet: the node's ``reference_trajectory`` ->
-``~/compensated_trajectory`` topics, two axes.
+352x below the raw trajectory's.  Several joints (a pedestal), replacement and the node's
+topics: :class:`TrajectoryCompensator`, :mod:`worm_gear_sim.ros.trajectory_bridge`,
+docs/pedestal.md.
 """
 
 from __future__ import annotations
@@ -275,8 +276,9 @@ class Trajectory:
         if n > MAX_TRAJECTORY_POINTS:
             raise TrajectoryRejected('too_long', f'{n} waypoints, more than '
                                      f'{MAX_TRAJECTORY_POINTS}')
+        pos = table(positions, 'positions', False) if n else None
         return cls(names, np.asarray(times, float).reshape(n),
-                   table(positions, 'positions', False) if n else np.empty((0, nj)),
+                   pos if pos is not None else np.empty((0, nj)),
                    table(velocities, 'velocities', True) if n else None,
                    table(accelerations, 'accelerations', True) if n else None,
                    int(stamp_ns))

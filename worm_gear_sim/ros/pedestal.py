@@ -18,7 +18,6 @@ from typing import Any
 
 from rclpy.node import Node
 
-from ..model import DriveModel
 from ..pedestal import load_pedestal
 from .node import LOG_THROTTLE_S, LogThrottle, WormGearSimNode
 from .trajectory_bridge import TrajectoryBridge
@@ -44,7 +43,7 @@ class PedestalNode(Node):
             f'pedestal of {len(drives)} drives ({", ".join(self.trajectories.joints)}): '
             f'waiting for {self.resolve_topic_name("reference_trajectory")}')
 
-    def models(self) -> dict[str, DriveModel]:
+    def models(self) -> dict[str, Any]:
         """Worm input joint -> the drive's model in force."""
         return {d.config.node.joint_names[0]: d.rt.model for d in self.drives}
 

@@ -22,7 +22,6 @@ from builtin_interfaces.msg import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from ..model import DriveModel
 from ..topics import COMPENSATED_TRAJECTORY_TOPIC, TRAJECTORY_TOPIC
 from ..trajectories import (
     TRAJECTORY_REJECT_REASONS,
@@ -83,7 +82,7 @@ class TrajectoryBridge:
     throttled; ``publish(pub, msg)`` publishes without ever raising; ``guard`` wraps the
     subscription callback (quiet at shutdown)."""
 
-    def __init__(self, node: Any, models: Callable[[], Mapping[str, DriveModel]],
+    def __init__(self, node: Any, models: Callable[[], Mapping[str, Any]],
                  counters: dict[str, Any], warn: Callable[[str, str], None],
                  publish: Callable[[Any, Any], None],
                  guard: Callable[[Any], Any] = lambda f: f) -> None:
