@@ -48,6 +48,11 @@ def test_a_constant_load_signal_equals_the_constant_key_bit_for_bit(over):
     assert pack_parameters(cfg)[P_TLOAD] == 0.0
 
 
+# Radau's tolerance: converged (err/effect below equals that at rtol 1e-11 to 6 digits), 3x
+# faster than 1e-11 (12 s instead of 35 s)
+RTOL = 1e-9
+
+
 def _radau(cfg: Config, load: LoadSignal, times: np.ndarray, breaks) -> np.ndarray:
     """The model's equations (mesh_forces with no constant load) with -T(t) added to the
     antenna's equation, integrated by Radau from rest under T(0)."""
@@ -79,8 +84,9 @@ def _radau(cfg: Config, load: LoadSignal, times: np.ndarray, breaks) -> np.ndarr
     out = np.empty((len(times), 3))
     for a, b in zip(breaks[:-1], breaks[1:]):
         sel = (times >= a) & (times <= b)
-        sol = solve_ivp(rhs, (a, b), y, method='Radau', jac=jac, rtol=1e-11,
-                        atol=np.r_[np.full(3, 1e-15), np.full(3, 1e-12)], dense_output=True)
+        sol = solve_ivp(rhs, (a, b), y, method='Radau', jac=jac, rtol=RTOL,
+                        atol=np.r_[np.full(3, 1e-4 * RTOL), np.full(3, 0.1 * RTOL)],
+                        dense_output=True)
         assert sol.success, sol.message
         out[sel] = sol.sol(times[sel])[:3].T
         y = sol.y[:, -1]
