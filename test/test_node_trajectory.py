@@ -138,13 +138,14 @@ BAD = [
     ('length_mismatch', lambda: message([0.1, 0.2], [[1.0], [1.0, 2.0]])),
     ('length_mismatch', lambda: message([0.1, 0.2], [1.0, 2.0], [[0.0], []])),
     ('too_long', lambda: message([4000.0], [1.0])),
+    ('too_long', lambda: message([700.0], [1.0])),      # 700 101 dense points > 600 000
     ('past_stamp', lambda: message([0.1], [1.0], stamp_ns=NOW_NS - 10**9)),
     ('command_limits', lambda: message([0.001], [2e4])),      # beyond node.max_command_abs
 ]
 
 
 def test_bad_trajectories_are_rejected_whole_counted_and_nothing_is_forwarded(ros_harness):
-    assert {r for r, _ in BAD} == set(TRAJECTORY_REJECT_REASONS)
+    assert {r for r, _ in BAD} == set(TRAJECTORY_REJECT_REASONS) - {'busy'}
     h = ros_harness()
     assert h.wait_clock(NOW_NS)
     tr = Trajectories(h)
@@ -159,3 +160,33 @@ def test_bad_trajectories_are_rejected_whole_counted_and_nothing_is_forwarded(ro
     assert tr.send(message([0.05], [0.3], stamp_ns=NOW_NS + 10**9))
     t, p, _, _ = as_arrays(tr.out[-1])
     assert p[0, 0] == pytest.approx(0.3, abs=1e-3) and c['trajectories_compensated'] == 1
+
+
+def test_a_flood_of_trajectories_is_bounded_and_counted_busy(ros_harness):
+    """While the worker is held, MAX_PENDING trajectories wait and the next is rejected
+    'busy'; released, the waiting ones are all published, in order."""
+    import threading
+
+    from worm_gear_sim.ros.trajectory_bridge import MAX_PENDING
+    h = ros_harness()
+    assert h.wait_clock(NOW_NS)
+    tr = Trajectories(h)
+    bridge = h.node.trajectories
+    gate = threading.Event()
+    work = bridge._compensate_and_publish
+
+    def held(*args):
+        gate.wait(30.0)
+        work(*args)
+    bridge._compensate_and_publish = held
+    for k in range(MAX_PENDING):
+        tr.pub.publish(message([0.05], [0.1 * (k + 1)], stamp_ns=NOW_NS + (k + 1) * 10**9))
+    c = h.node.counters
+    assert h.spin_until(lambda: c['trajectories_received'] == MAX_PENDING)
+    tr.pub.publish(message([0.05], [1.0], stamp_ns=NOW_NS + 9 * 10**9))
+    assert h.spin_until(lambda: c['trajectories_received'] == MAX_PENDING + 1)
+    assert c['rejected_trajectory_busy'] == 1 and not tr.out
+    gate.set()
+    assert h.spin_until(lambda: len(tr.out) == MAX_PENDING, 30.0)
+    ends = [as_arrays(m)[1][-1, 0] for m in tr.out]
+    np.testing.assert_allclose(ends, [0.1 * (k + 1) for k in range(MAX_PENDING)], atol=1e-3)

@@ -46,7 +46,7 @@ from .simulation import simulate
 
 __all__ = ['jtc_sample', 'compensate_trajectory', 'CompensatedTrajectory', 'Trajectory',
            'TrajectoryCompensator', 'TrajectoryRejected', 'TRAJECTORY_REJECT_REASONS',
-           'MAX_TRAJECTORY_POINTS', 'MAX_TRAJECTORY_DURATION']
+           'MAX_TRAJECTORY_POINTS', 'MAX_TRAJECTORY_DURATION', 'MAX_DENSE_POINTS']
 
 #: Seconds of the replaced trajectory's command the correction's filter runs through at a
 #: hand-over (longer than the drive's transients take to decay: 0.2 s at the defaults).
@@ -54,6 +54,9 @@ HANDOVER_HISTORY = 1.0
 #: The longest trajectory accepted: waypoints, and seconds (a tracking pass is minutes).
 MAX_TRAJECTORY_POINTS = 100_000
 MAX_TRAJECTORY_DURATION = 3600.0
+#: The most points of a compensated (dense) trajectory: 10 min at 1 kHz (a 38 MB message,
+#: ~5 s to build, ~0.8 GB peak).  Longer: stream overlapping trajectories (docs/pedestal.md).
+MAX_DENSE_POINTS = 600_000
 
 
 class TrajectoryRejected(ValueError):
@@ -68,7 +71,7 @@ class TrajectoryRejected(ValueError):
 #: Why a trajectory is refused (each a counter of the node).
 TRAJECTORY_REJECT_REASONS = ('empty', 'unknown_joint', 'duplicate_joint', 'length_mismatch',
                              'not_finite', 'not_increasing', 'too_long', 'past_stamp',
-                             'command_limits')
+                             'command_limits', 'busy')
 
 
 def _check(times: np.ndarray, pos: np.ndarray, vel: np.ndarray | None,
@@ -352,6 +355,11 @@ class TrajectoryCompensator:
                 raise TrajectoryRejected('unknown_joint', f'unknown joint {name!r} (this '
                                          f'node drives {", ".join(self.drives)})')
         _check(traj.time_from_start, traj.positions, traj.velocities, traj.accelerations)
+        dense = int(math.floor((traj.time_from_start[-1] + self.settle) * self.rate)) + 1
+        if dense > MAX_DENSE_POINTS:
+            raise TrajectoryRejected('too_long', f'{dense} compensated points at '
+                                     f'{self.rate:g} Hz, more than {MAX_DENSE_POINTS}: send '
+                                     'it as overlapping shorter trajectories')
         if traj.stamp_ns < 0:
             raise TrajectoryRejected('past_stamp', f'negative stamp {traj.stamp_ns} ns')
         if now_ns is not None and traj.stamp_ns and \

@@ -14,6 +14,7 @@ trajectory with the input's joint names, header and timing.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -38,6 +39,9 @@ _NS = 1_000_000_000
 TRAJECTORY_COUNTERS = ('trajectories_received', 'trajectories_compensated', 'trajectory_errors',
                        *(f'rejected_trajectory_{r}' for r in TRAJECTORY_REJECT_REASONS))
 QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)   # as the controller's
+#: Trajectories waiting for the worker at most; more are rejected as ``busy`` (a flood of
+#: long trajectories must not queue without bound).
+MAX_PENDING = 4
 
 
 def from_message(msg: JointTrajectory) -> Trajectory:
@@ -95,6 +99,8 @@ class TrajectoryBridge:
         self.compensator = TrajectoryCompensator(models())
         self.last_result: TrajectoryResult | None = None
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='trajectory')
+        self._pending = 0          # submitted, not finished (executor thread += , worker -=)
+        self._lock = threading.Lock()
         self._pub = node.create_publisher(JointTrajectory, COMPENSATED_TRAJECTORY_TOPIC, QOS)
         self._sub = node.create_subscription(JointTrajectory, TRAJECTORY_TOPIC,
                                              guard(self.on_trajectory), QOS)
@@ -110,6 +116,11 @@ class TrajectoryBridge:
         try:
             traj = from_message(msg)
             self.compensator.check(traj, now_ns)
+            with self._lock:
+                if self._pending >= MAX_PENDING:
+                    raise TrajectoryRejected('busy', f'{self._pending} trajectories still '
+                                             'being compensated')
+                self._pending += 1
         except TrajectoryRejected as exc:
             self._reject(exc)
             return
@@ -122,6 +133,13 @@ class TrajectoryBridge:
                         f'{self._counters[key]} so far; nothing forwarded')
 
     def _work(self, traj: Trajectory, header: Any, now_ns: int) -> None:
+        try:
+            self._compensate_and_publish(traj, header, now_ns)
+        finally:
+            with self._lock:
+                self._pending -= 1
+
+    def _compensate_and_publish(self, traj: Trajectory, header: Any, now_ns: int) -> None:
         try:
             models = self._models()
             comp = self.compensator
