@@ -54,6 +54,7 @@ setup(
         'console_scripts': [
             'worm_gear_sim_node = worm_gear_sim.ros.startup:node_main',
             'worm_gear_sim_pedestal = worm_gear_sim.ros.startup:pedestal_main',
+            'worm_gear_sim_calibrate = worm_gear_sim.ros.calibrate:main',
             'worm_gear_sim_demo = worm_gear_sim.ros.demo_commander:main',
             'worm-gear-sim = worm_gear_sim.cli:main',
         ],

@@ -32,7 +32,8 @@ from ..params import ConfigError
 from .common import CliError, add_config_options, config_from_args, say
 from .identify import _jsonable, write_params_yaml
 
-__all__ = ['register', 'cmd_calibrate']
+__all__ = ['register', 'cmd_calibrate', 'report_calibration', 'add_limit_options',
+           'limits_of']
 
 
 def register(subparsers: Any) -> None:
@@ -53,17 +54,7 @@ def register(subparsers: Any) -> None:
                      'for the real one (a params file)')
     src.add_argument('--export-excitation', metavar='CSV', help='only write the designed '
                      'excitation as one command series (t, theta1) for a servo outside ROS')
-    g = p.add_argument_group('limits of the excitation (worm angle theta1)')
-    g.add_argument('--max-angle', type=float, default=0.12, metavar='RAD',
-                   help='travel each way from the start (default: %(default)s rad)')
-    g.add_argument('--max-rate', type=float, default=6.0, metavar='RAD/S',
-                   help='(default: %(default)s rad/s)')
-    g.add_argument('--max-accel', type=float, default=1500.0, metavar='RAD/S2',
-                   help='(default: %(default)s rad/s^2)')
-    g.add_argument('--duration', type=float, default=2.0, metavar='S',
-                   help='longest total time of the moves (default: %(default)s s)')
-    g.add_argument('--start', type=float, default=0.0, metavar='RAD',
-                   help='the current worm angle (default: %(default)s)')
+    add_limit_options(p)
     r = p.add_argument_group('recording (--plant)')
     r.add_argument('--sample-rate', type=float, default=1e4, metavar='HZ',
                    help='encoder sample rate (default: %(default)g Hz)')
@@ -84,7 +75,22 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=cmd_calibrate)
 
 
-def _limits(args: argparse.Namespace) -> Any:
+def add_limit_options(p: argparse.ArgumentParser) -> None:
+    """The excitation's limits (this command and ``worm_gear_sim_calibrate``)."""
+    g = p.add_argument_group('limits of the excitation (worm angle theta1)')
+    g.add_argument('--max-angle', type=float, default=0.12, metavar='RAD',
+                   help='travel each way from the start (default: %(default)s rad)')
+    g.add_argument('--max-rate', type=float, default=6.0, metavar='RAD/S',
+                   help='(default: %(default)s rad/s)')
+    g.add_argument('--max-accel', type=float, default=1500.0, metavar='RAD/S2',
+                   help='(default: %(default)s rad/s^2)')
+    g.add_argument('--duration', type=float, default=2.0, metavar='S',
+                   help='longest total time of the moves (default: %(default)s s)')
+    g.add_argument('--start', type=float, default=0.0, metavar='RAD',
+                   help='the current worm angle (default: %(default)s)')
+
+
+def limits_of(args: argparse.Namespace) -> Any:
     from ..identification.calibrate import Limits
     return Limits(args.max_angle, args.max_rate, args.max_accel, args.duration, args.start)
 
@@ -105,7 +111,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise CliError(f'--sample-rate {args.sample_rate!r}: must be a positive number')
     if not (math.isfinite(args.accept) and 0 < args.accept < 1):
         raise CliError(f'--accept {args.accept!r}: a share between 0 and 1')
-    limits = _limits(args)
+    limits = limits_of(args)
     moves = design_excitation(limits)          # IdentificationError: exit 2, one line
     for m in moves:
         say(args, f'move {m.name} ({m.role}): {m.profile.describe()}, {m.t_end:.3f} s')
@@ -134,22 +140,40 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     res = calibrate(cfg, keys, limits, run, options=opt, outputs=outputs,
                     accept_rel=args.accept)
     wall = time.perf_counter() - t0
-    say(args, res.fit.table())
+    json_path, figures = report_calibration(
+        res, cfg, keys, limits, out, f'plant {args.plant}',
+        ' '.join(getattr(args, '_argv', [])), wall, not args.no_plot,
+        lambda line: say(args, line), plant=args.plant)
+    if not res.accepted:
+        raise CliError(f'calibration not accepted: {res.reasons[0]}; no YAML written '
+                       f'(report: {json_path}); the previous parameters stay in use')
+    return 0
+
+
+def report_calibration(res: Any, base: Any, keys: list[str], limits: Any, out: Path,
+                       source: str, command: str, wall: float, plot: bool,
+                       say_line: Any, **extra: Any) -> tuple[Path, list[str]]:
+    """Print the fit, the held-out errors and bounds; write FITTED.json (the report), the
+    before/after figure FITTED.png and, only when accepted, FITTED.yaml.  Shared by this
+    command and the node's calibration (``worm_gear_sim_calibrate``).  Returns the report's
+    path and the figures."""
+    say_line(res.fit.table())
     for row_b, row_a in zip(res.validation_before, res.validation_after):
         for o in row_a:
             if o != 'name':
-                say(args, f'held-out {row_a["name"]}: {o} RMS {100 * row_b[o]["rel"]:.2f} % '
-                    f'-> {100 * row_a[o]["rel"]:.2f} % of its amplitude '
-                    f'{row_a[o]["amplitude_rad"]:.3g} rad')
+                say_line(f'held-out {row_a["name"]}: {o} RMS {100 * row_b[o]["rel"]:.2f} % '
+                         f'-> {100 * row_a[o]["rel"]:.2f} % of its amplitude '
+                         f'{row_a[o]["amplitude_rad"]:.3g} rad')
     for b, row in zip(res.bounds, res.validation_after):
-        say(args, f'95 % bound on the theta4 RMS prediction error over a {b.duration:.3g} s '
-            f'move: {b.bound_rad:.3g} rad (misfit {b.misfit_rad:.3g}, parameters '
-            f'{b.spread_rad:.3g}); held-out {row["name"]}: {row["theta4"]["rms_rad"]:.3g} rad'
-            f' ({"within" if b.covers(row["theta4"]["rms_rad"]) else "OUTSIDE"})')
+        say_line(f'95 % bound on the theta4 RMS prediction error over a {b.duration:.3g} s '
+                 f'move: {b.bound_rad:.3g} rad (misfit {b.misfit_rad:.3g}, parameters '
+                 f'{b.spread_rad:.3g}); held-out {row["name"]}: '
+                 f'{row["theta4"]["rms_rad"]:.3g} rad '
+                 f'({"within" if b.covers(row["theta4"]["rms_rad"]) else "OUTSIDE"})')
     stem = out.with_suffix('')
     out.parent.mkdir(parents=True, exist_ok=True)
     report = res.fit.to_dict()
-    report.update(command=' '.join(getattr(args, '_argv', [])), plant=args.plant,
+    report.update(command=command, **extra,
                   limits={k: getattr(limits, k) for k in ('max_angle', 'max_rate',
                                                           'max_accel', 'duration', 'start')},
                   moves=[{'name': m.name, 'role': m.role, 'profile': m.profile.describe(),
@@ -162,15 +186,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   accepted=res.accepted, reasons=res.reasons, seconds=wall,
                   output_yaml=None)
     figures = []
-    if not args.no_plot:
+    if plot:
         from ..identification.plot import plot_fit
-        figures.append(str(plot_fit(res.held_out + res.train, cfg, res.config,
+        figures.append(str(plot_fit(res.held_out + res.train, base, res.config,
                                     stem.with_suffix('.png'),
                                     'calibrate: held-out move and training moves')))
     report['figures'] = figures
     if res.accepted:
-        header = [f'worm_gear_sim parameters calibrated by: worm-gear-sim calibrate '
-                  f'(plant {args.plant}); created {time.strftime("%Y-%m-%d %H:%M:%S")}',
+        header = [f'worm_gear_sim parameters calibrated ({source}); created '
+                  f'{time.strftime("%Y-%m-%d %H:%M:%S")}',
                   f'held-out theta4 RMS {100 * res.worst_held_out():.2f} % of its amplitude']
         for k, v, (lo, hi) in zip(res.fit.keys, res.fit.values, res.fit.ci95):
             header.append(f'{k} = {v:.9g}  (95 % interval {lo:.6g} .. {hi:.6g})')
@@ -178,11 +202,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         report['output_yaml'] = str(out)
     json_path = stem.with_suffix('.json')
     json_path.write_text(json.dumps(_jsonable(report), indent=2, allow_nan=True) + '\n')
-    say(args, f'calibrated {len(keys)} parameter(s) in {wall:.1f} s; wrote {json_path}'
-        + (f', {out}' if res.accepted else '') + (f', {", ".join(figures)}' if figures
-                                                   else ''))
-    if not res.accepted:
-        raise CliError(f'calibration not accepted: {res.reasons[0]}; no YAML written '
-                       f'(report: {json_path}); the previous parameters stay in use')
-    return 0
-
+    say_line(f'calibrated {len(keys)} parameter(s) in {wall:.1f} s; wrote {json_path}'
+             + (f', {out}' if res.accepted else '') + (f', {", ".join(figures)}' if figures
+                                                       else ''))
+    return json_path, figures

@@ -1,0 +1,278 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""``worm_gear_sim_calibrate``: calibrate a running node against its drive in one command.
+
+    worm_gear_sim_calibrate --fit geometry.flywheel_radius,load.output_viscous_coefficient \\
+        -o fitted.yaml --servo-topic /servo/worm_angle_reference \\
+        [--measured-topic measured_joint_states] [--node /worm_gear_sim] [--dry-run]
+
+Reads the running node's parameters (its parameter service) as the starting point, designs
+the excitation within the limits (the core's :func:`~worm_gear_sim.identification.calibrate
+.design_excitation`: steps out and back, a small step, a held-out S-curve), streams each
+move to the servo as stamped references (``sensor_msgs/JointState`` on ``--servo-topic``,
+1 kHz, 50 ms ahead of the instants, the worm input joint's name), records the drive's
+encoders (``--measured-topic``, JointState by the node's ``node.joint_names``) between the
+move's first and last stamps, waits for the drive to come to rest before the next move,
+fits and validates with the core's :func:`~worm_gear_sim.identification.calibrate.calibrate`
+and writes the report FITTED.json, the before/after figure FITTED.png and, when accepted,
+FITTED.yaml.  Accepted, the fitted keys are set on the node in one atomic parameter set
+(``set_parameters_atomically``: all or none); not accepted, nothing is applied and the
+previous parameters stay in use.
+
+Exit status: 0 accepted (and applied, unless ``--dry-run``); 1 not accepted or the node
+refused the set; 2 bad arguments, no node, or a drive that did not follow (no measured
+motion, motion unrelated to the command, records that stop, never at rest).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ['main', 'RosDrive']
+
+LEAD_S = 0.05             # references are sent this far ahead of their instant
+SETTLE_WINDOW_S = 0.05    # at rest: the measured antenna angle moves less than
+SETTLE_TOL_RAD = 1e-6     # this over that window
+OUTPUTS = {'theta2': 1, 'theta3': 2, 'theta4': 3}     # index in node.joint_names
+
+
+class CalibrationAborted(Exception):
+    """The drive or the node did not cooperate: one line, exit status 2."""
+
+
+def _args(argv: list[str]) -> argparse.Namespace:
+    from ..cli.calibrate import add_limit_options
+    ap = argparse.ArgumentParser(prog='worm_gear_sim_calibrate',
+                                 description=__doc__.split('\n\n')[0])
+    ap.add_argument('--fit', action='append', required=True, metavar='KEY[,KEY...]',
+                    help='parameters to fit (repeatable)')
+    ap.add_argument('-o', '--output', required=True, metavar='FITTED.yaml')
+    ap.add_argument('--node', default='/worm_gear_sim', help='the node to calibrate')
+    ap.add_argument('--servo-topic', required=True,
+                    help="the servo's stamped reference input (JointState)")
+    ap.add_argument('--measured-topic', default='measured_joint_states',
+                    help="the drive's encoders (JointState; default: %(default)s)")
+    ap.add_argument('--measure', default='theta4', help='measured outputs (default theta4)')
+    ap.add_argument('--outputs', default=None, help='outputs to fit (as for identify)')
+    ap.add_argument('--accept', type=float, default=0.05, metavar='SHARE')
+    ap.add_argument('--settle-timeout', type=float, default=10.0, metavar='S',
+                    help='longest wait for the drive to come to rest (default: %(default)s)')
+    ap.add_argument('--dry-run', action='store_true', help='do not set the fitted values')
+    ap.add_argument('--serial', action='store_true', help='fit in this process (no Dask)')
+    ap.add_argument('--no-plot', action='store_true')
+    add_limit_options(ap)
+    return ap.parse_args(argv)
+
+
+class RosDrive:
+    """The drive behind a servo, as the core's ``run(move) -> Record``: streams each move to
+    the servo (continuing from where the last one ended), records the encoders."""
+
+    def __init__(self, node: Any, executor: Any, servo_topic: str, measured_topic: str,
+                 joint_names: list[str], measure: list[str], rate: float,
+                 settle_timeout: float) -> None:
+        from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+        from sensor_msgs.msg import JointState
+        self.node, self.ex = node, executor
+        self.rate, self.settle_timeout = rate, settle_timeout
+        self.joints = joint_names
+        self.measure = measure
+        self.pub = node.create_publisher(JointState, servo_topic, QoSProfile(
+            depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+        self.samples: list[tuple[int, dict[str, float]]] = []
+        node.create_subscription(JointState, measured_topic, self._on_measured,
+                                 qos_profile_sensor_data)
+        self.msg = JointState(name=[joint_names[0]], position=[0.0])
+        self.position = 0.0        # the last commanded worm angle
+        self.next_ns = 0           # the next sample's stamp
+        self.servo_topic, self.measured_topic = servo_topic, measured_topic
+
+    def _on_measured(self, msg: Any) -> None:
+        st = msg.header.stamp
+        names = list(msg.name)
+        vals = {}
+        for o in self.measure:
+            j = self.joints[OUTPUTS[o]]
+            if j in names and names.index(j) < len(msg.position):
+                vals[o] = float(msg.position[names.index(j)])
+        if vals:
+            self.samples.append((st.sec * 10**9 + st.nanosec, vals))
+
+    def _now(self) -> int:
+        return self.node.get_clock().now().nanoseconds
+
+    def _stream(self, values: np.ndarray) -> tuple[int, int]:
+        """Send ``values`` at the rate, LEAD_S ahead of their instants; (first, last)
+        stamps."""
+        period = int(round(1e9 / self.rate))
+        if self.next_ns < self._now() + int(LEAD_S * 1e9):
+            self.next_ns = self._now() + int(LEAD_S * 1e9)
+        first = self.next_ns
+        k = 0
+        while k < values.size:
+            horizon = self._now() + int(LEAD_S * 1e9)
+            while k < values.size and self.next_ns <= horizon:
+                m = self.msg
+                m.header.stamp.sec, m.header.stamp.nanosec = divmod(self.next_ns, 10**9)
+                m.position[0] = float(values[k])
+                self.pub.publish(m)
+                self.next_ns += period
+                k += 1
+            self.ex.spin_once(timeout_sec=0.001)
+        self.position = float(values[-1])
+        return first, self.next_ns - period
+
+    def _wait_for(self, stamp_ns: int, timeout: float) -> None:
+        """Spin until a measurement stamped at or after ``stamp_ns`` came in."""
+        t0 = time.monotonic()
+        while not (self.samples and self.samples[-1][0] >= stamp_ns):
+            if time.monotonic() - t0 > timeout:
+                raise CalibrationAborted(
+                    f'no measured joint states on {self.measured_topic} after the command '
+                    f'(is the encoder topic right, does the servo take {self.servo_topic}?)')
+            self.ex.spin_once(timeout_sec=0.01)
+
+    def settle(self) -> None:
+        """Hold the position until the measured antenna is at rest (or the timeout)."""
+        t0 = time.monotonic()
+        hold = np.full(int(self.rate * SETTLE_WINDOW_S), self.position)
+        while True:
+            first, last = self._stream(hold)
+            self._wait_for(last, max(2.0, self.settle_timeout))
+            window = [v for s, v in self.samples if first <= s <= last]
+            o = self.measure[-1]
+            ys = [v[o] for v in window if o in v]
+            if len(ys) >= 3 and max(ys) - min(ys) <= SETTLE_TOL_RAD:
+                return
+            if time.monotonic() - t0 > self.settle_timeout:
+                raise CalibrationAborted(
+                    f'the drive did not come to rest within {self.settle_timeout:g} s '
+                    f'({o} moved {max(ys) - min(ys) if ys else math.nan:.3g} rad over '
+                    f'{SETTLE_WINDOW_S:g} s): raise --settle-timeout or check the servo')
+
+    def __call__(self, move: Any) -> Any:
+        from ..records import Record
+        self.settle()
+        n = int(math.floor(move.t_end * self.rate + 1e-9)) + 1
+        x = move.profile.theta1(np.arange(n) / self.rate)
+        x = x - x[0] + self.position             # from where the drive is
+        self.samples.clear()
+        first, last = self._stream(x)
+        try:
+            self._wait_for(last, 5.0)
+        except CalibrationAborted:
+            pass                                 # the core names a record that stops
+        got = [(s, v) for s, v in self.samples if first <= s <= last]
+        stamps = np.array([s for s, _ in got], dtype=np.int64)
+        cmd_t = first + np.arange(n, dtype=np.int64) * int(round(1e9 / self.rate))
+        measured = {o: np.array([v.get(o, np.nan) for _, v in got]) for o in self.measure}
+        t = (stamps - first) / 1e9
+        theta1 = np.interp(t, (cmd_t - first) / 1e9, x) if stamps.size else np.empty(0)
+        return Record(move.name, t, theta1, measured, t0_ns=int(first),
+                      source={'servo_topic': self.servo_topic,
+                              'measured_topic': self.measured_topic})
+
+
+def _node_config(node: Any, executor: Any, target: str) -> Any:
+    """The target node's parameter set (its parameter service), as a core Config."""
+    from rclpy.parameter import parameter_value_to_python
+    from rclpy.parameter_client import AsyncParameterClient
+
+    from ..params import Config, config_from_mapping
+    client = AsyncParameterClient(node, target)
+    if not client.wait_for_services(timeout_sec=30.0):
+        raise CalibrationAborted(f'no node {target} (its parameter services did not answer '
+                                 'within 30 s)')
+    names = list(Config().to_flat_dict())
+    fut = client.get_parameters(names)
+    executor.spin_until_future_complete(fut, timeout_sec=30.0)
+    if not fut.done() or fut.result() is None:
+        raise CalibrationAborted(f'{target} did not return its parameters')
+    values = {n: parameter_value_to_python(v) for n, v in zip(names, fut.result().values)}
+    return config_from_mapping(values, source=f'{target} parameters'), client
+
+
+def main(argv: list[str] | None = None) -> int:
+    from ..identification import FitOptions
+    from ..identification.calibrate import calibrate
+    from ..identification.data import IdentificationError
+    from ..params import ConfigError
+    opts = _args(sys.argv[1:] if argv is None else argv)
+    keys = [k.strip() for item in opts.fit for k in item.split(',') if k.strip()]
+    measure = [o.strip() for o in opts.measure.split(',') if o.strip()]
+    out = Path(opts.output)
+    bad = [o for o in measure if o not in OUTPUTS]
+    if bad or out.suffix.lower() not in ('.yaml', '.yml') or not 0 < opts.accept < 1:
+        print(f'worm_gear_sim_calibrate: bad arguments (--measure {bad or "ok"}, -o must end '
+              'in .yaml, --accept in (0, 1))', file=sys.stderr)
+        return 2
+    from ..cli.calibrate import limits_of, report_calibration
+    limits = limits_of(opts)
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    rclpy.init(args=[])
+    node = rclpy.create_node('worm_gear_sim_calibrator')
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    try:
+        base, client = _node_config(node, ex, opts.node)
+        unknown = [k for k in keys if k not in base.to_flat_dict()]
+        if unknown:
+            raise CalibrationAborted(f'unknown parameter(s) {", ".join(unknown)}')
+        drive = RosDrive(node, ex, opts.servo_topic, opts.measured_topic,
+                         list(base.node.joint_names), measure,
+                         base.node.publish_rate_hz, opts.settle_timeout)
+        t0 = time.perf_counter()
+        try:
+            res = calibrate(base, keys, limits, drive,
+                            options=FitOptions(strategy='robust', serial=opts.serial),
+                            outputs=opts.outputs.split(',') if opts.outputs else None,
+                            accept_rel=opts.accept)
+        except (IdentificationError, ConfigError) as exc:
+            raise CalibrationAborted(str(exc)) from None
+        wall = time.perf_counter() - t0
+        json_path, _ = report_calibration(
+            res, base, keys, limits, out, f'node {opts.node} on {opts.measured_topic}',
+            ' '.join(sys.argv if argv is None else ['worm_gear_sim_calibrate', *argv]),
+            wall, not opts.no_plot, print, node=opts.node, servo_topic=opts.servo_topic,
+            measured_topic=opts.measured_topic)
+        if not res.accepted:
+            print(f'calibration not accepted: {res.reasons[0]}; nothing applied to '
+                  f'{opts.node}, its parameters stay in use (report: {json_path})',
+                  file=sys.stderr)
+            return 1
+        if opts.dry_run:
+            print(f'accepted; --dry-run: {opts.node} left unchanged')
+            return 0
+        fitted = res.config.to_flat_dict()
+        params = [Parameter(k, value=float(fitted[k])) for k in keys]
+        fut = client.set_parameters_atomically(params)
+        ex.spin_until_future_complete(fut, timeout_sec=30.0)
+        result = fut.result().result if fut.done() and fut.result() is not None else None
+        if result is None or not result.successful:
+            why = result.reason if result is not None else 'no answer within 30 s'
+            print(f'{opts.node} refused the fitted set ({why}); nothing applied',
+                  file=sys.stderr)
+            return 1
+        print(f'applied to {opts.node} in one atomic set: ' + ', '.join(
+            f'{k} = {fitted[k]:.6g}' for k in keys))
+        return 0
+    except CalibrationAborted as exc:
+        print(f'worm_gear_sim_calibrate: {exc}; nothing applied', file=sys.stderr)
+        return 2
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':   # pragma: no cover
+    sys.exit(main())
