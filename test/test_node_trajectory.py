@@ -162,12 +162,15 @@ def test_bad_trajectories_are_rejected_whole_counted_and_nothing_is_forwarded(ro
     assert p[0, 0] == pytest.approx(0.3, abs=1e-3) and c['trajectories_compensated'] == 1
 
 
-def test_a_flood_of_trajectories_is_bounded_and_counted_busy(ros_harness):
-    """While the worker is held, MAX_PENDING trajectories wait and the next is rejected
-    'busy'; released, the waiting ones are all published, in order."""
+def test_a_flood_of_trajectories_is_bounded_and_counted_busy(ros_harness, monkeypatch):
+    """While the worker is held, trajectories wait until their compensated points would
+    exceed MAX_PENDING_POINTS (here lowered to 1000: two of 351 points wait, the third is
+    'busy'); a burst of many short ones is all taken; released, every waiting one is
+    published, in order."""
     import threading
 
-    from worm_gear_sim.ros.trajectory_bridge import MAX_PENDING
+    from worm_gear_sim.ros import trajectory_bridge
+    monkeypatch.setattr(trajectory_bridge, 'MAX_PENDING_POINTS', 1000)
     h = ros_harness()
     assert h.wait_clock(NOW_NS)
     tr = Trajectories(h)
@@ -179,14 +182,24 @@ def test_a_flood_of_trajectories_is_bounded_and_counted_busy(ros_harness):
         gate.wait(30.0)
         work(*args)
     bridge._compensate_and_publish = held
-    for k in range(MAX_PENDING):
-        tr.pub.publish(message([0.05], [0.1 * (k + 1)], stamp_ns=NOW_NS + (k + 1) * 10**9))
     c = h.node.counters
-    assert h.spin_until(lambda: c['trajectories_received'] == MAX_PENDING)
-    tr.pub.publish(message([0.05], [1.0], stamp_ns=NOW_NS + 9 * 10**9))
-    assert h.spin_until(lambda: c['trajectories_received'] == MAX_PENDING + 1)
+    for k in range(3):                   # 0.25 s + 0.1 s settle at 1 kHz: 351 points each
+        tr.pub.publish(message([0.25], [0.1 * (k + 1)], stamp_ns=NOW_NS + (k + 1) * 10**9))
+    assert h.spin_until(lambda: c['trajectories_received'] == 3)
     assert c['rejected_trajectory_busy'] == 1 and not tr.out
     gate.set()
-    assert h.spin_until(lambda: len(tr.out) == MAX_PENDING, 30.0)
+    assert h.spin_until(lambda: len(tr.out) == 2, 30.0)
     ends = [as_arrays(m)[1][-1, 0] for m in tr.out]
-    np.testing.assert_allclose(ends, [0.1 * (k + 1) for k in range(MAX_PENDING)], atol=1e-3)
+    np.testing.assert_allclose(ends, [0.1, 0.2], atol=1e-3)
+    # with the real limit, bursts of short trajectories (within the topics' depth of 10)
+    # are taken whole while the worker is held
+    monkeypatch.setattr(trajectory_bridge, 'MAX_PENDING_POINTS', 2_000_000)
+    gate.clear()
+    for burst in range(3):
+        for k in range(8):
+            tr.pub.publish(message([0.02], [0.01 * k],
+                                   stamp_ns=NOW_NS + (10 + 8 * burst + k) * 10**9))
+        assert h.spin_until(lambda: c['trajectories_received'] == 3 + 8 * (burst + 1))
+    gate.set()
+    assert h.spin_until(lambda: c['trajectories_compensated'] == 2 + 24, 30.0)
+    assert c['rejected_trajectory_busy'] == 1

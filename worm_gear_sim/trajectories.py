@@ -355,7 +355,7 @@ class TrajectoryCompensator:
                 raise TrajectoryRejected('unknown_joint', f'unknown joint {name!r} (this '
                                          f'node drives {", ".join(self.drives)})')
         _check(traj.time_from_start, traj.positions, traj.velocities, traj.accelerations)
-        dense = int(math.floor((traj.time_from_start[-1] + self.settle) * self.rate)) + 1
+        dense = self.dense_points(traj)
         if dense > MAX_DENSE_POINTS:
             raise TrajectoryRejected('too_long', f'{dense} compensated points at '
                                      f'{self.rate:g} Hz, more than {MAX_DENSE_POINTS}: send '
@@ -372,6 +372,10 @@ class TrajectoryCompensator:
         new = TrajectoryCompensator(drives, self.settle, self.history)
         new._sent = {j: v for j, v in self._sent.items() if j in new.drives}
         return new
+
+    def dense_points(self, traj: Trajectory) -> int:
+        """Points of the compensated trajectory (per joint) of a checked ``traj``."""
+        return int(math.floor((traj.time_from_start[-1] + self.settle) * self.rate)) + 1
 
     def start_position(self, joint: str, start_ns: int) -> float | None:
         """The position last sent for ``joint`` at ``start_ns`` (None: nothing sent)."""

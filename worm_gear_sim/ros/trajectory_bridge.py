@@ -39,9 +39,11 @@ _NS = 1_000_000_000
 TRAJECTORY_COUNTERS = ('trajectories_received', 'trajectories_compensated', 'trajectory_errors',
                        *(f'rejected_trajectory_{r}' for r in TRAJECTORY_REJECT_REASONS))
 QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)   # as the controller's
-#: Trajectories waiting for the worker at most; more are rejected as ``busy`` (a flood of
-#: long trajectories must not queue without bound).
-MAX_PENDING = 4
+#: Compensated points waiting for the worker at most (~16 s of its work); a trajectory that
+#: would exceed it is rejected as ``busy`` (a flood of long trajectories must not queue
+#: without bound); one is always taken when none waits.  A burst of short trajectories
+#: (hundreds of 1 s ones) is all taken.
+MAX_PENDING_POINTS = 2_000_000
 
 
 def from_message(msg: JointTrajectory) -> Trajectory:
@@ -99,7 +101,7 @@ class TrajectoryBridge:
         self.compensator = TrajectoryCompensator(models())
         self.last_result: TrajectoryResult | None = None
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='trajectory')
-        self._pending = 0          # submitted, not finished (executor thread += , worker -=)
+        self._pending = 0          # dense points submitted, not finished (+= here, -= worker)
         self._lock = threading.Lock()
         self._pub = node.create_publisher(JointTrajectory, COMPENSATED_TRAJECTORY_TOPIC, QOS)
         self._sub = node.create_subscription(JointTrajectory, TRAJECTORY_TOPIC,
@@ -116,15 +118,17 @@ class TrajectoryBridge:
         try:
             traj = from_message(msg)
             self.compensator.check(traj, now_ns)
+            points = self.compensator.dense_points(traj)
             with self._lock:
-                if self._pending >= MAX_PENDING:
-                    raise TrajectoryRejected('busy', f'{self._pending} trajectories still '
-                                             'being compensated')
-                self._pending += 1
+                if self._pending and self._pending + points > MAX_PENDING_POINTS:
+                    raise TrajectoryRejected('busy', f'{self._pending} compensated points '
+                                             f'still to compute, {points} more would '
+                                             f'exceed {MAX_PENDING_POINTS}')
+                self._pending += points
         except TrajectoryRejected as exc:
             self._reject(exc)
             return
-        self._pool.submit(self._work, traj, msg.header, now_ns)
+        self._pool.submit(self._work, traj, msg.header, now_ns, points)
 
     def _reject(self, exc: TrajectoryRejected) -> None:
         key = f'rejected_trajectory_{exc.reason}'
@@ -132,12 +136,12 @@ class TrajectoryBridge:
         self._warn(key, f'rejected {TRAJECTORY_TOPIC}: {exc.reason} ({exc}); '
                         f'{self._counters[key]} so far; nothing forwarded')
 
-    def _work(self, traj: Trajectory, header: Any, now_ns: int) -> None:
+    def _work(self, traj: Trajectory, header: Any, now_ns: int, points: int) -> None:
         try:
             self._compensate_and_publish(traj, header, now_ns)
         finally:
             with self._lock:
-                self._pending -= 1
+                self._pending -= points
 
     def _compensate_and_publish(self, traj: Trajectory, header: Any, now_ns: int) -> None:
         try:
