@@ -199,7 +199,8 @@ def test_a_flood_of_trajectories_is_bounded_and_counted_busy(ros_harness, monkey
         for k in range(8):
             tr.pub.publish(message([0.02], [0.01 * k],
                                    stamp_ns=NOW_NS + (10 + 8 * burst + k) * 10**9))
-        assert h.spin_until(lambda: c['trajectories_received'] == 3 + 8 * (burst + 1))
+        want = 3 + 8 * (burst + 1)
+        assert h.spin_until(lambda n=want: c['trajectories_received'] == n)
     gate.set()
     assert h.spin_until(lambda: c['trajectories_compensated'] == 2 + 24, 30.0)
     assert c['rejected_trajectory_busy'] == 1
