@@ -82,7 +82,7 @@ class Trajectories:
 def paper_waypoints():
     """The paper's 18-step move as 5 waypoints (positions and velocities: the cubic rule
     reproduces its quadratic pieces), from 10 ms after the start."""
-    amp = 18 * 2 * math.pi / 360 * 56 / 56      # worm angle [rad] of the move
+    amp = math.radians(18.0)                     # worm angle [rad] of the move
     knots = np.array([0.01, 0.014, 0.026, 0.03, 0.05])
     rate = amp / 0.016
     pos = np.array([0.0, 0.5 * rate * 0.004, amp - 0.5 * rate * 0.004, amp, amp])

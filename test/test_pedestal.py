@@ -8,7 +8,6 @@ SIGINT ends it quietly."""
 
 from __future__ import annotations
 
-import math
 import signal
 import sys
 from pathlib import Path
@@ -138,7 +137,6 @@ def test_the_pedestal_process_splits_compensates_and_merges_like_the_twin(
     got_az = from_message(out['azimuth'][0])
     np.testing.assert_allclose(got_az.positions[:, 0], want.positions[:, 1], rtol=0,
                                atol=1e-9)
-    assert math.isfinite(float(got.positions.sum()))
 
 
 @pytest.mark.ros

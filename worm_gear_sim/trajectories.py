@@ -44,7 +44,8 @@ from .profiles import SampledProfile
 from .realtime import feedforward_series
 from .simulation import simulate
 
-__all__ = ['jtc_sample', 'compensate_trajectory', 'CompensatedTrajectory', 'Trajectory',
+__all__ = ['jtc_sample', 'compensate_trajectory', 'antenna_error', 'CompensatedTrajectory',
+           'JointTrajectoryData',
            'TrajectoryCompensator', 'TrajectoryRejected', 'TRAJECTORY_REJECT_REASONS',
            'MAX_TRAJECTORY_POINTS', 'MAX_TRAJECTORY_DURATION', 'MAX_DENSE_POINTS']
 
@@ -223,18 +224,25 @@ def compensate_trajectory(model: DriveModel | Config, times: ArrayLike,
     dddelta = np.gradient(ddelta, dt) if n > 2 else np.zeros(n)
     out = CompensatedTrajectory(t, ref + delta, vref + ddelta, aref + dddelta, ref, delta)
     if predict and n > 1:
-        ratio = m.output_per_input
-        for cmd, field in ((ref + delta, 'predicted_error'), (ref, 'raw_error')):
-            tr = simulate(m, SampledProfile(t, cmd), t_end=float(t[-1]),
-                          record_every=int(round(dt / m.config.integrator.time_step)),
-                          theta1_initial=float(cmd[0]))
-            th4 = np.interp(t, tr.t, tr.theta[:, 2])
-            setattr(out, field, th4 - ref * ratio)
+        out.predicted_error = antenna_error(m, t, ref + delta, ref)
+        out.raw_error = antenna_error(m, t, ref, ref)
     return out
 
 
+def antenna_error(model: DriveModel | Config, t: np.ndarray, command: np.ndarray,
+                  reference: np.ndarray) -> np.ndarray:
+    """The antenna error theta4 - reference l_w / r_g [rad] at the uniform times ``t``
+    when the drive, at rest at ``command[0]``, is driven by ``command`` (straight lines
+    between the samples, as the node applies commands)."""
+    m = DriveModel.of(model)
+    every = max(1, int(round((t[1] - t[0]) / m.config.integrator.time_step)))
+    tr = simulate(m, SampledProfile(t, command), t_end=float(t[-1]), record_every=every,
+                  theta1_initial=float(command[0]))
+    return np.interp(t, tr.t, tr.theta[:, 2]) - reference * m.output_per_input
+
+
 @dataclass(frozen=True)
-class Trajectory:
+class JointTrajectoryData:
     """A ``trajectory_msgs/JointTrajectory`` as arrays: ``time_from_start`` (n,) [s],
     ``positions`` (n, joints) [rad], ``velocities`` and ``accelerations`` (n, joints) or
     None, ``stamp_ns`` the header stamp (0: start on reception, the controller's rule)."""
@@ -251,7 +259,7 @@ class Trajectory:
                     positions: Sequence[Sequence[float]],
                     velocities: Sequence[Sequence[float]] | None = None,
                     accelerations: Sequence[Sequence[float]] | None = None,
-                    stamp_ns: int = 0) -> Trajectory:
+                    stamp_ns: int = 0) -> JointTrajectoryData:
         """From per-point lists as a message carries them.  A point's velocities
         (accelerations) are empty or one per joint, and given on every point or on none:
         else TrajectoryRejected ``length_mismatch`` (the controller would reject it too)."""
@@ -297,7 +305,7 @@ class TrajectoryResult:
     ``trajectory`` (same joints in the same order, same stamp), the start instant it was
     timed from (``start_ns``) and each joint's :class:`CompensatedTrajectory`."""
 
-    trajectory: Trajectory
+    trajectory: JointTrajectoryData
     start_ns: int
     axes: dict[str, CompensatedTrajectory]
 
@@ -339,7 +347,7 @@ class TrajectoryCompensator:
     def joints(self) -> tuple[str, ...]:
         return tuple(self.drives)
 
-    def check(self, traj: Trajectory, now_ns: int | None = None) -> None:
+    def check(self, traj: JointTrajectoryData, now_ns: int | None = None) -> None:
         """TrajectoryRejected naming the first problem (:data:`TRAJECTORY_REJECT_REASONS`):
         no joints or points, unknown or repeated joints, ragged or non-finite values,
         time_from_start not increasing, too long, or wholly in the past of ``now_ns``."""
@@ -373,7 +381,7 @@ class TrajectoryCompensator:
         new._sent = {j: v for j, v in self._sent.items() if j in new.drives}
         return new
 
-    def dense_points(self, traj: Trajectory) -> int:
+    def dense_points(self, traj: JointTrajectoryData) -> int:
         """Points of the compensated trajectory (per joint) of a checked ``traj``."""
         return int(math.floor((traj.time_from_start[-1] + self.settle) * self.rate)) + 1
 
@@ -403,7 +411,7 @@ class TrajectoryCompensator:
             return None                                 # held: at rest, nothing to carry
         return th, xh
 
-    def compensate(self, traj: Trajectory, now_ns: int = 0, predict: bool = False
+    def compensate(self, traj: JointTrajectoryData, now_ns: int = 0, predict: bool = False
                    ) -> TrajectoryResult:
         """Check, split, compensate and merge ``traj`` (class docstring); remembers what it
         sent for the next trajectory's start.  ``predict``: also the antenna errors."""
@@ -426,7 +434,7 @@ class TrajectoryCompensator:
         for joint, ct in axes.items():
             self._sent[joint] = (start_ns, ct.t, ct.reference)
         first = axes[traj.joint_names[0]]
-        dense = Trajectory(traj.joint_names, first.t,
+        dense = JointTrajectoryData(traj.joint_names, first.t,
                            np.column_stack([axes[j].position for j in traj.joint_names]),
                            np.column_stack([axes[j].velocity for j in traj.joint_names]),
                            np.column_stack([axes[j].acceleration for j in traj.joint_names]),

@@ -26,7 +26,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ..topics import COMPENSATED_TRAJECTORY_TOPIC, TRAJECTORY_TOPIC
 from ..trajectories import (
     TRAJECTORY_REJECT_REASONS,
-    Trajectory,
+    JointTrajectoryData,
     TrajectoryCompensator,
     TrajectoryRejected,
     TrajectoryResult,
@@ -46,18 +46,18 @@ QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)   # as the co
 MAX_PENDING_POINTS = 2_000_000
 
 
-def from_message(msg: JointTrajectory) -> Trajectory:
-    """The core's Trajectory of a message (TrajectoryRejected for ragged points)."""
+def from_message(msg: JointTrajectory) -> JointTrajectoryData:
+    """The core's JointTrajectoryData of a message (TrajectoryRejected for ragged points)."""
     pts = msg.points
     st = msg.header.stamp
-    return Trajectory.from_points(
+    return JointTrajectoryData.from_points(
         list(msg.joint_names),
         [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in pts],
         [p.positions for p in pts], [p.velocities for p in pts],
         [p.accelerations for p in pts], st.sec * _NS + st.nanosec)
 
 
-def to_message(traj: Trajectory, header: Any) -> JointTrajectory:
+def to_message(traj: JointTrajectoryData, header: Any) -> JointTrajectory:
     """The dense compensated trajectory as a message with the input's ``header``."""
     msg = JointTrajectory()
     msg.header = header
@@ -136,14 +136,14 @@ class TrajectoryBridge:
         self._warn(key, f'rejected {TRAJECTORY_TOPIC}: {exc.reason} ({exc}); '
                         f'{self._counters[key]} so far; nothing forwarded')
 
-    def _work(self, traj: Trajectory, header: Any, now_ns: int, points: int) -> None:
+    def _work(self, traj: JointTrajectoryData, header: Any, now_ns: int, points: int) -> None:
         try:
             self._compensate_and_publish(traj, header, now_ns)
         finally:
             with self._lock:
                 self._pending -= points
 
-    def _compensate_and_publish(self, traj: Trajectory, header: Any, now_ns: int) -> None:
+    def _compensate_and_publish(self, traj: JointTrajectoryData, header: Any, now_ns: int) -> None:
         try:
             models = self._models()
             comp = self.compensator

@@ -34,9 +34,12 @@ import numpy as np
 
 from ..model import DriveModel
 from ..params import Config
-from ..profiles import SampledProfile
-from ..simulation import simulate
-from ..trajectories import Trajectory, TrajectoryCompensator, jtc_sample
+from ..trajectories import (
+    JointTrajectoryData,
+    TrajectoryCompensator,
+    antenna_error,
+    jtc_sample,
+)
 
 __all__ = ['satellite_pass', 'pass_window', 'pass_waypoints', 'stream_pass', 'PassResult',
            'EARTH_RADIUS', 'EARTH_MU']
@@ -117,7 +120,7 @@ class PassResult:
 def stream_pass(drives: Mapping[str, DriveModel | Config], angles: Mapping[str, np.ndarray],
                 t: np.ndarray, waypoint_period: float = 1.0, chunk: float = 20.0,
                 every: float = 10.0, compensator: TrajectoryCompensator | None = None
-                ) -> tuple[list[Trajectory], list[Trajectory]]:
+                ) -> tuple[list[JointTrajectoryData], list[JointTrajectoryData]]:
     """The pass as overlapping trajectories (module docstring) and their compensated twins
     (through ``compensator``, default: a new one over ``drives``).  ``angles``: antenna
     angle [rad] per worm input joint on the dense times ``t`` [s].  The first trajectory
@@ -130,8 +133,8 @@ def stream_pass(drives: Mapping[str, DriveModel | Config], angles: Mapping[str, 
            for j in joints}
     tw = wps[joints[0]][0]
     base_ns = 1_000_000_000
-    sent: list[Trajectory] = []
-    out: list[Trajectory] = []
+    sent: list[JointTrajectoryData] = []
+    out: list[JointTrajectoryData] = []
     start = 0.0
     while start < tw[-1] - 1e-9:
         sel = (tw >= start - 1e-9) & (tw <= start + chunk + 1e-9)
@@ -149,14 +152,14 @@ def stream_pass(drives: Mapping[str, DriveModel | Config], angles: Mapping[str, 
             pos = np.vstack((pos, pos[-1] + vel[-1] * LEAD_IN / 2))
             vel = np.vstack((vel, np.zeros(len(joints))))
         stamp = base_ns + int(round((start + (LEAD_IN if sent else 0.0)) * 1e9))
-        traj = Trajectory(joints, times, pos, vel, None, stamp)
+        traj = JointTrajectoryData(joints, times, pos, vel, None, stamp)
         sent.append(traj)
         out.append(comp.compensate(traj).trajectory)
         start += every
     return sent, out
 
 
-def stitch(trajs: Sequence[Trajectory], joint: int, t_ns: np.ndarray,
+def stitch(trajs: Sequence[JointTrajectoryData], joint: int, t_ns: np.ndarray,
            velocities: bool = True) -> np.ndarray:
     """The command a controller executes from back-to-back trajectories (each from its
     stamp until the next one's), read with its spline rule, at times ``t_ns``."""
@@ -174,8 +177,8 @@ def stitch(trajs: Sequence[Trajectory], joint: int, t_ns: np.ndarray,
     return out
 
 
-def evaluate_pass(drives: Mapping[str, DriveModel | Config], sent: Sequence[Trajectory],
-                  compensated: Sequence[Trajectory], settle_from: float = LEAD_IN + 1.0
+def evaluate_pass(drives: Mapping[str, DriveModel | Config], sent: Sequence[JointTrajectoryData],
+                  compensated: Sequence[JointTrajectoryData], settle_from: float = LEAD_IN + 1.0
                   ) -> PassResult:
     """Simulate each drive on the stitched raw and compensated commands (linear reading of
     the dense compensated points, as the node applies commands; the raw trajectories with
@@ -192,12 +195,7 @@ def evaluate_pass(drives: Mapping[str, DriveModel | Config], sent: Sequence[Traj
         m = DriveModel.of(drives[j])
         raw = stitch(sent, k, t_ns)
         cmd = stitch(compensated, k, t_ns, velocities=False)
-        ratio = m.output_per_input
-        every = int(round(1.0 / rate / m.config.integrator.time_step))
-        errs = []
-        for c in (raw, cmd):
-            tr = simulate(m, SampledProfile(t, c), t_end=float(t[-1]), record_every=every,
-                          theta1_initial=float(c[0]))
-            errs.append(np.interp(t, tr.t, tr.theta[:, 2]) - raw * ratio)
-        ref[j], raw_e[j], comp_e[j] = raw * ratio, errs[0], errs[1]
+        ref[j] = raw * m.output_per_input
+        raw_e[j] = antenna_error(m, t, raw, raw)
+        comp_e[j] = antenna_error(m, t, cmd, raw)
     return PassResult(t, ref, raw_e, comp_e, len(sent), settle_from)
