@@ -58,7 +58,7 @@ from numba import njit
 from scipy.interpolate import BSpline
 
 from .modal import modes
-from .model import DriveModel, inverse_theta1
+from .model import DriveModel, gear_torque_demand, has_play, inverse_theta1, rest_flank
 from .params import Config
 
 __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_filter',
@@ -66,6 +66,7 @@ __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_fil
 
 SHAPERS = ('none', 'zv', 'zvd', 'ei')
 NODES_PER_KNOT = 24      # quadrature nodes per B-spline knot interval
+FLANK_TORQUE = 1e-6      # N m: |mesh torque demand| above which the flank in contact changes
 MIN_DEGREE = 4           # >= 5-fold spectral zeros at the command rate (anti-aliasing)
 
 
@@ -251,10 +252,12 @@ def _interp_at(s, ht, hx, lo, hi, j):
 
 @njit(cache=True, error_model='numpy')
 def compensation_kernel(te, tau, W, ht, hx, lo, hi, p, out_per_in, quasi_static, dynamic,
-                        enabled, r):
+                        enabled, r, flank):
     """One evaluation of the compensator at time ``te`` (the compiled per-sample update):
     r[m] = sum_k W[m, k] x(te - tau_k) (the filtered reference and its derivatives), then
-    the model inverse.  Returns (delta, x(te))."""
+    the model inverse.  ``flank`` = [flank in contact, backlash inverse on]: when on, the
+    last two rows of W are the lead-free r', r'' whose mesh torque demand decides the flank
+    (kept while |demand| <= FLANK_TORQUE), updated in place.  Returns (delta, x(te))."""
     ref = _interp_at(te, ht, hx, lo, hi, hi - 1)[0]
     if not enabled:
         return 0.0, ref
@@ -269,10 +272,19 @@ def compensation_kernel(te, tau, W, ht, hx, lo, hi, p, out_per_in, quasi_static,
     if not quasi_static:
         return r[0] - ref, ref          # shaping (filtering) only
     c = out_per_in
+    f = flank[0]
+    if flank[1] > 0.0:                  # the backlash inverse: which flank must carry the load
+        nd -= 2
+        demand = gear_torque_demand(p, r[nd] * c, r[nd + 1] * c, 0.0, 0.0, False)
+        if demand > FLANK_TORQUE:
+            f = 1.0
+        elif demand < -FLANK_TORQUE:
+            f = -1.0
+        flank[0] = f
     if nd == 5:
-        th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, r[3] * c, r[4] * c, dynamic)
+        th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, r[3] * c, r[4] * c, dynamic, f)
     else:
-        th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, 0.0, 0.0, False)
+        th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, 0.0, 0.0, False, f)
     return th1 - ref, ref
 
 
@@ -290,6 +302,7 @@ class Compensator:
 
     def __init__(self, model: DriveModel | Config) -> None:
         self._derivs = np.zeros(0)       # r, r', ... of the filtered reference (reset fills it)
+        self._flank = np.zeros(2)        # [flank in contact, backlash inverse on]
         self.reconfigure(model)
         self.reset(0.0, 0.0)
 
@@ -325,9 +338,22 @@ class Compensator:
         self.filter = design_filter(shaper, width / (degree + 1), degree, lag, self.preview,
                                     n_deriv)
         self._tau = np.ascontiguousarray(self.filter.tau)
-        self._W = np.ascontiguousarray(self.filter.weights)
-        if self._derivs.size != n_deriv:
-            self._derivs = np.zeros(n_deriv)
+        W = self.filter.weights
+        # the backlash inverse decides the flank from the lead-free (lag 0) r', r'': the
+        # lead makes r'' overshoot at every rate change, which would flip the flank back
+        # and forth (same knots, same nodes: the rows stack)
+        self.backlash_inverse = bool(cs.backlash_inverse) and self.quasi_static \
+            and has_play(model.p)
+        if self.backlash_inverse:
+            plain = design_filter(shaper, width / (degree + 1), degree, 0, self.preview, 3)
+            if not np.array_equal(plain.tau, self.filter.tau):  # pragma: no cover
+                raise RuntimeError('backlash inverse: filter nodes differ')
+            W = np.vstack((W, plain.weights[1:3]))
+        self._W = np.ascontiguousarray(W)
+        if self._derivs.size != W.shape[0]:
+            self._derivs = np.zeros(W.shape[0])
+        self._flank[1] = 1.0 if self.backlash_inverse else 0.0
+        self._rest_flank = rest_flank(model.p) if self.backlash_inverse else 0.0
         self._n_deriv = n_deriv
         self._span = self.filter.lag_span + self.preview
         self._p, self._output_per_input = model.p, model.output_per_input   # per-sample use
@@ -343,8 +369,9 @@ class Compensator:
         self._lo, self._hi = 0, 1
         self._last_delta = 0.0
         self._reference = float(theta1_ref)
-        self._derivs = np.zeros(self._n_deriv)
+        self._derivs = np.zeros(self._W.shape[0])
         self._derivs[0] = float(theta1_ref)
+        self._flank[0] = self._rest_flank
 
     def update(self, t: float, theta1_ref: float) -> float:
         """Add the sample (t, theta1_ref) and return the correction delta [rad] for time
@@ -387,7 +414,7 @@ class Compensator:
         d, ref = compensation_kernel(float(te), self._tau, self._W, self._ht, self._hx,
                                      self._lo, self._hi, self._p, self._output_per_input,
                                      self.quasi_static, self.dynamic, self.enabled,
-                                     self._derivs)
+                                     self._derivs, self._flank)
         self._reference = ref
         self._last_delta = d
         return d
@@ -407,6 +434,8 @@ class Compensator:
         self._ht, self._hx = other._ht.copy(), other._hx.copy()
         self._lo, self._hi = other._lo, other._hi
         self._last_delta, self._reference = other._last_delta, other._reference
+        if self.backlash_inverse:    # the teeth stay where they are (none: the rest flank)
+            self._flank[0] = other._flank[0] if other.backlash_inverse else self._rest_flank
 
     # ---- introspection ---------------------------------------------------------------------
     @property
@@ -421,7 +450,13 @@ class Compensator:
     @property
     def filtered_reference(self) -> np.ndarray:
         """Last filtered worm reference and its derivatives (r, r', r'' [, r''', r''''])."""
-        return np.array(self._derivs, float)
+        return np.array(self._derivs[:self._n_deriv], float)
+
+    @property
+    def flank(self) -> float:
+        """The flank the backlash inverse has the worm on: +1 drive, -1 coast, 0 the centre
+        of the play (always 0 without play or with ``compensation.backlash_inverse`` off)."""
+        return float(self._flank[0])
 
     def describe(self) -> str:
         f = self.filter
@@ -430,4 +465,5 @@ class Compensator:
                 f'B-spline degree {f.degree} over {f.smoothing_time * 1e3:.3g} ms, '
                 f'lead {f.lead[0]:.3g} s / '
                 f'{f.lead[1]:.3g} s^2, preview {self.preview * 1e3:.3g} ms, '
-                f'quasi_static {self.quasi_static}, model_inverse {self.dynamic}')
+                f'quasi_static {self.quasi_static}, model_inverse {self.dynamic}, '
+                f'backlash_inverse {self.backlash_inverse}')

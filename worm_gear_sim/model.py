@@ -431,15 +431,21 @@ def without_play(p: np.ndarray) -> np.ndarray:
     return q
 
 
+def rest_flank(p: np.ndarray) -> float:
+    """The flank a drive at rest leans on: +1 drive (q > h), -1 coast (q < -h), 0 the
+    centre of the play.  A load torque T_load > 0 turns the antenna back, so the worm holds
+    it on the drive flank; T_load < 0 on the coast flank; without a load the flank of
+    ``mesh.initial_flank``."""
+    load = float(p[P_TLOAD])
+    return 1.0 if load > 0.0 else -1.0 if load < 0.0 else float(p[P_INIT_FLANK])
+
+
 def play_rest_shift(p: np.ndarray) -> tuple[np.ndarray, bool]:
     """Where a drive with play rests: (shift of (theta2, theta3, theta4) to subtract from
-    the rest without play, loaded).  A load torque T_load > 0 turns the antenna back, so the
-    worm holds it on the drive flank (q > h); T_load < 0 on the coast flank; without a load
-    the flank of ``mesh.initial_flank`` (q = +h, -h, or 0 for center) with no tooth
-    force."""
+    the rest without play, loaded), on the flank of :func:`rest_flank` (no tooth force at
+    the centre)."""
     load = float(p[P_TLOAD])
-    side = 1.0 if load > 0.0 else -1.0 if load < 0.0 else float(p[P_INIT_FLANK])
-    d = side * p[P_GAP_HALF] / p[P_RG]
+    d = rest_flank(p) * p[P_GAP_HALF] / p[P_RG]
     return np.array([0.0, d, d]), load != 0.0
 
 
@@ -612,10 +618,25 @@ def forces(p: np.ndarray, u: ArrayLike, v: ArrayLike,
 
 # ---- the inverse: theta1 that makes theta4 follow a path (feed-forward compensation) --------
 @njit(cache=True, error_model='numpy')
-def inverse_theta1(p, y0, y1, y2, y3, y4, dynamic):
+def gear_torque_demand(p, y1, y2, y3, y4, dynamic):
+    """The mesh torque on the gear [N m] that moves the antenna along theta4 = y(t) (Eq. 6
+    and the gear body; the same expression as :func:`inverse_theta1`): its sign tells the
+    flank that must carry it (> 0 the drive flank, < 0 the coast flank)."""
+    Jg, J4, Kg = p[P_JG], p[P_J4], p[P_KG]
+    cout, Tload = p[P_COUT], p[P_TLOAD]
+    if dynamic:
+        th3_2 = y2 + (J4 * y4 + cout * y3) / Kg
+        return Jg * th3_2 + J4 * y2 + cout * y1 + Tload
+    return (Jg + J4) * y2 + cout * y1 + Tload
+
+
+@njit(cache=True, error_model='numpy')
+def inverse_theta1(p, y0, y1, y2, y3, y4, dynamic, flank):
     """Flat-output inverse of the nominal chain (packed parameters ``p``): the worm-shaft
     input theta1 that makes theta4 = y(t), from y and its derivatives; ``dynamic`` keeps
-    the third and fourth derivative terms."""
+    the third and fourth derivative terms.  With play (``mesh.backlash`` > 0) the worm
+    must also take up half the play on the flank ``flank`` (+1 drive, -1 coast, 0 the
+    centre): the approach is q = q_e + flank h (the inverse of :func:`penetration`)."""
     Jw, Jg, J4 = p[P_JW], p[P_JG], p[P_J4]
     Kw, Kg = p[P_KW], p[P_KG]
     lw, rw, rg = p[P_LW], p[P_RW], p[P_RG]
@@ -643,6 +664,9 @@ def inverse_theta1(p, y0, y1, y2, y3, y4, dynamic):
     th2_rigid = th3 * ratio
     kgws = mesh_compliance(p, th2_rigid, th3, mu)[0]      # Eq. 10, the model's own
     q = Wn * kgws / cl                                    # Eq. 9
+    h = p[P_GAP_HALF]
+    if h > 0.0:
+        q += flank * h                                    # the play, on the flank in contact
     th2 = (q + rg * th3) / lw                             # Eq. 8
     Tw = rw * A * Wn                                      # mesh torque on the worm
     if dynamic:

@@ -355,6 +355,9 @@ class CompensationSettings:
                                '1/node.publish_rate_hz', 's', 0.0, 0.1)
     lag_order: int = _f(2, 'Lead of the reference filter: it tracks polynomials of this '
                         'degree without lag (0: plain delay, 1: ramps, 2: parabolas)', '', 0, 2)
+    backlash_inverse: bool = _f(True, 'With mesh.backlash > 0: move the worm across the play '
+                                'to the flank the motion needs, in one command period when '
+                                'the mesh torque demand changes sign (docs/compensation.md)')
 
 
 SECTIONS: dict[str, type] = {
