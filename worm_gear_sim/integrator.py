@@ -484,11 +484,12 @@ def record_aux(p, u, v, theta1, mu, out):
 
 
 @njit(cache=True, error_model='numpy')
-def _split_at_contact(p, Ct, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, since, mode, mu,
-                      gap, qa, qb):
+def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, since, mode,
+                      mu, gap, qa, qb):
     """Redo a step whose approach q crosses an edge of the clearance (+-gap) as two parts
     split where it crosses: the crossing fraction by secant iterations on q (q at the end of
-    a part of length f dt), then the rest of the step.  Returns (ok, u, v, a, rho, since,
+    a part of length f dt), then the rest of the step (with the damping ``Cb`` of the
+    region the step ends in; ``Ct`` that of its start).  Returns (ok, u, v, a, rho, since,
     mode, mu, n_solves, n_evals); ok False leaves the caller's whole step in force."""
     lw, rg = p[P_LW], p[P_RG]
     ra = _contact_region(gap, qa)
@@ -525,7 +526,7 @@ def _split_at_contact(p, Ct, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, since,
     if not found:
         return False, u0, v0, a0, rho, since, mode, mu, ns, ne
     ok, u2, v2, a2, rho2, since2, n2, e2, _, mode2, mu2 = _step(
-        p, Ct, u1, v1, a1, th_b, td_b, (1.0 - f) * dt, rho1, since1, mode1, mu1)
+        p, Cb, u1, v1, a1, th_b, td_b, (1.0 - f) * dt, rho1, since1, mode1, mu1)
     ns += n2
     ne += e2
     if not ok:
@@ -539,7 +540,10 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
     """Advance len(theta1)-1 steps of size dt; theta1[k] is the command at the start of
     step k and theta1[k+1] at its end (theta1_dot likewise).  ``load``: the load torque on
     the antenna [N m] on the same grid (load[k+1] at the end of step k, linear within it),
-    or an empty array for the constant ``p[P_TLOAD]``.  Updates u, v, a in place and only
+    or an empty array for the constant ``p[P_TLOAD]``.  ``C``: the damping, 3 x 3, or 6 x 3
+    with the damping of the open mesh in rows 3..5 (:func:`~worm_gear_sim.modal.
+    stepping_damping`: taken by the steps that start inside the play, so no structural
+    damping acts across it).  Updates u, v, a in place and only
     with fully converged steps.  Every ``record_stride`` steps (if > 0) the end state is
     written to rec_* (row j after step (j+1)*stride).  ``ctl`` carries the Newton
     controller state between calls.  Returns (steps done, status)."""
@@ -550,6 +554,9 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
         if load.shape[0] < n_steps + 1:
             return 0, STATUS_NONFINITE
     Ct = (C[0, 0], C[0, 1], C[0, 2], C[1, 0], C[1, 1], C[1, 2], C[2, 0], C[2, 1], C[2, 2])
+    Co = Ct
+    if C.shape[0] == 6:
+        Co = (C[3, 0], C[3, 1], C[3, 2], C[4, 0], C[4, 1], C[4, 2], C[5, 0], C[5, 1], C[5, 2])
     max_level = int(p[P_MAXSUB])
     gap = p[P_GAP_HALF]
     lw, rg = p[P_LW], p[P_RG]
@@ -579,8 +586,11 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 status = STATUS_NONFINITE
                 break
             p[P_TLOAD] = ld_b                                      # Eq. 6 (+ load), at t_k+1
+        Cs = Ct
+        if gap > 0.0 and abs(lw * uu[0] - rg * uu[1]) < gap:
+            Cs = Co                              # the step starts inside the play
         ok, un, vn, an, rho, since, ns, ne, ver, mode_n, mu_n = _step(
-            p, Ct, uu, vv, aa, th_b, td_b, dt, rho, since, mode, mu)
+            p, Cs, uu, vv, aa, th_b, td_b, dt, rho, since, mode, mu)
         n_solves += ns
         n_evals += ne
         n_verified += ver
@@ -598,7 +608,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 if varying:
                     p[P_TLOAD] = ld_a + f * (ld_b - ld_a)
                 ok, us, vs, as_, rho, since, ns, ne, ver, mode_n, mu_n = _step(
-                    p, Ct, us, vs, as_, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a),
+                    p, Cs, us, vs, as_, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a),
                     h, rho, since, mode_n, mu_n)
                 n_solves += ns
                 n_evals += ne
@@ -617,13 +627,14 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
         if gap > 0.0 and level == 1:
             qa = lw * uu[0] - rg * uu[1]
             qb = lw * un[0] - rg * un[1]
-            if _contact_region(gap, qa) != _contact_region(gap, qb):
+            rb = _contact_region(gap, qb)
+            if _contact_region(gap, qa) != rb:
                 # a contact event (loss, impact, re-engagement) inside the step: split the
                 # step where q crosses the flank's edge, so that each part is smooth (the
                 # trapezoidal rule then neither gains nor loses the contact's energy)
                 ok_e, ue, ve, ae, rho_e, since_e, mode_e, mu_e, ns, ne = _split_at_contact(
-                    p, Ct, uu, vv, aa, th_a, th_b, td_a, td_b, dt, rho, since, mode, mu,
-                    gap, qa, qb)
+                    p, Cs, Co if rb == 0 else Ct, uu, vv, aa, th_a, th_b, td_a, td_b, dt,
+                    rho, since, mode, mu, gap, qa, qb)
                 n_solves += ns
                 n_evals += ne
                 if ok_e:
@@ -658,7 +669,10 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
 
 @njit(cache=True, error_model='numpy')
 def consistent_acceleration(p, C, u, v, theta1, theta1_dot, a):
-    """a = M^{-1} (Q - C (v - r theta1')) at a given state (initial condition)."""
+    """a = M^{-1} (Q - C (v - r theta1')) at a given state (initial condition); ``C`` as
+    :func:`advance` takes it (rows 3..5 inside the play)."""
+    o = 3 if C.shape[0] == 6 and _in_play(p, u) else 0
+    C = C[o:o + 3]
     f = mesh_forces(p, u[0], u[1], u[2], v[0], v[1], v[2], theta1)
     r3 = p[P_OUTPUT_PER_INPUT]
     rel0 = v[0] - theta1_dot

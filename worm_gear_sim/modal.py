@@ -11,6 +11,8 @@ import numpy as np
 import scipy.linalg as sla
 
 from .model import (
+    P_KG,
+    P_KW,
     DriveModel,
     forces,
     has_play,
@@ -23,6 +25,7 @@ from .model import (
 from .schema import ANGLE_LIMIT, Parameters
 
 __all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix',
+           'open_mesh_damping_matrix', 'stepping_damping',
            'amplitude_time_step', 'step_resolution', 'step_resolution_warning',
            'StepResolutionWarning', 'STEPS_PER_PERIOD']
 
@@ -178,6 +181,52 @@ def damping_matrix(model: DriveModel | Parameters) -> np.ndarray:
         w = 2 * np.pi * f_hz
         z = zetas[:len(w)]
         C = C + M @ phi @ np.diag(2.0 * z * w) @ phi.T @ M
+    return np.ascontiguousarray(C)
+
+
+def open_mesh_damping_matrix(model: DriveModel | Parameters) -> np.ndarray:
+    """The structural damping that still acts while the mesh play is open (no tooth
+    contact): none of it through the mesh.  Rayleigh alpha on the worm only (against its
+    motor end: the gear and antenna are then not tied to the kinematic motion of theta1),
+    beta times the stiffness of the two shafts alone, and modal damping on the modes of
+    the open drive (the worm on its shaft, the gear against the antenna; the free rigid
+    motion of gear and antenna gets none), each with the ratio of the engaged mode it
+    resembles most (largest mass-weighted overlap of the shapes)."""
+    model = DriveModel.of(model)
+    p, d = model.p, model.config.damping
+    M = mass_matrix(p)
+    K0 = linear_stiffness(p)
+    Kw, Kg = float(p[P_KW]), float(p[P_KG])             # the shafts, without the mesh
+    Ko = np.array([[Kw, 0.0, 0.0], [0.0, Kg, -Kg], [0.0, -Kg, Kg]])
+    C = np.zeros((3, 3))
+    C[0, 0] = d.rayleigh_alpha * M[0, 0]
+    C = C + d.rayleigh_beta * Ko
+    zetas = np.asarray(d.modal_damping_ratios, float)
+    if np.any(zetas > 0):
+        _, phi_e = _undamped_modes(K0, M)
+        f_o, phi_o = _undamped_modes(Ko, M)
+        for k in range(f_o.size):
+            w = 2.0 * np.pi * f_o[k]
+            norm = float(phi_o[:, k] @ M @ phi_o[:, k])
+            if not (w > 0.0 and norm > 0.0):
+                continue                      # the free rigid motion of gear and antenna
+            overlap = np.abs(phi_o[:, k] @ M @ phi_e) / np.sqrt(
+                norm * np.einsum('ik,ij,jk->k', phi_e, M, phi_e))
+            j = int(np.argmax(overlap))
+            z = float(zetas[j]) if j < zetas.size else 0.0
+            mphi = M @ phi_o[:, k] / np.sqrt(norm)
+            C = C + 2.0 * z * w * np.outer(mphi, mphi)
+    return np.ascontiguousarray(C)
+
+
+def stepping_damping(model: DriveModel | Parameters) -> np.ndarray:
+    """The damping the integrator takes: :func:`damping_matrix` (3 x 3), stacked over
+    :func:`open_mesh_damping_matrix` (6 x 3: rows 3..5 for the steps that start inside the
+    play) when the drive has play and some structural damping."""
+    model = DriveModel.of(model)
+    C = damping_matrix(model)
+    if has_play(model.p) and np.any(C != 0.0):
+        C = np.vstack((C, open_mesh_damping_matrix(model)))
     return np.ascontiguousarray(C)
 
 

@@ -48,8 +48,8 @@ from .integrator import (
 )
 from .load import LOAD_LIMIT, LoadSignal, load_grid
 from .modal import (
-    damping_matrix,
     static_equilibrium,
+    stepping_damping,
 )
 from .model import (
     AUX_FX,
@@ -186,7 +186,7 @@ class Stepper:
         self.model = model
         self.config: Parameters = model.config
         self.p: np.ndarray = model.p          # the packed vector the kernels take
-        self.C: np.ndarray = damping_matrix(model) if C is None else C
+        self.C: np.ndarray = stepping_damping(model) if C is None else C
 
     @property
     def derived(self) -> Derived:
@@ -203,7 +203,7 @@ class Stepper:
         The time step cannot change (it is read-only in the node)."""
         self._check_time_step(model)
         model = DriveModel.of(model)
-        C = damping_matrix(model)
+        C = stepping_damping(model)
         a = np.zeros(3)
         consistent_acceleration(model.p, C, self._u, self._v, self._theta1,
                                 self._theta1_dot, a)
