@@ -203,6 +203,29 @@ def plot_error_study(rows: Sequence[Mapping[str, Any]], path: str | Path, title:
     return _save(fig, path)
 
 
+def plot_reversal_study(rows: Sequence[Mapping[str, Any]], path: str | Path,
+                        title: str) -> Path:
+    """``sweep reversal``: the reversal-window RMS antenna error of each series, one panel
+    per move, one line per load and preview (:mod:`worm_gear_sim.studies.backlash_reversal`)."""
+    moves = list(dict.fromkeys(str(r['move']) for r in rows))
+    fig, ax = _new(1, len(moves), (6.5 * len(moves), 4.6))
+    for a, mv in zip(ax[0], moves):
+        rs = [r for r in rows if r['move'] == mv]
+        series = list(dict.fromkeys(str(r['series']) for r in rs))
+        for ld, pv in dict.fromkeys((r['load'], r['preview_ms']) for r in rs):
+            case = {r['series']: r for r in rs if (r['load'], r['preview_ms']) == (ld, pv)}
+            a.semilogy(range(len(series)), [case[s]['reversal_rms_err4'] for s in series],
+                       'o-', label=f'{ld}, preview {pv:.3g} ms')
+        a.set_xticks(range(len(series)))
+        a.set_xticklabels(series, rotation=30, ha='right', fontsize=8)
+        a.set_ylabel('RMS antenna error around the reversal [rad]')
+        a.set_title(f'{mv} reversal', fontsize=9)
+        a.grid(True, which='both', alpha=0.3)
+        a.legend(fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
 def plot_pass(result: Any, path: str | Path, title: str = '') -> Path:
     """A tracking pass (:mod:`worm_gear_sim.studies.tracking_pass`): per axis, the antenna
     angle, the pointing error with and without compensation, and the compensated error on

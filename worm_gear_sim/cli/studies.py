@@ -46,7 +46,8 @@ def register(sub: Any) -> None:
     p.add_argument('study', nargs='*', metavar='STUDY',
                    help=f'{", ".join(PAPER_STUDIES)} or all; or play / gust: the antenna '
                    'error on the radar slew against the mesh play / the gust intensity, '
-                   'with and without the feed-forward')
+                   'with and without the feed-forward; or reversal: the feed-forward '
+                   'across the play on reversal moves (docs/compensation.md)')
     p.add_argument('--param', metavar='PATH[,PATH]', help='sweep this dotted parameter '
                    '(several comma-separated paths get the same value)')
     p.add_argument('--values', metavar='V1,V2,...', help='values for --param')
@@ -181,18 +182,35 @@ ERROR_STUDIES = {
     'play': ('antenna error against the mesh play (radar slew, 2 N m load)',
              'mesh.backlash [arcmin]'),
     'gust': ('antenna error against the gust intensity (radar slew, 5 N m mean wind, '
-             '0.2 s gusts, 3 seeds)', 'turbulence intensity sigma_u / U')}
+             '0.2 s gusts, 3 seeds)', 'turbulence intensity sigma_u / U'),
+    'reversal': ('the feed-forward across 2 arcmin of play on reversal moves (3 % damping)',
+                 '')}
 
 
 def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> None:
-    """``sweep play`` / ``sweep gust``: CSV, PNG and a table per study."""
-    from ..plotting import plot_error_study
+    """``sweep play`` / ``gust`` / ``reversal``: CSV, PNG and a table per study."""
+    from ..plotting import plot_error_study, plot_reversal_study
     from ..studies import rows_to_csv
+    from ..studies.backlash_reversal import REVERSAL_COLUMNS, reversal_rows
     from ..studies.play_gust import PLAY_GUST_COLUMNS, gust_rows, play_rows
     outdir = Path(args.out_dir)
     outdir.mkdir(parents=True, exist_ok=True)
     for n in names:
         t0 = time.perf_counter()
+        if n == 'reversal':
+            rows = reversal_rows(cfg)
+            title = ERROR_STUDIES[n][0]
+            csv_path, png_path = outdir / f'{n}.csv', outdir / f'{n}.png'
+            rows_to_csv(rows, REVERSAL_COLUMNS, csv_path)
+            plot_reversal_study(rows, png_path, title)
+            say(args, f'\n{title} ({time.perf_counter() - t0:.1f} s)')
+            say(args, fmt_table(rows, [('move', 'move', ''), ('load', 'load', ''),
+                                         ('preview_ms', 'preview [ms]', '.3g'),
+                                         ('series', 'series', ''),
+                                         ('reversal_rms_err4', 'reversal RMS [rad]', '.3e'),
+                                         ('improvement', 'improvement', '.3g')]))
+            say(args, f'wrote {csv_path}, {png_path}')
+            continue
         rows = play_rows(cfg) if n == 'play' else gust_rows(cfg)
         title, x_label = ERROR_STUDIES[n]
         csv_path, png_path = outdir / f'{n}.csv', outdir / f'{n}.png'

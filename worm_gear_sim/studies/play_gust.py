@@ -12,7 +12,10 @@ r_g: RMS over the whole run, RMS over the reversal (from the end of the first tr
 phase to 100 ms into the second), and the mean over the last 50 ms (the static error).
 
 * Play: ``mesh.backlash`` over ``PLAYS_ARCMIN`` under ``PLAY_LOAD`` (a load torque smaller
-  than the reversal's inertia torque, so the mesh changes flank at the reversal).
+  than the reversal's inertia torque, so the mesh changes flank at the reversal), with the
+  3 % modal damping of the reversal study (:mod:`.backlash_reversal`: undamped, every
+  impact of the teeth rings for seconds); series uncompensated, ``blind`` (the
+  feed-forward without its backlash inverse) and compensated (with it).
 * Gusts: the wind model of :mod:`worm_gear_sim.load` with mean ``GUST_MEAN`` and time scale
   ``GUST_TIME_SCALE`` over ``GUST_INTENSITIES``, averaged over ``GUST_SEEDS``.
 """
@@ -27,12 +30,13 @@ import numpy as np
 
 from ..load import WindLoad
 from ..params import Config
+from .backlash_reversal import REVERSAL_DAMPING
 from .compensation_eval import radar_slew_scenario, run_scenario
 
 __all__ = ['ARCMIN', 'PLAYS_ARCMIN', 'GUST_INTENSITIES', 'play_rows', 'gust_rows',
            'PLAY_GUST_COLUMNS']
 
-ARCMIN = math.pi / 180.0 / 60.0
+ARCMIN = math.pi / 180.0 / 60.0     # the same as backlash_reversal.ARCMIN
 PLAYS_ARCMIN = (0.0, 0.5, 1.0, 2.0, 3.0, 5.0)
 PLAY_LOAD = {'load.output_torque': 2.0, 'load.output_viscous_coefficient': 2.0}
 GUST_INTENSITIES = (0.0, 0.05, 0.1, 0.2, 0.3)
@@ -57,9 +61,11 @@ def play_rows(base: Config, plays_arcmin: Sequence[float] = PLAYS_ARCMIN) -> lis
     """Rows of the play study (module docstring)."""
     rows = []
     for b in plays_arcmin:
-        plant = base.replace({**PLAY_LOAD, 'mesh.backlash': float(b) * ARCMIN})
+        plant = base.replace({**PLAY_LOAD, **REVERSAL_DAMPING, 'mesh.backlash': float(b) * ARCMIN,
+                              'compensation.backlash_inverse': True})
         sc = radar_slew_scenario(plant)
-        for series, comp in (('uncompensated', None), ('compensated', plant)):
+        blind = plant.replace({'compensation.backlash_inverse': False})
+        for series, comp in (('uncompensated', None), ('blind', blind), ('compensated', plant)):
             m = _metrics(run_scenario(plant, sc, comp))
             rows.append({'study': 'play', 'series': series, 'label': f'{b:g} arcmin',
                          'x': float(b), 'runs': 1, **m})
