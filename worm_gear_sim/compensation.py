@@ -62,7 +62,7 @@ from .model import DriveModel, gear_torque_demand, has_play, inverse_theta1, res
 from .params import Config
 
 __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_filter',
-           'SHAPERS', 'compensation_kernel']
+           'SHAPERS', 'compensation_kernel', 'centring_preview']
 
 SHAPERS = ('none', 'zv', 'zvd', 'ei')
 NODES_PER_KNOT = 24      # quadrature nodes per B-spline knot interval
@@ -467,3 +467,12 @@ class Compensator:
                 f'{f.lead[1]:.3g} s^2, preview {self.preview * 1e3:.3g} ms, '
                 f'quasi_static {self.quasi_static}, model_inverse {self.dynamic}, '
                 f'backlash_inverse {self.backlash_inverse}')
+
+
+def centring_preview(model: DriveModel | Config) -> float:
+    """The preview [s] that centres the reference filter's kernel on the present (its mean
+    delay: 2.5 ms at a 1 kHz command rate).  With it the filtered reference is not late, so
+    the backlash inverse changes flank when the move's torque changes sign rather than
+    after (docs/compensation.md: 53-115x instead of 1.8-4x on fast reversals)."""
+    config = DriveModel.of(model).config
+    return float(Compensator(config.replace({'compensation.preview_time': 1.0})).filter.shift)

@@ -14,7 +14,10 @@ position is held.
 :func:`compensate_trajectory` samples that path at the node's command rate
 (``node.publish_rate_hz``), adds the feed-forward correction of the same samples
 (:func:`~worm_gear_sim.realtime.feedforward_series`: the whole trajectory is known, so the
-correction can start before the move, up to ``compensation.preview_time``) and returns the
+correction can start before the move, up to ``compensation.preview_time``; a drive with
+play and the backlash inverse, configured without a preview, gets the centring preview
+:func:`~worm_gear_sim.compensation.centring_preview`, which a known trajectory has for
+free and which makes the crossing of the play timely) and returns the
 compensated trajectory densely, with velocities and accelerations of the compensated path
 (the spline's own derivatives plus central differences of the correction), so that the
 controller's interpolation between the dense points follows it; plus the antenna error the
@@ -38,13 +41,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .model import DriveModel
+from .compensation import centring_preview
+from .model import DriveModel, has_play
 from .params import Config
 from .profiles import SampledProfile
 from .realtime import feedforward_series
 from .simulation import simulate
 
-__all__ = ['jtc_sample', 'compensate_trajectory', 'antenna_error', 'CompensatedTrajectory',
+__all__ = ['jtc_sample', 'compensate_trajectory', 'trajectory_model', 'antenna_error',
+           'CompensatedTrajectory',
            'JointTrajectoryData',
            'TrajectoryCompensator', 'TrajectoryRejected', 'TRAJECTORY_REJECT_REASONS',
            'MAX_TRAJECTORY_POINTS', 'MAX_TRAJECTORY_DURATION', 'MAX_DENSE_POINTS']
@@ -184,6 +189,18 @@ class CompensatedTrajectory:
     raw_error: np.ndarray | None = None
 
 
+def trajectory_model(model: DriveModel) -> DriveModel:
+    """The model a known trajectory is compensated with: ``model``, or, for a drive with
+    play whose backlash inverse is on and whose ``compensation.preview_time`` is 0, the
+    same with the centring preview (the trajectory's future is known: no latency)."""
+    cs = model.config.compensation
+    if has_play(model.p) and cs.backlash_inverse and cs.quasi_static and cs.enabled \
+            and cs.preview_time == 0.0:
+        return DriveModel(model.config.replace(
+            {'compensation.preview_time': centring_preview(model)}))
+    return model
+
+
 def compensate_trajectory(model: DriveModel | Config, times: ArrayLike,
                           positions: ArrayLike, velocities: ArrayLike | None = None,
                           accelerations: ArrayLike | None = None,
@@ -199,7 +216,7 @@ def compensate_trajectory(model: DriveModel | Config, times: ArrayLike,
     them first, so a hand-over in the middle of a move continues the correction instead of
     restarting it from rest.  ``predict`` also simulates the drive on the raw and the
     compensated command (the antenna errors; from rest at the start)."""
-    m = DriveModel.of(model)
+    m = trajectory_model(DriveModel.of(model))
     rate = m.config.node.publish_rate_hz if rate is None else float(rate)
     tw = np.asarray(times, float).reshape(-1)
     if tw.size == 0:

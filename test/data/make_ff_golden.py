@@ -12,8 +12,11 @@ import numpy as np
 
 from worm_gear_sim import Config
 from worm_gear_sim.realtime import feedforward_series
-from worm_gear_sim.studies.compensation_eval import (RADAR_LOAD, paper_step_scenario,
-                                                     radar_slew_scenario)
+from worm_gear_sim.studies.compensation_eval import (
+    RADAR_LOAD,
+    paper_step_scenario,
+    radar_slew_scenario,
+)
 
 CASES = {
     'causal': {},

@@ -34,12 +34,12 @@ from typing import Any
 
 import numpy as np
 
-from ..compensation import Compensator
+from ..compensation import centring_preview
 from ..params import Config
 from .compensation_eval import CompensationRun, Scenario, radar_slew_scenario, run_scenario
 
 __all__ = ['ARCMIN', 'REVERSAL_PLAY_ARCMIN', 'REVERSAL_DAMPING', 'REVERSAL_LOADS',
-           'REVERSAL_MOVES', 'PLAY_ERRORS', 'REVERSAL_COLUMNS', 'centring_preview',
+           'REVERSAL_MOVES', 'PLAY_ERRORS', 'REVERSAL_COLUMNS',
            'reversal_window', 'reversal_rms', 'reversal_case', 'reversal_rows', 'summary']
 
 ARCMIN = math.pi / 180.0 / 60.0
@@ -58,13 +58,6 @@ PLAY_ERRORS = (-0.3, 0.3)
 WINDOW_BEFORE, WINDOW_AFTER = 0.05, 0.1      # s around the reversal
 REVERSAL_COLUMNS = ['study', 'move', 'load', 'preview_ms', 'series', 'play_used_arcmin',
                     'reversal_rms_err4', 'improvement', 'max_err4']
-
-
-def centring_preview(cfg: Config) -> float:
-    """The preview [s] that centres the compensator's smoothing kernel (its mean delay,
-    2.5 ms at a 1 kHz command rate): with it the filtered reference is not late, so the
-    backlash inverse changes flank when the move's torque changes sign."""
-    return float(Compensator(cfg.replace({'compensation.preview_time': 1.0})).filter.shift)
 
 
 def reversal_window(scenario: Scenario) -> tuple[float, float]:
