@@ -142,7 +142,7 @@ def test_live_equals_offline_and_a_redesign_keeps_the_flank():
 @pytest.mark.parametrize('load', ['drag', 'load'])
 def test_the_reversal_error_falls_as_measured(load):
     """2 arcmin of play, 3 % damping, the radar slew's reversal (docs/compensation.md,
-    ``sweep reversal``).  Target (issue 17): >= 10x against the uncompensated drive, >= 3x
+    ``sweep reversal``).  The targets: >= 10x against the uncompensated drive, >= 3x
     with the play off by +-30 %.  Met with the centring preview (measured 85x drag / 53x
     load); causal the crossing comes late (measured 4.0x / 1.8x); with the play off by
     30 % the offset it leaves bounds the gain near 3.3x, and an overestimate strikes the

@@ -50,6 +50,7 @@ constant-rate tracking error is many times the uncompensated one.  Shaping with
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -60,9 +61,10 @@ from scipy.interpolate import BSpline
 from .modal import modes
 from .model import DriveModel, gear_torque_demand, has_play, inverse_theta1, rest_flank
 from .params import Config
+from .schema import Parameters
 
 __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_filter',
-           'SHAPERS', 'compensation_kernel', 'centring_preview']
+           'SHAPERS', 'compensation_kernel', 'centring_preview', 'with_preview']
 
 SHAPERS = ('none', 'zv', 'zvd', 'ei')
 NODES_PER_KNOT = 24      # quadrature nodes per B-spline knot interval
@@ -475,4 +477,11 @@ def centring_preview(model: DriveModel | Config) -> float:
     the backlash inverse changes flank when the move's torque changes sign rather than
     after (docs/compensation.md: 53-115x instead of 1.8-4x on fast reversals)."""
     config = DriveModel.of(model).config
-    return float(Compensator(config.replace({'compensation.preview_time': 1.0})).filter.shift)
+    return float(Compensator(DriveModel(with_preview(config, 1.0))).filter.shift)
+
+
+def with_preview(config: Parameters, preview: float) -> Parameters:
+    """A copy of ``config`` (a Config stays a Config) with another
+    ``compensation.preview_time`` [s]."""
+    cs = dataclasses.replace(config.compensation, preview_time=float(preview))
+    return dataclasses.replace(config, compensation=cs)

@@ -11,8 +11,6 @@ import numpy as np
 import scipy.linalg as sla
 
 from .model import (
-    P_KG,
-    P_KW,
     DriveModel,
     forces,
     has_play,
@@ -196,7 +194,7 @@ def open_mesh_damping_matrix(model: DriveModel | Parameters) -> np.ndarray:
     p, d = model.p, model.config.damping
     M = mass_matrix(p)
     K0 = linear_stiffness(p)
-    Kw, Kg = float(p[P_KW]), float(p[P_KG])             # the shafts, without the mesh
+    Kw, Kg = model.derived.K_w, model.derived.K_g        # the shafts, without the mesh
     Ko = np.array([[Kw, 0.0, 0.0], [0.0, Kg, -Kg], [0.0, -Kg, Kg]])
     C = np.zeros((3, 3))
     C[0, 0] = d.rayleigh_alpha * M[0, 0]

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .compensation import centring_preview
+from .compensation import centring_preview, with_preview
 from .model import DriveModel, has_play
 from .params import Config
 from .profiles import SampledProfile
@@ -196,8 +196,7 @@ def trajectory_model(model: DriveModel) -> DriveModel:
     cs = model.config.compensation
     if has_play(model.p) and cs.backlash_inverse and cs.quasi_static and cs.enabled \
             and cs.preview_time == 0.0:
-        return DriveModel(model.config.replace(
-            {'compensation.preview_time': centring_preview(model)}))
+        return DriveModel(with_preview(model.config, centring_preview(model)))
     return model
 
 
