@@ -15,7 +15,9 @@ phase to 100 ms into the second), and the mean over the last 50 ms (the static e
   than the reversal's inertia torque, so the mesh changes flank at the reversal), with the
   3 % modal damping of the reversal study (:mod:`.backlash_reversal`: undamped, every
   impact of the teeth rings for seconds); series uncompensated, ``blind`` (the
-  feed-forward without its backlash inverse) and compensated (with it).
+  feed-forward without its backlash inverse), compensated (with it) and ``compensated,
+  preview`` (with it and the centring preview,
+  :func:`~worm_gear_sim.compensation.centring_preview`).
 * Gusts: the wind model of :mod:`worm_gear_sim.load` with mean ``GUST_MEAN`` and time scale
   ``GUST_TIME_SCALE`` over ``GUST_INTENSITIES``, averaged over ``GUST_SEEDS``.
 """
@@ -28,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from ..compensation import centring_preview
 from ..load import WindLoad
 from ..params import Config
 from .backlash_reversal import REVERSAL_DAMPING
@@ -65,7 +68,9 @@ def play_rows(base: Config, plays_arcmin: Sequence[float] = PLAYS_ARCMIN) -> lis
                               'compensation.backlash_inverse': True})
         sc = radar_slew_scenario(plant)
         blind = plant.replace({'compensation.backlash_inverse': False})
-        for series, comp in (('uncompensated', None), ('blind', blind), ('compensated', plant)):
+        ahead = plant.replace({'compensation.preview_time': centring_preview(plant)})
+        for series, comp in (('uncompensated', None), ('blind', blind), ('compensated', plant),
+                             ('compensated, preview', ahead)):
             m = _metrics(run_scenario(plant, sc, comp))
             rows.append({'study': 'play', 'series': series, 'label': f'{b:g} arcmin',
                          'x': float(b), 'runs': 1, **m})
