@@ -34,6 +34,14 @@ Design (computed from the NOMINAL model at construction / :meth:`Compensator.rec
    the y''' / y'''' terms (gear- and worm-body inertia, drag rate); they need a degree-6
    kernel and measure worse at a 1 kHz command rate, so they are off by default.
 
+3. Across the mesh play (``mesh.backlash`` > 0, ``compensation.backlash_inverse``): the
+   inverse also takes up half the play on the flank the move needs, the sign of the mesh
+   torque demand (:func:`worm_gear_sim.model.gear_torque_demand`) of the filtered reference
+   without the lead (two more rows of weights; the lead's overshoot at rate changes would
+   flip the flank back and forth).  A change of flank steps the correction by the whole
+   play, so the worm crosses it in one command period; it is timely only with a preview
+   (:func:`centring_preview`).  Measured in docs/compensation.md, "Across the mesh play".
+
 ``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one compiled kernel
 (:func:`compensation_kernel`: an interpolation walk over the history at ~120 quadrature
 nodes, the weights and the model inverse :func:`worm_gear_sim.model.inverse_theta1`), about
