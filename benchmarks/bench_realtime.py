@@ -123,6 +123,24 @@ def best(fn, repeats: int) -> float:
     return out
 
 
+def streaming(comp, t: list[float], x: list[float]):
+    """A run: reset ``comp`` and stream the samples through ``update``."""
+    def run():
+        comp.reset(x[0], t[0])
+        for a, b in zip(t, x):
+            comp.update(a, b)
+    return run
+
+
+def interleaved(fa, fb, repeats: int) -> tuple[float, float]:
+    """Minimum times of two runs taken in turn, so that both see the same load."""
+    ta, tb = math.inf, math.inf
+    for _ in range(repeats):
+        ta = min(ta, best(fa, 1))
+        tb = min(tb, best(fb, 1))
+    return ta, tb
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--samples', type=int, default=2000)
@@ -143,36 +161,14 @@ def main(argv: list[str] | None = None) -> int:
     d_old = [old.update(a, b) for a, b in zip(t, x)]
     diff = max(abs(a - b) for a, b in zip(d_new, d_old))
 
-    def run_new():
-        comp.reset(x[0], t[0])
-        for a, b in zip(t, x):
-            comp.update(a, b)
-
-    def run_old():
-        old.reset(x[0], t[0])
-        for a, b in zip(t, x):
-            old.update(a, b)
-
-    # interleaved so that both see the same load
-    t_new, t_old = math.inf, math.inf
-    for _ in range(rep):
-        t_old = min(t_old, best(run_old, 1))
-        t_new = min(t_new, best(run_new, 1))
+    run_new, run_old = streaming(comp, t, x), streaming(old, t, x)
+    t_old, t_new = interleaved(run_old, run_new, rep)
     print(f'compensator update: Python {t_old / n * 1e6:.2f} us, compiled '
           f'{t_new / n * 1e6:.2f} us per sample: {t_old / t_new:.1f}x faster; '
           f'largest difference of the corrections {diff:.1e} rad')
 
     played = Compensator(cfg.replace({'mesh.backlash': 2 * math.pi / 180 / 60}))
-
-    def run_play():
-        played.reset(x[0], t[0])
-        for a, b in zip(t, x):
-            played.update(a, b)
-
-    t_play, t_none = math.inf, math.inf
-    for _ in range(rep):
-        t_none = min(t_none, best(run_new, 1))
-        t_play = min(t_play, best(run_play, 1))
+    t_none, t_play = interleaved(run_new, streaming(played, t, x), rep)
     print(f'compensator update with 2 arcmin of play and the backlash inverse: '
           f'{t_play / n * 1e6:.2f} us per sample, {t_play / t_none:.2f}x the update without '
           f'play ({t_none / n * 1e6:.2f} us)')

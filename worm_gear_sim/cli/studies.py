@@ -197,30 +197,26 @@ def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> N
     outdir.mkdir(parents=True, exist_ok=True)
     for n in names:
         t0 = time.perf_counter()
-        if n == 'reversal':
-            rows = reversal_rows(cfg)
-            title = ERROR_STUDIES[n][0]
-            csv_path, png_path = outdir / f'{n}.csv', outdir / f'{n}.png'
-            rows_to_csv(rows, REVERSAL_COLUMNS, csv_path)
-            plot_reversal_study(rows, png_path, title)
-            say(args, f'\n{title} ({time.perf_counter() - t0:.1f} s)')
-            say(args, fmt_table(rows, [('move', 'move', ''), ('load', 'load', ''),
-                                         ('preview_ms', 'preview [ms]', '.3g'),
-                                         ('series', 'series', ''),
-                                         ('reversal_rms_err4', 'reversal RMS [rad]', '.3e'),
-                                         ('improvement', 'improvement', '.3g')]))
-            say(args, f'wrote {csv_path}, {png_path}')
-            continue
-        rows = play_rows(cfg) if n == 'play' else gust_rows(cfg)
         title, x_label = ERROR_STUDIES[n]
         csv_path, png_path = outdir / f'{n}.csv', outdir / f'{n}.png'
-        rows_to_csv(rows, PLAY_GUST_COLUMNS, csv_path)
-        plot_error_study(rows, png_path, title, x_label)
+        if n == 'reversal':
+            rows = reversal_rows(cfg)
+            rows_to_csv(rows, REVERSAL_COLUMNS, csv_path)
+            plot_reversal_study(rows, png_path, title)
+            table = [('move', 'move', ''), ('load', 'load', ''),
+                     ('preview_ms', 'preview [ms]', '.3g'), ('series', 'series', ''),
+                     ('reversal_rms_err4', 'reversal RMS [rad]', '.3e'),
+                     ('improvement', 'improvement', '.3g')]
+        else:
+            rows = play_rows(cfg) if n == 'play' else gust_rows(cfg)
+            rows_to_csv(rows, PLAY_GUST_COLUMNS, csv_path)
+            plot_error_study(rows, png_path, title, x_label)
+            table = [('series', 'series', ''), ('label', 'case', ''),
+                     ('rms_err4', 'RMS err4 [rad]', '.3e'),
+                     ('reversal_rms_err4', 'reversal RMS [rad]', '.3e'),
+                     ('static_err4', 'static [rad]', '.3e')]
         say(args, f'\n{title} ({time.perf_counter() - t0:.1f} s)')
-        say(args, fmt_table(rows, [('series', 'series', ''), ('label', 'case', ''),
-                                     ('rms_err4', 'RMS err4 [rad]', '.3e'),
-                                     ('reversal_rms_err4', 'reversal RMS [rad]', '.3e'),
-                                     ('static_err4', 'static [rad]', '.3e')]))
+        say(args, fmt_table(rows, table))
         say(args, f'wrote {csv_path}, {png_path}')
 
 
