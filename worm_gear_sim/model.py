@@ -620,13 +620,13 @@ def forces(p: np.ndarray, u: ArrayLike, v: ArrayLike,
 @njit(cache=True, error_model='numpy')
 def gear_torque_demand(p, y1, y2, y3, y4, dynamic):
     """The mesh torque on the gear [N m] that moves the antenna along theta4 = y(t) (Eq. 6
-    and the gear body; the same expression as :func:`inverse_theta1`): its sign tells the
-    flank that must carry it (> 0 the drive flank, < 0 the coast flank)."""
+    and the gear body, as :func:`inverse_theta1` takes it): its sign tells the flank that
+    must carry it (> 0 the drive flank, < 0 the coast flank)."""
     Jg, J4, Kg = p[P_JG], p[P_J4], p[P_KG]
     cout, Tload = p[P_COUT], p[P_TLOAD]
     if dynamic:
-        th3_2 = y2 + (J4 * y4 + cout * y3) / Kg
-        return Jg * th3_2 + J4 * y2 + cout * y1 + Tload
+        Ts = J4 * y2 + cout * y1 + Tload                  # gear-shaft torque, Eq. 6
+        return Jg * (y2 + (J4 * y4 + cout * y3) / Kg) + Ts
     return (Jg + J4) * y2 + cout * y1 + Tload
 
 
@@ -637,7 +637,7 @@ def inverse_theta1(p, y0, y1, y2, y3, y4, dynamic, flank):
     the third and fourth derivative terms.  With play (``mesh.backlash`` > 0) the worm
     must also take up half the play on the flank ``flank`` (+1 drive, -1 coast, 0 the
     centre): the approach is q = q_e + flank h (the inverse of :func:`penetration`)."""
-    Jw, Jg, J4 = p[P_JW], p[P_JG], p[P_J4]
+    Jw, J4 = p[P_JW], p[P_J4]
     Kw, Kg = p[P_KW], p[P_KG]
     lw, rw, rg = p[P_LW], p[P_RW], p[P_RG]
     sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
@@ -650,10 +650,7 @@ def inverse_theta1(p, y0, y1, y2, y3, y4, dynamic, flank):
     th3 = y0 + Ts / Kg
     th3_1 = y1 + (J4 * y3 + cout * y2) / Kg
     th3_2 = y2 + (J4 * y4 + cout * y3) / Kg
-    if dynamic:
-        Tm = Jg * th3_2 + Ts
-    else:
-        Tm = (Jg + J4) * y2 + cout * y1 + Tload
+    Tm = gear_torque_demand(p, y1, y2, y3, y4, dynamic)
     # friction of the rigid sliding speed, flank from the sign of the mesh torque
     th2_1 = th3_1 * ratio
     v_s = rw * cl * th2_1 + rg * sl * th3_1

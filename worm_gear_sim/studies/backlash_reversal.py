@@ -29,7 +29,7 @@ to 100 ms after it ends) and the improvement uncompensated / series.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -40,7 +40,7 @@ from .compensation_eval import CompensationRun, Scenario, radar_slew_scenario, r
 
 __all__ = ['ARCMIN', 'REVERSAL_PLAY_ARCMIN', 'REVERSAL_DAMPING', 'REVERSAL_LOADS',
            'REVERSAL_MOVES', 'PLAY_ERRORS', 'REVERSAL_COLUMNS',
-           'reversal_window', 'reversal_rms', 'reversal_case', 'reversal_rows', 'summary']
+           'reversal_window', 'reversal_rms', 'reversal_case', 'reversal_rows']
 
 ARCMIN = math.pi / 180.0 / 60.0
 REVERSAL_PLAY_ARCMIN = 2.0
@@ -117,13 +117,3 @@ def reversal_rows(base: Config, moves: Sequence[str] = tuple(REVERSAL_MOVES),
     return [r for m in moves for ld in loads for pv in previews
             for r in reversal_case(base, m, ld, pv)]
 
-
-def summary(rows: Sequence[Mapping[str, Any]]) -> str:
-    """One line per case: the improvement of each series."""
-    cases = dict.fromkeys((r['move'], r['load'], r['preview_ms']) for r in rows)
-    lines = []
-    for m, ld, pv in cases:
-        rs = [r for r in rows if (r['move'], r['load'], r['preview_ms']) == (m, ld, pv)]
-        parts = ', '.join(f'{r["series"]} {r["improvement"]:.3g}x' for r in rs[1:])
-        lines.append(f'{m}/{ld}/preview {pv:.3g} ms: {parts}')
-    return '\n'.join(lines)

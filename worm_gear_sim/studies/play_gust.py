@@ -24,7 +24,6 @@ phase to 100 ms into the second), and the mean over the last 50 ms (the static e
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -33,13 +32,12 @@ import numpy as np
 from ..compensation import centring_preview
 from ..load import WindLoad
 from ..params import Config
-from .backlash_reversal import REVERSAL_DAMPING
+from .backlash_reversal import ARCMIN, REVERSAL_DAMPING
 from .compensation_eval import radar_slew_scenario, run_scenario
 
 __all__ = ['ARCMIN', 'PLAYS_ARCMIN', 'GUST_INTENSITIES', 'play_rows', 'gust_rows',
            'PLAY_GUST_COLUMNS']
 
-ARCMIN = math.pi / 180.0 / 60.0     # the same as backlash_reversal.ARCMIN
 PLAYS_ARCMIN = (0.0, 0.5, 1.0, 2.0, 3.0, 5.0)
 PLAY_LOAD = {'load.output_torque': 2.0, 'load.output_viscous_coefficient': 2.0}
 GUST_INTENSITIES = (0.0, 0.05, 0.1, 0.2, 0.3)
