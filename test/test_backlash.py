@@ -21,21 +21,42 @@ ARCMIN = np.pi / (180 * 60)
 DATA = Path(__file__).resolve().parent / 'data'
 
 
-def test_zero_play_reproduces_the_trajectories_before_play_bit_for_bit():
+#: Rounding sensitivity of these records, measured: the slew with its command scaled by
+#: 1 + 1e-15 differs by up to 3e-11 (set-valued) and 3.4e-8 (regularized friction, steep
+#: at zero slip) of each column's largest value.  Records written on another CPU (numba
+#: compiles for the host) may differ by as much; the golden comparison allows 30x that.
+NO_PLAY_RTOL = 1e-6
+
+
+def test_zero_play_reproduces_the_trajectories_before_play():
     """mesh.backlash = 0 (the default): the paper's move and a slew with reversals under
     load, set-valued and regularized friction, equal the golden trajectories written by
-    the code before the clearance existed (test/data/make_no_play_golden.py), every bit."""
+    the code before the clearance existed (test/data/make_no_play_golden.py) within
+    NO_PLAY_RTOL of each column's largest value (the file was written on another CPU); and
+    in one run the resting flank, which only matters with play, changes nothing, bit for
+    bit (the play logic is inert at b = 0)."""
     gold = np.load(DATA / 'no_play_golden.npz')
+
+    def close(tr, ref):
+        got = np.column_stack([tr.theta, tr.omega])
+        assert got.shape == ref.shape
+        err = np.abs(got - ref).max(axis=0) / np.abs(ref).max(axis=0)
+        assert err.max() <= NO_PLAY_RTOL, err
+        return got
+
     for fric in ('set_valued', 'regularized'):
         cfg = Config().replace({'friction.direction': fric})
         assert cfg.mesh.backlash == 0.0
-        tr = simulate(cfg, t_end=0.03, record_every=25)
-        assert np.array_equal(np.column_stack([tr.theta, tr.omega]), gold[f'paper_{fric}'])
+        base = close(simulate(cfg, t_end=0.03, record_every=25), gold[f'paper_{fric}'])
         t = np.array([0.0, 0.01, 0.02, 0.03, 0.04])
         th = np.array([0.0, 0.02, -0.01, 0.015, 0.015])
-        tr = simulate(cfg.replace({'load.output_torque': 1.5}),
-                      profile=SampledProfile(t, th, 'linear'), t_end=0.04, record_every=25)
-        assert np.array_equal(np.column_stack([tr.theta, tr.omega]), gold[f'slew_{fric}'])
+        c2 = cfg.replace({'load.output_torque': 1.5})
+        close(simulate(c2, profile=SampledProfile(t, th, 'linear'), t_end=0.04,
+                       record_every=25), gold[f'slew_{fric}'])
+        for flank in ('coast', 'center'):
+            tr = simulate(cfg.replace({'mesh.initial_flank': flank}), t_end=0.03,
+                          record_every=25)
+            assert np.array_equal(np.column_stack([tr.theta, tr.omega]), base), flank
 
 
 @pytest.mark.parametrize('fric', ['set_valued', 'regularized'])

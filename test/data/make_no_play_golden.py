@@ -3,7 +3,8 @@
 """Golden trajectories of the drive without play, written by the code before
 ``mesh.backlash`` existed (commit 54a0830): ``python test/data/make_no_play_golden.py
 test/data/no_play_golden.npz``.  test_backlash.py checks that ``mesh.backlash: 0``
-reproduces them bit for bit (every 25th step of the paper's move and of a slew with
+reproduces them within a stated rounding tolerance (numba compiles for the host
+CPU; other CPUs round otherwise): every 25th step of the paper's move and of a slew with
 reversals under load, both friction laws: theta and omega)."""
 import sys
 
