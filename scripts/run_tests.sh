@@ -3,8 +3,9 @@
 # ROS_DISTRO (kilted, the default, in .venv; or jazzy, in .venv-jazzy):
 #   scripts/run_tests.sh                      # Kilted
 #   ROS_DISTRO=jazzy scripts/run_tests.sh     # Jazzy (LTS)
-# Extra arguments go to pytest (e.g. scripts/run_tests.sh -k radau). DDS traffic stays on
-# this machine; ROS_DOMAIN_ID (default 42) is used in-process, ROS_DOMAIN_ID+1 by child processes.
+# Extra arguments go to pytest (e.g. scripts/run_tests.sh -k radau). The tests run on every core
+# (pytest-xdist; PYTEST_WORKERS=1 runs them in one process). DDS traffic stays on this machine;
+# pytest worker N uses ROS_DOMAIN_ID (default 42) + 2N in-process and + 2N + 1 for child processes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # shellcheck source=scripts/ros_distro.sh
@@ -20,4 +21,9 @@ echo "[tests] ruff check ."
 echo "[tests] mypy (the core; configured in pyproject.toml)"
 "$VENV/bin/python" -m mypy
 echo "[tests] pytest"
-exec "$VENV/bin/python" -m pytest "$@"
+workers=${PYTEST_WORKERS:-auto}
+if [ "$workers" = 1 ]; then
+    exec "$VENV/bin/python" -m pytest "$@"
+fi
+# --dist loadfile: a module's tests stay on one worker, so module-scoped fixtures run once.
+exec "$VENV/bin/python" -m pytest -n "$workers" --dist loadfile "$@"

@@ -29,10 +29,45 @@ settings.register_profile('ci', derandomize=True, print_blob=True)
 if os.environ.get('CI'):
     settings.load_profile('ci')
 
+# pytest-xdist (scripts/run_tests.sh runs the suite on every core): worker gwN takes the pair of
+# domains ROS_DOMAIN_ID + 2N, + 2N + 1, set here before any test or child process reads it,
+# so the workers' DDS traffic stays apart.
+_WORKER = os.environ.get('PYTEST_XDIST_WORKER', '')
+if _WORKER.startswith('gw') and _WORKER[2:].isdigit():
+    os.environ['ROS_DOMAIN_ID'] = str(int(os.environ.get('ROS_DOMAIN_ID', '42') or 42)
+                                      + 2 * int(_WORKER[2:]))
+
 # The user's ROS_DOMAIN_ID (default 42) for in-process tests, the next one for child processes:
 # concurrent test sessions on one machine stay apart when each sets its own domain.
 IN_PROCESS_DOMAIN_ID = int(os.environ.get('ROS_DOMAIN_ID', '42') or 42)
 SUBPROCESS_DOMAIN_ID = IN_PROCESS_DOMAIN_ID + 1
+
+
+#: Fixtures that start rclpy: a test that requests one is marked ``ros``.
+ROS_FIXTURES = frozenset({'ros_context', 'ros_harness', 'ros_dds_context', 'ros_subprocess_env'})
+#: A test module whose text names one of these talks to ROS (rclpy, the ROS wing, an installed
+#: executable or a colcon build): all its tests are marked ``ros``.  Deliberately broad: the
+#: marker selects what the second ROS distro's CI run must repeat (``-m ros``), and a test
+#: wrongly left out of it would go untested on that distro.
+ROS_WORDS = ('rclpy', 'worm_gear_sim.ros', 'worm_gear_sim_', 'colcon', 'ros_harness')
+
+
+def _module_talks_to_ros(path: str, _cache: dict[str, bool] = {}) -> bool:  # noqa: B006
+    if path not in _cache:
+        try:
+            text = open(path, encoding='utf-8').read()
+        except OSError:
+            text = ''
+        _cache[path] = any(w in text for w in ROS_WORDS)
+    return _cache[path]
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark ``ros`` every test that needs rclpy: see ROS_FIXTURES and ROS_WORDS."""
+    for item in items:
+        if (ROS_FIXTURES & set(getattr(item, 'fixturenames', ()))
+                or _module_talks_to_ros(str(item.path))):
+            item.add_marker(pytest.mark.ros)
 
 
 @pytest.fixture

@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Limits as a user hits them: the CLI as a subprocess.
+"""Limits as a user hits them: the CLI's whole entry point (``cli.main``, in this process).
 
 6: ``--set`` of list parameters (the documented ``damping.modal_damping_ratios=0.01,0,0``,
 ``node.joint_names``) works and bad lists give one line naming the key.
@@ -24,9 +24,17 @@ DT = Config().integrator.time_step
 
 
 def cli(*args, timeout=120):
-    env = dict(os.environ, PYTHONPATH=str(REPO), MPLBACKEND='Agg')
-    return subprocess.run([sys.executable, '-m', 'worm_gear_sim', *map(str, args)],
-                          capture_output=True, text=True, env=env, timeout=timeout, cwd=REPO)
+    """``worm-gear-sim ARGS`` in this process (``cli.main``: the whole entry point but the
+    interpreter's start, ~3 s a call as a process; test_cli.py runs the executable itself
+    as a process): its exit status, standard output and standard error."""
+    import contextlib
+    import io
+
+    from worm_gear_sim import cli as cli_module
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        status = cli_module.main([str(a) for a in args])
+    return subprocess.CompletedProcess(list(args), status, out.getvalue(), err.getvalue())
 
 
 def one_line_error(r, *fragments):
