@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from worm_gear_sim.dynamics.simulation import KEEP_ROWS
 from worm_gear_sim.params import Config
-from worm_gear_sim.simulation import KEEP_ROWS
 
 REPO = Path(__file__).resolve().parents[1]
 DT = Config().integrator.time_step

@@ -1,7 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""A load torque on the antenna that varies in time (worm_gear_sim.load): a constant signal
-equals the constant key bit for bit; a varying one agrees with an independent Radau
+"""A load torque on the antenna that varies in time (worm_gear_sim.dynamics.load): a constant
+signal equals the constant key bit for bit; a varying one agrees with an independent Radau
 solution of the same equations; the wind model has the documented statistics and spectrum
 and is reproducible; bad samples are one-line errors; CSV records carry the load into the
 prediction and the CLI."""
@@ -15,10 +15,18 @@ from scipy.signal import welch
 
 from worm_gear_sim import Config, SampledProfile, simulate
 from worm_gear_sim.cli import main as cli_main
+from worm_gear_sim.dynamics.load import LoadSignal, SampledLoad, WindLoad
+from worm_gear_sim.dynamics.modal import static_equilibrium
+from worm_gear_sim.dynamics.model import (
+    P_J4,
+    P_JG,
+    P_JW,
+    P_KG,
+    P_TLOAD,
+    mesh_forces,
+    pack_parameters,
+)
 from worm_gear_sim.identification.data import predict, record_from_model
-from worm_gear_sim.load import LoadSignal, SampledLoad, WindLoad
-from worm_gear_sim.modal import static_equilibrium
-from worm_gear_sim.model import P_J4, P_JG, P_JW, P_KG, P_TLOAD, mesh_forces, pack_parameters
 from worm_gear_sim.records import Record, RecordError, read_csv
 
 

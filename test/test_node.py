@@ -17,7 +17,7 @@ pytest.importorskip('rclpy')
 from rclpy.parameter import Parameter  # noqa: E402
 
 from worm_gear_sim import Config, SampledProfile, Simulator, load_config  # noqa: E402
-from worm_gear_sim.profiles import make_profile  # noqa: E402
+from worm_gear_sim.dynamics.profiles import make_profile  # noqa: E402
 from worm_gear_sim.ros.params_bridge import MODEL_PARAMETER_NAMES  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -342,7 +342,7 @@ def test_sim_clock_restart_reinitialises(ros_harness):
 
 
 def test_simulation_error_keeps_last_good_state(ros_harness, monkeypatch):
-    from worm_gear_sim.simulation import SimulationError
+    from worm_gear_sim.dynamics.simulation import SimulationError
     h = ros_harness()
     run_ticks(h, [0.0, 0.01])
     good = h.node.sim.state

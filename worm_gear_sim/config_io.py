@@ -168,8 +168,8 @@ def params_document(cfg: Config) -> dict[str, Any]:
     """The fully resolved parameters: every config section plus a ``derived`` block
     (inertias, stiffnesses, lead per radian, ratio, mesh calibration, back-drive margin at
     rest, linear modes)."""
-    from .modal import modes
-    from .model import DriveModel
+    from .dynamics.modal import modes
+    from .dynamics.model import DriveModel
     doc: dict[str, Any] = {'format': PARAMS_FORMAT}
     doc.update(cfg.to_nested_dict())
     model = DriveModel(cfg)

@@ -22,7 +22,7 @@ ROS node can declare descriptors and the CLI can print help from the same source
 SI units and radians throughout (REP 103).  The other jobs around the schema live next
 door: value checks and the "type from the default" rule in :mod:`~worm_gear_sim.validation`
 (:class:`ConfigError` is re-exported here), whether a set can be simulated in
-:mod:`~worm_gear_sim.usability`, derived quantities (inertias, stiffnesses, l_w, ratio) in
+:mod:`~worm_gear_sim.dynamics.usability`, derived quantities (inertias, stiffnesses, l_w, ratio) in
 :mod:`~worm_gear_sim.derived`, YAML files in :mod:`~worm_gear_sim.config_io`
 (:func:`~worm_gear_sim.config_io.load_config`).
 """

@@ -93,7 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _describe(exc: BaseException) -> tuple[int, str]:
-    from ..simulation import SimulationError
+    from ..dynamics.simulation import SimulationError
     if isinstance(exc, CliError):
         return 2, str(exc)
     if isinstance(exc, ConfigError):

@@ -26,11 +26,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..modal import modes
-from ..model import DriveModel
+from ..dynamics.modal import modes
+from ..dynamics.model import DriveModel
+from ..dynamics.simulation import SimulationError
 from ..params import Config, ConfigError
 from ..records import Record
-from ..simulation import SimulationError
 from .data import (
     OUTPUTS,
     IdentificationError,

@@ -12,12 +12,12 @@ import collections
 import copy
 import math
 
-from ..command_timing import CommandQueue, StreamClock
 from ..compensation import Compensator
-from ..load import LOAD_LIMIT
-from ..model import DriveModel
+from ..dynamics.load import LOAD_LIMIT
+from ..dynamics.model import DriveModel
+from ..dynamics.simulation import Simulator
 from ..params import Config
-from ..simulation import Simulator
+from .command_timing import CommandQueue, StreamClock
 from .drive import SimulatedDrive
 from .outputs import COUNTER_NAMES, Correction, Event, Output, Prepared, Reject
 

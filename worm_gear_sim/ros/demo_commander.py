@@ -31,7 +31,7 @@ evaluation).  At the end, a summary and the same moves run offline through the c
 what the model says with and without compensation.  Exit code 0 after ``--duration``
 seconds of streaming, 1 if the node never answers.
 
-    python -m worm_gear_sim.demo_commander --duration 20 --pattern paper
+    python -m worm_gear_sim.ros.demo_commander --duration 20 --pattern paper
 """
 
 from __future__ import annotations

@@ -6,9 +6,9 @@ An I/O shell around the core's real-time pipeline
 :class:`~worm_gear_sim.realtime.RealtimePredictor`: this module holds the topics, QoS and
 timers, and each callback hands its message to the core in a line; every number it
 publishes comes from the core (the pipeline drives
-:class:`~worm_gear_sim.simulation.Simulator` and the feed-forward
+:class:`~worm_gear_sim.dynamics.simulation.Simulator` and the feed-forward
 :class:`~worm_gear_sim.compensation.Compensator`).  Beside it: :mod:`.interface` (topic
-names), :mod:`.params_bridge` and :mod:`.param_updates` (parameters), :mod:`.node_status`
+names), :mod:`.params_bridge` and :mod:`.param_updates` (parameters), :mod:`.statuses`
 (/diagnostics), :mod:`.run` (the process: executor, spin, exit codes).
 
 Interface (SI units, rad; relative, remappable names; docs/node.md):
@@ -27,7 +27,7 @@ Interface (SI units, rad; relative, remappable names; docs/node.md):
   instant it predicts, plus ``~/positioning_error`` and ``~/worm_error``;
 * ``measured_joint_states`` (in, optional, JointState from the drive's encoders, names of
   ``node.joint_names``, sensor data QoS): the live model check
-  (:class:`~worm_gear_sim.model_check.ModelCheck`) publishes ``~/prediction_residual``
+  (:class:`~worm_gear_sim.realtime.model_check.ModelCheck`) publishes ``~/prediction_residual``
   (JointState, the measurement's stamp, measured - predicted per measured joint) and a
   ``model check`` status on /diagnostics that turns WARN when a joint's residual RMS over
   ``node.residual_window`` exceeds its ``node.residual_warn_rms``;
@@ -35,7 +35,7 @@ Interface (SI units, rad; relative, remappable names; docs/node.md):
   reliable, keep last 10) and ``~/compensated_trajectory`` (out, the same joint, header
   and timing, dense at ``node.publish_rate_hz``: reference + correction, meant to be
   remapped to a joint_trajectory_controller's ``~/joint_trajectory``; :mod:`.trajectory_bridge`,
-  the core's :class:`~worm_gear_sim.trajectories.TrajectoryCompensator`);
+  the core's :class:`~worm_gear_sim.trajectory_compensation.TrajectoryCompensator`);
 * ``/diagnostics``: counters of the pipeline and of this node, stale-stream status;
 * every model parameter is a declared ROS parameter (dotted names of
   :meth:`Config.to_flat_dict`), validated by the core (:meth:`Config.replace`, which proves
@@ -43,7 +43,7 @@ Interface (SI units, rad; relative, remappable names; docs/node.md):
   executor thread.
 
 Run ``worm_gear_sim_node --ros-args --params-file config/worm_gear_sim.yaml`` (or
-``python -m worm_gear_sim.node ...``; :mod:`.run`); ``--executor single_threaded``
+``python -m worm_gear_sim.ros ...``; :mod:`.run`); ``--executor single_threaded``
 overrides the ``node.executor`` parameter.
 """
 
@@ -60,12 +60,12 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..command_timing import COMMAND_QUEUE_LENGTH, CommandQueue, StreamClock
 from ..config_io import load_config
-from ..modal import StepResolutionWarning, step_resolution_warning
-from ..model_check import ModelCheck
+from ..dynamics.modal import StepResolutionWarning, step_resolution_warning
 from ..params import NODE_NAME, Config, ConfigError, config_from_mapping
 from ..realtime import STALE_PERIODS, Output, Prediction, RealtimePredictor
+from ..realtime.command_timing import COMMAND_QUEUE_LENGTH, CommandQueue, StreamClock
+from ..realtime.model_check import ModelCheck
 from . import diagnostics as diag
 from .clock_guard import guard_clock_source
 from .interface import (
@@ -85,9 +85,9 @@ from .interface import (
     RESIDUAL_TOPIC,
     WORM_ERROR_TOPIC,
 )
-from .node_status import CallbackLoad, backdrive_status, model_check_status, node_statuses
 from .param_updates import ParameterUpdates
 from .params_bridge import check_overrides, declare_config, parameter_type
+from .statuses import CallbackLoad, backdrive_status, model_check_status, node_statuses
 from .trajectory_bridge import TrajectoryBridge
 
 __all__ = ['WormGearSimNode', 'LogThrottle', 'file_defaults', 'COMMAND_TOPIC',

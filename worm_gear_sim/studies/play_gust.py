@@ -18,8 +18,8 @@ phase to 100 ms into the second), and the mean over the last 50 ms (the static e
   feed-forward without its backlash inverse), compensated (with it) and ``compensated,
   preview`` (with it and the centring preview,
   :func:`~worm_gear_sim.compensation.centring_preview`).
-* Gusts: the wind model of :mod:`worm_gear_sim.load` with mean ``GUST_MEAN`` and time scale
-  ``GUST_TIME_SCALE`` over ``GUST_INTENSITIES``, averaged over ``GUST_SEEDS``.
+* Gusts: the wind model of :mod:`worm_gear_sim.dynamics.load` with mean ``GUST_MEAN`` and time
+  scale ``GUST_TIME_SCALE`` over ``GUST_INTENSITIES``, averaged over ``GUST_SEEDS``.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from ..compensation import centring_preview
-from ..load import WindLoad
+from ..dynamics.load import WindLoad
 from ..params import Config
 from .backlash_reversal import ARCMIN, REVERSAL_DAMPING
 from .compensation_eval import radar_slew_scenario, run_scenario

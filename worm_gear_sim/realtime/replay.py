@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from .params import Config
-from .records import (
+from ..params import Config
+from ..records import (
     FLOAT64,
     JOINT_STATE,
     Record,
@@ -141,7 +141,7 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
     the recording's clock).  ``end_time`` [s
     after the first command]: stop feeding samples stamped later, or keep the held
     prediction going up to it after the last one (the stream paused)."""
-    from .realtime import RealtimePredictor
+    from . import RealtimePredictor
     if record.command_stamps_ns is None:
         raise RecordError(f'{record.name}: no command stream to replay (a bag is needed)')
     kind = record.source.get('command_type')

@@ -541,7 +541,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
     step k and theta1[k+1] at its end (theta1_dot likewise).  ``load``: the load torque on
     the antenna [N m] on the same grid (load[k+1] at the end of step k, linear within it),
     or an empty array for the constant ``p[P_TLOAD]``.  ``C``: the damping, 3 x 3, or 6 x 3
-    with the damping of the open mesh in rows 3..5 (:func:`~worm_gear_sim.modal.
+    with the damping of the open mesh in rows 3..5 (:func:`~worm_gear_sim.dynamics.modal.
     stepping_damping`: taken by the steps that start inside the play, so no structural
     damping acts across it).  Updates u, v, a in place and only
     with fully converged steps.  Every ``record_stride`` steps (if > 0) the end state is

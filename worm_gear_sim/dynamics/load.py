@@ -9,8 +9,8 @@ turning the antenna back (the sign of ``load.output_torque``, Eq. 6 + load).
   seed.
 
 Both give ``torque(t)`` on arrays; the integrator takes the values on its own grid
-(:func:`worm_gear_sim.integrator.advance`, ``load[k+1]`` at the end of step k) and
-:func:`worm_gear_sim.simulation.simulate` starts the drive at rest under ``torque(0)``.
+(:func:`worm_gear_sim.dynamics.integrator.advance`, ``load[k+1]`` at the end of step k) and
+:func:`worm_gear_sim.dynamics.simulation.simulate` starts the drive at rest under ``torque(0)``.
 
 Wind model (docs/load.md).  The aerodynamic torque on a dish goes with the square of the
 wind speed, U + u(t), so with the gust ratio x(t) = u(t)/U

@@ -12,8 +12,8 @@ import time
 from collections.abc import Mapping
 from typing import Any
 
-from ..model_check import ModelCheck
 from ..realtime import RealtimePredictor
+from ..realtime.model_check import ModelCheck
 from . import diagnostics as diag
 from .interface import COMMAND_TOPIC, NODE_REJECT_REASONS, REFERENCE_TOPIC, REJECT_REASONS
 

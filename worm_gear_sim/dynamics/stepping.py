@@ -3,12 +3,12 @@
 """The stepping integration of the drive: :class:`Stepper`, the Newmark integrator on a fixed
 grid t = t0 + k dt for real time (:meth:`~Stepper.advance_to`) and batch
 (:meth:`~Stepper.run`, :meth:`~Stepper.iter_run`), on the compiled kernel
-(:func:`worm_gear_sim.integrator.advance`).  It runs whatever model it is given: proving a
-parameter set usable is the job of :class:`worm_gear_sim.simulation.Simulator` (the public
+(:func:`worm_gear_sim.dynamics.integrator.advance`).  It runs whatever model it is given: proving a
+parameter set usable is the job of :class:`worm_gear_sim.dynamics.simulation.Simulator` (the public
 class: this plus the usable check and the diagnosis of a failed integration), whose check
-runs a short trial on a :class:`Stepper` (:mod:`worm_gear_sim.usability`).  What a run
+runs a short trial on a :class:`Stepper` (:mod:`worm_gear_sim.dynamics.usability`).  What a run
 yields (:class:`Trajectory`, :class:`SimState`, the CSV writer) is in
-:mod:`worm_gear_sim.trajectory`.
+:mod:`worm_gear_sim.dynamics.trajectory`.
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ from collections.abc import Callable, Iterator
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .derived import Derived
+from ..derived import Derived
+from ..schema import ANGLE_LIMIT, Parameters
 from .integrator import (
     C_MODE,
     C_MU,
@@ -63,7 +64,6 @@ from .model import (
     with_load_torque,
 )
 from .profiles import Profile
-from .schema import ANGLE_LIMIT, Parameters
 from .trajectory import ROW_BYTES, SimState, Trajectory
 
 __all__ = ['Stepper', 'SimulationError', 'RUN_MEMORY_LIMIT', 'RATE_LIMIT', 'TIME_LIMIT']
@@ -117,7 +117,7 @@ class Stepper:
 
     ``model``: a :class:`DriveModel` (built once, shared with the compensator and the
     studies) or a Config (the stepper builds its model).  No usable check: use
-    :class:`worm_gear_sim.simulation.Simulator`, which adds it.
+    :class:`worm_gear_sim.dynamics.simulation.Simulator`, which adds it.
     """
 
     #: Default step limit of one :meth:`advance_to` call (1e8 steps: 400 s at the default
@@ -421,7 +421,7 @@ class Stepper:
             load: LoadSignal | None = None) -> Trajectory:
         """Integrate the profile from the current state to ``t_end`` and record every
         ``record_every`` steps (row 0 = current state), all in memory.  ``load``: a load
-        torque signal on the antenna (:mod:`worm_gear_sim.load`) in place of the model's
+        torque signal on the antenna (:mod:`worm_gear_sim.dynamics.load`) in place of the model's
         constant ``load.output_torque``.
 
         Raises ValueError before integrating when the recorded rows would take more than
