@@ -15,7 +15,7 @@ from worm_gear_sim import Config, SampledProfile, simulate
 from worm_gear_sim.derived import derive
 from worm_gear_sim.dynamics.load import LoadSignal
 from worm_gear_sim.dynamics.model import P_CGKG_LIN, P_CWKW_LIN, DriveModel, pack_parameters
-from worm_gear_sim.params import ConfigError
+from worm_gear_sim.validation import ConfigError
 
 ARCMIN = np.pi / (180 * 60)
 DATA = Path(__file__).resolve().parent / 'data'

@@ -24,17 +24,14 @@ from processes import start_logged, stop_and_read
 pytest.importorskip('rclpy')
 
 from worm_gear_sim import Config  # noqa: E402
-from worm_gear_sim.ros.demo_commander import (  # noqa: E402
-    LINE_WIDTH,
-    MOVE_HEADER,
+from worm_gear_sim.ros.demo_report import LINE_WIDTH, MOVE_HEADER, format_move, format_status
+from worm_gear_sim.studies.compensation_eval import SETTLE_TOLERANCE  # noqa: E402
+from worm_gear_sim.studies.demo_moves import (
     MoveSummary,
     MoveTracker,
     command_pattern,
-    format_move,
-    format_status,
     pattern_segments,
 )
-from worm_gear_sim.studies.compensation_eval import SETTLE_TOLERANCE  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config' / 'worm_gear_sim.yaml'

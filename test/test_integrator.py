@@ -263,7 +263,7 @@ def test_ramp_tracking_without_load_has_no_static_error():
 
 # ---- exact stick-slip (set-valued friction) ------------------------------------------------
 def _ring_down(over, dt, horizon=0.5):
-    from worm_gear_sim.dynamics.simulation import ring_down
+    from worm_gear_sim.dynamics.trajectory import ring_down
     cfg = Config().replace(dict(over, **{'integrator.time_step': dt}))
     n, k = round((0.02 + horizon) / dt), max(1, int(1e-5 / dt + 1e-9))
     while n % k:                # a row about every 10 us, and one at the end of the run

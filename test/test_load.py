@@ -249,7 +249,8 @@ def test_the_play_and_gust_studies_measure_what_the_feedforward_cannot_cover():
     half the play; with the backlash inverse the static error is gone and the slew's error
     is less than half the blind one (the reversal itself: ``sweep reversal``);
     compensated, the error grows with the gust intensity."""
-    from worm_gear_sim.studies.play_gust import ARCMIN, gust_rows, play_rows
+    from worm_gear_sim.studies.backlash_reversal import ARCMIN
+    from worm_gear_sim.studies.play_gust import gust_rows, play_rows
     rows = {(r['x'], r['series']): r for r in play_rows(Config(), (0.0, 2.0))}
     off0, on0 = rows[0.0, 'uncompensated'], rows[0.0, 'compensated']
     off2, blind2 = rows[2.0, 'uncompensated'], rows[2.0, 'blind']

@@ -17,8 +17,8 @@ from worm_gear_sim.compensation import Compensator
 from worm_gear_sim.dynamics.modal import static_equilibrium
 from worm_gear_sim.dynamics.model import pack_parameters
 from worm_gear_sim.dynamics.simulation import Simulator
-from worm_gear_sim.params import ConfigError
 from worm_gear_sim.realtime import COUNTER_NAMES, RealtimePredictor, Reject, feedforward_series
+from worm_gear_sim.validation import ConfigError
 
 EPOCH = 1_700_000_000_123_456_789          # ns: a ROS time stamp of 2023
 MS = 1_000_000

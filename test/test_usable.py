@@ -16,13 +16,9 @@ from worm_gear_sim.config_io import load_config
 from worm_gear_sim.dynamics.modal import modes
 from worm_gear_sim.dynamics.simulation import Simulator, simulate
 from worm_gear_sim.dynamics.usability import OMEGA_DT_MAX, SPRING_RATIO_MIN
-from worm_gear_sim.params import (
-    ANGLE_LIMIT,
-    Config,
-    ConfigError,
-    check_usable,
-    config_from_mapping,
-)
+from worm_gear_sim.params import Config, check_usable, config_from_mapping
+from worm_gear_sim.schema import ANGLE_LIMIT
+from worm_gear_sim.validation import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -231,7 +227,7 @@ def test_advance_to_huge_span_is_refused_up_front():
      ['friction.regularization_velocity', 'near step']),
 ])
 def test_integration_failure_names_the_likely_cause(overrides, words):
-    from worm_gear_sim.dynamics.simulation import SimulationError
+    from worm_gear_sim.dynamics.stepping import SimulationError
     cfg = Config().replace(overrides)
     with pytest.raises(SimulationError) as exc:
         simulate(cfg, t_end=0.03)

@@ -26,7 +26,7 @@ _EXPORTS: dict[str, str] = {
     'ModalResult': 'dynamics.modal', 'damping_matrix': 'dynamics.modal',
     'modes': 'dynamics.modal', 'static_equilibrium': 'dynamics.modal',
     'DriveModel': 'dynamics.model',
-    'Config': 'params', 'ConfigError': 'params', 'Derived': 'derived',
+    'Config': 'params', 'ConfigError': 'validation', 'Derived': 'derived',
     'default_config': 'params', 'derive': 'derived', 'load_config': 'config_io',
     'check_usable': 'params',
     'Profile': 'dynamics.profiles', 'RampProfile': 'dynamics.profiles',
@@ -34,7 +34,7 @@ _EXPORTS: dict[str, str] = {
     'StepProfile': 'dynamics.profiles', 'TrapezoidalProfile': 'dynamics.profiles',
     'make_profile': 'dynamics.profiles',
     'SimState': 'dynamics.trajectory', 'Trajectory': 'dynamics.trajectory',
-    'SimulationError': 'dynamics.simulation', 'Simulator': 'dynamics.simulation',
+    'SimulationError': 'dynamics.stepping', 'Simulator': 'dynamics.simulation',
     'simulate': 'dynamics.simulation', 'simulate_to_csv': 'dynamics.simulation',
     'Compensator': 'compensation', 'feedforward_series': 'realtime',
     'RealtimePredictor': 'realtime',
@@ -66,10 +66,12 @@ if TYPE_CHECKING:  # static analysers see the eager imports
         TrapezoidalProfile,
         make_profile,
     )
-    from .dynamics.simulation import SimulationError, Simulator, simulate, simulate_to_csv
+    from .dynamics.simulation import Simulator, simulate, simulate_to_csv
+    from .dynamics.stepping import SimulationError
     from .dynamics.trajectory import SimState, Trajectory
-    from .params import Config, ConfigError, check_usable, default_config
+    from .params import Config, check_usable, default_config
     from .realtime import RealtimePredictor, feedforward_series
+    from .validation import ConfigError
 
 
 def __getattr__(name: str) -> Any:

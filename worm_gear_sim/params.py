@@ -10,8 +10,10 @@ unless the whole set can be simulated (:func:`check_usable`, rules in
 :mod:`~worm_gear_sim.dynamics.usability`).  The layering points one way: schema -> model,
 integrator, simulator -> usability -> params -> config_io, the CLI, the node.
 
-The schema's names (sections, :data:`ANGLE_LIMIT`, :data:`NODE_NAME`, :data:`SECTIONS`,
-``suggest``, ``value_kind``) are importable from here too.
+The schema's names (sections, :data:`~worm_gear_sim.schema.ANGLE_LIMIT`,
+:data:`~worm_gear_sim.schema.NODE_NAME`, ...) are imported from :mod:`~worm_gear_sim.schema`,
+:class:`~worm_gear_sim.validation.ConfigError` and the value rules from
+:mod:`~worm_gear_sim.validation`: each name has one home.
 """
 
 from __future__ import annotations
@@ -21,36 +23,13 @@ from dataclasses import dataclass
 from typing import Any
 
 from .schema import (
-    ANGLE_LIMIT,
-    DEG,
-    NODE_NAME,
-    PHASE_AT_MEAN_STIFFNESS,
-    SECTIONS,
-    VALUE_KINDS,
-    CompensationSettings,
-    ConfigError,
-    Damping,
-    Friction,
-    Geometry,
-    InputProfile,
-    Integrator,
-    Load,
-    Materials,
-    Mesh,
-    NodeSettings,
     Parameters,
-    Shafts,
     sections_from_mapping,
-    suggest,
-    value_kind,
 )
+from .validation import ConfigError, suggest
 
 __all__ = [
-    'ConfigError', 'Config', 'config_from_mapping', 'default_config', 'NODE_NAME',
-    'check_usable', 'ANGLE_LIMIT', 'SECTIONS', 'suggest', 'value_kind', 'VALUE_KINDS',
-    'Parameters', 'DEG', 'PHASE_AT_MEAN_STIFFNESS', 'Geometry', 'Materials', 'Shafts', 'Mesh',
-    'Friction', 'Damping', 'Load', 'Integrator', 'InputProfile', 'NodeSettings',
-    'CompensationSettings',
+    'Config', 'config_from_mapping', 'default_config', 'check_usable',
 ]
 
 

@@ -21,7 +21,7 @@ ROS node can declare descriptors and the CLI can print help from the same source
 
 SI units and radians throughout (REP 103).  The other jobs around the schema live next
 door: value checks and the "type from the default" rule in :mod:`~worm_gear_sim.validation`
-(:class:`ConfigError` is re-exported here), whether a set can be simulated in
+(:class:`~worm_gear_sim.validation.ConfigError` among them), whether a set can be simulated in
 :mod:`~worm_gear_sim.dynamics.usability`, derived quantities (inertias, stiffnesses, l_w, ratio) in
 :mod:`~worm_gear_sim.derived`, YAML files in :mod:`~worm_gear_sim.config_io`
 (:func:`~worm_gear_sim.config_io.load_config`).
@@ -35,19 +35,16 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from .validation import (
-    VALUE_KINDS,
     ConfigError,
     coerce,
     field_default,
     suggest,
-    value_kind,
 )
 
 __all__ = [
-    'ConfigError', 'Parameters', 'sections_from_mapping', 'NODE_NAME', 'ANGLE_LIMIT',
-    'SECTIONS', 'suggest', 'value_kind', 'VALUE_KINDS', 'Geometry', 'Materials', 'Shafts',
-    'Mesh', 'Friction', 'Damping', 'Load', 'Integrator', 'InputProfile', 'NodeSettings',
-    'CompensationSettings',
+    'Parameters', 'sections_from_mapping', 'NODE_NAME', 'ANGLE_LIMIT', 'SECTIONS', 'DEG',
+    'PHASE_AT_MEAN_STIFFNESS', 'Geometry', 'Materials', 'Shafts', 'Mesh', 'Friction', 'Damping',
+    'Load', 'Integrator', 'InputProfile', 'NodeSettings', 'CompensationSettings',
 ]
 
 NODE_NAME = 'worm_gear_sim'

@@ -123,7 +123,7 @@ def check_output_size(dt: float, t_end: float, stride: int, out: Path, max_gb: f
     Raises CliError naming the estimate and the ways out."""
     import shutil
 
-    from ..dynamics.simulation import RUN_MEMORY_LIMIT
+    from ..dynamics.stepping import RUN_MEMORY_LIMIT
     from ..dynamics.trajectory import ROW_BYTES, csv_bytes_estimate
     if not max_gb > 0:
         raise CliError(f'--max-csv-size must be > 0 GB, got {max_gb:g}')

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..schema import ConfigError, InputProfile
+from ..schema import InputProfile
+from ..validation import ConfigError
 
 __all__ = ['Profile', 'StepProfile', 'RampProfile', 'TrapezoidalProfile', 'SCurveProfile',
            'SampledProfile', 'make_profile', 'motion_span']

@@ -9,7 +9,7 @@ adds what a caller with a parameter set needs: the set proven usable first
 :class:`~worm_gear_sim.dynamics.stepping.Stepper`), a warning for an under-resolved step, and the
 likely cause of a failed integration in its :class:`SimulationError`.  What a run yields
 (:class:`Trajectory`, :class:`SimState`, the CSV writer) is in
-:mod:`worm_gear_sim.dynamics.trajectory` (re-exported here).
+:mod:`worm_gear_sim.dynamics.trajectory`.
 """
 
 from __future__ import annotations
@@ -24,20 +24,14 @@ from .load import LoadSignal
 from .modal import StepResolutionWarning, step_resolution_warning
 from .model import DriveModel
 from .profiles import Profile, make_profile
-from .stepping import RUN_MEMORY_LIMIT, SimulationError, Stepper
-from .trajectory import (  # re-exported: the results of a run, importable from here too
-    ROW_BYTES,
-    SimState,
+from .stepping import SimulationError, Stepper
+from .trajectory import (
     Trajectory,
     TrajectoryCsvWriter,
-    csv_bytes_estimate,
-    ring_down,
 )
 from .usability import check_usable, diagnose
 
-__all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate',
-           'simulate_to_csv', 'TrajectoryCsvWriter', 'csv_bytes_estimate', 'ring_down',
-           'ROW_BYTES', 'RUN_MEMORY_LIMIT', 'KEEP_ROWS']
+__all__ = ['Simulator', 'simulate', 'simulate_to_csv', 'KEEP_ROWS']
 
 
 class Simulator(Stepper):

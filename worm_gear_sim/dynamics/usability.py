@@ -40,7 +40,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..schema import ANGLE_LIMIT, ConfigError, Parameters
+from ..schema import ANGLE_LIMIT, Parameters
+from ..validation import ConfigError
 
 if TYPE_CHECKING:
     from .modal import ModalResult

@@ -29,8 +29,9 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..dynamics.modal import modes
-from ..params import Config, ConfigError
+from ..params import Config
 from ..records import Record
+from ..validation import ConfigError
 from .data import IdentificationError, measured_frequencies
 from .parameters import fit_parameters
 from .problem import DIFF_STEP, Problem

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..dynamics.modal import modes
 from ..dynamics.model import DriveModel
-from ..dynamics.simulation import SimulationError
+from ..dynamics.stepping import SimulationError
 from ..params import Config
 from ..records import Record
 from .data import OUTPUTS, motion_times, predict, rigid_motion

@@ -13,7 +13,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..dynamics.model import DriveModel
-from ..dynamics.simulation import SimulationError
+from ..dynamics.stepping import SimulationError
 from ..params import Config
 from ..records import Record
 from .data import OUTPUTS, predict, record_name

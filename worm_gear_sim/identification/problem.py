@@ -28,9 +28,10 @@ import numpy as np
 
 from ..dynamics.modal import modes
 from ..dynamics.model import DriveModel
-from ..dynamics.simulation import SimulationError
-from ..params import Config, ConfigError
+from ..dynamics.stepping import SimulationError
+from ..params import Config
 from ..records import Record
+from ..validation import ConfigError
 from .data import (
     OUTPUTS,
     IdentificationError,

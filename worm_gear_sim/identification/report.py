@@ -17,7 +17,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from ..dynamics.model import DriveModel
-from ..dynamics.simulation import SimulationError
+from ..dynamics.stepping import SimulationError
 from ..params import Config
 from ..records import Record
 from .data import OUTPUTS, IdentificationError, normalised, predict, rigid_motion

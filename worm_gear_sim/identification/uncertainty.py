@@ -33,9 +33,9 @@ import numpy as np
 from scipy.stats import norm
 
 from ..dynamics.model import DriveModel
-from ..dynamics.simulation import SimulationError
-from ..params import ConfigError
+from ..dynamics.stepping import SimulationError
 from ..records import Record
+from ..validation import ConfigError
 from .data import normalised, predict
 from .parameters import apply_values, fit_parameters
 from .report import FitResult

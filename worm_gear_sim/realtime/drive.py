@@ -11,7 +11,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from ..dynamics.simulation import SimulationError, Simulator
+from ..dynamics.simulation import Simulator
+from ..dynamics.stepping import SimulationError
 from .outputs import Output, Prediction
 
 __all__ = ['SimulatedDrive', 'HOLD_EPS']

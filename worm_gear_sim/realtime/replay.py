@@ -23,15 +23,8 @@ from typing import Any
 import numpy as np
 
 from ..params import Config
-from ..records import (
-    FLOAT64,
-    JOINT_STATE,
-    Record,
-    RecordError,
-    read_bag,
-    write_bag,
-    write_csv_columns,
-)
+from ..records import Record, RecordError, read_bag, write_bag, write_csv_columns
+from ..topics import FLOAT64, JOINT_STATE
 
 __all__ = ['Replay', 'replay', 'compare_with_recorded', 'REPLAY_CSV_COLUMNS']
 

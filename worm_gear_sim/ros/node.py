@@ -62,13 +62,11 @@ from std_msgs.msg import Float64
 
 from ..config_io import load_config
 from ..dynamics.modal import StepResolutionWarning, step_resolution_warning
-from ..params import NODE_NAME, Config, ConfigError, config_from_mapping
-from ..realtime import STALE_PERIODS, Output, Prediction, RealtimePredictor
-from ..realtime.command_timing import COMMAND_QUEUE_LENGTH, CommandQueue, StreamClock
+from ..params import Config, config_from_mapping
+from ..realtime import Output, Prediction, RealtimePredictor
 from ..realtime.model_check import ModelCheck
-from . import diagnostics as diag
-from .clock_guard import guard_clock_source
-from .interface import (
+from ..schema import NODE_NAME
+from ..topics import (
     BACKDRIVE_MARGIN_TOPIC,
     COMMAND_TOPIC,
     COMPENSATED_COMMAND_TOPIC,
@@ -77,23 +75,21 @@ from .interface import (
     JOINT_STATES_TOPIC,
     LOAD_TORQUE_TOPIC,
     MEASURED_TOPIC,
-    NODE_REJECT_REASONS,
     POSITIONING_ERROR_TOPIC,
-    REFERENCE_DEPTH,
     REFERENCE_TOPIC,
-    REJECT_REASONS,
     RESIDUAL_TOPIC,
     WORM_ERROR_TOPIC,
 )
+from ..validation import ConfigError
+from . import diagnostics as diag
+from .clock_guard import guard_clock_source
+from .interface import NODE_REJECT_REASONS, REFERENCE_DEPTH
 from .param_updates import ParameterUpdates
 from .params_bridge import check_overrides, declare_config, parameter_type
 from .statuses import CallbackLoad, backdrive_status, model_check_status, node_statuses
 from .trajectory_bridge import TrajectoryBridge
 
-__all__ = ['WormGearSimNode', 'LogThrottle', 'file_defaults', 'COMMAND_TOPIC',
-           'REFERENCE_TOPIC', 'REFERENCE_DEPTH', 'JOINT_STATES_TOPIC', 'REJECT_REASONS',
-           'NODE_REJECT_REASONS', 'WATCH_PERIOD', 'CommandQueue', 'StreamClock',
-           'COMMAND_QUEUE_LENGTH', 'STALE_PERIODS']
+__all__ = ['WormGearSimNode', 'LogThrottle', 'file_defaults', 'WATCH_PERIOD']
 
 LOG_THROTTLE_S = 2.0   # at most one log line per cause every 2 s (bursts of bad input)
 WATCH_PERIOD = 0.02    # s: the slow timer that notices a paused stamped stream

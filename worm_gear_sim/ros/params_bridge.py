@@ -24,8 +24,10 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
-from ..params import SECTIONS, Config, ConfigError, value_kind
-from ..params import suggest as suggest_name
+from ..params import Config
+from ..schema import SECTIONS
+from ..validation import ConfigError, value_kind
+from ..validation import suggest as suggest_name
 
 __all__ = ['parameter_type', 'descriptor_for', 'declare_config', 'to_core_value',
            'coerce_parameter', 'is_model_parameter', 'check_overrides',

@@ -24,7 +24,7 @@ from rclpy.signals import install_signal_handlers as install_rclpy_signal_handle
 from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 
-from ..params import ConfigError
+from ..validation import ConfigError
 from . import signals
 from .config_errors import check_params_files, clean_rcl_message, config_error
 from .node import WormGearSimNode

@@ -35,7 +35,7 @@ from ..params import Config
 from .backlash_reversal import ARCMIN, REVERSAL_DAMPING
 from .compensation_eval import radar_slew_scenario, run_scenario
 
-__all__ = ['ARCMIN', 'PLAYS_ARCMIN', 'GUST_INTENSITIES', 'play_rows', 'gust_rows',
+__all__ = ['PLAYS_ARCMIN', 'GUST_INTENSITIES', 'play_rows', 'gust_rows',
            'PLAY_GUST_COLUMNS']
 
 PLAYS_ARCMIN = (0.0, 0.5, 1.0, 2.0, 3.0, 5.0)
