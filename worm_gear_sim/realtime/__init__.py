@@ -118,9 +118,13 @@ Parameters are swapped with :meth:`RealtimePredictor.reconfigure`; the expensive
 (compensator design, the model's matrices) is :meth:`RealtimePredictor.prepare`, which the
 node can run off the real-time path.
 
-The package: :mod:`.predictor` (the state machine of these rules), :mod:`.drive` (the
+The package: :mod:`.predictor` (the state machine of these rules), :mod:`.admission` (the
+input checks and the confirmation of a jump, once for every input), :mod:`.drive` (the
 simulator side: advance, catch-up, predictions), :mod:`.outputs` (what a call returns, the
 counter names), :mod:`.offline` (``feedforward_series``, the offline twin); import from here.
+Beside the pipeline: :mod:`.command_timing` (sample times of an unstamped command stream),
+:mod:`.replay` (a recorded bag through the same pipeline) and :mod:`.model_check` (the live
+residual check of the model), imported from their modules.
 """
 
 from .offline import feedforward_series
