@@ -318,3 +318,19 @@ def test_a_module_exports_only_what_it_defines():
         if foreign:
             bad.append(f'{_module_name(p)} re-exports {sorted(foreign)}')
     assert not bad, '\n'.join(bad)
+
+
+def test_the_readme_is_a_front_door():
+    """The README says what the project is, its Quick-start commands (the demo and the
+    tests first), one picture and where the docs are, in at most 200 lines; the details
+    live in docs/, and every doc it links to exists."""
+    root = PACKAGE.parent
+    text = (root / 'README.md').read_text()
+    assert len(text.splitlines()) <= 200, f'README.md: {len(text.splitlines())} lines'
+    commands = re.findall(r'^(scripts/\w+\.sh)\b', text, re.MULTILINE)
+    assert commands[:3] == ['scripts/run_demo.sh', 'scripts/run_tests.sh',
+                            'scripts/run_pass.sh'], commands
+    links = re.findall(r'\]\((docs/[^)#]+)', text)
+    assert 'docs/performance.md' in links and any(p.endswith('.png') for p in links)
+    missing = [p for p in links if not (root / p).is_file()]
+    assert not missing, f'README links to missing files: {missing}'
