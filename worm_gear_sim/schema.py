@@ -42,9 +42,9 @@ from .validation import (
 )
 
 __all__ = [
-    'Parameters', 'sections_from_mapping', 'NODE_NAME', 'ANGLE_LIMIT', 'SECTIONS', 'DEG',
-    'PHASE_AT_MEAN_STIFFNESS', 'Geometry', 'Materials', 'Shafts', 'Mesh', 'Friction', 'Damping',
-    'Load', 'Integrator', 'InputProfile', 'NodeSettings', 'CompensationSettings',
+    'Parameters', 'sections_from_mapping', 'NODE_NAME', 'ANGLE_LIMIT', 'LOAD_LIMIT', 'SECTIONS',
+    'DEG', 'PHASE_AT_MEAN_STIFFNESS', 'Geometry', 'Materials', 'Shafts', 'Mesh', 'Friction',
+    'Damping', 'Load', 'Integrator', 'InputProfile', 'NodeSettings', 'CompensationSettings',
 ]
 
 NODE_NAME = 'worm_gear_sim'
@@ -53,6 +53,8 @@ DEG = math.pi / 180.0
 #: the mesh phase and the approach q = l_w theta2 - r_g theta3 keep ~1e-7 of their resolution
 #: in double precision (a year of continuous slewing of the worm at 30 rad/s).
 ANGLE_LIMIT = 1e9
+#: Largest |load torque| [N m] a signal may take (the range of ``load.output_torque``).
+LOAD_LIMIT = 1e5
 # Mesh phase at which the mesh stiffness k_Y of the cosine contact mapping equals its mean
 # over the cycle (default parameters; test_model checks it)
 PHASE_AT_MEAN_STIFFNESS = 1.8373
@@ -236,7 +238,7 @@ class Load:
     """External load on the output (antenna). The paper has none (defaults zero)."""
 
     output_torque: float = _f(0.0, 'Constant external torque on theta4 (wind, unbalance)',
-                              'N*m', -1e5, 1e5)
+                              'N*m', -LOAD_LIMIT, LOAD_LIMIT)
     output_viscous_coefficient: float = _f(0.0, 'Viscous bearing drag on theta4', 'N*m*s/rad',
                                            0.0, 1e5)
 

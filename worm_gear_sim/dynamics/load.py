@@ -37,10 +37,9 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ['LoadSignal', 'SampledLoad', 'WindLoad', 'LOAD_LIMIT', 'load_grid']
+from ..schema import LOAD_LIMIT
 
-#: Largest |load torque| [N m] a signal may take (the range of ``load.output_torque``).
-LOAD_LIMIT = 1e5
+__all__ = ['LoadSignal', 'SampledLoad', 'WindLoad', 'load_grid']
 
 
 class LoadSignal:

@@ -23,7 +23,7 @@ from numba import njit
 from numpy.typing import ArrayLike
 
 from ..derived import Derived
-from ..schema import ANGLE_LIMIT, Parameters
+from ..schema import ANGLE_LIMIT, LOAD_LIMIT, Parameters
 from .integrator import (
     C_MODE,
     C_MU,
@@ -49,7 +49,7 @@ from .integrator import (
 from .integrator import (
     sliding_speed as record_aux_speed,
 )
-from .load import LOAD_LIMIT, LoadSignal, load_grid
+from .load import LoadSignal, load_grid
 from .modal import (
     static_equilibrium,
     stepping_damping,

@@ -13,10 +13,10 @@ import copy
 import math
 
 from ..compensation import Compensator
-from ..dynamics.load import LOAD_LIMIT
 from ..dynamics.model import DriveModel
 from ..dynamics.simulation import Simulator
 from ..params import Config
+from ..schema import LOAD_LIMIT
 from .admission import Admission, Candidate, JumpConfirmation
 from .command_timing import CommandQueue, StreamClock
 from .drive import SimulatedDrive
