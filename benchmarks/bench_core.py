@@ -34,9 +34,9 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from worm_gear_sim import Config, Simulator, make_profile, simulate  # noqa: E402
-from worm_gear_sim.integrator import N_STATS, S_EVALS, S_SOLVES, advance  # noqa: E402
-from worm_gear_sim.modal import StepResolutionWarning  # noqa: E402
-from worm_gear_sim.model import mesh_forces  # noqa: E402
+from worm_gear_sim.dynamics.integrator import N_STATS, S_EVALS, S_SOLVES, advance  # noqa: E402
+from worm_gear_sim.dynamics.modal import StepResolutionWarning  # noqa: E402
+from worm_gear_sim.dynamics.model import mesh_forces  # noqa: E402
 
 OLD = {'friction.direction': 'regularized', 'integrator.worm_frequency_matching': False,
        'integrator.time_step': 1e-5}
@@ -122,7 +122,7 @@ def pointwise_accuracy(over: dict) -> tuple[float, float]:
 def ring_down_of(over: dict, horizon: float = 0.5) -> float:
     """The antenna's ring-down over 0.5 s after the 18-step move (trajectory.ring_down)."""
     from worm_gear_sim import DriveModel, static_equilibrium
-    from worm_gear_sim.trajectory import ring_down
+    from worm_gear_sim.dynamics.trajectory import ring_down
     model = DriveModel(Config().replace(over))
     dt = model.config.integrator.time_step
     n, k = round((0.02 + horizon) / dt), max(1, int(1e-5 / dt + 1e-9))

@@ -36,6 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from worm_gear_sim import derive, load_config, modes  # noqa: E402
+from worm_gear_sim.dynamics.profiles import SCurveProfile, TrapezoidalProfile  # noqa: E402
 from worm_gear_sim.identification import (  # noqa: E402
     DIFF_STEP,
     STRATEGIES,
@@ -45,7 +46,6 @@ from worm_gear_sim.identification import (  # noqa: E402
     prediction_errors,
     record_from_model,
 )
-from worm_gear_sim.profiles import SCurveProfile, TrapezoidalProfile  # noqa: E402
 
 KEYS = ['materials.gear_shaft_shear_modulus', 'materials.flywheel_density',
         'damping.modal_damping_ratios[0]', 'friction.mu_kinetic']

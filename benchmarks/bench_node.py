@@ -2,7 +2,7 @@
 # Licensed under the Apache License, Version 2.0
 """Real-time benchmark of the ROS 2 node across two processes.
 
-Starts ``python -m worm_gear_sim.node --ros-args --params-file config/worm_gear_sim.yaml``
+Starts ``python -m worm_gear_sim.ros --ros-args --params-file config/worm_gear_sim.yaml``
 (1 kHz ticks and the integrator step of that file) as a child process; this process streams
 ``worm_angle_command`` at 1 kHz (a radar slew: constant-rate triangle, +-0.5 rad of worm at
 0.5 rad/s, i.e. the antenna sweeping at ~9 mrad/s) and subscribes to ``joint_states`` and

@@ -54,7 +54,7 @@ def commands(layout: str) -> list[list[str]]:
         return [[py, str(Path(__file__).resolve().parent / 'relay_node.py'), *AXES]]
     if layout == 'pedestal':
         return [[py, '-c', PEDESTAL, '--ros-args', '--log-level', 'warn']]
-    return [[py, '-m', 'worm_gear_sim.node', '--ros-args', '--params-file', str(PARAMS_FILE),
+    return [[py, '-m', 'worm_gear_sim.ros', '--ros-args', '--params-file', str(PARAMS_FILE),
              '-r', f'__ns:=/{ns}', '-p', 'node.monitor_rate_hz:=50.0', '--log-level', 'warn']
             for ns in AXES]
 

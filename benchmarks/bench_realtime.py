@@ -43,9 +43,9 @@ import numpy as np
 
 from worm_gear_sim import Config
 from worm_gear_sim.compensation import Compensator
-from worm_gear_sim.model import friction_coefficient, mesh_compliance
+from worm_gear_sim.dynamics.model import friction_coefficient, mesh_compliance
+from worm_gear_sim.dynamics.simulation import Simulator
 from worm_gear_sim.realtime import RealtimePredictor
-from worm_gear_sim.simulation import Simulator
 
 EPOCH = 1_700_000_000_000_000_000
 LOAD = {'load.output_torque': 5.0, 'load.output_viscous_coefficient': 2.0}

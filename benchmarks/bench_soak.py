@@ -2,7 +2,7 @@
 # Licensed under the Apache License, Version 2.0
 """Soak benchmark: the node as a process at 1 kHz for a long time.
 
-Starts ``python -m worm_gear_sim.node --ros-args --params-file config/worm_gear_sim.yaml``
+Starts ``python -m worm_gear_sim.ros --ros-args --params-file config/worm_gear_sim.yaml``
 as a child process and drives it from this process at ``--rate`` (1 kHz): a radar slew
 (constant-rate triangle, +-0.5 rad of worm at 0.5 rad/s) as
 

@@ -31,7 +31,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from worm_gear_sim import Config, simulate  # noqa: E402
-from worm_gear_sim.modal import StepResolutionWarning, step_resolution  # noqa: E402
+from worm_gear_sim.dynamics.modal import StepResolutionWarning, step_resolution  # noqa: E402
 
 STEPS = (1e-5, 5e-6, 4e-6, 2.5e-6)
 REF_DT = 5e-8

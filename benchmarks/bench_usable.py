@@ -38,10 +38,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--sets', type=int, default=200)
     ap.add_argument('--repeat', type=int, default=5)
     args = ap.parse_args(argv)
-    from worm_gear_sim.modal import modes
-    from worm_gear_sim.model import DriveModel
-    from worm_gear_sim.simulation import Simulator
-    from worm_gear_sim.usability import TRIAL_ANGLE, TRIAL_TIME
+    from worm_gear_sim.dynamics.modal import modes
+    from worm_gear_sim.dynamics.model import DriveModel
+    from worm_gear_sim.dynamics.simulation import Simulator
+    from worm_gear_sim.dynamics.usability import TRIAL_ANGLE, TRIAL_TIME
     check_usable(Config().replace({'load.output_torque': -1.0}))      # compile / warm up
     rows: dict[str, list[float]] = {k: [] for k in (
         'build (no check)', 'check, new set', 'check, proven set', 'replace() end to end',

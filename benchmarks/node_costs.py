@@ -45,7 +45,7 @@ def breakdown(n_ticks: int = 2000) -> dict[str, float]:
         out['tick callback (all below)'] = \
             (node.load.window['busy_ns'] - busy0) / (node.counters['ticks'] - k0) / 1e3
         # physics alone: 1 ms of the same slew per call
-        from worm_gear_sim.simulation import Simulator
+        from worm_gear_sim.dynamics.simulation import Simulator
         s = Simulator(node.config, theta1=slew(0.0))
         t, a = 0.0, time.perf_counter()
         for _ in range(n_ticks):

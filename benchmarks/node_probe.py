@@ -42,9 +42,9 @@ def slew(t: float, rate: float = 0.5, amplitude: float = 0.5) -> float:
 
 def start_node(log_path: Path, *, executor: str | None = None, log_level: str = 'warn',
                ros_args: Sequence[str] = ()) -> tuple[subprocess.Popen, IO[str]]:
-    """``python -m worm_gear_sim.node`` with the package's params file (and ``ros_args``
+    """``python -m worm_gear_sim.ros`` with the package's params file (and ``ros_args``
     after it), stdout and stderr in ``log_path``."""
-    cmd = [sys.executable, '-m', 'worm_gear_sim.node']
+    cmd = [sys.executable, '-m', 'worm_gear_sim.ros']
     if executor:
         cmd += ['--executor', executor]
     cmd += ['--ros-args', '--params-file', str(PARAMS_FILE), *ros_args,

@@ -51,7 +51,7 @@ def main() -> int:
         return 2
     procs = []
     try:
-        procs.append(start_logged([py, '-m', 'worm_gear_sim.node', '--ros-args',
+        procs.append(start_logged([py, '-m', 'worm_gear_sim.ros', '--ros-args',
                                    '--params-file', str(REPO / 'config/worm_gear_sim.yaml'),
                                    *comp], env, work / 'node.log'))
         procs.append(start_logged([py, '-m', 'worm_gear_sim.ros.bag_recorder', '-o', str(bag)],

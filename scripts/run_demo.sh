@@ -53,7 +53,7 @@ fi
 if [ -n "${DEMO_INTERFACE:-}" ]; then
     DEMO_ARGS+=(--interface "$DEMO_INTERFACE")
 fi
-"$PY" -m worm_gear_sim.node "${NODE_ARGS[@]}" &
+"$PY" -m worm_gear_sim.ros "${NODE_ARGS[@]}" &
 NODE_PID=$!
 echo "[demo] ROS 2 $ROS_DISTRO: node pid $NODE_PID ${NODE_ARGS[*]:5}"
 stop_node() {
@@ -72,7 +72,7 @@ trap 'exit 129' HUP
 trap 'exit 141' PIPE
 
 set +e
-"$PY" -m worm_gear_sim.demo_commander "${DEMO_ARGS[@]}"
+"$PY" -m worm_gear_sim.ros.demo_commander "${DEMO_ARGS[@]}"
 DEMO_RC=$?
 stop_node
 NODE_RC=$?

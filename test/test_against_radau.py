@@ -15,7 +15,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from worm_gear_sim import Config, make_profile, simulate
-from worm_gear_sim.model import P_J4, P_JG, P_JW, P_KG, mesh_forces, pack_parameters
+from worm_gear_sim.dynamics.model import P_J4, P_JG, P_JW, P_KG, mesh_forces, pack_parameters
 
 T_END = 0.025
 #: Radau's tolerance for the smooth (tanh-friction) references: converged for this check.
@@ -147,7 +147,7 @@ def _radau_set_valued_segments(cfg: Config, t_end: float):
     in the direction of the friction force the cone cannot hold).  Without flywheel the
     massless shaft end follows the gear (theta4 = theta3).  Shares only the equations
     (mesh_forces_mu, slip_coefficient)."""
-    from worm_gear_sim.model import (
+    from worm_gear_sim.dynamics.model import (
         P_COSL,
         P_LW,
         P_MU_STATIC,

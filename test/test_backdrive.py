@@ -11,7 +11,7 @@ import pytest
 
 from worm_gear_sim import Config, Simulator
 from worm_gear_sim.derived import derive
-from worm_gear_sim.model import DriveModel
+from worm_gear_sim.dynamics.model import DriveModel
 
 
 def analytic(cfg: Config) -> float:

@@ -13,9 +13,9 @@ from scipy.integrate import solve_ivp
 
 from worm_gear_sim import Config, SampledProfile, simulate
 from worm_gear_sim.derived import derive
-from worm_gear_sim.load import LoadSignal
-from worm_gear_sim.model import P_CGKG_LIN, P_CWKW_LIN, DriveModel, pack_parameters
-from worm_gear_sim.params import ConfigError
+from worm_gear_sim.dynamics.load import LoadSignal
+from worm_gear_sim.dynamics.model import P_CGKG_LIN, P_CWKW_LIN, DriveModel, pack_parameters
+from worm_gear_sim.validation import ConfigError
 
 ARCMIN = np.pi / (180 * 60)
 DATA = Path(__file__).resolve().parent / 'data'
@@ -241,7 +241,7 @@ def test_structural_damping_does_not_act_across_the_open_play():
     tr = simulate(cfg, profile=inside, t_end=0.01, record_every=40)
     assert tr.theta[-1, 0] == pytest.approx(0.8 * half, rel=0.02)   # the worm moved
     assert np.max(np.abs(tr.theta[:, 1:])) < 1e-15                  # the gear did not
-    from worm_gear_sim.modal import damping_matrix
+    from worm_gear_sim.dynamics.modal import damping_matrix
     a, beta = cfg.damping.rayleigh_alpha, cfg.damping.rayleigh_beta
     shafts = np.array([[d.K_w, 0, 0], [0, d.K_g, -d.K_g], [0, -d.K_g, d.K_g]])
     c_open = np.diag([a * d.J_w, 0.0, 0.0]) + beta * shafts
@@ -302,7 +302,7 @@ def test_bad_play_is_a_one_line_error_naming_the_key(value, words):
 def test_the_initial_state_rests_on_the_loaded_or_the_chosen_flank(load, flank, side):
     """Under a load the drive starts at rest on the loaded flank (whatever
     mesh.initial_flank says); without one on the flank chosen, with no tooth force."""
-    from worm_gear_sim.modal import static_equilibrium
+    from worm_gear_sim.dynamics.modal import static_equilibrium
     b = 2 * ARCMIN
     cfg = Config().replace({'mesh.backlash': b, 'load.output_torque': load,
                             'mesh.initial_flank': flank})

@@ -174,7 +174,7 @@ def test_a_known_trajectory_with_play_is_compensated_with_the_centring_preview()
     preview configured it uses the centring preview (its corrections are the offline
     twin's with that preview), and the antenna error around the reversal falls >= 10x
     against the raw trajectory."""
-    from worm_gear_sim.trajectories import compensate_trajectory, trajectory_model
+    from worm_gear_sim.trajectory_compensation import compensate_trajectory, trajectory_model
     cfg = Config().replace({'load.output_viscous_coefficient': 2.0, 'mesh.backlash': 2 * ARCMIN,
                             'damping.modal_damping_ratios': [0.03, 0.03, 0.03]})
     no_play = trajectory_model(DriveModel(cfg.replace({'mesh.backlash': 0.0})))

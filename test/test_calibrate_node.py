@@ -27,7 +27,7 @@ KEYS = 'geometry.flywheel_radius,load.output_viscous_coefficient'
 
 
 def _node(ns: str, params: dict, env, log: Path):
-    args = [sys.executable, '-m', 'worm_gear_sim.node', '--ros-args', '--params-file',
+    args = [sys.executable, '-m', 'worm_gear_sim.ros', '--ros-args', '--params-file',
             str(CONFIG), '--log-level', 'warn', '-r', f'__ns:={ns}']
     for k, v in params.items():
         args += ['-p', f'{k}:={v!r}']

@@ -266,7 +266,7 @@ def test_broken_config_files(capsys, broken_files, which, fragments):
 
 
 def test_run_failure_is_one_line(capsys, tmp_path, monkeypatch):
-    from worm_gear_sim import simulation
+    from worm_gear_sim.dynamics import simulation
 
     def boom(*a, **k):
         raise simulation.SimulationError('integration stopped at t = 0.001 s: test')

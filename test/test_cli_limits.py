@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from worm_gear_sim.dynamics.simulation import KEEP_ROWS
 from worm_gear_sim.params import Config
-from worm_gear_sim.simulation import KEEP_ROWS
 
 REPO = Path(__file__).resolve().parents[1]
 DT = Config().integrator.time_step
@@ -122,7 +122,7 @@ def test_hostile_config_files_are_named_errors(tmp_path, kind):
     """A 1 kB YAML alias bomb (expands to 9^9 strings: it reached 5.7 GB), a 5 000-deep
     YAML or JSON, a binary file, a file over the size limit, a NUL byte: each one line
     naming the file (and the limit), exit 2, at once."""
-    from worm_gear_sim.config_io import MAX_CONFIG_BYTES, MAX_CONFIG_DEPTH
+    from worm_gear_sim.guarded_io import MAX_CONFIG_BYTES, MAX_CONFIG_DEPTH
     f = tmp_path / {'deep_json': 'p.json', 'binary': 'p.bin'}.get(kind, 'p.yaml')
     if kind == 'alias_bomb':
         assert len(ALIAS_BOMB) < 1100

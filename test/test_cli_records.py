@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from worm_gear_sim import cli, load_config
-from worm_gear_sim.profiles import SampledProfile
+from worm_gear_sim.dynamics.profiles import SampledProfile
+from worm_gear_sim.dynamics.simulation import simulate
 from worm_gear_sim.records import read_csv
-from worm_gear_sim.simulation import simulate
 
 EPOCH_S = 1_763_890_855
 

@@ -9,8 +9,8 @@ import pytest
 
 from worm_gear_sim.compensation import Compensator, design_filter, design_shaper
 from worm_gear_sim.derived import derive
-from worm_gear_sim.modal import static_equilibrium
-from worm_gear_sim.model import pack_parameters
+from worm_gear_sim.dynamics.modal import static_equilibrium
+from worm_gear_sim.dynamics.model import pack_parameters
 from worm_gear_sim.params import Config
 from worm_gear_sim.realtime import feedforward_series
 

@@ -1,16 +1,16 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""``compensate`` command: outputs, stand-alone entry point, one-line errors."""
+"""``compensate`` command: outputs, the `worm-gear-sim compensate` entry point, one-line errors."""
 
 import numpy as np
 import pytest
 
-from worm_gear_sim import compensation_cli
+from worm_gear_sim.cli import main as cli_main
 
 
 def test_compensate_writes_csv_and_png(tmp_path, capsys):
     out = tmp_path / 'sub' / 'run.csv'
-    rc = compensation_cli.main(['--end-time', '0.12', '-o', str(out)])
+    rc = cli_main(['compensate', '--end-time', '0.12', '-o', str(out)])
     assert rc == 0
     text = capsys.readouterr().out
     assert 'tracking_rms' in text and 'residual_peak' in text
@@ -29,7 +29,7 @@ def test_compensate_writes_csv_and_png(tmp_path, capsys):
 
 def test_compensate_detuned_plant_without_plot(tmp_path, capsys):
     out = tmp_path / 'd.csv'
-    rc = compensation_cli.main(['--detune', 'flywheel_inertia=0.8', '--end-time', '0.1',
+    rc = cli_main(['compensate', '--detune', 'flywheel_inertia=0.8', '--end-time', '0.1',
                                 '--no-plot', '-o', str(out), '--set',
                                 'compensation.preview_time=0.002'])
     assert rc == 0
@@ -52,7 +52,7 @@ def test_compensate_detuned_plant_without_plot(tmp_path, capsys):
     (['--config', '/nonexistent/x.yaml'], 'not found'),
 ])
 def test_bad_arguments_one_line_error(tmp_path, capsys, args, needle):
-    rc = compensation_cli.main([*args, '--no-plot', '-o', str(tmp_path / 'x.csv')])
+    rc = cli_main(['compensate', *args, '--no-plot', '-o', str(tmp_path / 'x.csv')])
     assert rc != 0
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and needle in err

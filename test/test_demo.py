@@ -24,17 +24,14 @@ from processes import start_logged, stop_and_read
 pytest.importorskip('rclpy')
 
 from worm_gear_sim import Config  # noqa: E402
-from worm_gear_sim.ros.demo_commander import (  # noqa: E402
-    LINE_WIDTH,
-    MOVE_HEADER,
+from worm_gear_sim.ros.demo_report import LINE_WIDTH, MOVE_HEADER, format_move, format_status
+from worm_gear_sim.studies.compensation_eval import SETTLE_TOLERANCE  # noqa: E402
+from worm_gear_sim.studies.demo_moves import (
     MoveSummary,
     MoveTracker,
     command_pattern,
-    format_move,
-    format_status,
     pattern_segments,
 )
-from worm_gear_sim.studies.compensation_eval import SETTLE_TOLERANCE  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / 'config' / 'worm_gear_sim.yaml'
@@ -133,7 +130,7 @@ def test_lines_fit_80_columns():
 
 # ---- the demo and the node as processes ----------------------------------------------------
 def _start_node(env: dict[str, str], log_path: Path, *extra: str) -> tuple:
-    return start_logged([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
+    return start_logged([sys.executable, '-m', 'worm_gear_sim.ros', '--ros-args',
                          '--params-file', str(CONFIG), '--log-level', 'warn', *extra],
                         env, log_path)
 
@@ -141,7 +138,7 @@ def _start_node(env: dict[str, str], log_path: Path, *extra: str) -> tuple:
 def _demo(node: subprocess.Popen, env: dict[str, str], *args: str,
           timeout: float = 240.0) -> subprocess.CompletedProcess:
     """Run the demo to its end; stop it at once if the node dies first (bounded)."""
-    demo = subprocess.Popen([sys.executable, '-m', 'worm_gear_sim.demo_commander', *args],
+    demo = subprocess.Popen([sys.executable, '-m', 'worm_gear_sim.ros.demo_commander', *args],
                             cwd=ROOT, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + timeout
@@ -188,7 +185,7 @@ def test_demo_on_a_terminal_is_one_updating_line(ros_subprocess_env, tmp_path):
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack('HHHH', 24, 80, 0, 0))
     chunks: list[bytes] = []
     try:
-        demo = subprocess.Popen([sys.executable, '-m', 'worm_gear_sim.demo_commander',
+        demo = subprocess.Popen([sys.executable, '-m', 'worm_gear_sim.ros.demo_commander',
                                  '--interface', 'float64', '--duration', '2'], cwd=ROOT,
                                 env=ros_subprocess_env, stdout=slave, stderr=slave,
                                 stdin=subprocess.DEVNULL)

@@ -20,10 +20,13 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from worm_gear_sim.modal import modes
-from worm_gear_sim.params import ANGLE_LIMIT, Config, ConfigError, config_from_mapping
-from worm_gear_sim.profiles import make_profile
-from worm_gear_sim.simulation import SimulationError, Simulator
+from worm_gear_sim.dynamics.modal import modes
+from worm_gear_sim.dynamics.profiles import make_profile
+from worm_gear_sim.dynamics.simulation import Simulator
+from worm_gear_sim.dynamics.stepping import SimulationError
+from worm_gear_sim.params import Config, config_from_mapping
+from worm_gear_sim.schema import ANGLE_LIMIT
+from worm_gear_sim.validation import ConfigError
 
 EXAMPLES = int(os.environ.get('WGS_FUZZ_EXAMPLES', '0') or 0)
 

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from worm_gear_sim import load_config, modes
+from worm_gear_sim.dynamics.profiles import SCurveProfile, TrapezoidalProfile
 from worm_gear_sim.identification import (
     FitOptions,
     IdentificationError,
@@ -33,7 +34,6 @@ from worm_gear_sim.identification import (
     prediction_errors,
     record_from_model,
 )
-from worm_gear_sim.profiles import SCurveProfile, TrapezoidalProfile
 
 KG = 'materials.gear_shaft_shear_modulus'
 RHO = 'materials.flywheel_density'

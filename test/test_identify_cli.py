@@ -19,8 +19,8 @@ from processes import start_logged, stop_and_read
 
 from worm_gear_sim import load_config
 from worm_gear_sim.cli import main
+from worm_gear_sim.dynamics.profiles import SCurveProfile, TrapezoidalProfile
 from worm_gear_sim.identification import record_from_model
-from worm_gear_sim.profiles import SCurveProfile, TrapezoidalProfile
 from worm_gear_sim.records import BagStream, write_streams
 
 KG = 'materials.gear_shaft_shear_modulus'
@@ -230,7 +230,7 @@ def test_node_loads_the_fitted_yaml(fitted, ros_dds_context, ros_subprocess_env,
     from rclpy.executors import SingleThreadedExecutor
     ex = SingleThreadedExecutor(context=ros_dds_context)
     ex.add_node(node)
-    proc, log = start_logged([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
+    proc, log = start_logged([sys.executable, '-m', 'worm_gear_sim.ros', '--ros-args',
                               '--params-file', str(fitted)], ros_subprocess_env,
                              tmp_path / 'node.txt')
     try:

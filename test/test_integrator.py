@@ -18,7 +18,7 @@ from worm_gear_sim import (
     simulate,
     static_equilibrium,
 )
-from worm_gear_sim.model import pack_parameters
+from worm_gear_sim.dynamics.model import pack_parameters
 
 THETA1 = 0.11309733552923255          # 18 steps of 0.36 deg
 LINEAR_OFF = {'mesh.stiffness_model': 'linear', 'friction.model': 'off'}
@@ -102,7 +102,7 @@ def test_energy_with_nonlinear_mesh_and_paper_compliance_terms():
     so single steps can store a little energy; bounded here, and dissipation dominates.
     The mesh's parametric work 0.5 dk_Y q^2 (stiffness changing under a loaded mesh) is the
     whole gain: without it no step gains more than round-off."""
-    from worm_gear_sim.model import P_LW, P_RG, mesh_stiffness_y
+    from worm_gear_sim.dynamics.model import P_LW, P_RG, mesh_stiffness_y
     for over, bound, balance in (
             (TANH, 1e-8, 1e-12), ({'friction.in_compliance': True, **TANH}, 1e-8, None),
             ({'mesh.contact_mapping': 'sawtooth', **TANH}, 1e-9, 1e-12)):
@@ -263,7 +263,7 @@ def test_ramp_tracking_without_load_has_no_static_error():
 
 # ---- exact stick-slip (set-valued friction) ------------------------------------------------
 def _ring_down(over, dt, horizon=0.5):
-    from worm_gear_sim.simulation import ring_down
+    from worm_gear_sim.dynamics.trajectory import ring_down
     cfg = Config().replace(dict(over, **{'integrator.time_step': dt}))
     n, k = round((0.02 + horizon) / dt), max(1, int(1e-5 / dt + 1e-9))
     while n % k:                # a row about every 10 us, and one at the end of the run

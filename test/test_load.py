@@ -1,7 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""A load torque on the antenna that varies in time (worm_gear_sim.load): a constant signal
-equals the constant key bit for bit; a varying one agrees with an independent Radau
+"""A load torque on the antenna that varies in time (worm_gear_sim.dynamics.load): a constant
+signal equals the constant key bit for bit; a varying one agrees with an independent Radau
 solution of the same equations; the wind model has the documented statistics and spectrum
 and is reproducible; bad samples are one-line errors; CSV records carry the load into the
 prediction and the CLI."""
@@ -15,10 +15,18 @@ from scipy.signal import welch
 
 from worm_gear_sim import Config, SampledProfile, simulate
 from worm_gear_sim.cli import main as cli_main
+from worm_gear_sim.dynamics.load import LoadSignal, SampledLoad, WindLoad
+from worm_gear_sim.dynamics.modal import static_equilibrium
+from worm_gear_sim.dynamics.model import (
+    P_J4,
+    P_JG,
+    P_JW,
+    P_KG,
+    P_TLOAD,
+    mesh_forces,
+    pack_parameters,
+)
 from worm_gear_sim.identification.data import predict, record_from_model
-from worm_gear_sim.load import LoadSignal, SampledLoad, WindLoad
-from worm_gear_sim.modal import static_equilibrium
-from worm_gear_sim.model import P_J4, P_JG, P_JW, P_KG, P_TLOAD, mesh_forces, pack_parameters
 from worm_gear_sim.records import Record, RecordError, read_csv
 
 
@@ -241,7 +249,8 @@ def test_the_play_and_gust_studies_measure_what_the_feedforward_cannot_cover():
     half the play; with the backlash inverse the static error is gone and the slew's error
     is less than half the blind one (the reversal itself: ``sweep reversal``);
     compensated, the error grows with the gust intensity."""
-    from worm_gear_sim.studies.play_gust import ARCMIN, gust_rows, play_rows
+    from worm_gear_sim.studies.backlash_reversal import ARCMIN
+    from worm_gear_sim.studies.play_gust import gust_rows, play_rows
     rows = {(r['x'], r['series']): r for r in play_rows(Config(), (0.0, 2.0))}
     off0, on0 = rows[0.0, 'uncompensated'], rows[0.0, 'compensated']
     off2, blind2 = rows[2.0, 'uncompensated'], rows[2.0, 'blind']

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from worm_gear_sim import Config, modes
-from worm_gear_sim.model import (
+from worm_gear_sim.dynamics.model import (
     P_LW,
     P_RG,
     P_RW,
@@ -284,7 +284,7 @@ def test_tooth_hand_over(mapping, jump_w, jump_g):
 def test_default_phase_starts_at_the_mean_mesh_stiffness():
     """At theta = 0 the default phase offset puts the mesh stiffness k_Y (teeth in series
     with the bearings, what the dynamics see) at its cycle mean."""
-    from worm_gear_sim.model import mesh_stiffness_y
+    from worm_gear_sim.dynamics.model import mesh_stiffness_y
     p = pack_parameters(Config())
     ph = np.linspace(0, 2 * math.pi, 20001)[:-1]
     kY = np.array([mesh_stiffness_y(p, 2 * x, 0.0) for x in ph])

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from worm_gear_sim.model_check import ModelCheck, PredictionHistory, ResidualMonitor
+from worm_gear_sim.realtime.model_check import ModelCheck, PredictionHistory, ResidualMonitor
 
 
 def test_residual_monitor_windowed_rms_and_levels():

@@ -15,7 +15,7 @@ import pytest
 pytest.importorskip('rclpy')
 
 from worm_gear_sim import Config  # noqa: E402
-from worm_gear_sim.profiles import make_profile  # noqa: E402
+from worm_gear_sim.dynamics.profiles import make_profile  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

@@ -17,7 +17,7 @@ pytest.importorskip('rclpy')
 from rclpy.parameter import Parameter  # noqa: E402
 
 from worm_gear_sim import Config, SampledProfile, Simulator, load_config  # noqa: E402
-from worm_gear_sim.profiles import make_profile  # noqa: E402
+from worm_gear_sim.dynamics.profiles import make_profile  # noqa: E402
 from worm_gear_sim.ros.params_bridge import MODEL_PARAMETER_NAMES  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -342,7 +342,7 @@ def test_sim_clock_restart_reinitialises(ros_harness):
 
 
 def test_simulation_error_keeps_last_good_state(ros_harness, monkeypatch):
-    from worm_gear_sim.simulation import SimulationError
+    from worm_gear_sim.dynamics.stepping import SimulationError
     h = ros_harness()
     run_ticks(h, [0.0, 0.01])
     good = h.node.sim.state
@@ -573,7 +573,7 @@ def test_command_queue_rules():
     """CommandQueue.take: overflow drops the oldest; stamps not after the previous sample
     merge (newest value); with restamp (sim time) stamps not after the previous tick take
     the next known time; stamps after the tick wait; another time base is restamped."""
-    from worm_gear_sim.ros.node import CommandQueue
+    from worm_gear_sim.realtime.command_timing import CommandQueue
     q = CommandQueue(maxlen=4)
     for i in range(6):
         q.push('sim', 100 + i, float(i))
@@ -607,7 +607,7 @@ def test_stream_clock_recovers_a_steady_grid():
     stream clock's sample spacing jitters 20x less than the reception stamps'; late
     callbacks are put on their slot; a 500 Hz stream skips slots; a pause, a 400 Hz
     stream and a burst re-lock it."""
-    from worm_gear_sim.ros.node import StreamClock
+    from worm_gear_sim.realtime.command_timing import StreamClock
     for bad in (dict(period_ns=0.0), dict(period_ns=1e6, gain=0.0),
                 dict(period_ns=1e6, window=0.5), dict(period_ns=1e6, max_outlier_rate=1.0)):
         with pytest.raises(ValueError):

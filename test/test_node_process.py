@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""The node as a separate process (``python -m worm_gear_sim.node --ros-args --params-file
+"""The node as a separate process (``python -m worm_gear_sim.ros --ros-args --params-file
 config/worm_gear_sim.yaml``), talked to over DDS on this machine (domain 43, discovery
 LOCALHOST), stopped with SIGINT / SIGTERM: clean exit, code 0, no traceback."""
 
@@ -68,7 +68,7 @@ class Probe:
 
 
 def node_args(*extra: str) -> list[str]:
-    return [sys.executable, '-m', 'worm_gear_sim.node', *extra, '--ros-args',
+    return [sys.executable, '-m', 'worm_gear_sim.ros', *extra, '--ros-args',
             '--params-file', str(CONFIG)]
 
 
@@ -117,7 +117,7 @@ def test_process_rejects_invalid_parameter_file(ros_subprocess_env, tmp_path):
     bad = tmp_path / 'bad.yaml'
     bad.write_text(CONFIG.read_text().replace('model: stribeck ', 'model: coulomb  '))
     assert 'model: coulomb' in bad.read_text()
-    proc = subprocess.run([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
+    proc = subprocess.run([sys.executable, '-m', 'worm_gear_sim.ros', '--ros-args',
                            '--params-file', str(bad)], cwd=ROOT, env=ros_subprocess_env,
                           capture_output=True, text=True, timeout=120)
     text = proc.stdout + proc.stderr

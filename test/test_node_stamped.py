@@ -357,7 +357,7 @@ def test_the_load_torque_topic_drives_the_prediction_and_rejects_bad_samples(ros
     from sensor_msgs.msg import JointState
 
     from worm_gear_sim import SampledProfile, Simulator
-    from worm_gear_sim.load import SampledLoad
+    from worm_gear_sim.dynamics.load import SampledLoad
     h = make(ros_harness)
     pub = h.probe.create_publisher(JointState, 'load_torque', 1000)
     assert h.spin_until(lambda: pub.get_subscription_count() > 0)

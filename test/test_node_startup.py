@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Start-up of the node as a process (``python -m worm_gear_sim.node``): every configuration
+"""Start-up of the node as a process (``python -m worm_gear_sim.ros``): every configuration
 error gives one line naming the cause and exit code 2, never a traceback; Ctrl-C or SIGTERM
 at any moment of the start-up (imports of numpy/scipy/numba/rclpy, rclpy.init, parameter
 declaration) ends it quietly."""
@@ -72,7 +72,7 @@ def test_every_configuration_error_is_one_line_and_exit_code_2(tmp_path, ros_sub
     for i, (ros_args, _) in enumerate(cases):   # all at once: each start costs seconds
         out = open(tmp_path / f'out{i}.txt', 'w+')
         procs.append((subprocess.Popen(
-            [sys.executable, '-m', 'worm_gear_sim.node', '--ros-args', *ros_args],
+            [sys.executable, '-m', 'worm_gear_sim.ros', '--ros-args', *ros_args],
             cwd=ROOT, env=ros_subprocess_env, stdout=out, stderr=subprocess.STDOUT), out))
         if i % 4 == 3:
             procs[-1][0].wait(timeout=180)
@@ -119,7 +119,7 @@ def test_early_signals_end_the_start_up_quietly(ros_subprocess_env):
         t0 = time.monotonic()
         for sig, delay in plan[batch:batch + 5]:
             procs.append((sig, delay, subprocess.Popen(
-                [sys.executable, '-m', 'worm_gear_sim.node', '--ros-args', '--params-file',
+                [sys.executable, '-m', 'worm_gear_sim.ros', '--ros-args', '--params-file',
                  str(CONFIG)], cwd=ROOT, env=ros_subprocess_env, stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT, text=True)))
         started = {}

@@ -20,7 +20,7 @@ from builtin_interfaces.msg import Duration, Time  # noqa: E402
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint  # noqa: E402
 
 from worm_gear_sim.ros.trajectory_bridge import from_message  # noqa: E402
-from worm_gear_sim.trajectories import (  # noqa: E402
+from worm_gear_sim.trajectory_compensation import (  # noqa: E402
     TRAJECTORY_REJECT_REASONS,
     TrajectoryCompensator,
 )

@@ -10,7 +10,8 @@ import yaml
 
 from worm_gear_sim.config_io import load_config
 from worm_gear_sim.derived import derive
-from worm_gear_sim.params import Config, ConfigError, config_from_mapping
+from worm_gear_sim.params import Config, config_from_mapping
+from worm_gear_sim.validation import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
 YAML_PATH = REPO / 'config' / 'worm_gear_sim.yaml'

@@ -18,7 +18,7 @@ from processes import start_logged, stop_and_read
 
 from worm_gear_sim import ConfigError
 from worm_gear_sim.pedestal import load_pedestal
-from worm_gear_sim.trajectories import TrajectoryCompensator
+from worm_gear_sim.trajectory_compensation import TrajectoryCompensator
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -93,7 +93,7 @@ def test_bad_csv_is_a_clear_error(tmp_path, content, words):
 
 
 def test_motion_span_of_sampled_commands():
-    from worm_gear_sim.profiles import motion_span
+    from worm_gear_sim.dynamics.profiles import motion_span
     t = np.arange(8) * 0.5
     assert motion_span(t, np.zeros(8)) is None
     assert motion_span(t, [0, 0, 1, 2, 2, 2, 2, 2]) == (0.5, 1.5)

@@ -14,11 +14,11 @@ from hypothesis import strategies as st_
 
 from worm_gear_sim import Config, SampledProfile
 from worm_gear_sim.compensation import Compensator
-from worm_gear_sim.modal import static_equilibrium
-from worm_gear_sim.model import pack_parameters
-from worm_gear_sim.params import ConfigError
+from worm_gear_sim.dynamics.modal import static_equilibrium
+from worm_gear_sim.dynamics.model import pack_parameters
+from worm_gear_sim.dynamics.simulation import Simulator
 from worm_gear_sim.realtime import COUNTER_NAMES, RealtimePredictor, Reject, feedforward_series
-from worm_gear_sim.simulation import Simulator
+from worm_gear_sim.validation import ConfigError
 
 EPOCH = 1_700_000_000_123_456_789          # ns: a ROS time stamp of 2023
 MS = 1_000_000
@@ -843,7 +843,7 @@ def test_a_live_load_equals_the_offline_load_signal():
     predictions equal the batch simulator with the same references and a SampledLoad of
     the same samples held from their stamps (the live rule); the load changes the
     prediction."""
-    from worm_gear_sim.load import SampledLoad
+    from worm_gear_sim.dynamics.load import SampledLoad
     cfg = Config()
     rng = np.random.default_rng(7)
     st, x = slew(300, rng, jitter_ns=200_000)

@@ -3,7 +3,7 @@
 """``simulate --bag``: a recorded command stream replays through the node's pipeline to
 the prediction the node computed live.  The 'live' run here feeds the pipeline exactly as
 the node's callbacks do (arrival order, jittered arrivals, bursts, its receive clock),
-independently of worm_gear_sim.replay; the bag is written with rosbags directly."""
+independently of worm_gear_sim.realtime.replay; the bag is written with rosbags directly."""
 
 from __future__ import annotations
 
@@ -14,11 +14,11 @@ from rosbags.typesys import Stores, get_typestore
 
 from worm_gear_sim import load_config
 from worm_gear_sim.cli import main
-from worm_gear_sim.profiles import TrapezoidalProfile
+from worm_gear_sim.dynamics.profiles import TrapezoidalProfile
 from worm_gear_sim.realtime import RealtimePredictor
+from worm_gear_sim.realtime.replay import compare_with_recorded, replay
 from worm_gear_sim.records import prediction_streams as streams_of
 from worm_gear_sim.records import read_bag, read_csv, write_streams
-from worm_gear_sim.replay import compare_with_recorded, replay
 
 TS = get_typestore(Stores.ROS2_KILTED)
 JS, F64 = 'sensor_msgs/msg/JointState', 'std_msgs/msg/Float64'

@@ -17,9 +17,9 @@ from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
 from worm_gear_sim import load_config  # noqa: E402
 from worm_gear_sim.cli import main  # noqa: E402
-from worm_gear_sim.profiles import TrapezoidalProfile  # noqa: E402
+from worm_gear_sim.dynamics.profiles import TrapezoidalProfile  # noqa: E402
+from worm_gear_sim.realtime.replay import compare_with_recorded, replay  # noqa: E402
 from worm_gear_sim.records import read_bag  # noqa: E402
-from worm_gear_sim.replay import compare_with_recorded, replay  # noqa: E402
 
 TS = get_typestore(Stores.ROS2_KILTED)
 JS = 'sensor_msgs/msg/JointState'

@@ -14,7 +14,7 @@ import pytest
 from processes import start_logged, stop_and_read
 
 from worm_gear_sim import Config, Simulator
-from worm_gear_sim.modal import (
+from worm_gear_sim.dynamics.modal import (
     STEPS_PER_PERIOD,
     StepResolutionWarning,
     amplitude_time_step,
@@ -67,7 +67,7 @@ def test_node_logs_an_under_resolved_step_through_ros(tmp_path, ros_subprocess_e
     (not as Python's two-line warning on stderr), and ends quietly on SIGINT."""
     pytest.importorskip('rclpy')
     log_path = tmp_path / 'node.log'
-    proc, log = start_logged([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
+    proc, log = start_logged([sys.executable, '-m', 'worm_gear_sim.ros', '--ros-args',
                               '-p', 'integrator.time_step:=1e-05'], ros_subprocess_env,
                              log_path)
     deadline = time.monotonic() + 90.0

@@ -8,15 +8,10 @@ import tracemalloc
 import numpy as np
 import pytest
 
+from worm_gear_sim.dynamics.profiles import make_profile
+from worm_gear_sim.dynamics.simulation import Simulator, simulate, simulate_to_csv
+from worm_gear_sim.dynamics.trajectory import ROW_BYTES, Trajectory
 from worm_gear_sim.params import Config
-from worm_gear_sim.profiles import make_profile
-from worm_gear_sim.simulation import (
-    ROW_BYTES,
-    Simulator,
-    Trajectory,
-    simulate,
-    simulate_to_csv,
-)
 
 FIELDS = ('t', 'theta1', 'theta1_dot', 'theta', 'omega', 'alpha', 'aux')
 

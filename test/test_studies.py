@@ -9,8 +9,9 @@ import pytest
 
 from worm_gear_sim import studies as S
 from worm_gear_sim.derived import derive
-from worm_gear_sim.model import P_CGKG_LIN, pack_parameters
-from worm_gear_sim.params import Config, ConfigError
+from worm_gear_sim.dynamics.model import P_CGKG_LIN, pack_parameters
+from worm_gear_sim.params import Config
+from worm_gear_sim.validation import ConfigError
 
 SHORT = 0.03     # s: the move ends at 0.02 s, 10 ms of ringing is enough for the checks
 
@@ -108,7 +109,7 @@ def test_run_case_metrics(base):
 
 
 def _fake_trajectory(t, theta1, theta):
-    from worm_gear_sim.simulation import Trajectory
+    from worm_gear_sim.dynamics.trajectory import Trajectory
     n = t.size
     return Trajectory(t=t, theta1=theta1, theta1_dot=np.zeros(n), theta=theta,
                       omega=np.zeros((n, 3)), alpha=np.zeros((n, 3)), aux=np.zeros((n, 8)),

@@ -19,7 +19,7 @@ from worm_gear_sim.studies.tracking_pass import (
     satellite_pass,
     stream_pass,
 )
-from worm_gear_sim.trajectories import JointTrajectoryData, TrajectoryCompensator
+from worm_gear_sim.trajectory_compensation import JointTrajectoryData, TrajectoryCompensator
 
 
 def test_the_pass_geometry_culminates_at_its_elevation_and_swings_the_azimuth():

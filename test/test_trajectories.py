@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Trajectory compensation offline (worm_gear_sim.trajectories): the controller's spline
+"""Trajectory compensation offline (worm_gear_sim.trajectory_compensation): the controller's spline
 reading of waypoints (known polynomials reproduced exactly), the compensated positions equal
 reference + feedforward_series of the same samples, the controller's own interpolation of
 the dense output follows the compensated path, the paper's move rings >= 50x less, bad
@@ -15,7 +15,7 @@ import pytest
 
 from worm_gear_sim import Config
 from worm_gear_sim.realtime import feedforward_series
-from worm_gear_sim.trajectories import compensate_trajectory, jtc_sample
+from worm_gear_sim.trajectory_compensation import compensate_trajectory, jtc_sample
 
 
 def _poly(c, t):
@@ -49,7 +49,7 @@ def _paper_move_waypoints(cfg):
     5 sparse waypoints with positions and velocities: the cubic rule reproduces each
     quadratic piece exactly (the acceleration jumps at the knots, so a quintic with one
     acceleration per waypoint could not)."""
-    from worm_gear_sim.profiles import TrapezoidalProfile
+    from worm_gear_sim.dynamics.profiles import TrapezoidalProfile
     prof = TrapezoidalProfile(cfg.input.target_angle, 0.02, 0.004, 0.01)
     knots = np.array([0.01, 0.014, 0.026, 0.03, 0.05])
     rate = prof.amplitude / (0.02 - 0.004)

@@ -13,16 +13,12 @@ import numpy as np
 import pytest
 
 from worm_gear_sim.config_io import load_config
-from worm_gear_sim.modal import modes
-from worm_gear_sim.params import (
-    ANGLE_LIMIT,
-    Config,
-    ConfigError,
-    check_usable,
-    config_from_mapping,
-)
-from worm_gear_sim.simulation import Simulator, simulate
-from worm_gear_sim.usability import OMEGA_DT_MAX, SPRING_RATIO_MIN
+from worm_gear_sim.dynamics.modal import modes
+from worm_gear_sim.dynamics.simulation import Simulator, simulate
+from worm_gear_sim.dynamics.usability import OMEGA_DT_MAX, SPRING_RATIO_MIN
+from worm_gear_sim.params import Config, check_usable, config_from_mapping
+from worm_gear_sim.schema import ANGLE_LIMIT
+from worm_gear_sim.validation import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -231,7 +227,7 @@ def test_advance_to_huge_span_is_refused_up_front():
      ['friction.regularization_velocity', 'near step']),
 ])
 def test_integration_failure_names_the_likely_cause(overrides, words):
-    from worm_gear_sim.simulation import SimulationError
+    from worm_gear_sim.dynamics.stepping import SimulationError
     cfg = Config().replace(overrides)
     with pytest.raises(SimulationError) as exc:
         simulate(cfg, t_end=0.03)
@@ -249,7 +245,7 @@ def test_integration_failure_names_the_likely_cause(overrides, words):
 def test_node_start_up_with_an_unusable_value_is_one_line_exit_2(param, key,
                                                                   ros_subprocess_env):
     pytest.importorskip('rclpy')
-    proc = subprocess.run([sys.executable, '-m', 'worm_gear_sim.node', '--ros-args',
+    proc = subprocess.run([sys.executable, '-m', 'worm_gear_sim.ros', '--ros-args',
                            '-p', param], cwd=REPO, env=ros_subprocess_env,
                           capture_output=True, text=True, timeout=120)
     text = (proc.stdout + proc.stderr).strip()

@@ -10,7 +10,7 @@ its import rules: docs/architecture.md.
     >>> traj.output_error[-1]                   # antenna error theta4 - theta1 l_w/r_g [rad]
 
 The names below are imported on first use (PEP 562): importing the package itself loads
-no numpy/scipy/numba, so the entry points (``python -m worm_gear_sim.node``) can install
+no numpy/scipy/numba, so the entry points (``python -m worm_gear_sim.ros``) can install
 their signal handlers before the heavy imports start.
 """
 
@@ -23,17 +23,19 @@ __version__ = '0.1.0'
 
 #: public name -> submodule that defines it
 _EXPORTS: dict[str, str] = {
-    'ModalResult': 'modal', 'damping_matrix': 'modal', 'modes': 'modal',
-    'static_equilibrium': 'modal',
-    'DriveModel': 'model',
-    'Config': 'params', 'ConfigError': 'params', 'Derived': 'derived',
+    'ModalResult': 'dynamics.modal', 'damping_matrix': 'dynamics.modal',
+    'modes': 'dynamics.modal', 'static_equilibrium': 'dynamics.modal',
+    'DriveModel': 'dynamics.model',
+    'Config': 'params', 'ConfigError': 'validation', 'Derived': 'derived',
     'default_config': 'params', 'derive': 'derived', 'load_config': 'config_io',
     'check_usable': 'params',
-    'Profile': 'profiles', 'RampProfile': 'profiles', 'SampledProfile': 'profiles',
-    'SCurveProfile': 'profiles', 'StepProfile': 'profiles', 'TrapezoidalProfile': 'profiles',
-    'make_profile': 'profiles',
-    'SimState': 'trajectory', 'SimulationError': 'simulation', 'Simulator': 'simulation',
-    'Trajectory': 'trajectory', 'simulate': 'simulation', 'simulate_to_csv': 'simulation',
+    'Profile': 'dynamics.profiles', 'RampProfile': 'dynamics.profiles',
+    'SampledProfile': 'dynamics.profiles', 'SCurveProfile': 'dynamics.profiles',
+    'StepProfile': 'dynamics.profiles', 'TrapezoidalProfile': 'dynamics.profiles',
+    'make_profile': 'dynamics.profiles',
+    'SimState': 'dynamics.trajectory', 'Trajectory': 'dynamics.trajectory',
+    'SimulationError': 'dynamics.stepping', 'Simulator': 'dynamics.simulation',
+    'simulate': 'dynamics.simulation', 'simulate_to_csv': 'dynamics.simulation',
     'Compensator': 'compensation', 'feedforward_series': 'realtime',
     'RealtimePredictor': 'realtime',
     'resolve_config': 'config_io', 'params_document': 'config_io',
@@ -53,10 +55,9 @@ if TYPE_CHECKING:  # static analysers see the eager imports
     from .compensation import Compensator
     from .config_io import load_config, params_document, resolve_config
     from .derived import Derived, derive
-    from .modal import ModalResult, damping_matrix, modes, static_equilibrium
-    from .model import DriveModel
-    from .params import Config, ConfigError, check_usable, default_config
-    from .profiles import (
+    from .dynamics.modal import ModalResult, damping_matrix, modes, static_equilibrium
+    from .dynamics.model import DriveModel
+    from .dynamics.profiles import (
         Profile,
         RampProfile,
         SampledProfile,
@@ -65,9 +66,12 @@ if TYPE_CHECKING:  # static analysers see the eager imports
         TrapezoidalProfile,
         make_profile,
     )
+    from .dynamics.simulation import Simulator, simulate, simulate_to_csv
+    from .dynamics.stepping import SimulationError
+    from .dynamics.trajectory import SimState, Trajectory
+    from .params import Config, check_usable, default_config
     from .realtime import RealtimePredictor, feedforward_series
-    from .simulation import SimulationError, Simulator, simulate, simulate_to_csv
-    from .trajectory import SimState, Trajectory
+    from .validation import ConfigError
 
 
 def __getattr__(name: str) -> Any:

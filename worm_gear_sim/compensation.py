@@ -13,7 +13,7 @@ Design (computed from the NOMINAL model at construction / :meth:`Compensator.rec
    commands) is convolved with a short smooth kernel g: a B-spline whose knots are one
    command period apart (``node.publish_rate_hz``; degree 4, 5 ms at 1 kHz), optionally
    convolved with an input shaper (ZV / ZVD / EI impulses tuned to the antenna mode of
-   :func:`worm_gear_sim.modal.modes`).  The filtered reference r and its derivatives are
+   :func:`worm_gear_sim.dynamics.modal.modes`).  The filtered reference r and its derivatives are
    quadratures of the stored history with precomputed weights (the derivatives of g are
    analytic), exact for polynomial references.  A lead P(s) = 1 + p1 s + p2 s^2 is folded
    in so that F = g P = 1 + O(s^(n+1)), n = ``compensation.lag_order``: the filter has no
@@ -36,17 +36,18 @@ Design (computed from the NOMINAL model at construction / :meth:`Compensator.rec
 
 3. Across the mesh play (``mesh.backlash`` > 0, ``compensation.backlash_inverse``): the
    inverse also takes up half the play on the flank the move needs, the sign of the mesh
-   torque demand (:func:`worm_gear_sim.model.gear_torque_demand`) of the filtered reference
-   without the lead (two more rows of weights; the lead's overshoot at rate changes would
+   torque demand (:func:`worm_gear_sim.dynamics.model.gear_torque_demand`) of the filtered
+   reference without the lead (two more rows of weights; the lead's overshoot at rate changes would
    flip the flank back and forth).  A change of flank steps the correction by the whole
    play, so the worm crosses it in one command period; it is timely only with a preview
    (:func:`centring_preview`).  Measured in docs/compensation.md, "Across the mesh play".
 
 ``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one compiled kernel
 (:func:`compensation_kernel`: an interpolation walk over the history at ~120 quadrature
-nodes, the weights and the model inverse :func:`worm_gear_sim.model.inverse_theta1`), about
-2 us with the Python call (``benchmarks/bench_realtime.py``).  Structural damping
-(``damping.*``) is not in the inverse (zero by default; it only makes the drive ring less).
+nodes, the weights and the model inverse
+:func:`worm_gear_sim.dynamics.model.inverse_theta1`), about 2 us with the Python call
+(``benchmarks/bench_realtime.py``).  Structural damping (``damping.*``) is not in the
+inverse (zero by default; it only makes the drive ring less).
 
 Why no input shaper by default (see docs/compensation.md for the measurements): a
 lag-free filter (needed for constant-rate tracking) that contains a shaper one antenna
@@ -66,8 +67,8 @@ import numpy as np
 from numba import njit
 from scipy.interpolate import BSpline
 
-from .modal import modes
-from .model import DriveModel, gear_torque_demand, has_play, inverse_theta1, rest_flank
+from .dynamics.modal import modes
+from .dynamics.model import DriveModel, gear_torque_demand, has_play, inverse_theta1, rest_flank
 from .params import Config
 from .schema import Parameters
 

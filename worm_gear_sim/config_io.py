@@ -28,17 +28,18 @@ import yaml
 
 from .guarded_io import (
     MAX_CONFIG_BYTES,
-    MAX_CONFIG_DEPTH,
     GuardedFileError,
     guarded_yaml_load,
     read_text_file,
 )
-from .params import NODE_NAME, Config, ConfigError, config_from_mapping, suggest, value_kind
+from .params import Config, config_from_mapping
+from .schema import NODE_NAME
+from .validation import ConfigError, suggest, value_kind
 
 __all__ = ['load_config', 'default_config_path', 'PARAMS_FORMAT', 'typed_value', 'parse_set',
            'check_key', 'params_document', 'load_params_json', 'load_any_config',
            'resolve_config', 'params_json_dump', 'params_yaml_text', 'read_config_text',
-           'safe_yaml_load', 'MAX_CONFIG_BYTES', 'MAX_CONFIG_DEPTH']
+           'safe_yaml_load']
 
 PARAMS_FORMAT = 'worm_gear_sim.params/1'
 _RESERVED_JSON_KEYS = ('format', 'derived')
@@ -168,8 +169,8 @@ def params_document(cfg: Config) -> dict[str, Any]:
     """The fully resolved parameters: every config section plus a ``derived`` block
     (inertias, stiffnesses, lead per radian, ratio, mesh calibration, back-drive margin at
     rest, linear modes)."""
-    from .modal import modes
-    from .model import DriveModel
+    from .dynamics.modal import modes
+    from .dynamics.model import DriveModel
     doc: dict[str, Any] = {'format': PARAMS_FORMAT}
     doc.update(cfg.to_nested_dict())
     model = DriveModel(cfg)

@@ -5,7 +5,7 @@ inertias of the bodies (solid cylinders), torsional and axial shaft stiffnesses,
 travel per radian l_w, the lead angle, the reduction ``ratio`` = r_g / l_w and its inverse
 ``output_per_input`` = l_w / r_g (docs/model-notes.md, glossary).
 
-:class:`worm_gear_sim.model.DriveModel` holds them next to the kernel's packed parameters.
+:class:`worm_gear_sim.dynamics.model.DriveModel` holds them next to the kernel's packed parameters.
 """
 
 from __future__ import annotations

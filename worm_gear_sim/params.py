@@ -7,11 +7,13 @@ with unit, range, description; checked per field and across fields) plus the usa
 of the ways a set is built from outside: :func:`config_from_mapping`, :meth:`Config.replace`
 and :func:`~worm_gear_sim.config_io.load_config` raise :class:`ConfigError` naming the keys
 unless the whole set can be simulated (:func:`check_usable`, rules in
-:mod:`~worm_gear_sim.usability`).  The layering points one way: schema -> model, integrator,
-simulator -> usability -> params -> config_io, the CLI, the node.
+:mod:`~worm_gear_sim.dynamics.usability`).  The layering points one way: schema -> model,
+integrator, simulator -> usability -> params -> config_io, the CLI, the node.
 
-The schema's names (sections, :data:`ANGLE_LIMIT`, :data:`NODE_NAME`, :data:`SECTIONS`,
-``suggest``, ``value_kind``) are importable from here too.
+The schema's names (sections, :data:`~worm_gear_sim.schema.ANGLE_LIMIT`,
+:data:`~worm_gear_sim.schema.NODE_NAME`, ...) are imported from :mod:`~worm_gear_sim.schema`,
+:class:`~worm_gear_sim.validation.ConfigError` and the value rules from
+:mod:`~worm_gear_sim.validation`: each name has one home.
 """
 
 from __future__ import annotations
@@ -21,36 +23,13 @@ from dataclasses import dataclass
 from typing import Any
 
 from .schema import (
-    ANGLE_LIMIT,
-    DEG,
-    NODE_NAME,
-    PHASE_AT_MEAN_STIFFNESS,
-    SECTIONS,
-    VALUE_KINDS,
-    CompensationSettings,
-    ConfigError,
-    Damping,
-    Friction,
-    Geometry,
-    InputProfile,
-    Integrator,
-    Load,
-    Materials,
-    Mesh,
-    NodeSettings,
     Parameters,
-    Shafts,
     sections_from_mapping,
-    suggest,
-    value_kind,
 )
+from .validation import ConfigError, suggest
 
 __all__ = [
-    'ConfigError', 'Config', 'config_from_mapping', 'default_config', 'NODE_NAME',
-    'check_usable', 'ANGLE_LIMIT', 'SECTIONS', 'suggest', 'value_kind', 'VALUE_KINDS',
-    'Parameters', 'DEG', 'PHASE_AT_MEAN_STIFFNESS', 'Geometry', 'Materials', 'Shafts', 'Mesh',
-    'Friction', 'Damping', 'Load', 'Integrator', 'InputProfile', 'NodeSettings',
-    'CompensationSettings',
+    'Config', 'config_from_mapping', 'default_config', 'check_usable',
 ]
 
 
@@ -93,9 +72,9 @@ def check_usable(cfg: Parameters, changed: Iterable[str] | None = None) -> None:
     the defaults).  Called by :func:`config_from_mapping`, :meth:`Config.replace`,
     :func:`~worm_gear_sim.config_io.load_config` and the Simulator; cached per Config; pure
     (no shared state besides the cache), so it can run off the node's real-time path.  The
-    rules: :mod:`worm_gear_sim.usability` (imported here on first use: the model and numba
+    rules: :mod:`worm_gear_sim.dynamics.usability` (imported here on first use: the model and numba
     load only when a set is checked)."""
-    from .usability import check_usable as _check
+    from .dynamics.usability import check_usable as _check
     _check(cfg, changed)
 
 

@@ -26,7 +26,8 @@ from pathlib import Path
 from typing import Any
 
 from .config_io import default_config_path, load_config, read_config_text, safe_yaml_load
-from .params import Config, ConfigError
+from .params import Config
+from .validation import ConfigError
 
 __all__ = ['Drive', 'load_pedestal', 'default_pedestal_path', 'MAX_DRIVES']
 

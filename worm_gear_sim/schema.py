@@ -21,8 +21,8 @@ ROS node can declare descriptors and the CLI can print help from the same source
 
 SI units and radians throughout (REP 103).  The other jobs around the schema live next
 door: value checks and the "type from the default" rule in :mod:`~worm_gear_sim.validation`
-(:class:`ConfigError` is re-exported here), whether a set can be simulated in
-:mod:`~worm_gear_sim.usability`, derived quantities (inertias, stiffnesses, l_w, ratio) in
+(:class:`~worm_gear_sim.validation.ConfigError` among them), whether a set can be simulated in
+:mod:`~worm_gear_sim.dynamics.usability`, derived quantities (inertias, stiffnesses, l_w, ratio) in
 :mod:`~worm_gear_sim.derived`, YAML files in :mod:`~worm_gear_sim.config_io`
 (:func:`~worm_gear_sim.config_io.load_config`).
 """
@@ -35,19 +35,16 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from .validation import (
-    VALUE_KINDS,
     ConfigError,
     coerce,
     field_default,
     suggest,
-    value_kind,
 )
 
 __all__ = [
-    'ConfigError', 'Parameters', 'sections_from_mapping', 'NODE_NAME', 'ANGLE_LIMIT',
-    'SECTIONS', 'suggest', 'value_kind', 'VALUE_KINDS', 'Geometry', 'Materials', 'Shafts',
-    'Mesh', 'Friction', 'Damping', 'Load', 'Integrator', 'InputProfile', 'NodeSettings',
-    'CompensationSettings',
+    'Parameters', 'sections_from_mapping', 'NODE_NAME', 'ANGLE_LIMIT', 'LOAD_LIMIT', 'SECTIONS',
+    'DEG', 'PHASE_AT_MEAN_STIFFNESS', 'Geometry', 'Materials', 'Shafts', 'Mesh', 'Friction',
+    'Damping', 'Load', 'Integrator', 'InputProfile', 'NodeSettings', 'CompensationSettings',
 ]
 
 NODE_NAME = 'worm_gear_sim'
@@ -56,6 +53,8 @@ DEG = math.pi / 180.0
 #: the mesh phase and the approach q = l_w theta2 - r_g theta3 keep ~1e-7 of their resolution
 #: in double precision (a year of continuous slewing of the worm at 30 rad/s).
 ANGLE_LIMIT = 1e9
+#: Largest |load torque| [N m] a signal may take (the range of ``load.output_torque``).
+LOAD_LIMIT = 1e5
 # Mesh phase at which the mesh stiffness k_Y of the cosine contact mapping equals its mean
 # over the cycle (default parameters; test_model checks it)
 PHASE_AT_MEAN_STIFFNESS = 1.8373
@@ -239,7 +238,7 @@ class Load:
     """External load on the output (antenna). The paper has none (defaults zero)."""
 
     output_torque: float = _f(0.0, 'Constant external torque on theta4 (wind, unbalance)',
-                              'N*m', -1e5, 1e5)
+                              'N*m', -LOAD_LIMIT, LOAD_LIMIT)
     output_viscous_coefficient: float = _f(0.0, 'Viscous bearing drag on theta4', 'N*m*s/rad',
                                            0.0, 1e5)
 

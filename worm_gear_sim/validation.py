@@ -6,7 +6,7 @@ The cross-field checks of a whole set are the schema's (:mod:`~worm_gear_sim.sch
 ``validate``), which calls these per field.
 
 Whether a valid set can also be *simulated* is a separate question, answered by the model
-itself: :mod:`worm_gear_sim.usability`.
+itself: :mod:`worm_gear_sim.dynamics.usability`.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ __all__ = ['ConfigError', 'suggest', 'VALUE_KINDS', 'value_kind', 'field_default
 
 class ConfigError(ValueError):
     """An invalid parameter value or configuration file; ``key`` names the bad parameter,
-    ``keys`` every parameter blamed (a whole-set rule of :mod:`~worm_gear_sim.usability` may
-    name several)."""
+    ``keys`` every parameter blamed (a whole-set rule of
+    :mod:`~worm_gear_sim.dynamics.usability` may name several)."""
 
     def __init__(self, key: str, message: str, keys: Iterable[str] = ()) -> None:
         self.key = key

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 
 from worm_gear_sim import Config, simulate
-from worm_gear_sim.profiles import SampledProfile
+from worm_gear_sim.dynamics.profiles import SampledProfile
 
 out = {}
 for fric in ('set_valued', 'regularized'):

@@ -24,7 +24,7 @@ from ..config_io import (
     parse_set,
     resolve_config,
 )
-from ..params import ConfigError
+from ..validation import ConfigError
 from .common import PROG, CliError, Parser
 
 __all__ = ['main', 'build_parser', 'resolve_config', 'parse_set', 'params_document',
@@ -93,7 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _describe(exc: BaseException) -> tuple[int, str]:
-    from ..simulation import SimulationError
+    from ..dynamics.stepping import SimulationError
     if isinstance(exc, CliError):
         return 2, str(exc)
     if isinstance(exc, ConfigError):

@@ -28,7 +28,7 @@ from typing import Any
 
 from ..config_io import load_config
 from ..identification import FitOptions
-from ..params import ConfigError
+from ..validation import ConfigError
 from .common import CliError, add_config_options, config_from_args, say
 from .identify import _jsonable, write_params_yaml
 

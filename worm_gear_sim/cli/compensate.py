@@ -18,8 +18,8 @@ import numpy as np
 
 from ..compensation import Compensator
 from ..config_io import resolve_config
-from ..model import DriveModel
-from ..profiles import make_profile, motion_span
+from ..dynamics.model import DriveModel
+from ..dynamics.profiles import make_profile, motion_span
 from ..records import write_csv_columns
 from ..studies.compensation_eval import (
     DETUNINGS,

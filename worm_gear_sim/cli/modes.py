@@ -44,7 +44,7 @@ def register(sub: Any) -> None:
 
 # ---- modes -----------------------------------------------------------------------------
 def cmd_modes(args: argparse.Namespace) -> int:
-    from ..modal import modes
+    from ..dynamics.modal import modes
     cfg = config_from_args(args)
     for name in ('theta1', 'sliding_rate'):
         if not math.isfinite(getattr(args, name)):
@@ -90,7 +90,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
         params_json_dump(doc, args.json)
         print(f'wrote {args.json}')
     if args.plot:
-        from ..plotting import plot_modes
+        from .plotting import plot_modes
         plot_modes(res, args.plot)
         print(f'wrote {args.plot}')
     return 0

@@ -19,7 +19,7 @@ MAX_CSV_GB = 2.0                 # default --max-csv-size [GB]
 
 def wind_from_arg(text: str) -> Any:
     """``MEAN,INTENSITY[,TIME_SCALE[,SEED]]`` -> a WindLoad; CliError naming the option."""
-    from ..load import WindLoad
+    from ..dynamics.load import WindLoad
     parts = [x.strip() for x in str(text).split(',')]
     if not 2 <= len(parts) <= 4:
         raise CliError(f'--wind {text!r}: give MEAN,INTENSITY[,TIME_SCALE[,SEED]], e.g. '
@@ -123,8 +123,8 @@ def check_output_size(dt: float, t_end: float, stride: int, out: Path, max_gb: f
     Raises CliError naming the estimate and the ways out."""
     import shutil
 
-    from ..simulation import RUN_MEMORY_LIMIT
-    from ..trajectory import ROW_BYTES, csv_bytes_estimate
+    from ..dynamics.stepping import RUN_MEMORY_LIMIT
+    from ..dynamics.trajectory import ROW_BYTES, csv_bytes_estimate
     if not max_gb > 0:
         raise CliError(f'--max-csv-size must be > 0 GB, got {max_gb:g}')
     steps = int(math.floor(t_end / dt + 1e-9))
@@ -154,13 +154,13 @@ def check_output_size(dt: float, t_end: float, stride: int, out: Path, max_gb: f
 def cmd_simulate(args: argparse.Namespace) -> int:
     if args.bag:
         return _simulate_bag(args)
-    from ..load import SampledLoad
-    from ..model import DriveModel
-    from ..plotting import plot_trajectory
-    from ..profiles import Profile, SampledProfile, make_profile
+    from ..dynamics.load import SampledLoad
+    from ..dynamics.model import DriveModel
+    from ..dynamics.profiles import Profile, SampledProfile, make_profile
+    from ..dynamics.simulation import simulate, simulate_to_csv
     from ..records import read_csv
-    from ..simulation import simulate, simulate_to_csv
     from ..studies import equilibrium, move_end_time, oscillation_metrics
+    from .plotting import plot_trajectory
     if args.column and not args.input_csv:
         raise CliError('--column needs --csv')
     cfg = config_from_args(args)
@@ -240,11 +240,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _simulate_bag(args: argparse.Namespace) -> int:
-    """Replay a bag's command stream through the node's pipeline (worm_gear_sim.replay)."""
+    """Replay a bag's command stream through the node's pipeline
+    (worm_gear_sim.realtime.replay)."""
     import numpy as np
 
+    from ..realtime.replay import compare_with_recorded, replay
     from ..records import read_bag
-    from ..replay import compare_with_recorded, replay
     if args.column:
         raise CliError('--column applies to --csv, not --bag')
     if args.npz or args.output_rate is not None or args.record_every is not None:

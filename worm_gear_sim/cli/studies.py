@@ -73,8 +73,8 @@ def register(sub: Any) -> None:
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from ..plotting import plot_experiment
     from ..studies import EXPERIMENT_COLUMNS, experiment_table, move_end_time, rows_to_csv
+    from .plotting import plot_experiment
     cfg = config_from_args(args)
     if cfg.geometry.lead_convention != 'kinematic' or cfg.mesh.stiffness_model != 'nonlinear':
         say(args, 'note: the experiment sets lead_convention and the linear/nonlinear '
@@ -83,7 +83,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     outdir.mkdir(parents=True, exist_ok=True)
     rows, trajs = experiment_table(cfg)
     rows_to_csv(rows, EXPERIMENT_COLUMNS, outdir / 'experiment.csv')
-    from ..profiles import make_profile
+    from ..dynamics.profiles import make_profile
     t_move = move_end_time(cfg, make_profile(cfg.input))
     plot_experiment(trajs, rows, outdir / 'experiment.png', t_move=t_move)
     if args.traces:
@@ -189,10 +189,10 @@ ERROR_STUDIES = {
 
 def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> None:
     """``sweep play`` / ``gust`` / ``reversal``: CSV, PNG and a table per study."""
-    from ..plotting import plot_error_study, plot_reversal_study
     from ..studies import rows_to_csv
     from ..studies.backlash_reversal import REVERSAL_COLUMNS, reversal_rows
     from ..studies.play_gust import PLAY_GUST_COLUMNS, gust_rows, play_rows
+    from .plotting import plot_error_study, plot_reversal_study
     outdir = Path(args.out_dir)
     outdir.mkdir(parents=True, exist_ok=True)
     for n in names:
@@ -221,8 +221,8 @@ def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> N
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from ..plotting import plot_sweep
     from ..studies import ENVELOPE_COLUMNS, envelope_rows, rows_to_csv, run_cases
+    from .plotting import plot_sweep
     cfg = config_from_args(args)
     special = [n for n in (args.study or []) if n in ERROR_STUDIES]
     if special:
@@ -290,12 +290,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _sweep_traces(cfg: Config, study, path: Path) -> None:
-    from ..plotting import plot_traces
     from ..studies import move_end_time, run_case
+    from .plotting import plot_traces
     trajs = {}
     for c in study.cases:
         res = run_case(cfg, c.overrides, keep_trajectory=True)
         trajs[f'{c.series}: {c.label}' if len({x.series for x in study.cases}) > 1
               else c.label] = res['trajectory']
-    from ..profiles import make_profile
+    from ..dynamics.profiles import make_profile
     plot_traces(trajs, path, study.title, move_end_time(cfg, make_profile(cfg.input)))

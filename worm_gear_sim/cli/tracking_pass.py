@@ -16,11 +16,11 @@ from typing import Any
 import numpy as np
 
 from ..pedestal import load_pedestal
-from ..plotting import plot_pass
 from ..records import write_csv_columns
 from ..studies.tracking_pass import PassResult, pass_window, stream_pass
 from ..studies.tracking_pass import evaluate_pass as _evaluate
 from .common import CliError, fmt_table, say
+from .plotting import plot_pass
 
 __all__ = ['register', 'PASS_COLUMNS', 'write_pass', 'pass_table']
 

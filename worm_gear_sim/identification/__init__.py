@@ -1,7 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """Fit model parameters to measured records; the live model check is in
-:mod:`worm_gear_sim.model_check`.  Pure core (no rclpy; figures in :mod:`.plot`).
+:mod:`worm_gear_sim.realtime.model_check`.  Pure core (no rclpy; figures in :mod:`.plot`).
 
 One module per job:
 

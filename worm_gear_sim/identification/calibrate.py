@@ -40,8 +40,8 @@ from typing import Any
 
 import numpy as np
 
+from ..dynamics.profiles import Profile, SCurveProfile, TrapezoidalProfile
 from ..params import Config
-from ..profiles import Profile, SCurveProfile, TrapezoidalProfile
 from ..records import Record
 from .data import IdentificationError, record_from_model
 from .fit import FitOptions, identify

@@ -7,8 +7,8 @@ A *record* (:class:`~worm_gear_sim.records.Record`) is one measured run of the d
 times ``t`` [s], the commanded worm angle ``theta1`` [rad] at those times and at least one
 measured angle ``theta2``/``theta3``/``theta4`` [rad].  The model predicts a record by
 starting at rest in static equilibrium at ``theta1[0]`` and integrating the command
-interpolated linearly between the samples (:class:`~worm_gear_sim.profiles.SampledProfile`),
-exactly as ``simulate --csv``.
+interpolated linearly between the samples
+(:class:`~worm_gear_sim.dynamics.profiles.SampledProfile`), exactly as ``simulate --csv``.
 """
 
 from __future__ import annotations
@@ -18,12 +18,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..load import LoadSignal, SampledLoad
-from ..model import DriveModel
+from ..dynamics.load import LoadSignal, SampledLoad
+from ..dynamics.model import DriveModel
+from ..dynamics.profiles import Profile, SampledProfile, motion_span
+from ..dynamics.simulation import Simulator
 from ..params import Config
-from ..profiles import Profile, SampledProfile, motion_span
 from ..records import Record
-from ..simulation import Simulator
 from ..studies import dominant_frequency
 
 __all__ = ['OUTPUTS', 'MIN_SAMPLES', 'MAX_FIT_SAMPLES', 'decimation', 'IdentificationError',

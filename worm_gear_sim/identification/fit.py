@@ -8,8 +8,9 @@ Oscillatory records defeat a plain local fit (it locks onto the wrong period).  
 measures, compared in docs/identification.md, make it robust:
 
 * **frequency start**: the dominant frequency of each measured output (FFT after the move) is
-  matched to the nearest linearised mode of the model (:func:`worm_gear_sim.modal.modes`) by a
-  minimum-change Gauss-Newton step on the fitted keys before the time-domain fit;
+  matched to the nearest linearised mode of the model
+  (:func:`worm_gear_sim.dynamics.modal.modes`) by a minimum-change Gauss-Newton step on the
+  fitted keys before the time-domain fit;
 * **growing windows**: the fit runs on the first few periods after motion starts, then on
   longer windows, each starting from the previous estimate;
 * **multi-start**: several starts (the frequency start, the base, a scrambled Sobol set over
@@ -27,9 +28,10 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..modal import modes
-from ..params import Config, ConfigError
+from ..dynamics.modal import modes
+from ..params import Config
 from ..records import Record
+from ..validation import ConfigError
 from .data import IdentificationError, measured_frequencies
 from .parameters import fit_parameters
 from .problem import DIFF_STEP, Problem

@@ -24,11 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..modal import modes
-from ..model import DriveModel
+from ..dynamics.modal import modes
+from ..dynamics.model import DriveModel
+from ..dynamics.stepping import SimulationError
 from ..params import Config
 from ..records import Record
-from ..simulation import SimulationError
 from .data import OUTPUTS, motion_times, predict, rigid_motion
 
 __all__ = ['ALIASED_SHARE', 'DENSE_SPAN', 'OutputSampling', 'sampling_check',

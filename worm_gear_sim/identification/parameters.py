@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from ..params import Config, suggest
+from ..params import Config
+from ..validation import suggest
 from .data import IdentificationError
 
 __all__ = ['FITTABLE_SECTIONS', 'FitParameter', 'fit_parameters', 'apply_values']

@@ -12,10 +12,10 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..model import DriveModel
+from ..dynamics.model import DriveModel
+from ..dynamics.stepping import SimulationError
 from ..params import Config
 from ..records import Record
-from ..simulation import SimulationError
 from .data import OUTPUTS, predict, record_name
 
 __all__ = ['plot_fit']

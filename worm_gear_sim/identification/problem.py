@@ -26,11 +26,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..modal import modes
-from ..model import DriveModel
-from ..params import Config, ConfigError
+from ..dynamics.modal import modes
+from ..dynamics.model import DriveModel
+from ..dynamics.stepping import SimulationError
+from ..params import Config
 from ..records import Record
-from ..simulation import SimulationError
+from ..validation import ConfigError
 from .data import (
     OUTPUTS,
     IdentificationError,

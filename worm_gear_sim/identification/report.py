@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from ..model import DriveModel
+from ..dynamics.model import DriveModel
+from ..dynamics.stepping import SimulationError
 from ..params import Config
 from ..records import Record
-from ..simulation import SimulationError
 from .data import OUTPUTS, IdentificationError, normalised, predict, rigid_motion
 from .problem import DIFF_STEP, Problem, jacobian
 

@@ -32,10 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import norm
 
-from ..model import DriveModel
-from ..params import ConfigError
+from ..dynamics.model import DriveModel
+from ..dynamics.stepping import SimulationError
 from ..records import Record
-from ..simulation import SimulationError
+from ..validation import ConfigError
 from .data import normalised, predict
 from .parameters import apply_values, fit_parameters
 from .report import FitResult

@@ -9,8 +9,8 @@ One object turns a stream of reference samples theta1_ref into
   the sample's stamp, and ``compensated = theta1_ref + delta`` (what the servo should
   command for that instant);
 * **predictions** (:class:`Prediction`): the simulated drive
-  (:class:`~worm_gear_sim.simulation.Simulator`) at the instant they predict: theta1..theta4,
-  rates, shaft torques, the antenna positioning error and the worm error;
+  (:class:`~worm_gear_sim.dynamics.simulation.Simulator`) at the instant they predict:
+  theta1..theta4, rates, shaft torques, the antenna positioning error and the worm error;
 * **events** (:class:`Event`) the node logs once (warning): resyncs, clock restarts, a
   stale or resumed stream, overruns, simulation or compensation errors;
 * **counters** (:attr:`RealtimePredictor.counters`): integers with stable names for
@@ -91,7 +91,7 @@ Float64 path (``push_command`` + ``tick``; ``std_msgs/Float64`` ``worm_angle_com
     Unstamped commands are handed over with their reception time; ``tick(now_ns)`` at
     ``node.publish_rate_hz`` turns them into samples as ``node.command_timing`` says
     (``tick``: the newest command since the previous tick is a sample at the tick;
-    ``reception``; ``stream``: :class:`~worm_gear_sim.command_timing.StreamClock`; with
+    ``reception``; ``stream``: :class:`~worm_gear_sim.realtime.command_timing.StreamClock`; with
     ``sim_time`` the /clock reading at reception), feeds them through the same sample
     path (a sample not after the previous one replaces its value: ``merged_samples``),
     holds the last command up to the tick (or to the last corrected sample when a preview
@@ -118,9 +118,13 @@ Parameters are swapped with :meth:`RealtimePredictor.reconfigure`; the expensive
 (compensator design, the model's matrices) is :meth:`RealtimePredictor.prepare`, which the
 node can run off the real-time path.
 
-The package: :mod:`.predictor` (the state machine of these rules), :mod:`.drive` (the
+The package: :mod:`.predictor` (the state machine of these rules), :mod:`.admission` (the
+input checks and the confirmation of a jump, once for every input), :mod:`.drive` (the
 simulator side: advance, catch-up, predictions), :mod:`.outputs` (what a call returns, the
 counter names), :mod:`.offline` (``feedforward_series``, the offline twin); import from here.
+Beside the pipeline: :mod:`.command_timing` (sample times of an unstamped command stream),
+:mod:`.replay` (a recorded bag through the same pipeline) and :mod:`.model_check` (the live
+residual check of the model), imported from their modules.
 """
 
 from .offline import feedforward_series

@@ -1,7 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """The simulator side of the real-time pipeline: :class:`SimulatedDrive` advances the
-:class:`~worm_gear_sim.simulation.Simulator` with the applied command samples, never more
+:class:`~worm_gear_sim.dynamics.simulation.Simulator` with the applied command samples, never more
 than ``node.max_catch_up`` seconds for one call (the rest is skipped: an overrun), keeps
 the last good state after a simulation error, and returns :class:`Prediction` records.
 The rules of when it is driven are the pipeline's (:mod:`.predictor`)."""
@@ -11,7 +11,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from ..simulation import SimulationError, Simulator
+from ..dynamics.simulation import Simulator
+from ..dynamics.stepping import SimulationError
 from .outputs import Output, Prediction
 
 __all__ = ['SimulatedDrive', 'HOLD_EPS']

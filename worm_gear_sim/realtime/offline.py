@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..model import DriveModel
+from ..dynamics.model import DriveModel
 from ..params import Config
 from .predictor import RealtimePredictor
 

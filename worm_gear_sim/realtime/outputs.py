@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 
 from ..compensation import Compensator
-from ..model import DriveModel
+from ..dynamics.model import DriveModel
 from ..schema import Parameters
 
 __all__ = ['Reject', 'Correction', 'Prediction', 'Event', 'Output', 'Prepared',

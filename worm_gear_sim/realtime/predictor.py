@@ -1,10 +1,10 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """The real-time pipeline's state machine, :class:`RealtimePredictor`: the stamped path
-(``push``, ``hold``), the Float64 path (``push_command``, ``tick``), validation and the
-resync policy, and the sample path through the compensator; the simulator side is
-:class:`~.drive.SimulatedDrive`.  The rules are written out in the package's docstring
-(:mod:`worm_gear_sim.realtime`)."""
+(``push``, ``hold``), the Float64 path (``push_command``, ``tick``), the resync policy, and
+the sample path through the compensator; the input checks and the confirmation of a jump
+are :mod:`.admission`, the simulator side is :class:`~.drive.SimulatedDrive`.  The rules
+are written out in the package's docstring (:mod:`worm_gear_sim.realtime`)."""
 
 from __future__ import annotations
 
@@ -12,12 +12,13 @@ import collections
 import copy
 import math
 
-from ..command_timing import CommandQueue, StreamClock
 from ..compensation import Compensator
-from ..load import LOAD_LIMIT
-from ..model import DriveModel
+from ..dynamics.model import DriveModel
+from ..dynamics.simulation import Simulator
 from ..params import Config
-from ..simulation import Simulator
+from ..schema import LOAD_LIMIT
+from .admission import Admission, Candidate, JumpConfirmation
+from .command_timing import CommandQueue, StreamClock
 from .drive import SimulatedDrive
 from .outputs import COUNTER_NAMES, Correction, Event, Output, Prepared, Reject
 
@@ -26,7 +27,6 @@ __all__ = ['RealtimePredictor', 'STALE_PERIODS', 'STALE_MAX_INTERVAL', 'CONFIRM_
 STALE_PERIODS = 3.5          # tick periods without a sample: the reference rests
 STALE_MAX_INTERVAL = 0.05    # s: sample intervals longer than this are pauses, not a rate
 CONFIRM_SAMPLES = 3          # agreeing candidates that confirm a jump or a new timeline
-CHAIN_MAX_GAP_NS = 50_000_000  # candidates further apart do not confirm each other
 RESTART_MIN_BACK_NS = 100_000_000  # a stamp this much older may start a new timeline
 CLOCK_TOLERANCE_NS = 1_000_000  # now_ns may step back this much without a restart
 INFO_EVENTS = ('started', 'stream_resumed')
@@ -80,12 +80,14 @@ class RealtimePredictor:
             self.sim.reset(0.0, 0.0)
         self._drive = SimulatedDrive(self.sim, self.counters, self._event)
         self._queue = CommandQueue()
+        self._admission = Admission(0.0, 0.0, self.max_stamp_age_ns, 0)
+        self._chain = JumpConfirmation(self.confirm_samples, 0.0)      # stamped candidates
+        self._cmd_chain = JumpConfirmation(self.confirm_samples, 0.0)  # Float64 candidates
         self._set_config(self._design(model))
         self._stream = StreamClock(float(self._period_ns))
         self._last_now_ns: dict[str, int] = {}    # per clock: 'stamped' | 'command'
         self._last_tick_ns = 0
         self._cmd: float | None = None             # last accepted Float64 command
-        self._cmd_chain: list[float] = []
         self._init_state()
 
     # ---- configuration -----------------------------------------------------------------
@@ -115,11 +117,12 @@ class RealtimePredictor:
         self._comp = comp
         self.compensation_error = prepared.error
         self.preview_ns = int(round(config.compensation.preview_time * 1e9))
-        self._lead_ns = self.max_stamp_lead_ns + self.preview_ns
+        adm = self._admission
+        adm.lead_ns = self.max_stamp_lead_ns + self.preview_ns
+        adm.max_jump = self._chain.max_jump = self._cmd_chain.max_jump = node.max_command_jump
+        adm.max_abs = node.max_command_abs
         span = 0.0 if comp is None else comp.filter.lag_span + comp.preview
         self._rest_count = int(math.ceil(span * 1e9 / self._period_ns)) + 2
-        self._max_jump = node.max_command_jump
-        self._max_abs = node.max_command_abs
         if self.sim is not None:
             self.sim.interpolation = node.command_interpolation
 
@@ -154,7 +157,7 @@ class RealtimePredictor:
         self._queue.clear()
         self._stream.reset()
         self._cmd = None
-        self._cmd_chain = []
+        self._cmd_chain.clear()
         self._last_now_ns = {}
 
     def _init_state(self) -> None:
@@ -164,12 +167,11 @@ class RealtimePredictor:
         self._base: int | None = self._explicit_base
         self._last_ns = 0                        # last sample fed (real or rest) [ns]
         self._last_real_ns = 0                   # last accepted sample [ns]
-        self._last_real_x = 0.0
+        self._last_real_ref = 0.0                # its theta1_ref [rad]
         self._last_arrival_ns = 0                # caller's clock at that sample [ns]
         self._gap_ns = self._gap0_ns             # G at the last accepted sample
         self._rest_k = 0                         # rest samples inserted after it
-        self._pending: collections.deque = collections.deque()   # (ns, x, real)
-        self._chain: list[tuple[int, float, Reject]] = []   # resync candidates
+        self._pending: collections.deque = collections.deque()   # (ns, theta1_ref, real)
         self._stale = False
         self._delta = 0.0                        # last correction [rad]
         self._last_load_ns: int | None = None    # last accepted load sample [ns]
@@ -230,33 +232,24 @@ class RealtimePredictor:
         caller's clock at reception (same clock as the stamps); None skips the stamp
         window and the clock-restart check (offline)."""
         out = Output()
-        c = self.counters
-        c['samples_received'] += 1
+        self.counters['samples_received'] += 1
         stamp_ns = int(stamp_ns)
-        x = float(theta1_ref)
+        theta1_ref = float(theta1_ref)
         if now_ns is not None:
-            self._check_clock(int(now_ns), out, 'stamped')
-        reason = self._value_reason(x)
+            now_ns = int(now_ns)
+            self._check_clock(now_ns, out, 'stamped')
+        adm = self._admission
+        reason = adm.value_reason(theta1_ref)
         if reason is None:
-            if stamp_ns < 0:
-                reason = Reject.NEGATIVE_STAMP
-            elif stamp_ns == 0:
-                reason = Reject.ZERO_STAMP
-            elif now_ns is not None and stamp_ns < now_ns - self.max_stamp_age_ns:
-                reason = Reject.TOO_OLD
-            elif now_ns is not None and stamp_ns > now_ns + self._lead_ns:
-                reason = Reject.TOO_NEW
-            elif self._mode == 'command':   # a valid sample: the stamped stream takes over
-                self._restart(out, 'input_changed', 'stamped references after Float64 '
-                              'commands: the pipeline restarts on the stamped stream',
-                              drop=False)
-        if reason is None:
-            if self._started and stamp_ns == self._last_ns:
-                reason = Reject.DUPLICATE
-            elif self._started and stamp_ns < self._last_ns:
-                reason = Reject.OUT_OF_ORDER
-            elif self._started and abs(x - self._last_real_x) > self._max_jump:
-                reason = Reject.JUMP
+            reason = adm.stamp_reason(stamp_ns, now_ns)
+        if reason is None and self._mode == 'command':   # the stamped stream takes over
+            self._restart(out, 'input_changed', 'stamped references after Float64 '
+                          'commands: the pipeline restarts on the stamped stream', drop=False)
+        if reason is None and self._started:
+            reason = adm.order_reason(stamp_ns, self._last_ns)
+            if reason is None:
+                reason = adm.jump_reason(theta1_ref, self._last_real_ref)
+        arrival_ns = stamp_ns if now_ns is None else now_ns
         if reason is not None:
             restart = reason is Reject.OUT_OF_ORDER and \
                 self._last_ns - stamp_ns > RESTART_MIN_BACK_NS    # not a late packet
@@ -264,17 +257,19 @@ class RealtimePredictor:
                 # a resync candidate: counted when its fate is known (accepted by a
                 # confirmed resync, or rejected when the chain breaks)
                 out.rejected = reason
-                if self._candidate(stamp_ns, x, reason):
+                confirmed, broken = self._chain.offer(theta1_ref, reason, stamp_ns)
+                self._count_rejected(broken)
+                if confirmed:
                     out.rejected = None
                     self._resync(out)      # confirmed: the candidates are accepted
-                    self._last_arrival_ns = stamp_ns if now_ns is None else int(now_ns)
+                    self._last_arrival_ns = arrival_ns
             else:
                 self._reject(out, reason)
             out.stale = self._stale
             return out
         self._drop_candidates()
-        self._accept(stamp_ns, x, out, predict=True)
-        self._last_arrival_ns = stamp_ns if now_ns is None else int(now_ns)
+        self._accept(stamp_ns, theta1_ref, out, predict=True)
+        self._last_arrival_ns = arrival_ns
         out.stale = self._stale
         return out
 
@@ -293,26 +288,13 @@ class RealtimePredictor:
         c = self.counters
         c['load_samples_received'] += 1
         stamp_ns = int(stamp_ns)
-        x = float(torque)
-        reason: Reject | None = None
-        if math.isnan(x):
-            reason = Reject.NAN
-        elif math.isinf(x):
-            reason = Reject.INF
-        elif abs(x) > LOAD_LIMIT:
-            reason = Reject.OUT_OF_RANGE
-        elif stamp_ns < 0:
-            reason = Reject.NEGATIVE_STAMP
-        elif stamp_ns == 0:
-            reason = Reject.ZERO_STAMP
-        elif now_ns is not None and stamp_ns < int(now_ns) - self.max_stamp_age_ns:
-            reason = Reject.TOO_OLD
-        elif now_ns is not None and stamp_ns > int(now_ns) + self._lead_ns:
-            reason = Reject.TOO_NEW
-        elif self._last_load_ns is not None and stamp_ns == self._last_load_ns:
-            reason = Reject.DUPLICATE
-        elif self._last_load_ns is not None and stamp_ns < self._last_load_ns:
-            reason = Reject.OUT_OF_ORDER
+        torque = float(torque)
+        adm = self._admission
+        reason = adm.value_reason(torque, LOAD_LIMIT)
+        if reason is None:
+            reason = adm.stamp_reason(stamp_ns, None if now_ns is None else int(now_ns))
+        if reason is None:
+            reason = adm.order_reason(stamp_ns, self._last_load_ns)
         if reason is not None:
             c['rejected_load_samples'] += 1
             c['rejected_load_' + reason.value] += 1
@@ -322,9 +304,9 @@ class RealtimePredictor:
         if self.sim is None:
             return None
         if not self._started:               # applied when the simulation starts
-            self._load_pending.append((stamp_ns, x))
+            self._load_pending.append((stamp_ns, torque))
             return None
-        if not self.sim.push_load(self._time(stamp_ns), x):
+        if not self.sim.push_load(self._time(stamp_ns), torque):
             c['late_load_samples'] += 1
         return None
 
@@ -377,52 +359,49 @@ class RealtimePredictor:
         out = Output()
         c = self.counters
         c['commands_received'] += 1
-        x = float(theta1_ref)
-        reason = self._value_reason(x)
-        if reason is None and self._cmd is not None and abs(x - self._cmd) > self._max_jump:
-            reason = Reject.JUMP
-        if reason is not None:
-            ch = self._cmd_chain
-            if reason is Reject.JUMP:
-                if ch and abs(x - ch[-1]) <= self._max_jump:
-                    ch.append(x)
-                else:
-                    ch[:] = [x]
-            if len(ch) < self.confirm_samples or reason is not Reject.JUMP:
-                self._reject(out, reason)
-            else:
-                self._event(out, 'resync', f'worm_angle_command jumped from {self._cmd!r} '
-                            f'to {x!r} rad, confirmed by {len(ch)} commands: the '
-                            'simulation restarts at rest at the new level')
-                c['resyncs'] += 1
-                if self._started:
-                    self._release(None, out, predict=False)
-                self._init_state()
-                self._queue.clear()
-                self._cmd_chain = []
-                self._accept_command(receive_ns, x, out)
+        theta1_ref = float(theta1_ref)
+        reason = self._admission.value_reason(theta1_ref)
+        if reason is None:
+            reason = self._admission.jump_reason(theta1_ref, self._cmd)
+        if reason is None:
+            self._cmd_chain.clear()
+            self._accept_command(receive_ns, theta1_ref, out)
             return out
-        self._cmd_chain = []
-        self._accept_command(receive_ns, x, out)
+        confirmed = False
+        if reason is Reject.JUMP:   # each candidate is counted rejected when it comes
+            confirmed, _ = self._cmd_chain.offer(theta1_ref, reason)
+        if not confirmed:
+            self._reject(out, reason)
+            return out
+        self._event(out, 'resync', f'worm_angle_command jumped from {self._cmd!r} to '
+                    f'{theta1_ref!r} rad, confirmed by {len(self._cmd_chain)} commands: the '
+                    'simulation restarts at rest at the new level')
+        c['resyncs'] += 1
+        if self._started:
+            self._release(None, out, predict=False)
+        self._init_state()
+        self._queue.clear()
+        self._cmd_chain.clear()
+        self._accept_command(receive_ns, theta1_ref, out)
         return out
 
-    def _accept_command(self, receive_ns: int, x: float, out: Output) -> None:
+    def _accept_command(self, receive_ns: int, theta1_ref: float, out: Output) -> None:
         c = self.counters
-        self._cmd = x
+        self._cmd = theta1_ref
         out.accepted = True
         receive_ns = int(receive_ns)
         if self.sim_time:
-            self._queue.push('sim', receive_ns, x)
+            self._queue.push('sim', receive_ns, theta1_ref)
         else:
             timing = self.config.node.command_timing
             if timing == 'reception':
-                self._queue.push('wall', receive_ns, x)
+                self._queue.push('wall', receive_ns, theta1_ref)
             elif timing == 'stream':
-                self._queue.push('wall', self._stream(receive_ns), x)
+                self._queue.push('wall', self._stream(receive_ns), theta1_ref)
                 c['stream_relocks'] = self._stream.relocks
                 c['stream_outliers'] = self._stream.outliers
             else:                   # 'tick': no time of its own, restamped to the next tick
-                self._queue.push('wall', self._last_tick_ns, x)
+                self._queue.push('wall', self._last_tick_ns, theta1_ref)
 
     def tick(self, now_ns: int) -> Output:
         """Float64 path, at ``node.publish_rate_hz``: the queued commands become samples
@@ -471,16 +450,7 @@ class RealtimePredictor:
         out.stale = self._stale
         return out
 
-    # ---- internals: validation ---------------------------------------------------------
-    def _value_reason(self, x: float) -> Reject | None:
-        if math.isnan(x):
-            return Reject.NAN
-        if math.isinf(x):
-            return Reject.INF
-        if abs(x) > self._max_abs:
-            return Reject.OUT_OF_RANGE
-        return None
-
+    # ---- internals: rejection and resync -----------------------------------------------
     def _reject(self, out: Output, reason: Reject) -> None:
         out.rejected = reason
         self.counters['rejected_samples'] += 1
@@ -502,25 +472,15 @@ class RealtimePredictor:
             return True
         return False
 
-    def _candidate(self, ns: int, x: float, reason: Reject) -> bool:
-        """Keep a rejected sample as a resync candidate; True when confirmed."""
-        ch = self._chain
-        if ch:
-            pns, px, _ = ch[-1]
-            if not (0 < ns - pns <= CHAIN_MAX_GAP_NS and abs(x - px) <= self._max_jump):
-                self._drop_candidates()
-        ch.append((ns, x, reason))
-        return len(ch) >= self.confirm_samples
+    def _count_rejected(self, candidates: list[Candidate]) -> None:
+        """Candidates whose chain broke: rejected, each under its own reason."""
+        c = self.counters
+        for cand in candidates:
+            c['rejected_samples'] += 1
+            c['rejected_' + cand.reason.value] += 1
 
     def _drop_candidates(self) -> None:
-        """The chain broke: its candidates are rejected, each under its own reason."""
-        ch = getattr(self, '_chain', None)
-        if ch:
-            c = self.counters
-            for _, _, reason in ch:
-                c['rejected_samples'] += 1
-                c['rejected_' + reason.value] += 1
-            ch.clear()
+        self._count_rejected(self._chain.clear())
 
     @property
     def resync_candidates(self) -> int:
@@ -529,19 +489,21 @@ class RealtimePredictor:
         return len(self._chain)
 
     def _resync(self, out: Output) -> None:
-        chain, self._chain = self._chain, []
-        old_ns, old_x = self._last_real_ns, self._last_real_x
+        chain = self._chain.clear()
+        old_ns, old_ref = self._last_real_ns, self._last_real_ref
+        first = chain[0]
         self.counters['resyncs'] += 1
-        self._event(out, 'resync', f'reference moved from {old_x!r} rad at {old_ns} ns to '
-                    f'{chain[0][1]!r} rad at {chain[0][0]} ns, confirmed by {len(chain)} '
+        self._event(out, 'resync', f'reference moved from {old_ref!r} rad at {old_ns} ns to '
+                    f'{first.value!r} rad at {first.stamp_ns} ns, confirmed by {len(chain)} '
                     'samples: the simulation restarts at rest there')
         if self._started:
             self._release(None, out, predict=True)
         mode = self._mode
         self._init_state()
         self._mode = mode
-        for ns, x, _ in chain:
-            self._accept(ns, x, out, predict=True)
+        for cand in chain:
+            assert cand.stamp_ns is not None       # stamped candidates
+            self._accept(cand.stamp_ns, cand.value, out, predict=True)
 
     def _restart(self, out: Output, kind: str, message: str, drop: bool = True) -> None:
         if kind == 'input_changed':
@@ -564,13 +526,13 @@ class RealtimePredictor:
             self.last_error = message
 
     # ---- internals: the sample path ----------------------------------------------------
-    def _accept(self, ns: int, x: float, out: Output, predict: bool,
+    def _accept(self, ns: int, theta1_ref: float, out: Output, predict: bool,
                 merge: bool = False) -> None:
         c = self.counters
         if not self._started:
-            self._start(ns, x, predict)
-            self._event(out, 'started', f'first reference sample {x:.9g} rad: simulation '
-                        'started at rest')
+            self._start(ns, theta1_ref, predict)
+            self._event(out, 'started', f'first reference sample {theta1_ref:.9g} rad: '
+                        'simulation started at rest')
         elif ns - self._last_real_ns > self._gap_ns:     # a pause: the reference rested
             self._insert_rest(ns, out, predict)
         if self._stale:
@@ -581,12 +543,12 @@ class RealtimePredictor:
                 self._gap_ns = max(self._gap0_ns, 2 * min(ns - self._last_real_ns,
                                                           int(STALE_MAX_INTERVAL * 1e9)))
             self._rest_k = 0
-        self._last_real_ns, self._last_real_x = ns, x
+        self._last_real_ns, self._last_real_ref = ns, theta1_ref
         c['samples_accepted'] += 1
         out.accepted = True
-        self._feed(ns, x, True, out, predict)
+        self._feed(ns, theta1_ref, True, out, predict)
 
-    def _start(self, ns: int, x: float, predict: bool) -> None:
+    def _start(self, ns: int, theta1_ref: float, predict: bool) -> None:
         if self._base is None:
             self._base = ns
         t = (ns - self._base) * 1e-9
@@ -594,7 +556,7 @@ class RealtimePredictor:
         d = 0.0
         if comp is not None:
             try:
-                comp.reset(x, t)
+                comp.reset(theta1_ref, t)
                 d = comp.evaluate(t)      # the rest correction (static wind-up)
             except Exception as exc:  # noqa: BLE001 - a compensator bug must not stop us
                 self._compensation_failed(exc, Output())
@@ -609,7 +571,8 @@ class RealtimePredictor:
             # a restart: the samples of the previous time origin are dropped, their
             # latest value holds
             self.sim.hold_load(self.sim.load_torque)
-        self._drive.start(x + d if self.apply_compensation else x, x, t)
+        self._drive.start(theta1_ref + d if self.apply_compensation else theta1_ref,
+                          theta1_ref, t)
         if pending and self.sim is not None:
             for ns_l, v in pending:
                 if ns_l > ns:
@@ -624,7 +587,7 @@ class RealtimePredictor:
         """Rest samples (the last value) at last + G + k period, k < K, before
         ``until_ns`` (None: all), as the module doc says."""
         base = self._last_real_ns + self._gap_ns
-        x = self._last_real_x
+        theta1_ref = self._last_real_ref
         while self._rest_k < self._rest_count:
             r = base + self._rest_k * self._period_ns
             if until_ns is not None and r >= until_ns:
@@ -633,26 +596,27 @@ class RealtimePredictor:
             if r <= self._last_ns:
                 continue
             self.counters['rest_samples'] += 1
-            self._feed(r, x, False, out, predict)
+            self._feed(r, theta1_ref, False, out, predict)
 
-    def _feed(self, ns: int, x: float, real: bool, out: Output, predict: bool) -> None:
+    def _feed(self, ns: int, theta1_ref: float, real: bool, out: Output, predict: bool
+              ) -> None:
         """One sample into the compensator and (unless the compensation is applied) the
         simulator; release the corrections that became ready."""
         t = self._time(ns)
         comp = self._comp
         if comp is not None:
             try:
-                comp.add_sample(t, x)
+                comp.add_sample(t, theta1_ref)
             except Exception as exc:  # noqa: BLE001
                 self._compensation_failed(exc, out)
             p = self._pending
             if p and p[-1][0] == ns:             # a merge: the same time, a new value
-                p[-1] = (ns, x, p[-1][2] or real)
+                p[-1] = (ns, theta1_ref, p[-1][2] or real)
             else:
-                p.append((ns, x, real))
+                p.append((ns, theta1_ref, real))
         self._last_ns = ns
         if comp is None or not self.apply_compensation:
-            self._drive.drive(ns, t, x, x, out, predict)
+            self._drive.drive(ns, t, theta1_ref, theta1_ref, out, predict)
         if comp is not None:
             self._release(ns, out, predict)
             try:
@@ -668,7 +632,7 @@ class RealtimePredictor:
             return
         P = self.preview_ns
         while p and (newest_ns is None or p[0][0] + P <= newest_ns):
-            ns, x, real = p.popleft()
+            ns, theta1_ref, real = p.popleft()
             t = self._time(ns)
             try:
                 d = float(comp.evaluate(t))
@@ -679,10 +643,10 @@ class RealtimePredictor:
                 d = self._delta
             self._delta = d
             if real:
-                out.corrections.append(Correction(ns, x, d))
+                out.corrections.append(Correction(ns, theta1_ref, d))
                 self.counters['corrections'] += 1
             if self.apply_compensation:
-                self._drive.drive(ns, t, x + d, x, out, predict)
+                self._drive.drive(ns, t, theta1_ref + d, theta1_ref, out, predict)
 
     def _compensation_failed(self, exc: Exception, out: Output) -> None:
         self.counters['compensation_errors'] += 1

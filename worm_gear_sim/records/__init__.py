@@ -25,9 +25,6 @@ from .bag_io import (
     BAG_VERSION,
     DEFAULT_COMMAND_TOPICS,
     DEFAULT_MEASURED_TOPICS,
-    FLOAT64,
-    JOINT_STATE,
-    NODE_NAMESPACE,
     BagStream,
     bag_topics,
     prediction_streams,
@@ -41,8 +38,7 @@ from .record import Record, RecordError
 __all__ = ['Record', 'RecordError', 'read_csv', 'read_bag', 'read_record', 'write_bag',
            'BagStream', 'prediction_streams', 'write_streams', 'bag_topics',
            'ANGLE_UNITS', 'TIME_UNITS', 'DEFAULT_COMMAND_TOPICS',
-           'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE', 'FLOAT64', 'JOINT_STATE',
-           'write_csv_header', 'write_csv_columns', 'BAG_VERSION']
+           'DEFAULT_MEASURED_TOPICS', 'write_csv_header', 'write_csv_columns', 'BAG_VERSION']
 
 
 def read_record(path: str | Path, **kwargs: Any) -> Record:

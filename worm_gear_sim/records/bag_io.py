@@ -26,7 +26,6 @@ from ..topics import (
     JOINT_STATE,
     JOINT_STATES_TOPIC,
     MEASURED_TOPIC,
-    NODE_NAMESPACE,
     POSITIONING_ERROR_TOPIC,
     REFERENCE_TOPIC,
     WORM_ERROR_TOPIC,
@@ -35,8 +34,7 @@ from ..topics import (
 from .record import MEASURED_NAMES, Record, RecordError, valid_sorted
 
 __all__ = ['read_bag', 'bag_topics', 'BagStream', 'write_streams', 'prediction_streams',
-           'write_bag', 'DEFAULT_COMMAND_TOPICS', 'DEFAULT_MEASURED_TOPICS', 'NODE_NAMESPACE',
-           'FLOAT64', 'JOINT_STATE', 'BAG_VERSION']
+           'write_bag', 'DEFAULT_COMMAND_TOPICS', 'DEFAULT_MEASURED_TOPICS', 'BAG_VERSION']
 
 DEFAULT_COMMAND_TOPICS = (REFERENCE_TOPIC, COMMAND_TOPIC)
 DEFAULT_MEASURED_TOPICS = (MEASURED_TOPIC, JOINT_STATES_TOPIC)

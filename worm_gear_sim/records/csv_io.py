@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..load import LOAD_LIMIT
+from ..schema import LOAD_LIMIT
 from .record import ANGLE_NAMES, MEASURED_NAMES, Record, RecordError
 
 __all__ = ['read_csv', 'write_csv_header', 'write_csv_columns', 'ANGLE_UNITS', 'TIME_UNITS',

@@ -203,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
     from ..identification import FitOptions
     from ..identification.calibrate import calibrate
     from ..identification.data import IdentificationError
-    from ..params import ConfigError
+    from ..validation import ConfigError
     opts = _args(sys.argv[1:] if argv is None else argv)
     keys = [k.strip() for item in opts.fit for k in item.split(',') if k.strip()]
     measure = [o.strip() for o in opts.measure.split(',') if o.strip()]

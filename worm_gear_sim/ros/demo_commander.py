@@ -31,7 +31,7 @@ evaluation).  At the end, a summary and the same moves run offline through the c
 what the model says with and without compensation.  Exit code 0 after ``--duration``
 seconds of streaming, 1 if the node never answers.
 
-    python -m worm_gear_sim.demo_commander --duration 20 --pattern paper
+    python -m worm_gear_sim.ros.demo_commander --duration 20 --pattern paper
 """
 
 from __future__ import annotations
@@ -59,26 +59,21 @@ from ..params import Config
 from ..studies.demo_moves import (
     MoveSummary,
     MoveTracker,
-    command_pattern,
     demo_plan,
-    offline_moves,
-    pattern_segments,
 )
-from ..topics import private_topic
-from .demo_report import LINE_WIDTH, MOVE_HEADER, fit, format_move, format_status, summary, urad
-from .interface import (
+from ..topics import (
     COMMAND_TOPIC,
     COMPENSATED_COMMAND_TOPIC,
     DIAGNOSTICS_TOPIC,
     JOINT_STATES_TOPIC,
     POSITIONING_ERROR_TOPIC,
-    REFERENCE_DEPTH,
     REFERENCE_TOPIC,
+    private_topic,
 )
+from .demo_report import LINE_WIDTH, MOVE_HEADER, fit, format_move, format_status, summary, urad
+from .interface import REFERENCE_DEPTH
 
-__all__ = ['DemoCommander', 'MOVE_HEADER', 'MoveSummary', 'MoveTracker', 'command_pattern',
-           'format_move', 'format_status', 'main', 'offline_moves', 'pattern_segments',
-           'LINE_WIDTH']
+__all__ = ['DemoCommander', 'main']
 
 MAX_BURST = 100                 # samples per timer call after a stall (the node queues 1000)
 NODE_WAIT_S = 10.0              # stamped: wait for the node's /diagnostics at most this long

@@ -6,10 +6,12 @@ An I/O shell around the core's real-time pipeline
 :class:`~worm_gear_sim.realtime.RealtimePredictor`: this module holds the topics, QoS and
 timers, and each callback hands its message to the core in a line; every number it
 publishes comes from the core (the pipeline drives
-:class:`~worm_gear_sim.simulation.Simulator` and the feed-forward
+:class:`~worm_gear_sim.dynamics.simulation.Simulator` and the feed-forward
 :class:`~worm_gear_sim.compensation.Compensator`).  Beside it: :mod:`.interface` (topic
-names), :mod:`.params_bridge` and :mod:`.param_updates` (parameters), :mod:`.node_status`
-(/diagnostics), :mod:`.run` (the process: executor, spin, exit codes).
+names), :mod:`.params_bridge` and :mod:`.param_updates` (parameters), :mod:`.statuses`
+(/diagnostics), :mod:`.publishers` (the answers' publishers and messages), :mod:`.callbacks`
+(guards, throttled logs, one-joint samples), :mod:`.run` (the process: executor, spin, exit
+codes).
 
 Interface (SI units, rad; relative, remappable names; docs/node.md):
 
@@ -27,7 +29,7 @@ Interface (SI units, rad; relative, remappable names; docs/node.md):
   instant it predicts, plus ``~/positioning_error`` and ``~/worm_error``;
 * ``measured_joint_states`` (in, optional, JointState from the drive's encoders, names of
   ``node.joint_names``, sensor data QoS): the live model check
-  (:class:`~worm_gear_sim.model_check.ModelCheck`) publishes ``~/prediction_residual``
+  (:class:`~worm_gear_sim.realtime.model_check.ModelCheck`) publishes ``~/prediction_residual``
   (JointState, the measurement's stamp, measured - predicted per measured joint) and a
   ``model check`` status on /diagnostics that turns WARN when a joint's residual RMS over
   ``node.residual_window`` exceeds its ``node.residual_warn_rms``;
@@ -35,7 +37,7 @@ Interface (SI units, rad; relative, remappable names; docs/node.md):
   reliable, keep last 10) and ``~/compensated_trajectory`` (out, the same joint, header
   and timing, dense at ``node.publish_rate_hz``: reference + correction, meant to be
   remapped to a joint_trajectory_controller's ``~/joint_trajectory``; :mod:`.trajectory_bridge`,
-  the core's :class:`~worm_gear_sim.trajectories.TrajectoryCompensator`);
+  the core's :class:`~worm_gear_sim.trajectory_compensation.TrajectoryCompensator`);
 * ``/diagnostics``: counters of the pipeline and of this node, stale-stream status;
 * every model parameter is a declared ROS parameter (dotted names of
   :meth:`Config.to_flat_dict`), validated by the core (:meth:`Config.replace`, which proves
@@ -43,13 +45,12 @@ Interface (SI units, rad; relative, remappable names; docs/node.md):
   executor thread.
 
 Run ``worm_gear_sim_node --ros-args --params-file config/worm_gear_sim.yaml`` (or
-``python -m worm_gear_sim.node ...``; :mod:`.run`); ``--executor single_threaded``
+``python -m worm_gear_sim.ros ...``; :mod:`.run`); ``--executor single_threaded``
 overrides the ``node.executor`` parameter.
 """
 
 from __future__ import annotations
 
-import inspect
 import time
 import warnings
 from typing import Any
@@ -60,40 +61,39 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..command_timing import COMMAND_QUEUE_LENGTH, CommandQueue, StreamClock
-from ..config_io import load_config
-from ..modal import StepResolutionWarning, step_resolution_warning
-from ..model_check import ModelCheck
-from ..params import NODE_NAME, Config, ConfigError, config_from_mapping
-from ..realtime import STALE_PERIODS, Output, Prediction, RealtimePredictor
-from . import diagnostics as diag
-from .clock_guard import guard_clock_source
-from .interface import (
+from ..dynamics.modal import StepResolutionWarning, step_resolution_warning
+from ..params import Config, config_from_mapping
+from ..realtime import Output, RealtimePredictor
+from ..realtime.model_check import ModelCheck
+from ..schema import NODE_NAME
+from ..topics import (
     BACKDRIVE_MARGIN_TOPIC,
     COMMAND_TOPIC,
-    COMPENSATED_COMMAND_TOPIC,
     DIAGNOSTICS_TOPIC,
-    FEEDFORWARD_TOPIC,
-    JOINT_STATES_TOPIC,
     LOAD_TORQUE_TOPIC,
     MEASURED_TOPIC,
-    NODE_REJECT_REASONS,
-    POSITIONING_ERROR_TOPIC,
-    REFERENCE_DEPTH,
     REFERENCE_TOPIC,
-    REJECT_REASONS,
     RESIDUAL_TOPIC,
-    WORM_ERROR_TOPIC,
 )
-from .node_status import CallbackLoad, backdrive_status, model_check_status, node_statuses
+from . import diagnostics as diag
+from .callbacks import (
+    NS,
+    LogThrottle,
+    guard_message,
+    guard_timer,
+    one_joint_sample,
+    same_name_nodes,
+    stamp_ns,
+)
+from .clock_guard import guard_clock_source
+from .interface import NODE_REJECT_REASONS, REFERENCE_DEPTH
 from .param_updates import ParameterUpdates
-from .params_bridge import check_overrides, declare_config, parameter_type
+from .params_bridge import check_overrides, declare_config, file_defaults, parameter_type
+from .publishers import PredictionPublishing
+from .statuses import CallbackLoad, backdrive_status, model_check_status, node_statuses
 from .trajectory_bridge import TrajectoryBridge
 
-__all__ = ['WormGearSimNode', 'LogThrottle', 'file_defaults', 'COMMAND_TOPIC',
-           'REFERENCE_TOPIC', 'REFERENCE_DEPTH', 'JOINT_STATES_TOPIC', 'REJECT_REASONS',
-           'NODE_REJECT_REASONS', 'WATCH_PERIOD', 'CommandQueue', 'StreamClock',
-           'COMMAND_QUEUE_LENGTH', 'STALE_PERIODS']
+__all__ = ['WormGearSimNode', 'WATCH_PERIOD']
 
 LOG_THROTTLE_S = 2.0   # at most one log line per cause every 2 s (bursts of bad input)
 WATCH_PERIOD = 0.02    # s: the slow timer that notices a paused stamped stream
@@ -102,48 +102,9 @@ WATCH_PERIOD = 0.02    # s: the slow timer that notices a paused stamped stream
 STALE_MARGIN = 0.1
 NAME_CHECK_PERIOD = 1.0  # s: look for other nodes of this name (discovery takes a moment)
 NAME_CHECKS = 5          # times after the start
-_NS = 1_000_000_000
 
 
-class LogThrottle:
-    """One log line per cause every ``period`` seconds (monotonic clock); the lines held
-    back are counted and reported with the next line of that cause."""
-
-    def __init__(self, period: float) -> None:
-        self.period_ns = int(period * 1e9)
-        self._last: dict[str, int] = {}
-        self._held: dict[str, int] = {}
-
-    def __call__(self, cause: str, text: str) -> str:
-        """The line to log now for ``cause`` ('' while throttled)."""
-        now = time.monotonic_ns()
-        last = self._last.get(cause)
-        if last is not None and now - last < self.period_ns:
-            self._held[cause] = self._held.get(cause, 0) + 1
-            return ''
-        self._last[cause] = now
-        held = self._held.pop(cause, 0)
-        return f'{text} [{held} more like this held back]' if held else text
-
-
-def file_defaults() -> Config:
-    """Declaration defaults: the package's YAML (source tree or installed share/), falling
-    back to the code defaults, which equal it (a test checks this)."""
-    try:
-        return load_config()
-    except ConfigError:
-        return Config()
-
-
-def _timer_signature(fn: Any) -> Any:
-    # The EventsExecutor calls inspect.signature() on every timer callback (to decide on
-    # passing TimerInfo); a ready-made signature makes that O(1) (~20 us a call less).
-    fn.__signature__ = inspect.Signature()
-    return fn
-
-
-
-class WormGearSimNode(Node):
+class WormGearSimNode(PredictionPublishing, Node):
     """Real-time worm-gear prediction; see the module docstring for the interface.
 
     ``defaults`` sets the declaration defaults (``--params-file`` and ``parameter_overrides``
@@ -180,77 +141,61 @@ class WormGearSimNode(Node):
         self._last_monitor_ns = -(1 << 62)       # stamp of the last monitoring message
         self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
         guard_clock_source(self, self._on_bad_clock)
-
-        # --- ROS interfaces --------------------------------------------------------------
-        qos_state = QoSProfile(depth=10)
-        overrides = QoSOverridingOptions.with_default_policies
-        self._pub_js = self.create_publisher(JointState, JOINT_STATES_TOPIC, qos_state,
-                                             qos_overriding_options=overrides())
-        self._pub_err = self.create_publisher(Float64, POSITIONING_ERROR_TOPIC, qos_state)
-        self._pub_worm = self.create_publisher(Float64, WORM_ERROR_TOPIC, qos_state)
-        self._pub_ff = self.create_publisher(Float64, FEEDFORWARD_TOPIC,
-                                             QoSProfile(depth=REFERENCE_DEPTH))
-        self._pub_cc = self.create_publisher(JointState, COMPENSATED_COMMAND_TOPIC,
-                                             QoSProfile(depth=REFERENCE_DEPTH),
-                                             qos_overriding_options=overrides())
-        self._pub_diag = self.create_publisher(diag.DiagnosticArray, DIAGNOSTICS_TOPIC, 1)
-        self._sub_cmd = self.create_subscription(
-            Float64, COMMAND_TOPIC, self._guard_message(self._on_command),
-            qos_profile_sensor_data,
-            qos_overriding_options=overrides())
         self._check = ModelCheck(cfg.node.joint_names[1:], cfg.node.residual_window,
                                  cfg.node.residual_warn_rms)
-        self._pub_res = self.create_publisher(JointState, RESIDUAL_TOPIC, qos_state)
-        self._pub_margin = self.create_publisher(Float64, BACKDRIVE_MARGIN_TOPIC, qos_state)
-        self._f_margin = Float64()
-        self._sub_meas = self.create_subscription(
-            JointState, MEASURED_TOPIC, self._guard_message(self._on_measured),
-            qos_profile_sensor_data,
-            qos_overriding_options=overrides())
-        self._res = JointState()
         self._antenna_joint = cfg.node.joint_names[3]
-        self._sub_load = self.create_subscription(
-            JointState, LOAD_TORQUE_TOPIC, self._guard_message(self._on_load),
-            QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
-            qos_overriding_options=overrides())
-        self._sub_ref = self.create_subscription(
-            JointState, REFERENCE_TOPIC, self._guard_message(self._on_reference),
-            QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE),
-            qos_overriding_options=overrides())
-
-        # pre-built messages: a sample only rewrites their fields
-        self._js = JointState()
-        self._js.name = list(cfg.node.joint_names)
-        self._cc = JointState()
-        self._cc.name = [self._worm_input_joint]
-        self._cc.position = [0.0]
-        self._f_err, self._f_worm, self._f_ff = Float64(), Float64(), Float64()
-
+        self._create_prediction_publishers(cfg.node.joint_names)
+        self._create_monitoring_publishers()
+        self._create_subscriptions()
         # trajectories of the worm input joint (a ros2_control joint_trajectory_controller's
         # language): compensated whole on a worker thread (.trajectory_bridge)
         self.trajectories = TrajectoryBridge(
             self, lambda: {self.rt.model.config.node.joint_names[0]: self.rt.model}, self.counters,
             self._warn, self._publish, self._guard_message)
-
         check_overrides(self)
+        self._create_timers(cfg)
+        # parameter sets: validated on the parameter service, built in a worker thread
+        self._params = ParameterUpdates(self, self.rt, cfg, types, self.counters, self._warn,
+                                        self._guard)
+        self._log_ready(cfg)
 
-        # Timers: the tick runs only on the Float64 path, the held output only while the
-        # stamped stream is stale; the watch is slow.  They start cancelled.
+    def _create_monitoring_publishers(self) -> None:
+        """/diagnostics, ~/prediction_residual, ~/backdrive_margin and their messages."""
+        qos_state = QoSProfile(depth=10)
+        self._pub_diag = self.create_publisher(diag.DiagnosticArray, DIAGNOSTICS_TOPIC, 1)
+        self._pub_res = self.create_publisher(JointState, RESIDUAL_TOPIC, qos_state)
+        self._pub_margin = self.create_publisher(Float64, BACKDRIVE_MARGIN_TOPIC, qos_state)
+        self._res, self._f_margin = JointState(), Float64()
+
+    def _create_subscriptions(self) -> None:
+        """The inputs: Float64 commands, encoder angles, load torques, stamped references."""
+        overrides = QoSOverridingOptions.with_default_policies
+        reliable = QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+        for msg_type, topic, callback, qos in (
+                (Float64, COMMAND_TOPIC, self._on_command, qos_profile_sensor_data),
+                (JointState, MEASURED_TOPIC, self._on_measured, qos_profile_sensor_data),
+                (JointState, LOAD_TORQUE_TOPIC, self._on_load, reliable),
+                (JointState, REFERENCE_TOPIC, self._on_reference, reliable)):
+            self.create_subscription(msg_type, topic, self._guard_message(callback), qos,
+                                     qos_overriding_options=overrides())
+
+    def _create_timers(self, cfg: Config) -> None:
+        """The tick runs only on the Float64 path, the held output only while the stamped
+        stream is stale; the watch is slow.  They start cancelled.  Then diagnostics, and
+        the look for another node of this name (discovery needs a moment: a few times)."""
         period = 1.0 / cfg.node.publish_rate_hz
         self._tick_timer = self.create_timer(period, self._guard(self._on_tick))
         self._hold_timer = self.create_timer(period, self._guard(self._on_hold))
         self._watch_timer = self.create_timer(WATCH_PERIOD, self._guard(self._on_watch))
         for t in (self._tick_timer, self._hold_timer, self._watch_timer):
             t.cancel()
-        # parameter sets: validated on the parameter service, built in a worker thread
-        self._params = ParameterUpdates(self, self.rt, cfg, types, self.counters, self._warn,
-                                        self._guard)
         self._diag_timer = self.create_timer(cfg.node.diagnostic_period,
                                              self._guard(self.publish_diagnostics))
-        # another node of this name on the domain: discovery needs a moment, look twice
         self._name_checks = 0
         self._name_timer = self.create_timer(NAME_CHECK_PERIOD,
                                              self._guard(self._check_same_name))
+
+    def _log_ready(self, cfg: Config) -> None:
         self.get_logger().info(
             f'ready: dt = {self.sim.dt:g} s, {cfg.node.publish_rate_hz:g} Hz, ratio '
             f'1:{self.rt.model.derived.ratio:.6g}; waiting for '
@@ -285,30 +230,12 @@ class WormGearSimNode(Node):
 
     # ---- helpers -------------------------------------------------------------------------
     def _guard(self, callback: Any) -> Any:
-        """Timer callback that ends quietly when Ctrl-C / SIGTERM shut the context down
-        while it runs (a publish on a dying context raises); other errors propagate."""
-        context = self.context
-
-        def guarded() -> None:
-            try:
-                callback()
-            except Exception:
-                if context.ok():
-                    raise
-        return _timer_signature(guarded)
+        """Timer callback that ends quietly when the context shuts down (.callbacks)."""
+        return guard_timer(self.context, callback)
 
     def _guard_message(self, callback: Any) -> Any:
-        """Subscription callback that ends quietly when Ctrl-C / SIGTERM shut the context
-        down while it runs; other errors propagate."""
-        context = self.context
-
-        def guarded(msg: Any) -> None:
-            try:
-                callback(msg)
-            except Exception:
-                if context.ok():
-                    raise
-        return guarded
+        """Subscription callback that ends quietly when the context shuts down."""
+        return guard_message(self.context, callback)
 
     def _publish(self, pub: Any, msg: Any) -> None:
         """``pub.publish(msg)``; a failure is logged (throttled) and counted in
@@ -329,8 +256,7 @@ class WormGearSimNode(Node):
         """Warn (and report on /diagnostics) when other nodes on the domain have this
         node's fully qualified name: their topics, parameters and services would mix with
         this node's, silently.  Runs NAME_CHECKS times after the start."""
-        me = (self.get_name(), self.get_namespace())
-        n = sum(1 for nn in self.get_node_names_and_namespaces() if nn == me) - 1
+        n = same_name_nodes(self)
         if n > self.counters['same_name_nodes']:
             self.counters['same_name_nodes'] = n
             self.get_logger().warning(
@@ -361,22 +287,22 @@ class WormGearSimNode(Node):
         and prediction(s) published, all in this callback."""
         t0 = time.thread_time_ns()
         self._params.swap_prepared()
-        sample = self._one_joint_sample(msg, msg.position, 'position', self._worm_input_joint,
-                                        '', self._reject_message)
+        sample = one_joint_sample(msg, msg.position, 'position', self._worm_input_joint, '',
+                                  self._reject_message)
         if sample is None:
             return
-        stamp, x = sample
+        stamp, theta1_ref = sample
         if self._mode != 'stamped':
             self._enter_mode('stamped')
-        out = self.rt.push(stamp, x, now_ns=self._clock.now().nanoseconds)
-        self._handle(out, REFERENCE_TOPIC, stamp, value=x)
+        out = self.rt.push(stamp, theta1_ref, now_ns=self._clock.now().nanoseconds)
+        self._handle(out, REFERENCE_TOPIC, stamp, value=theta1_ref)
         self.load.busy(t0)
 
     def _on_load(self, msg: JointState) -> None:
         """One stamped load torque sample on the antenna (effort[0], N m): to the pipeline,
         which applies it in stamp order with the references."""
-        sample = self._one_joint_sample(msg, msg.effort, 'effort', self._antenna_joint,
-                                        'load_', self._reject_load)
+        sample = one_joint_sample(msg, msg.effort, 'effort', self._antenna_joint, 'load_',
+                                  self._reject_load)
         if sample is None:
             return
         stamp, torque = sample
@@ -385,22 +311,6 @@ class WormGearSimNode(Node):
             n = self.rt.counters['rejected_load_' + reason.value]
             self._warn('load_' + reason.value, f'rejected {LOAD_TORQUE_TOPIC}: '
                        f'load_{reason.value}; {n} so far')
-
-    @staticmethod
-    def _one_joint_sample(msg: JointState, values: Any, field: str, joint: str, prefix: str,
-                          reject: Any) -> tuple[int, float] | None:
-        """(stamp [ns], values[0]) of a one-joint JointState sample, or None after
-        ``reject(prefix + reason, text)``: no ``field[0]`` (``empty_<field>``) or a
-        ``name[0]`` other than ``joint`` (``wrong_joint``)."""
-        if len(values) == 0:
-            reject(f'{prefix}empty_{field}', f'no {field}[0]')
-            return None
-        names = msg.name
-        if len(names) and names[0] != joint:
-            reject(f'{prefix}wrong_joint', f'joint {names[0]!r}; this input takes {joint!r}')
-            return None
-        st = msg.header.stamp
-        return st.sec * _NS + st.nanosec, values[0]
 
     def _reject_load(self, reason: str, text: str) -> None:
         self.counters['rejected_' + reason] += 1
@@ -431,7 +341,7 @@ class WormGearSimNode(Node):
         self._params.swap_prepared()
         now = self._clock.now().nanoseconds          # the timer's own clock
         last, self._last_watch_ns = self._last_watch_ns, now
-        if now - last > 2 * WATCH_PERIOD * _NS:
+        if now - last > 2 * WATCH_PERIOD * NS:
             return
         if self._hold_timer.is_canceled():
             self._handle(self.rt.hold(now), '', 0)
@@ -480,9 +390,8 @@ class WormGearSimNode(Node):
             # on the wall clock the pipeline runs on the monotonic clock: the JointState
             # carries the ROS time of the tick
             self._handle(out, '', 0, stamp_ns=None if rt.sim_time else stamp.nanoseconds)
-            if rt.compensator is not None and self._pub_ff.get_subscription_count():
-                self._f_ff.data = rt.last_delta   # the correction of the newest sample
-                self._publish(self._pub_ff, self._f_ff)
+            if rt.compensator is not None:
+                self._publish_latest_feedforward(rt.last_delta)
         self.load.busy(t0)
 
     # ---- output ----------------------------------------------------------------------------
@@ -510,9 +419,7 @@ class WormGearSimNode(Node):
             check = self._check
             for p in preds:
                 check.predicted_ns(p.stamp_ns if stamp_ns is None else stamp_ns, p.theta)
-            if self._pub_js.get_subscription_count() or \
-                    self._pub_err.get_subscription_count() or \
-                    self._pub_worm.get_subscription_count():
+            if self._predictions_monitored():
                 rate = self.config.node.monitor_rate_hz
                 for p in preds:
                     ns = p.stamp_ns if stamp_ns is None else stamp_ns
@@ -535,8 +442,7 @@ class WormGearSimNode(Node):
         """Encoder angles: residual measured - predicted at the message's stamp (the
         reception time if unstamped) on ~/prediction_residual; the model check rejects and
         counts bad samples."""
-        st = msg.header.stamp
-        stamp = st.sec * _NS + st.nanosec
+        stamp = stamp_ns(msg.header.stamp)
         if stamp == 0:
             stamp = self._clock.now().nanoseconds
         try:
@@ -546,39 +452,10 @@ class WormGearSimNode(Node):
             return
         if self._pub_res.get_subscription_count():
             r = self._res
-            r.header.stamp.sec, r.header.stamp.nanosec = divmod(stamp, _NS)
+            r.header.stamp.sec, r.header.stamp.nanosec = divmod(stamp, NS)
             r.name = joints
             r.position = residual.tolist()
             self._publish(self._pub_res, r)
-
-    def _publish_corrections(self, corrections: list) -> None:
-        """Stamped path: ~/compensated_command and ~/feedforward for each correction."""
-        cc, ff = self._cc, self._f_ff
-        pub_cc = self._pub_cc.get_subscription_count()
-        pub_ff = self._pub_ff.get_subscription_count()
-        for c in corrections:
-            if pub_cc:
-                cc.header.stamp.sec, cc.header.stamp.nanosec = divmod(c.stamp_ns, _NS)
-                cc.position[0] = c.theta1_ref + c.delta
-                self._publish(self._pub_cc, cc)
-            if pub_ff:
-                ff.data = c.delta
-                self._publish(self._pub_ff, ff)
-
-    def _publish_prediction(self, p: Prediction, stamp_ns: int) -> None:
-        js = self._js
-        if self._pub_js.get_subscription_count():
-            js.header.stamp.sec, js.header.stamp.nanosec = divmod(stamp_ns, _NS)
-            js.position = p.position
-            js.velocity = p.velocity
-            js.effort = p.effort
-            self._publish(self._pub_js, js)
-        if self._pub_err.get_subscription_count():
-            self._f_err.data = p.positioning_error
-            self._publish(self._pub_err, self._f_err)
-        if self._pub_worm.get_subscription_count():
-            self._f_worm.data = p.worm_error
-            self._publish(self._pub_worm, self._f_worm)
 
     # ---- diagnostics -------------------------------------------------------------------------
     def diagnostic_statuses(self) -> list[diag.DiagnosticStatus]:

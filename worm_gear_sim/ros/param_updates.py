@@ -21,8 +21,9 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..params import Config, ConfigError
+from ..params import Config
 from ..realtime import RealtimePredictor
+from ..validation import ConfigError
 from .params_bridge import coerce_parameter, is_model_parameter, to_core_value
 
 __all__ = ['ParameterUpdates', 'SWAP_POLL_PERIOD']

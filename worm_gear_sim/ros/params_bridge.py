@@ -24,12 +24,15 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
-from ..params import SECTIONS, Config, ConfigError, value_kind
-from ..params import suggest as suggest_name
+from ..config_io import load_config
+from ..params import Config
+from ..schema import SECTIONS
+from ..validation import ConfigError, value_kind
+from ..validation import suggest as suggest_name
 
 __all__ = ['parameter_type', 'descriptor_for', 'declare_config', 'to_core_value',
            'coerce_parameter', 'is_model_parameter', 'check_overrides',
-           'MODEL_PARAMETER_NAMES']
+           'MODEL_PARAMETER_NAMES', 'file_defaults']
 
 #: Dotted names of all model parameters, in declaration order.
 MODEL_PARAMETER_NAMES: tuple[str, ...] = tuple(Config().to_flat_dict())
@@ -140,3 +143,12 @@ def coerce_parameter(param: Parameter, declared_type: int) -> Parameter:
         return Parameter(param.name, Parameter.Type.DOUBLE_ARRAY,
                          [float(v) for v in param.value])
     return param
+
+
+def file_defaults() -> Config:
+    """Declaration defaults: the package's YAML (source tree or installed share/), falling
+    back to the code defaults, which equal it (a test checks this)."""
+    try:
+        return load_config()
+    except ConfigError:
+        return Config()

@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     from ..pedestal import load_pedestal
     from ..studies.tracking_pass import evaluate_pass, pass_window, stream_pass
     from ..topics import TRAJECTORY_TOPIC
-    from ..trajectories import TrajectoryCompensator
+    from ..trajectory_compensation import TrajectoryCompensator
     from .trajectory_bridge import from_message, to_message
 
     drives = load_pedestal(opts.pedestal)

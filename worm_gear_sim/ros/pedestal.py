@@ -19,7 +19,8 @@ from typing import Any
 from rclpy.node import Node
 
 from ..pedestal import load_pedestal
-from .node import LOG_THROTTLE_S, LogThrottle, WormGearSimNode
+from .callbacks import LogThrottle
+from .node import LOG_THROTTLE_S, WormGearSimNode
 from .trajectory_bridge import TrajectoryBridge
 
 __all__ = ['PedestalNode', 'build_pedestal', 'PEDESTAL_NODE_NAME']

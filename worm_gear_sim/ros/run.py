@@ -4,7 +4,7 @@
 the exit codes (0 after a signal at any time, 2 after a one-line configuration error).
 
 Reached through :func:`worm_gear_sim.ros.startup.node_main` (console script
-``worm_gear_sim_node``, ``python -m worm_gear_sim.node``), which installs the start-up
+``worm_gear_sim_node``, ``python -m worm_gear_sim.ros``), which installs the start-up
 signal handlers before the heavy imports.
 """
 
@@ -24,16 +24,16 @@ from rclpy.signals import install_signal_handlers as install_rclpy_signal_handle
 from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 
-from ..params import ConfigError
+from ..validation import ConfigError
 from . import signals
+from .config_errors import check_params_files, clean_rcl_message, config_error
 from .node import WormGearSimNode
-from .startup_errors import check_params_files, clean_rcl_message, config_error
 
 RCLError = _rclpy_impl.RCLError          # RCLInvalidROSArgsError derives from it
 
 __all__ = ['main', 'make_executor', 'spin_until_shutdown', 'STARTUP_CONFIG_ERRORS']
 
-#: Errors of the parameters given at start-up: one line and exit code 2 (``startup_errors``).
+#: Errors of the parameters given at start-up: one line and exit code 2 (``config_errors``).
 #: ValueError covers numerically unusable values (LinAlgError is one) until the core proves
 #: a set usable itself.
 STARTUP_CONFIG_ERRORS = (ConfigError, ParameterException, ValueError, ArithmeticError)
@@ -84,7 +84,7 @@ def _parse_args(argv: list[str], pedestal: bool) -> argparse.Namespace:
 
 
 def main(args: list[str] | None = None, pedestal: bool = False) -> int:
-    """Entry point of ``worm_gear_sim_node`` and ``python -m worm_gear_sim.node`` (through
+    """Entry point of ``worm_gear_sim_node`` and ``python -m worm_gear_sim.ros`` (through
     :func:`worm_gear_sim.ros.startup.node_main`, which installs the signal handlers before
     the heavy imports).
 

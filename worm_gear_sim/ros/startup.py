@@ -2,13 +2,13 @@
 # Licensed under the Apache License, Version 2.0
 """The one start-up path of the node's entry points: signals first, then the heavy imports.
 
-``worm_gear_sim_node`` (console script) and ``python -m worm_gear_sim.node`` call
+``worm_gear_sim_node`` (console script) and ``python -m worm_gear_sim.ros`` call
 :func:`node_main`, which installs the start-up signal handlers (:mod:`.signals`) BEFORE
 numpy, scipy, numba and rclpy are imported (that takes seconds), so Ctrl-C or SIGTERM at any
 moment of the start-up ends the process quietly with exit code 0.  Then :mod:`.run` (the
 process) takes over: every configuration error (broken, missing or unreadable params file,
 malformed ``-p``, unknown or misspelt parameter, invalid or unusable value) ends it with one
-line on stderr naming the cause, and exit code 2 (:mod:`.startup_errors`).  This module
+line on stderr naming the cause, and exit code 2 (:mod:`.config_errors`).  This module
 imports only the standard library and :mod:`.signals`; :mod:`.run` is imported by
 :func:`node_main` after the handlers are in place, and never imports this module back.
 """

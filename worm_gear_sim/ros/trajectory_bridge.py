@@ -1,12 +1,12 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """``reference_trajectory`` in, ``~/compensated_trajectory`` out: the I/O of the core's
-:class:`~worm_gear_sim.trajectories.TrajectoryCompensator` for the drives of a node (one
+:class:`~worm_gear_sim.trajectory_compensation.TrajectoryCompensator` for the drives of a node (one
 drive: :class:`~.node.WormGearSimNode`; several: :mod:`.pedestal`).
 
 A ``trajectory_msgs/JointTrajectory`` is turned into the core's
-:class:`~worm_gear_sim.trajectories.Trajectory` in the callback (one line per rule broken,
-counted as ``rejected_trajectory_<reason>``, nothing forwarded); the compensation (seconds
+:class:`~worm_gear_sim.trajectory_compensation.Trajectory` in the callback (one line per rule
+broken, counted as ``rejected_trajectory_<reason>``, nothing forwarded); the compensation (seconds
 for a long trajectory) runs on one worker thread, in arrival order, so the node's
 per-sample paths are not held up by it; the worker publishes the dense compensated
 trajectory with the input's joint names, header and timing.
@@ -24,7 +24,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..topics import COMPENSATED_TRAJECTORY_TOPIC, TRAJECTORY_TOPIC
-from ..trajectories import (
+from ..trajectory_compensation import (
     TRAJECTORY_REJECT_REASONS,
     JointTrajectoryData,
     TrajectoryCompensator,

@@ -14,13 +14,13 @@ from typing import Any
 import numpy as np
 
 from ..derived import derive
-from ..load import LoadSignal
-from ..modal import modes
-from ..model import DriveModel
+from ..dynamics.load import LoadSignal
+from ..dynamics.modal import modes
+from ..dynamics.model import DriveModel
+from ..dynamics.profiles import SampledProfile, TrapezoidalProfile, motion_span
+from ..dynamics.simulation import simulate
 from ..params import Config
-from ..profiles import SampledProfile, TrapezoidalProfile, motion_span
 from ..realtime import feedforward_series
-from ..simulation import simulate
 
 __all__ = ['Scenario', 'paper_step_scenario', 'radar_slew_scenario', 'run_scenario',
            'move_metrics', 'CompensationRun', 'DETUNINGS', 'detuned', 'detuning_cases',
@@ -88,7 +88,7 @@ def _piecewise_accel_profile(t0: float, segments, period: float, t_total: float)
 
 def paper_step_scenario(cfg: Config, start: float = 0.01, t_end: float = 0.5,
                         period: float | None = None) -> Scenario:
-    """The paper's 18-step move (:class:`~worm_gear_sim.profiles.TrapezoidalProfile`:
+    """The paper's 18-step move (:class:`~worm_gear_sim.dynamics.profiles.TrapezoidalProfile`:
     input.target_angle in input.move_time with input.accel_time ramps, 0.1131 rad in 20 ms
     with 4 ms ramps by default) from ``start``, sampled every ``period`` (default: the node's
     command period, 1 / node.publish_rate_hz)."""

@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from ..modal import modes
-from ..model import DriveModel
+from ..dynamics.modal import modes
+from ..dynamics.model import DriveModel
+from ..dynamics.profiles import TrapezoidalProfile
 from ..params import Config
-from ..profiles import TrapezoidalProfile
 from .compensation_eval import Scenario, move_metrics, run_scenario
 
 __all__ = ['PAPER_LEAD', 'command_pattern', 'Segments', 'pattern_segments', 'MoveSummary',

@@ -13,11 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from ..modal import amplitude_time_step, static_equilibrium
-from ..model import DriveModel
+from ..dynamics.modal import amplitude_time_step, static_equilibrium
+from ..dynamics.model import DriveModel
+from ..dynamics.profiles import Profile, make_profile
+from ..dynamics.simulation import Simulator
 from ..params import Config, config_from_mapping
-from ..profiles import Profile, make_profile
-from ..simulation import Simulator
 from .cases import Case
 from .metrics import move_end_time, oscillation_metrics
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from ..dynamics.profiles import Profile
+from ..dynamics.trajectory import Trajectory
 from ..params import Config
-from ..profiles import Profile
-from ..trajectory import Trajectory
 from .engine import case_config, run_case
 from .metrics import zero_crossing_frequency
 
@@ -46,7 +46,7 @@ def experiment_table(base: Config, t_end: float | None = None,
                      profile: Profile | None = None) -> tuple[list[dict], dict[str, Trajectory]]:
     """Run the four experiment cases in this process; return the table rows and the
     trajectories keyed 'model/convention'."""
-    from ..modal import modes
+    from ..dynamics.modal import modes
     rows, trajs = [], {}
     for model, conv, ov in experiment_cases():
         res = run_case(base, ov, t_end=t_end, profile=profile, keep_trajectory=True)

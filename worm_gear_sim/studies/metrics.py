@@ -11,8 +11,8 @@ Definitions used everywhere (docs/studies.md):
   change of a sampled series); the post-move window starts at the first recorded step at
   or after ``t_move`` at which theta1 has its final value.
 * **equilibrium** ``theta_eq``: the static equilibrium of the drive at the final command
-  (:func:`worm_gear_sim.modal.static_equilibrium`; at rest the regularised friction is zero,
-  so this is the rest point the ringing decays to; it includes shaft/mesh wind-up from an
+  (:func:`worm_gear_sim.dynamics.modal.static_equilibrium`; at rest the regularised friction is
+  zero, so this is the rest point the ringing decays to; it includes shaft/mesh wind-up from an
   external load, if any).
 * **oscillation amplitude** of theta_i: ``max |theta_i(t) - theta_i_eq|`` over
   ``t >= t_move`` (every integration step is inspected, not a decimated record).
@@ -32,11 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from ..modal import static_equilibrium
-from ..model import DriveModel
+from ..dynamics.modal import static_equilibrium
+from ..dynamics.model import DriveModel
+from ..dynamics.profiles import Profile, SampledProfile, motion_span
+from ..dynamics.trajectory import Trajectory
 from ..params import Config
-from ..profiles import Profile, SampledProfile, motion_span
-from ..trajectory import Trajectory
 
 __all__ = ['METRIC_COLUMNS', 'move_end_time', 'equilibrium', 'oscillation_metrics',
            'dominant_frequency', 'zero_crossing_frequency', 'rows_to_csv']

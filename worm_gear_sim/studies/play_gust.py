@@ -18,8 +18,8 @@ phase to 100 ms into the second), and the mean over the last 50 ms (the static e
   feed-forward without its backlash inverse), compensated (with it) and ``compensated,
   preview`` (with it and the centring preview,
   :func:`~worm_gear_sim.compensation.centring_preview`).
-* Gusts: the wind model of :mod:`worm_gear_sim.load` with mean ``GUST_MEAN`` and time scale
-  ``GUST_TIME_SCALE`` over ``GUST_INTENSITIES``, averaged over ``GUST_SEEDS``.
+* Gusts: the wind model of :mod:`worm_gear_sim.dynamics.load` with mean ``GUST_MEAN`` and time
+  scale ``GUST_TIME_SCALE`` over ``GUST_INTENSITIES``, averaged over ``GUST_SEEDS``.
 """
 
 from __future__ import annotations
@@ -30,12 +30,12 @@ from typing import Any
 import numpy as np
 
 from ..compensation import centring_preview
-from ..load import WindLoad
+from ..dynamics.load import WindLoad
 from ..params import Config
 from .backlash_reversal import ARCMIN, REVERSAL_DAMPING
 from .compensation_eval import radar_slew_scenario, run_scenario
 
-__all__ = ['ARCMIN', 'PLAYS_ARCMIN', 'GUST_INTENSITIES', 'play_rows', 'gust_rows',
+__all__ = ['PLAYS_ARCMIN', 'GUST_INTENSITIES', 'play_rows', 'gust_rows',
            'PLAY_GUST_COLUMNS']
 
 PLAYS_ARCMIN = (0.0, 0.5, 1.0, 2.0, 3.0, 5.0)

@@ -17,7 +17,7 @@ overlapping trajectories (waypoints every ``waypoint_period`` s with positions a
 velocities, ``chunk`` s long, a new one every ``every`` s replacing the last in the middle
 of its move), the first with a lead-in from rest, the last with a lead-out to rest
 (LEAD_IN s each: the antenna is parked before and after the pass).  Every trajectory
-goes through the same :class:`~worm_gear_sim.trajectories.TrajectoryCompensator` as the
+goes through the same :class:`~worm_gear_sim.trajectory_compensation.TrajectoryCompensator` as the
 node's; the command each drive executes is stitched from the dense compensated
 trajectories the way the controller switches (each from its start until the next one's),
 and the drive is simulated on it and on the raw reference: antenna pointing error
@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model import DriveModel
+from ..dynamics.model import DriveModel
 from ..params import Config
-from ..trajectories import (
+from ..trajectory_compensation import (
     JointTrajectoryData,
     TrajectoryCompensator,
     antenna_error,

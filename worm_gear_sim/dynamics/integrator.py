@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 from .model import (
@@ -541,7 +540,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
     step k and theta1[k+1] at its end (theta1_dot likewise).  ``load``: the load torque on
     the antenna [N m] on the same grid (load[k+1] at the end of step k, linear within it),
     or an empty array for the constant ``p[P_TLOAD]``.  ``C``: the damping, 3 x 3, or 6 x 3
-    with the damping of the open mesh in rows 3..5 (:func:`~worm_gear_sim.modal.
+    with the damping of the open mesh in rows 3..5 (:func:`~worm_gear_sim.dynamics.modal.
     stepping_damping`: taken by the steps that start inside the play, so no structural
     damping acts across it).  Updates u, v, a in place and only
     with fully converged steps.  Every ``record_stride`` steps (if > 0) the end state is
@@ -691,27 +690,3 @@ def consistent_acceleration(p, C, u, v, theta1, theta1_dot, a):
         else:
             a[2] = a[1]
 
-
-@njit(cache=True, error_model='numpy')
-def advance_segment(p, C, u, v, a, theta1_now, theta1_dot_now, t0, k0, dt, n, cmd_t,
-                    cmd_value, slope, t_end, theta1_end, stats, ctl, load):
-    """Real-time stepping: n steps on the grid t0 + (k0 + j) dt with the command on the
-    segment theta1(t) = cmd_value + slope (t - cmd_t) up to the new sample (t_end,
-    theta1_end) (slope 0: held); ``load``: the load torque at the n + 1 grid points (empty:
-    the constant p[P_TLOAD]).  Same arithmetic as SampledProfile's linear interpolation
-    (np.interp), so stepping and batch agree bit for bit: a grid point at or after the
-    sample time takes the sample's value."""
-    th = np.empty(n + 1)
-    td = np.empty(n + 1)
-    th[0] = theta1_now
-    td[0] = theta1_dot_now
-    for j in range(1, n + 1):
-        grid = t0 + float(k0 + j) * dt
-        if slope == 0.0 or grid >= t_end:
-            th[j] = theta1_end if slope != 0.0 else cmd_value
-        else:
-            th[j] = cmd_value + slope * (grid - cmd_t)
-        td[j] = slope
-    empty3 = np.empty((0, 3))
-    return advance(p, C, u, v, a, th, td, dt, 0, empty3, empty3, empty3,
-                   np.empty((0, N_AUX)), stats, ctl, load)

@@ -9,8 +9,8 @@ turning the antenna back (the sign of ``load.output_torque``, Eq. 6 + load).
   seed.
 
 Both give ``torque(t)`` on arrays; the integrator takes the values on its own grid
-(:func:`worm_gear_sim.integrator.advance`, ``load[k+1]`` at the end of step k) and
-:func:`worm_gear_sim.simulation.simulate` starts the drive at rest under ``torque(0)``.
+(:func:`worm_gear_sim.dynamics.integrator.advance`, ``load[k+1]`` at the end of step k) and
+:func:`worm_gear_sim.dynamics.simulation.simulate` starts the drive at rest under ``torque(0)``.
 
 Wind model (docs/load.md).  The aerodynamic torque on a dish goes with the square of the
 wind speed, U + u(t), so with the gust ratio x(t) = u(t)/U
@@ -37,10 +37,9 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ['LoadSignal', 'SampledLoad', 'WindLoad', 'LOAD_LIMIT', 'load_grid']
+from ..schema import LOAD_LIMIT
 
-#: Largest |load torque| [N m] a signal may take (the range of ``load.output_torque``).
-LOAD_LIMIT = 1e5
+__all__ = ['LoadSignal', 'SampledLoad', 'WindLoad', 'load_grid']
 
 
 class LoadSignal:

@@ -3,7 +3,7 @@
 """What a run of the drive yields: :class:`SimState` (one instant) and :class:`Trajectory`
 (the time series of a run, its error columns and energy), written to CSV by
 :class:`TrajectoryCsvWriter` (streamed, chunk by chunk) with its size estimates, and the
-ring-down metric of a run.  The runs themselves: :mod:`worm_gear_sim.simulation`.
+ring-down metric of a run.  The runs themselves: :mod:`worm_gear_sim.dynamics.simulation`.
 """
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ from typing import TextIO
 
 import numpy as np
 
+from ..records import write_csv_header
+from ..schema import Parameters
 from .model import (
     AUX_CGKG,
     AUX_CWKW,
@@ -27,8 +29,6 @@ from .model import (
     DriveModel,
     energy_series,
 )
-from .records import write_csv_header
-from .schema import Parameters
 
 __all__ = ['SimState', 'Trajectory', 'TrajectoryCsvWriter', 'CSV_FORMAT', 'ROW_BYTES',
            'csv_bytes_estimate', 'ring_down']

@@ -3,12 +3,14 @@
 """The stepping integration of the drive: :class:`Stepper`, the Newmark integrator on a fixed
 grid t = t0 + k dt for real time (:meth:`~Stepper.advance_to`) and batch
 (:meth:`~Stepper.run`, :meth:`~Stepper.iter_run`), on the compiled kernel
-(:func:`worm_gear_sim.integrator.advance`).  It runs whatever model it is given: proving a
-parameter set usable is the job of :class:`worm_gear_sim.simulation.Simulator` (the public
+(:func:`worm_gear_sim.dynamics.integrator.advance`).  It runs whatever model it is given: proving a
+parameter set usable is the job of :class:`worm_gear_sim.dynamics.simulation.Simulator` (the public
 class: this plus the usable check and the diagnosis of a failed integration), whose check
-runs a short trial on a :class:`Stepper` (:mod:`worm_gear_sim.usability`).  What a run
+runs a short trial on a :class:`Stepper` (:mod:`worm_gear_sim.dynamics.usability`).  What a run
 yields (:class:`Trajectory`, :class:`SimState`, the CSV writer) is in
-:mod:`worm_gear_sim.trajectory`.
+:mod:`worm_gear_sim.dynamics.trajectory`.  The real-time segment of :meth:`~Stepper.advance_to`
+(the command on one interpolation segment, then the kernel) is compiled here too:
+:func:`advance_segment`.
 """
 
 from __future__ import annotations
@@ -17,9 +19,11 @@ import math
 from collections.abc import Callable, Iterator
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike
 
-from .derived import Derived
+from ..derived import Derived
+from ..schema import ANGLE_LIMIT, LOAD_LIMIT, Parameters
 from .integrator import (
     C_MODE,
     C_MU,
@@ -39,14 +43,13 @@ from .integrator import (
     STATUS_NONFINITE,
     STATUS_OK,
     advance,
-    advance_segment,
     consistent_acceleration,
     record_aux,
 )
 from .integrator import (
     sliding_speed as record_aux_speed,
 )
-from .load import LOAD_LIMIT, LoadSignal, load_grid
+from .load import LoadSignal, load_grid
 from .modal import (
     static_equilibrium,
     stepping_damping,
@@ -63,10 +66,34 @@ from .model import (
     with_load_torque,
 )
 from .profiles import Profile
-from .schema import ANGLE_LIMIT, Parameters
 from .trajectory import ROW_BYTES, SimState, Trajectory
 
 __all__ = ['Stepper', 'SimulationError', 'RUN_MEMORY_LIMIT', 'RATE_LIMIT', 'TIME_LIMIT']
+
+
+@njit(cache=True, error_model='numpy')
+def advance_segment(p, C, u, v, a, theta1_now, theta1_dot_now, t0, k0, dt, n, cmd_t,
+                    cmd_value, slope, t_end, theta1_end, stats, ctl, load):
+    """Real-time stepping: n steps on the grid t0 + (k0 + j) dt with the command on the
+    segment theta1(t) = cmd_value + slope (t - cmd_t) up to the new sample (t_end,
+    theta1_end) (slope 0: held); ``load``: the load torque at the n + 1 grid points (empty:
+    the model's constant load).  Same arithmetic as SampledProfile's linear interpolation
+    (np.interp), so stepping and batch agree bit for bit: a grid point at or after the
+    sample time takes the sample's value."""
+    th = np.empty(n + 1)
+    td = np.empty(n + 1)
+    th[0] = theta1_now
+    td[0] = theta1_dot_now
+    for j in range(1, n + 1):
+        grid = t0 + float(k0 + j) * dt
+        if slope == 0.0 or grid >= t_end:
+            th[j] = theta1_end if slope != 0.0 else cmd_value
+        else:
+            th[j] = cmd_value + slope * (grid - cmd_t)
+        td[j] = slope
+    empty3 = np.empty((0, 3))
+    return advance(p, C, u, v, a, th, td, dt, 0, empty3, empty3, empty3,
+                   np.empty((0, N_AUX)), stats, ctl, load)
 
 
 class SimulationError(RuntimeError):
@@ -117,7 +144,7 @@ class Stepper:
 
     ``model``: a :class:`DriveModel` (built once, shared with the compensator and the
     studies) or a Config (the stepper builds its model).  No usable check: use
-    :class:`worm_gear_sim.simulation.Simulator`, which adds it.
+    :class:`worm_gear_sim.dynamics.simulation.Simulator`, which adds it.
     """
 
     #: Default step limit of one :meth:`advance_to` call (1e8 steps: 400 s at the default
@@ -421,7 +448,7 @@ class Stepper:
             load: LoadSignal | None = None) -> Trajectory:
         """Integrate the profile from the current state to ``t_end`` and record every
         ``record_every`` steps (row 0 = current state), all in memory.  ``load``: a load
-        torque signal on the antenna (:mod:`worm_gear_sim.load`) in place of the model's
+        torque signal on the antenna (:mod:`worm_gear_sim.dynamics.load`) in place of the model's
         constant ``load.output_torque``.
 
         Raises ValueError before integrating when the recorded rows would take more than

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
+from ..schema import ANGLE_LIMIT, Parameters
 from .model import (
     DriveModel,
     forces,
@@ -20,7 +21,6 @@ from .model import (
     rigid_motion_vector,
     without_play,
 )
-from .schema import ANGLE_LIMIT, Parameters
 
 __all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix',
            'open_mesh_damping_matrix', 'stepping_damping',
@@ -49,7 +49,7 @@ def static_equilibrium(model: DriveModel | np.ndarray, theta1: float,
 
 def _rest_with_play(p: np.ndarray, theta1: float, tol: float, max_iter: int) -> np.ndarray:
     """Rest with a mesh clearance: under a load torque on the loaded flank, without one on
-    ``mesh.initial_flank`` (:func:`~worm_gear_sim.model.play_rest_shift`)."""
+    ``mesh.initial_flank`` (:func:`~worm_gear_sim.dynamics.model.play_rest_shift`)."""
     shift, loaded = play_rest_shift(p)
     if not loaded:
         return rigid_motion_vector(p) * theta1 - shift

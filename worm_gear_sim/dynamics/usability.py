@@ -40,7 +40,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .schema import ANGLE_LIMIT, ConfigError, Parameters
+from ..schema import ANGLE_LIMIT, Parameters
+from ..validation import ConfigError
 
 if TYPE_CHECKING:
     from .modal import ModalResult
@@ -261,7 +262,7 @@ def _trial_failure(cfg: Parameters, changed: Sequence[str], m: ModalResult,
 
 
 def diagnose(cfg: Parameters) -> str:
-    """Text for the message of :class:`~worm_gear_sim.simulation.SimulationError` with a
+    """Text for the message of :class:`~worm_gear_sim.dynamics.simulation.SimulationError` with a
     usable ``cfg``: 'likely cause: ...' naming the parameters when a known cause applies (a
     mode beyond the step's Nyquist limit, a friction regularisation below 1e-8 m/s), else
     'no known cause; ...' with the keys that differ from the defaults ('' if none)."""

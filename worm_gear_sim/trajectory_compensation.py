@@ -42,11 +42,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .compensation import centring_preview, with_preview
-from .model import DriveModel, has_play
+from .dynamics.model import DriveModel, has_play
+from .dynamics.profiles import SampledProfile
+from .dynamics.simulation import simulate
 from .params import Config
-from .profiles import SampledProfile
 from .realtime import feedforward_series
-from .simulation import simulate
 
 __all__ = ['jtc_sample', 'compensate_trajectory', 'trajectory_model', 'antenna_error',
            'CompensatedTrajectory',

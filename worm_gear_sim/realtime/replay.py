@@ -22,16 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from .params import Config
-from .records import (
-    FLOAT64,
-    JOINT_STATE,
-    Record,
-    RecordError,
-    read_bag,
-    write_bag,
-    write_csv_columns,
-)
+from ..params import Config
+from ..records import Record, RecordError, read_bag, write_bag, write_csv_columns
+from ..topics import FLOAT64, JOINT_STATE
 
 __all__ = ['Replay', 'replay', 'compare_with_recorded', 'REPLAY_CSV_COLUMNS']
 
@@ -141,7 +134,7 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
     the recording's clock).  ``end_time`` [s
     after the first command]: stop feeding samples stamped later, or keep the held
     prediction going up to it after the last one (the stream paused)."""
-    from .realtime import RealtimePredictor
+    from . import RealtimePredictor
     if record.command_stamps_ns is None:
         raise RecordError(f'{record.name}: no command stream to replay (a bag is needed)')
     kind = record.source.get('command_type')

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .schema import ConfigError, InputProfile
+from ..schema import InputProfile
+from ..validation import ConfigError
 
 __all__ = ['Profile', 'StepProfile', 'RampProfile', 'TrapezoidalProfile', 'SCurveProfile',
            'SampledProfile', 'make_profile', 'motion_span']
@@ -202,7 +203,7 @@ class SampledProfile(Profile):
     def from_csv(cls, path: str | Path, interpolation: str = 'linear') -> SampledProfile:
         """The ``t``, ``theta1`` columns of a CSV named by its header, with units, times
         relative to the first sample (see :func:`worm_gear_sim.records.read_csv`)."""
-        from .records import RecordError, read_csv
+        from ..records import RecordError, read_csv
         try:
             rec = read_csv(path)
         except RecordError as exc:

@@ -46,8 +46,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike
 
-from .derived import Derived, derive
-from .schema import Parameters
+from ..derived import Derived, derive
+from ..schema import Parameters
 
 # ---- packed parameter vector layout (compile-time constants for numba) -------------------
 P_JW, P_JG, P_J4 = 0, 1, 2

@@ -12,10 +12,11 @@ import time
 from collections.abc import Mapping
 from typing import Any
 
-from ..model_check import ModelCheck
 from ..realtime import RealtimePredictor
+from ..realtime.model_check import ModelCheck
+from ..topics import COMMAND_TOPIC, REFERENCE_TOPIC
 from . import diagnostics as diag
-from .interface import COMMAND_TOPIC, NODE_REJECT_REASONS, REFERENCE_TOPIC, REJECT_REASONS
+from .interface import NODE_REJECT_REASONS, REJECT_REASONS
 
 __all__ = ['CallbackLoad', 'node_statuses', 'model_check_status', 'backdrive_status',
            'HARDWARE_ID']

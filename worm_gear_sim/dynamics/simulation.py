@@ -2,14 +2,14 @@
 # Licensed under the Apache License, Version 2.0
 """Public simulation API: a stepping :class:`Simulator` for real time and a batch
 :func:`simulate` / :func:`simulate_to_csv` for studies.  Both drive the same compiled kernel
-(:func:`worm_gear_sim.integrator.advance`) on the same grid t = t0 + k dt, through
-:class:`~worm_gear_sim.stepping.Stepper` (the integration itself); the :class:`Simulator`
+(:func:`worm_gear_sim.dynamics.integrator.advance`) on the same grid t = t0 + k dt, through
+:class:`~worm_gear_sim.dynamics.stepping.Stepper` (the integration itself); the :class:`Simulator`
 adds what a caller with a parameter set needs: the set proven usable first
-(:func:`~worm_gear_sim.usability.check_usable`, whose trial runs a bare
-:class:`~worm_gear_sim.stepping.Stepper`), a warning for an under-resolved step, and the
+(:func:`~worm_gear_sim.dynamics.usability.check_usable`, whose trial runs a bare
+:class:`~worm_gear_sim.dynamics.stepping.Stepper`), a warning for an under-resolved step, and the
 likely cause of a failed integration in its :class:`SimulationError`.  What a run yields
 (:class:`Trajectory`, :class:`SimState`, the CSV writer) is in
-:mod:`worm_gear_sim.trajectory` (re-exported here).
+:mod:`worm_gear_sim.dynamics.trajectory`.
 """
 
 from __future__ import annotations
@@ -19,30 +19,24 @@ from pathlib import Path
 
 import numpy as np
 
+from ..schema import Parameters
 from .load import LoadSignal
 from .modal import StepResolutionWarning, step_resolution_warning
 from .model import DriveModel
 from .profiles import Profile, make_profile
-from .schema import Parameters
-from .stepping import RUN_MEMORY_LIMIT, SimulationError, Stepper
-from .trajectory import (  # re-exported: the results of a run, importable from here too
-    ROW_BYTES,
-    SimState,
+from .stepping import SimulationError, Stepper
+from .trajectory import (
     Trajectory,
     TrajectoryCsvWriter,
-    csv_bytes_estimate,
-    ring_down,
 )
 from .usability import check_usable, diagnose
 
-__all__ = ['Simulator', 'Trajectory', 'SimulationError', 'SimState', 'simulate',
-           'simulate_to_csv', 'TrajectoryCsvWriter', 'csv_bytes_estimate', 'ring_down',
-           'ROW_BYTES', 'RUN_MEMORY_LIMIT', 'KEEP_ROWS']
+__all__ = ['Simulator', 'simulate', 'simulate_to_csv', 'KEEP_ROWS']
 
 
 class Simulator(Stepper):
     """Stateful Newmark integrator of the worm-gear drive on a fixed grid t0 + k dt
-    (:class:`~worm_gear_sim.stepping.Stepper`: real time with :meth:`advance_to`, batch
+    (:class:`~worm_gear_sim.dynamics.stepping.Stepper`: real time with :meth:`advance_to`, batch
     with :meth:`run` / :meth:`iter_run`) for a parameter set proven usable.
 
     ``model``: a :class:`DriveModel` (built once, shared with the compensator and the
@@ -50,7 +44,7 @@ class Simulator(Stepper):
     set usable first (:func:`check_usable`, cached per Config; a :class:`ConfigError`
     naming the keys otherwise) and warn when the step does not resolve the highest mode.
     A failed integration's :class:`SimulationError` names its likely cause
-    (:func:`~worm_gear_sim.usability.diagnose`).
+    (:func:`~worm_gear_sim.dynamics.usability.diagnose`).
     """
 
     def __init__(self, model: DriveModel | Parameters, theta1: float = 0.0, t0: float = 0.0,
@@ -95,7 +89,7 @@ def simulate(model: DriveModel | Parameters, profile: Profile | None = None,
     """Batch run of ``model`` (a :class:`DriveModel` or a Config) from rest: the config's
     input profile (or ``profile``) to ``t_end``, in memory (up-front ValueError beyond
     ``max_bytes``, see :meth:`Simulator.run`; long runs: :func:`simulate_to_csv`).
-    ``load``: a load torque signal (:mod:`worm_gear_sim.load`) in place of the constant
+    ``load``: a load torque signal (:mod:`worm_gear_sim.dynamics.load`) in place of the constant
     ``load.output_torque``; the drive starts at rest under its value at t = 0."""
     config = model.config if isinstance(model, DriveModel) else model
     profile = profile if profile is not None else make_profile(config.input)
