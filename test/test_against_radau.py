@@ -18,10 +18,12 @@ from worm_gear_sim import Config, make_profile, simulate
 from worm_gear_sim.dynamics.model import P_J4, P_JG, P_JW, P_KG, mesh_forces, pack_parameters
 
 T_END = 0.025
-#: Radau's tolerance for the smooth (tanh-friction) references: converged for this check.
-#: Measured on the nonlinear case: the reference at 1e-9 differs from the one at 1e-11 by
-#: 3e-7 of theta2's and 7e-11 of theta4's oscillation amplitude, against the 1e-3 tolerance
-#: and a Newmark error of 2e-6 / 1e-8; it takes 2.6x less time.
+#: Radau's tolerance for the references: converged for these checks.  Measured: the smooth
+#: (tanh-friction) nonlinear reference at 1e-9 differs from the one at 1e-11 by 3e-7 of
+#: theta2's and 7e-11 of theta4's oscillation amplitude (Newmark's error there 2e-6 / 1e-8,
+#: the tolerance 1e-3), 2.6x faster; the event-driven references at 1e-9 have the same events
+#: as at 1e-10 and differ by <= 1.2e-6 of either amplitude (nonlinear, no flywheel), 1.8x
+#: faster.
 RADAU_RTOL = 1e-9
 BREAKS = (0.0, 0.004, 0.016, 0.020, T_END)      # kinks of the trapezoidal command
 
@@ -225,7 +227,7 @@ def _radau_set_valued_segments(cfg: Config, t_end: float):
                 ev = (lambda tt, yy, m: ev_speed(tt, yy, m))
                 ev.terminal, ev.direction = True, -mode
                 events = [ev]
-            sol = solve_ivp(rhs, (t, b), y, method='Radau', rtol=1e-10, args=(mode,),
+            sol = solve_ivp(rhs, (t, b), y, method='Radau', rtol=RADAU_RTOL, args=(mode,),
                             atol=np.r_[np.full(3, 1e-15), np.full(3, 1e-12)],
                             dense_output=True, events=events)
             assert sol.status >= 0, sol.message
