@@ -330,7 +330,11 @@ class Compensator:
         self.quasi_static = bool(cs.quasi_static)
         self.dynamic = bool(cs.model_inverse) and self.quasi_static
         self.preview = float(cs.preview_time)
-        res = modes(model)
+        # the antenna mode with the teeth in contact (with play, the modes of the linearised
+        # model are those of a free mesh: a rigid antenna and the gear alone)
+        res = modes(DriveModel(dataclasses.replace(
+            config, mesh=dataclasses.replace(config.mesh, backlash=0.0)))
+            if has_play(model.p) else model)
         # the antenna mode: largest theta4 participation (mode 1 for the default drive)
         k = int(np.argmax(np.abs(res.shapes[2, :])))
         self.mode_frequency_hz = float(res.frequencies_hz[k] or res.undamped_hz[k])
