@@ -44,7 +44,7 @@ from .model import (P_COUT, P_GAP_HALF, P_J4, P_JG, P_LW, DriveModel, gear_torqu
                     has_play)
 from .params import Config
 
-__all__ = ['CrossingPlan', 'FlankSeries', 'smooth_step', 'flank_series', 'plan_crossings',
+__all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step', 'flank_series', 'plan_crossings',
            'flank_offset', 'soft_feedforward_series', 'crossing_time',
            'CROSSING_PERIODS']
 
@@ -93,24 +93,35 @@ def flank_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
                  ) -> FlankSeries:
     """Run :class:`Compensator` on the samples as the real-time pipeline does (each sample's
     correction evaluated once the samples up to its time plus ``preview_time`` are in; the
-    reference rests at its ends) and return its corrections, flanks and torque demands."""
+    reference rests at its ends): its corrections (those of
+    :func:`~worm_gear_sim.realtime.feedforward_series`, bit for bit), flanks and torque
+    demands.  ``t``: float seconds, or integer nanoseconds (then ``FlankSeries.t`` is in
+    seconds from the first sample)."""
     m = DriveModel.of(model)
-    ts = np.asarray(t, float).reshape(-1)
+    t_in = np.asarray(t).reshape(-1)
     x = np.asarray(theta1_ref, float).reshape(-1)
-    if ts.size == 0 or ts.shape != x.shape:
+    if t_in.size == 0 or t_in.shape != x.shape:
         raise ValueError('t and theta1_ref must be equal-length, non-empty 1-D arrays')
-    # the pipeline's clock: nanoseconds from the first sample
-    ts = np.round((ts - ts[0]) * 1e9).astype(np.int64) * 1e-9
+    # the pipeline's clock: nanoseconds from the first sample (integer times: nanoseconds)
+    if np.issubdtype(t_in.dtype, np.integer):
+        rel = t_in.astype(np.int64) - np.int64(t_in[0])
+        t_out = rel * 1e-9
+    else:
+        t_out = t_in.astype(float)
+        rel = np.round((t_out - t_out[0]) * 1e9).astype(np.int64)
+    if rel.size > 1 and not np.all(np.diff(rel) > 0):
+        raise ValueError('times must be strictly increasing (to the nanosecond)')
+    ts = rel * 1e-9
     comp = Compensator(m)
     comp.reset(float(x[0]), float(ts[0]))
     rest = comp.flank
     n = ts.size
     delta, flank, demand = np.empty(n), np.empty(n), np.empty(n)
-    P = comp.preview
+    P_ns = int(round(comp.preview * 1e9))
     c = m.output_per_input
     j = 0
     for i in range(n):
-        while j < n and (j <= i or ts[j - 1] < ts[i] + P):    # as the pipeline releases
+        while j < n and (j <= i or rel[j - 1] < rel[i] + P_ns):  # as the pipeline does
             comp.add_sample(float(ts[j]), float(x[j]))
             j += 1
         delta[i] = comp.evaluate(float(ts[i]))
@@ -122,7 +133,7 @@ def flank_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
             demand[i] = 0.0
         comp.trim(float(ts[i]))
     step = float(m.p[P_GAP_HALF] / m.p[P_LW]) if comp.backlash_inverse else 0.0
-    return FlankSeries(np.asarray(t, float).reshape(-1), delta, flank, demand, step, rest)
+    return FlankSeries(t_out, delta, flank, demand, step, rest)
 
 
 def crossing_time(model: DriveModel | Config) -> float:
@@ -252,3 +263,16 @@ def soft_feedforward_series(model: DriveModel | Config, t: ArrayLike, theta1_ref
     planned = flank_offset(fs.t, plans, fs.rest_flank)
     delta = fs.delta + (planned - fs.flank) * fs.flank_step
     return delta, plans
+
+
+def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
+                           ) -> np.ndarray:
+    """The correction of a known trajectory (``compensate_trajectory``, the trajectory
+    bridge): with play and the backlash inverse, :func:`soft_feedforward_series`; else
+    :func:`~worm_gear_sim.realtime.feedforward_series` (the same corrections without play)."""
+    m = DriveModel.of(model)
+    cs = m.config.compensation
+    if has_play(m.p) and cs.backlash_inverse and cs.quasi_static and cs.enabled:
+        return soft_feedforward_series(m, t, theta1_ref)[0]
+    from .realtime import feedforward_series
+    return feedforward_series(m, t, theta1_ref)
