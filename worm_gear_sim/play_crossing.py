@@ -40,13 +40,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .compensation import Compensator
-from .model import (P_COUT, P_GAP_HALF, P_J4, P_JG, P_LW, DriveModel, gear_torque_demand,
-                    has_play)
+from .model import P_COUT, P_GAP_HALF, P_J4, P_JG, P_LW, DriveModel, gear_torque_demand, has_play
 from .params import Config
 
-__all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step', 'flank_series', 'plan_crossings',
-           'flank_offset', 'soft_feedforward_series', 'crossing_time',
-           'CROSSING_PERIODS']
+__all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step',
+           'flank_series', 'plan_crossings', 'coast_error', 'flank_offset',
+           'soft_feedforward_series', 'crossing_time', 'CROSSING_PERIODS', 'SHORTEST_PERIODS',
+           'CROSSING_TOLERANCE']
 
 #: The longest crossing in antenna-mode periods (:func:`crossing_time`).
 CROSSING_PERIODS = 1.0
