@@ -82,16 +82,16 @@ def plot_mismatch_study(axis_rows: Sequence[Mapping[str, Any]],
         ax = axes[1]
         n = len(drive_rows)
         xs = list(range(n))
-        w = 0.2
-        for j, (col, lab) in enumerate((('sector_nominal_x', 'sector, nominal model'),
-                                        ('sector_x', 'sector, calibrated'),
-                                        ('slew_nominal_x', 'slew, nominal model'),
-                                        ('slew_x', 'slew, calibrated'))):
-            ax.bar([x + (j - 1.5) * w for x in xs],
+        bars = [(f'{m}{suffix}', f'{m}, {what}') for m in ('sector', 'slew')
+                for suffix, what in (('_nominal_x', 'nominal model'), ('_x', 'calibrated'))
+                if f'{m}_x' in drive_rows[0]]
+        w = 0.8 / max(len(bars), 1)
+        for j, (col, lab) in enumerate(bars):
+            ax.bar([x + (j - 0.5 * (len(bars) - 1)) * w for x in xs],
                    [float(r[col]) for r in drive_rows], w, label=lab,
                    color=colors[j % len(colors)])
         for x, r in zip(xs, drive_rows):
-            if not r['accepted'] in (True, 'True'):
+            if r['accepted'] not in (True, 'True'):
                 ax.text(x, 1.0, 'refused', rotation=90, ha='center', va='bottom', fontsize=7)
         ax.axhline(30.0, color='k', ls=':', lw=1)
         ax.axhline(50.0, color='k', ls='--', lw=1)

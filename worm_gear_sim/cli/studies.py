@@ -88,6 +88,13 @@ def register(sub: Any) -> None:
                    help='mismatch: random drives to calibrate then compensate (default: '
                    '%(default)s; 0: none)')
     g.add_argument('--seed', type=int, default=0, help='mismatch: seed of the random drives')
+    g.add_argument('--moves', default='sector,slew', metavar='M1,M2',
+                   help='mismatch: moves, of sector, slew (default: %(default)s)')
+    g.add_argument('--calibrate-fit', metavar='KEY[,KEY...]', help='mismatch: the keys '
+                   'calibrated (default: mesh.backlash, load.output_torque, '
+                   'load.output_viscous_coefficient, mesh.gear_tooth_stiffness_multiplier)')
+    g.add_argument('--fit-strategy', default='robust', metavar='NAME',
+                   help="mismatch: the calibration fit's strategy (default: %(default)s)")
     p.set_defaults(func=cmd_sweep)
 
 
@@ -254,13 +261,16 @@ def _crossing_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None
 
 def _mismatch_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None:
     from ..identification import FitOptions
+    from ..identification.fit import STRATEGIES
     from ..studies import rows_to_csv
     from ..studies.mismatch import (
         CALIBRATION_COLUMNS,
+        CALIBRATION_KEYS,
         MISMATCH_AXES,
         MISMATCH_COLUMNS,
         MISMATCH_DRIVE,
         MISMATCH_ERRORS,
+        MOVES,
         calibration_rows,
         mismatch_rows,
         summary,
@@ -276,8 +286,18 @@ def _mismatch_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None
         raise CliError('--errors must be shares > -1 (e.g. -0.3,0,0.3)')
     if args.drives < 0:
         raise CliError(f'--drives {args.drives}: must be >= 0')
+    moves = [m.strip() for m in args.moves.split(',') if m.strip()]
+    if not moves or any(m not in MOVES for m in moves):
+        raise CliError(f'--moves {args.moves!r}: choose from {", ".join(MOVES)}')
+    keys = [k.strip() for k in args.calibrate_fit.split(',') if k.strip()] \
+        if args.calibrate_fit else list(CALIBRATION_KEYS)
+    for k in keys:
+        check_key(k)
+    if args.fit_strategy not in STRATEGIES:
+        raise CliError(f'--fit-strategy {args.fit_strategy!r}: one of '
+                       f'{", ".join(STRATEGIES)}')
     drive = cfg.replace(MISMATCH_DRIVE)
-    rows = mismatch_rows(drive, axes, errors)
+    rows = mismatch_rows(drive, axes, errors, moves)
     rows_to_csv(rows, MISMATCH_COLUMNS, outdir / 'mismatch.csv')
     say(args, fmt_table(rows, [('move', 'move', ''), ('axis', 'axis', ''),
                                ('error', 'error', '+.0%'),
@@ -286,20 +306,22 @@ def _mismatch_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None
                                ('improvement', 'improvement', '.3g')]))
     drives: list[dict] = []
     if args.drives:
-        opts = FitOptions(serial=True) if args.serial else \
-            FitOptions(workers=args.workers, scheduler=args.scheduler)
+        opts = FitOptions(strategy=args.fit_strategy, serial=True) if args.serial else \
+            FitOptions(strategy=args.fit_strategy, workers=args.workers,
+                       scheduler=args.scheduler)
 
         def told(r: dict) -> None:
             say(args, f'drive {r["drive"]}: play {r["play_arcmin"]:.2f} arcmin, load '
                  f'{r["load_torque"]:.2f} N m, drag {r["drag"]:.1f} N m s/rad, teeth '
                  f'x{r["teeth"]:.2f}, bearings x{r["bearings"]:.2f}: '
                  f'{"accepted" if r["accepted"] else "refused"} in '
-                 f'{r["calibration_s"]:.0f} s; sector {r["sector_x"]:.3g}x, slew '
-                 f'{r["slew_x"]:.3g}x (nominal model {r["sector_nominal_x"]:.3g}x, '
-                 f'{r["slew_nominal_x"]:.3g}x)')
-        drives = calibration_rows(cfg, args.drives, args.seed, options=opts, progress=told)
+                 f'{r["calibration_s"]:.0f} s; '
+                 + ', '.join(f'{m} {r[m + "_x"]:.3g}x (nominal model '
+                             f'{r[m + "_nominal_x"]:.3g}x)' for m in moves))
+        drives = calibration_rows(cfg, args.drives, args.seed, keys=keys, options=opts,
+                                  moves=moves, progress=told)
         rows_to_csv(drives, CALIBRATION_COLUMNS, outdir / 'mismatch_drives.csv')
-        for col in ('sector_x', 'slew_x'):
+        for col in (m + '_x' for m in moves):
             sm = summary(drives, col)
             say(args, f'calibrate-then-compensate, {col[:-2]}: min {sm["min"]:.3g}x, median '
                  f'{sm["median"]:.3g}x, max {sm["max"]:.3g}x '

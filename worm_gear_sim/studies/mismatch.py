@@ -263,6 +263,7 @@ def calibration_rows(base: Config, n: int, seed: int = 0,
                      limits: Sequence[float] = CALIBRATION_LIMITS,
                      noise_rad: float = 1e-6, encoder_bits: int = 20,
                      sample_rate: float = 1e4, options: Any = None,
+                     moves: Sequence[str] = tuple(MOVES),
                      progress: Callable[[dict], None] | None = None) -> list[dict]:
     """Calibrate ``keys`` of ``base`` on each random drive (its records simulated, with
     noise and encoder steps), then compensate both moves with the calibrated model
@@ -291,7 +292,7 @@ def calibration_rows(base: Config, n: int, seed: int = 0,
                         'fit_load_torque': fitted.load.output_torque,
                         'fit_drag': fitted.load.output_viscous_coefficient,
                         'fit_teeth': fitted.mesh.gear_tooth_stiffness_multiplier})
-        for mv in MOVES:
+        for mv in moves:
             move = MOVES[mv](drive)
             raw = _rms(antenna_error(drive, move.t, move.theta1, move.theta1))
             row[f'{mv}_raw_rms'] = raw
