@@ -59,8 +59,8 @@ CROSSING_TOLERANCE = 1e-2
 def smooth_step(u: ArrayLike) -> np.ndarray:
     """0 -> 1 on u in [0, 1] with zero first, second and third derivatives at both ends
     (the degree-7 'smootherstep'); 0 before, 1 after."""
-    u = np.clip(np.asarray(u, float), 0.0, 1.0)
-    return u ** 4 * (35.0 + u * (-84.0 + u * (70.0 - 20.0 * u)))
+    v: np.ndarray = np.clip(np.asarray(u, float), 0.0, 1.0)
+    return v ** 4 * (35.0 + v * (-84.0 + v * (70.0 - 20.0 * v)))
 
 
 @dataclass(frozen=True)
