@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from worm_gear_sim import Config
-from worm_gear_sim.model import AUX_Q, P_GAP_HALF, P_LW, DriveModel
+from worm_gear_sim.model import AUX_Q, DriveModel
 from worm_gear_sim.play_crossing import (
     flank_series,
     smooth_step,
@@ -82,7 +82,7 @@ def test_the_crossings_follow_the_demand_and_keep_the_rest_offset(scan):
         inside |= (move.t >= p.start) & (move.t < p.end)
     assert np.array_equal(soft[~inside], fs.delta[~inside])
     assert not np.array_equal(soft[inside], fs.delta[inside])
-    h_input = m.p[P_GAP_HALF] / m.p[P_LW]          # half the play in worm angle
+    h_input = fs.flank_step                         # half the play in worm angle
     steps = (soft - fs.delta)[inside] / h_input    # planned flank - streaming flank
     assert np.all(np.abs(steps) <= 2.0 + 1e-12)
     # at rest: a move back, no load, from the drive flank: to the coast flank to
@@ -96,7 +96,8 @@ def test_the_crossings_follow_the_demand_and_keep_the_rest_offset(scan):
     assert [(p.start_flank, p.end_flank) for p in pl] == [(1.0, -1.0), (-1.0, 1.0)]
     assert all(p.end - p.start > 3e-3 for p in pl)
     assert d_soft[-1] == d_step[-1]
-    assert d_soft[-1] == pytest.approx(mr.p[P_GAP_HALF] / mr.p[P_LW], rel=1e-9)
+    half = 0.5 * rest.mesh.backlash / mr.output_per_input    # r_g b / 2 / l_w
+    assert d_soft[-1] == pytest.approx(half, rel=1e-9)
 
 
 def _touch_speeds(plant, t, command, windows):
@@ -105,7 +106,7 @@ def _touch_speeds(plant, t, command, windows):
     m = DriveModel(plant)
     tr = simulate(m, SampledProfile(t, command), t_end=float(t[-1]), record_every=1,
                   theta1_initial=float(command[0]))
-    q, h = tr.aux[:, AUX_Q], m.p[P_GAP_HALF]
+    q, h = tr.aux[:, AUX_Q], 0.5 * plant.mesh.backlash * plant.geometry.gear_pitch_radius
     free = np.abs(q) < h
     touch = np.flatnonzero(free[:-1] & ~free[1:]) + 1
     dq = np.abs(np.gradient(q, tr.t))[touch]

@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .compensation import Compensator
-from .model import P_COUT, P_GAP_HALF, P_J4, P_JG, P_LW, DriveModel, gear_torque_demand, has_play
+from .model import DriveModel, gear_torque_demand, has_play
 from .params import Config
 
 __all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step',
@@ -117,11 +117,11 @@ def flank_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
     rest = comp.flank
     n = ts.size
     delta, flank, demand = np.empty(n), np.empty(n), np.empty(n)
-    P_ns = int(round(comp.preview * 1e9))
+    preview_ns = int(round(comp.preview * 1e9))
     c = m.output_per_input
     j = 0
     for i in range(n):
-        while j < n and (j <= i or rel[j - 1] < rel[i] + P_ns):  # as the pipeline does
+        while j < n and (j <= i or rel[j - 1] < rel[i] + preview_ns):  # as the pipeline does
             comp.add_sample(float(ts[j]), float(x[j]))
             j += 1
         delta[i] = comp.evaluate(float(ts[i]))
@@ -132,7 +132,9 @@ def flank_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
         else:
             demand[i] = 0.0
         comp.trim(float(ts[i]))
-    step = float(m.p[P_GAP_HALF] / m.p[P_LW]) if comp.backlash_inverse else 0.0
+    # half the play along the mesh approach, r_g b / 2, in worm angle (q = l_w theta2 - ...)
+    step = 0.5 * m.config.mesh.backlash / m.output_per_input if comp.backlash_inverse \
+        else 0.0
     return FlankSeries(t_out, delta, flank, demand, step, rest)
 
 
@@ -255,9 +257,9 @@ def soft_feedforward_series(model: DriveModel | Config, t: ArrayLike, theta1_ref
         raise ValueError(f'crossing duration {longest!r} s: must be >= 0')
     period = 1.0 / m.config.node.publish_rate_hz
     Tmin = SHORTEST_PERIODS * period if shortest is None else float(shortest)
-    p = m.p
     half_play = 0.5 * m.config.mesh.backlash
-    plans = plan_crossings(fs, T, Tmin, float(p[P_JG] + p[P_J4]), float(p[P_COUT]),
+    plans = plan_crossings(fs, T, Tmin, m.derived.J_g + m.derived.J_4,
+                           m.config.load.output_viscous_coefficient,
                            2.0 * math.pi * Compensator(m).mode_frequency_hz,
                            tolerance * half_play)
     planned = flank_offset(fs.t, plans, fs.rest_flank)

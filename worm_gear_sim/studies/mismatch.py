@@ -245,7 +245,7 @@ def random_drives(base: Config, n: int, seed: int = 0,
     return out
 
 
-#: the keys calibrated (issue 27's set)
+#: the keys calibrated (play, load torque and drag, teeth)
 CALIBRATION_KEYS = ('mesh.backlash', 'load.output_torque', 'load.output_viscous_coefficient',
                     'mesh.gear_tooth_stiffness_multiplier')
 #: the calibration's limits: worm travel [rad], rate [rad/s], accel [rad/s^2], duration [s]
