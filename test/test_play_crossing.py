@@ -185,3 +185,18 @@ def test_sweep_mismatch_runs_from_the_command_line(tmp_path, capsys):
     assert len(drives) == 1 and float(drives[0]['slew_raw_rms']) > 0
     assert (tmp_path / 'mismatch.png').stat().st_size > 10_000
     assert main(['sweep', 'mismatch', '-o', str(tmp_path), '--axes', 'gears']) == 2
+
+
+def test_sweep_crossing_runs_from_the_command_line(tmp_path, capsys):
+    """``sweep crossing`` on one case: the CSV row (raw, causal, step and soft), the figure
+    and the summary; a bad grid is one line and status 2."""
+    from worm_gear_sim.cli import main
+    assert main(['sweep', 'crossing', '-o', str(tmp_path), '--plays', '1', '--loads', '0.5',
+                 '--drags', '10']) == 0
+    out = capsys.readouterr().out
+    assert 'soft:' in out and 'crossing.png' in out
+    (row,) = list(csv.DictReader(open(tmp_path / 'crossing.csv')))
+    assert int(row['crossings']) == 2
+    assert float(row['soft_x']) >= 100.0 > float(row['step_x'])
+    assert (tmp_path / 'crossing.png').stat().st_size > 10_000
+    assert main(['sweep', 'crossing', '-o', str(tmp_path), '--plays', '0']) == 2

@@ -95,7 +95,7 @@ def plot_mismatch_study(axis_rows: Sequence[Mapping[str, Any]],
                    color=colors[j % len(colors)])
         for x, r in zip(xs, drive_rows):
             if r['accepted'] not in (True, 'True', 'true'):
-                ax.text(x, 1.0, 'refused', rotation=90, ha='center', va='bottom', fontsize=7)
+                ax.text(x, 1.4, 'refused', rotation=90, ha='center', va='bottom', fontsize=6)
         ax.axhline(30.0, color='k', ls=':', lw=1)
         ax.axhline(50.0, color='k', ls='--', lw=1)
         ax.set_yscale('log')
