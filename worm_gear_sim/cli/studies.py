@@ -80,6 +80,8 @@ def register(sub: Any) -> None:
                    '(default: 0,10,50)')
     g.add_argument('--damping', type=float, default=0.0, metavar='ZETA',
                    help='crossing: modal damping ratio of the drives (default: 0)')
+    g.add_argument('--scan-rest', type=float, default=0.0, metavar='S',
+                   help='crossing: rest before the scan (default: 0 s)')
     g.add_argument('--axes', metavar='A1,A2,...', help='mismatch: model errors to sweep, of '
                    'play, load, teeth, bearings (default: all)')
     g.add_argument('--errors', metavar='E1,E2,...', help='mismatch: errors as shares '
@@ -243,7 +245,9 @@ def _crossing_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None
         raise CliError('--plays must be > 0, --loads and --drags >= 0')
     if not 0.0 <= args.damping < 1.0:
         raise CliError(f'--damping {args.damping!r}: must be in [0, 1)')
-    rows = crossing_rows(cfg, plays, loads, drags, args.damping)
+    if not 0.0 <= args.scan_rest <= 10.0:
+        raise CliError(f'--scan-rest {args.scan_rest!r}: must be in [0, 10] s')
+    rows = crossing_rows(cfg, plays, loads, drags, args.damping, args.scan_rest)
     rows_to_csv(rows, CROSSING_COLUMNS, outdir / 'crossing.csv')
     title = ERROR_STUDIES['crossing'][0]
     plot_crossing_study(rows, outdir / 'crossing.png', title)

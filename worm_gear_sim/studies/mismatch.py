@@ -69,14 +69,16 @@ def _period(cfg: Config) -> float:
 
 
 def sector_scan(cfg: Config, amplitude_deg: float = 5.0, period: float = 4.0,
-                periods: float = 1.0) -> Move:
+                periods: float = 1.0, rest: float = 0.0) -> Move:
     """The antenna sweeps ±``amplitude_deg`` sinusoidally with ``period`` [s], from rest at
-    the lower edge, for ``periods`` periods (module docstring)."""
+    the lower edge, for ``periods`` periods, after ``rest`` [s] at rest there (module
+    docstring)."""
     dt = _period(cfg)
     ratio = 1.0 / DriveModel(cfg).output_per_input
-    n = int(round(periods * period / dt))
+    n = int(round((periods * period + rest) / dt))
     t = np.arange(n + 1) * dt
-    y = -math.radians(amplitude_deg) * np.cos(2.0 * math.pi * t / period)
+    y = -math.radians(amplitude_deg) * np.cos(2.0 * math.pi * np.maximum(t - rest, 0.0)
+                                              / period)
     return Move('sector', t, y * ratio,
                 f'sector scan ±{amplitude_deg:g}° at the antenna, {period:g} s period')
 
@@ -136,9 +138,10 @@ CROSSING_DRAGS = (0.0, 10.0, 50.0)
 def crossing_rows(base: Config, plays: Sequence[float] = CROSSING_PLAYS,
                   loads: Sequence[float] = CROSSING_LOADS,
                   drags: Sequence[float] = CROSSING_DRAGS, damping: float = 0.0,
+                  rest: float = 0.0,
                   progress: Callable[[dict], None] | None = None) -> list[dict]:
-    """The sector scan with perfect knowledge on every (play, load, drag) case: raw,
-    causal, step crossing and soft crossing (module docstring)."""
+    """The sector scan (after ``rest`` s at rest) with perfect knowledge on every (play,
+    load, drag) case: raw, causal, step crossing and soft crossing (module docstring)."""
     rows = []
     for play in plays:
         for load in loads:
@@ -147,7 +150,7 @@ def crossing_rows(base: Config, plays: Sequence[float] = CROSSING_PLAYS,
                                       'load.output_torque': load,
                                       'load.output_viscous_coefficient': drag,
                                       'damping.modal_damping_ratios': [damping] * 3})
-                move = sector_scan(plant)
+                move = sector_scan(plant, rest=rest)
                 raw = _rms(antenna_error(plant, move.t, move.theta1, move.theta1))
                 r = {'study': 'crossing', 'play_arcmin': play, 'load_torque': load,
                      'drag': drag, 'damping': damping, 'raw_rms': raw}
