@@ -13,18 +13,18 @@ import numpy as np
 import pytest
 
 from worm_gear_sim import Config
-from worm_gear_sim.model import AUX_Q, DriveModel
+from worm_gear_sim.dynamics.model import AUX_Q, DriveModel
+from worm_gear_sim.dynamics.profiles import SampledProfile, TrapezoidalProfile
+from worm_gear_sim.dynamics.simulation import simulate
 from worm_gear_sim.play_crossing import (
     flank_series,
     smooth_step,
     soft_feedforward_series,
     trajectory_feedforward,
 )
-from worm_gear_sim.profiles import SampledProfile, TrapezoidalProfile
 from worm_gear_sim.realtime import feedforward_series
-from worm_gear_sim.simulation import simulate
 from worm_gear_sim.studies.mismatch import benefit, mismatched, sector_scan, slew_reversals
-from worm_gear_sim.trajectories import antenna_error, trajectory_model
+from worm_gear_sim.trajectory_compensation import antenna_error, trajectory_model
 
 ARCMIN = math.pi / (180 * 60)
 #: a sector-scan drive whose flank changes near the scan's edges (drag > inertia torque)

@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .compensation import Compensator
-from .model import DriveModel, gear_torque_demand, has_play
+from .dynamics.model import DriveModel, gear_torque_demand, has_play
 from .params import Config
 
 __all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step',

@@ -12,7 +12,7 @@ Moves (known trajectories, streamed at ``node.publish_rate_hz``):
   ``accel`` between cruises: out, back, out again, stop, hold.
 
 :func:`benefit` compensates a move with a model (the known-trajectory path of
-:mod:`worm_gear_sim.trajectories`: centring preview and, with play, the soft crossing of
+:mod:`worm_gear_sim.trajectory_compensation`: centring preview and, with play, the soft crossing of
 :mod:`worm_gear_sim.play_crossing`), runs the drive on the raw and on the compensated
 command, and returns the antenna error RMS over the whole move (start to end of the hold)
 and the improvement raw / compensated.
@@ -40,11 +40,11 @@ from typing import Any
 
 import numpy as np
 
-from ..model import DriveModel
+from ..dynamics.model import DriveModel
 from ..params import Config
 from ..play_crossing import soft_feedforward_series, trajectory_feedforward
 from ..realtime import feedforward_series
-from ..trajectories import antenna_error, trajectory_model
+from ..trajectory_compensation import antenna_error, trajectory_model
 from .backlash_reversal import ARCMIN
 from .compensation_eval import _piecewise_accel_profile
 
