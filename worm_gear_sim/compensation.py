@@ -41,6 +41,9 @@ Design (computed from the NOMINAL model at construction / :meth:`Compensator.rec
    flip the flank back and forth).  A change of flank steps the correction by the whole
    play, so the worm crosses it in one command period; it is timely only with a preview
    (:func:`centring_preview`).  Measured in docs/compensation.md, "Across the mesh play".
+   A known trajectory crosses the play softly instead (:mod:`worm_gear_sim.play_crossing`:
+   the crossing planned around the demand's sign change, the new flank reached with the
+   gear's velocity); the streaming path here is the one for live commands.
 
 ``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one compiled kernel
 (:func:`compensation_kernel`: an interpolation walk over the history at ~120 quadrature
@@ -330,7 +333,11 @@ class Compensator:
         self.quasi_static = bool(cs.quasi_static)
         self.dynamic = bool(cs.model_inverse) and self.quasi_static
         self.preview = float(cs.preview_time)
-        res = modes(model)
+        # the antenna mode with the teeth in contact (with play, the modes of the linearised
+        # model are those of a free mesh: a rigid antenna and the gear alone)
+        res = modes(DriveModel(dataclasses.replace(
+            config, mesh=dataclasses.replace(config.mesh, backlash=0.0)))
+            if has_play(model.p) else model)
         # the antenna mode: largest theta4 participation (mode 1 for the default drive)
         k = int(np.argmax(np.abs(res.shapes[2, :])))
         self.mode_frequency_hz = float(res.frequencies_hz[k] or res.undamped_hz[k])

@@ -17,7 +17,8 @@ position is held.
 correction can start before the move, up to ``compensation.preview_time``; a drive with
 play and the backlash inverse, configured without a preview, gets the centring preview
 :func:`~worm_gear_sim.compensation.centring_preview`, which a known trajectory has for
-free and which makes the crossing of the play timely) and returns the
+free and which makes the crossing of the play timely, and crosses the play softly:
+:mod:`worm_gear_sim.play_crossing`) and returns the
 compensated trajectory densely, with velocities and accelerations of the compensated path
 (the spline's own derivatives plus central differences of the correction), so that the
 controller's interpolation between the dense points follows it; plus the antenna error the
@@ -46,7 +47,7 @@ from .dynamics.model import DriveModel, has_play
 from .dynamics.profiles import SampledProfile
 from .dynamics.simulation import simulate
 from .params import Config
-from .realtime import feedforward_series
+from .play_crossing import trajectory_feedforward
 
 __all__ = ['jtc_sample', 'compensate_trajectory', 'trajectory_model', 'antenna_error',
            'CompensatedTrajectory',
@@ -232,9 +233,9 @@ def compensate_trajectory(model: DriveModel | Config, times: ArrayLike,
         if th.shape != xh.shape or not th[-1] < 0:
             raise ValueError('history: equal-length times < 0 and references')
         ns = np.round(np.concatenate((th, t)) * 1e9).astype(np.int64)
-        delta = feedforward_series(m, ns, np.concatenate((xh, ref)))[th.size:]
+        delta = trajectory_feedforward(m, ns, np.concatenate((xh, ref)))[th.size:]
     else:
-        delta = feedforward_series(m, t, ref)
+        delta = trajectory_feedforward(m, t, ref)
     dt = 1.0 / rate
     ddelta = np.gradient(delta, dt) if n > 2 else np.zeros(n)
     dddelta = np.gradient(ddelta, dt) if n > 2 else np.zeros(n)

@@ -47,7 +47,9 @@ def register(sub: Any) -> None:
                    help=f'{", ".join(PAPER_STUDIES)} or all; or play / gust: the antenna '
                    'error on the radar slew against the mesh play / the gust intensity, '
                    'with and without the feed-forward; or reversal: the feed-forward '
-                   'across the play on reversal moves (docs/compensation.md)')
+                   'across the play on reversal moves; crossing: the soft crossing of the '
+                   'play on a sector scan; mismatch: the feed-forward on a drive that differs '
+                   'from its model, and calibrate-then-compensate (docs/compensation.md)')
     p.add_argument('--param', metavar='PATH[,PATH]', help='sweep this dotted parameter '
                    '(several comma-separated paths get the same value)')
     p.add_argument('--values', metavar='V1,V2,...', help='values for --param')
@@ -69,6 +71,32 @@ def register(sub: Any) -> None:
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
     p.add_argument('--traces', action='store_true', help='also plot the time traces of '
                    'studies with at most 8 cases (e.g. flywheel, Figs. 12-13)')
+    g = p.add_argument_group('crossing and mismatch (docs/compensation.md)')
+    g.add_argument('--plays', metavar='A1,A2,...', help='crossing: plays [arcmin] '
+                   '(default: 0.5,1,2,5)')
+    g.add_argument('--loads', metavar='T1,T2,...', help='crossing: load torques [N m] '
+                   '(default: 0,0.5,1,2,5)')
+    g.add_argument('--drags', metavar='C1,C2,...', help='crossing: drags [N m s/rad] '
+                   '(default: 0,10,50)')
+    g.add_argument('--damping', type=float, default=0.0, metavar='ZETA',
+                   help='crossing: modal damping ratio of the drives (default: 0)')
+    g.add_argument('--scan-rest', type=float, default=0.0, metavar='S',
+                   help='crossing: rest before the scan (default: 0 s)')
+    g.add_argument('--axes', metavar='A1,A2,...', help='mismatch: model errors to sweep, of '
+                   'play, load, teeth, bearings (default: all)')
+    g.add_argument('--errors', metavar='E1,E2,...', help='mismatch: errors as shares '
+                   '(default: -0.3,-0.2,-0.1,0,0.1,0.2,0.3)')
+    g.add_argument('--drives', type=int, default=20, metavar='N',
+                   help='mismatch: random drives to calibrate then compensate (default: '
+                   '%(default)s; 0: none)')
+    g.add_argument('--seed', type=int, default=0, help='mismatch: seed of the random drives')
+    g.add_argument('--moves', default='sector,slew', metavar='M1,M2',
+                   help='mismatch: moves, of sector, slew (default: %(default)s)')
+    g.add_argument('--calibrate-fit', metavar='KEY[,KEY...]', help='mismatch: the keys '
+                   'calibrated (default: mesh.backlash, load.output_torque, '
+                   'load.output_viscous_coefficient, mesh.gear_tooth_stiffness_multiplier)')
+    g.add_argument('--fit-strategy', default='robust', metavar='NAME',
+                   help="mismatch: the calibration fit's strategy (default: %(default)s)")
     p.set_defaults(func=cmd_sweep)
 
 
@@ -184,7 +212,128 @@ ERROR_STUDIES = {
     'gust': ('antenna error against the gust intensity (radar slew, 5 N m mean wind, '
              '0.2 s gusts, 3 seeds)', 'turbulence intensity sigma_u / U'),
     'reversal': ('the feed-forward across 2 arcmin of play on reversal moves (3 % damping)',
-                 '')}
+                 ''),
+    'crossing': ('the soft crossing of the play: ±5° sector scan (4 s), perfect knowledge',
+                 ''),
+    'mismatch': ('the feed-forward on a drive that differs from its model', '')}
+
+
+def _floats(text: str | None, default: tuple, what: str) -> list[float]:
+    if text is None:
+        return list(default)
+    try:
+        return [float(v) for v in text.split(',') if v.strip()]
+    except ValueError:
+        raise CliError(f'{what} {text!r}: expected comma-separated numbers') from None
+
+
+def _crossing_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None:
+    from ..studies import rows_to_csv
+    from ..studies.mismatch import (
+        CROSSING_COLUMNS,
+        CROSSING_DRAGS,
+        CROSSING_LOADS,
+        CROSSING_PLAYS,
+        crossing_rows,
+        summary,
+    )
+    from .mismatch_plot import plot_crossing_study
+    plays = _floats(args.plays, CROSSING_PLAYS, '--plays')
+    loads = _floats(args.loads, CROSSING_LOADS, '--loads')
+    drags = _floats(args.drags, CROSSING_DRAGS, '--drags')
+    if not (plays and loads and drags) or min(plays) <= 0 or min(loads + drags) < 0:
+        raise CliError('--plays must be > 0, --loads and --drags >= 0')
+    if not 0.0 <= args.damping < 1.0:
+        raise CliError(f'--damping {args.damping!r}: must be in [0, 1)')
+    if not 0.0 <= args.scan_rest <= 10.0:
+        raise CliError(f'--scan-rest {args.scan_rest!r}: must be in [0, 10] s')
+    rows = crossing_rows(cfg, plays, loads, drags, args.damping, args.scan_rest)
+    rows_to_csv(rows, CROSSING_COLUMNS, outdir / 'crossing.csv')
+    title = ERROR_STUDIES['crossing'][0]
+    plot_crossing_study(rows, outdir / 'crossing.png', title)
+    say(args, fmt_table(rows, [
+        ('play_arcmin', 'play [arcmin]', '.3g'), ('load_torque', 'load [N m]', '.3g'),
+        ('drag', 'drag [N m s/rad]', '.3g'), ('raw_rms', 'raw RMS [rad]', '.3e'),
+        ('causal_x', 'causal', '.3g'), ('step_x', 'step', '.3g'),
+        ('soft_x', 'soft', '.3g'), ('crossing_ms', 'crossings [ms]', '')]))
+    for col in ('causal_x', 'step_x', 'soft_x'):
+        sm = summary(rows, col)
+        say(args, f'{col[:-2]}: {sm["min"]:.3g}x .. {sm["max"]:.3g}x (median '
+             f'{sm["median"]:.3g}x)')
+    say(args, f'wrote {outdir / "crossing.csv"}, {outdir / "crossing.png"}')
+
+
+def _mismatch_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None:
+    from ..identification import FitOptions
+    from ..identification.fit import STRATEGIES
+    from ..studies import rows_to_csv
+    from ..studies.mismatch import (
+        CALIBRATION_COLUMNS,
+        CALIBRATION_KEYS,
+        MISMATCH_AXES,
+        MISMATCH_COLUMNS,
+        MISMATCH_DRIVE,
+        MISMATCH_ERRORS,
+        MOVES,
+        calibration_rows,
+        mismatch_rows,
+        summary,
+    )
+    from .mismatch_plot import plot_mismatch_study
+    axes = [a.strip() for a in args.axes.split(',') if a.strip()] if args.axes \
+        else list(MISMATCH_AXES)
+    bad = [a for a in axes if a not in MISMATCH_AXES]
+    if bad or not axes:
+        raise CliError(f'--axes {args.axes!r}: choose from {", ".join(MISMATCH_AXES)}')
+    errors = _floats(args.errors, MISMATCH_ERRORS, '--errors')
+    if not errors or min(errors) <= -1.0:
+        raise CliError('--errors must be shares > -1 (e.g. -0.3,0,0.3)')
+    if args.drives < 0:
+        raise CliError(f'--drives {args.drives}: must be >= 0')
+    moves = [m.strip() for m in args.moves.split(',') if m.strip()]
+    if not moves or any(m not in MOVES for m in moves):
+        raise CliError(f'--moves {args.moves!r}: choose from {", ".join(MOVES)}')
+    keys = [k.strip() for k in args.calibrate_fit.split(',') if k.strip()] \
+        if args.calibrate_fit else list(CALIBRATION_KEYS)
+    for k in keys:
+        check_key(k)
+    if args.fit_strategy not in STRATEGIES:
+        raise CliError(f'--fit-strategy {args.fit_strategy!r}: one of '
+                       f'{", ".join(STRATEGIES)}')
+    drive = cfg.replace(MISMATCH_DRIVE)
+    rows = mismatch_rows(drive, axes, errors, moves)
+    rows_to_csv(rows, MISMATCH_COLUMNS, outdir / 'mismatch.csv')
+    say(args, fmt_table(rows, [('move', 'move', ''), ('axis', 'axis', ''),
+                               ('error', 'error', '+.0%'),
+                               ('raw_rms', 'raw RMS [rad]', '.3e'),
+                               ('compensated_rms', 'compensated [rad]', '.3e'),
+                               ('improvement', 'improvement', '.3g')]))
+    drives: list[dict] = []
+    if args.drives:
+        opts = FitOptions(strategy=args.fit_strategy, serial=True) if args.serial else \
+            FitOptions(strategy=args.fit_strategy, workers=args.workers,
+                       scheduler=args.scheduler)
+
+        def told(r: dict) -> None:
+            say(args, f'drive {r["drive"]}: play {r["play_arcmin"]:.2f} arcmin, load '
+                 f'{r["load_torque"]:.2f} N m, drag {r["drag"]:.1f} N m s/rad, teeth '
+                 f'x{r["teeth"]:.2f}, bearings x{r["bearings"]:.2f}: '
+                 f'{"accepted" if r["accepted"] else "refused"} in '
+                 f'{r["calibration_s"]:.0f} s; '
+                 + ', '.join(f'{m} {r[m + "_x"]:.3g}x (nominal model '
+                             f'{r[m + "_nominal_x"]:.3g}x)' for m in moves))
+        drives = calibration_rows(cfg, args.drives, args.seed, keys=keys, options=opts,
+                                  moves=moves, progress=told)
+        rows_to_csv(drives, CALIBRATION_COLUMNS, outdir / 'mismatch_drives.csv')
+        for col in (m + '_x' for m in moves):
+            sm = summary(drives, col)
+            say(args, f'calibrate-then-compensate, {col[:-2]}: min {sm["min"]:.3g}x, median '
+                 f'{sm["median"]:.3g}x, max {sm["max"]:.3g}x '
+                 f'({sum(bool(r["accepted"]) for r in drives)} of {len(drives)} accepted)')
+    plot_mismatch_study(rows, drives, outdir / 'mismatch.png', ERROR_STUDIES['mismatch'][0])
+    say(args, f'wrote {outdir / "mismatch.csv"}'
+         + (f', {outdir / "mismatch_drives.csv"}' if drives else '')
+         + f', {outdir / "mismatch.png"}')
 
 
 def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> None:
@@ -199,6 +348,11 @@ def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> N
         t0 = time.perf_counter()
         title, x_label = ERROR_STUDIES[n]
         csv_path, png_path = outdir / f'{n}.csv', outdir / f'{n}.png'
+        if n in ('crossing', 'mismatch'):
+            say(args, f'{title}')
+            (_crossing_study if n == 'crossing' else _mismatch_study)(args, cfg, outdir)
+            say(args, f'({time.perf_counter() - t0:.1f} s)')
+            continue
         if n == 'reversal':
             rows = reversal_rows(cfg)
             rows_to_csv(rows, REVERSAL_COLUMNS, csv_path)

@@ -1,0 +1,280 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""A soft crossing of the mesh play on a known trajectory (pure core, no rclpy).
+
+The streaming feed-forward (:class:`~worm_gear_sim.compensation.Compensator`) takes up half
+the play on the flank the move's mesh torque demand needs; when the demand changes sign it
+steps the correction by the whole play, so the worm crosses the play in one command period
+and strikes the new flank at the crossing speed (2 h in 1 ms): the antenna mode rings after
+the impact.  Offline, the whole trajectory is known: the crossing can be planned.
+
+Physics.  While the worm is inside the play the mesh carries no force: the gear and the
+antenna coast under their own inertia, drag and load, while the antenna path wants the mesh
+torque demand D(t) = (J_g + J_4) y'' + c y' + T_load (:func:`~worm_gear_sim.model.
+gear_torque_demand`).  Near the instant t0 where D changes sign it is small, D ~ D'(t0)
+(t - t0): the torque missing during a crossing [a, a + T] is D itself, and a window
+centred on t0 misses a torque of zero mean, so the antenna's error is of order
+D' T^3 / J (nanoradians for the sector scans of docs/compensation.md).  The worm, on the
+other hand, must reach the new flank with the gear's velocity (no impact): its offset
+moves from one flank to the other along a smooth step whose velocity and acceleration are
+zero at both ends (:func:`smooth_step`), so the approach q closes onto the elastic approach
+q_e of the inverse with zero relative velocity.  Where the demand is held at zero (a drive
+at rest, a move from rest without load) the window is placed where the demand is smallest
+(:func:`plan_crossings`: the window of the given duration, containing t0, that minimises the
+integral of D^2), so a move from rest crosses the play before the move starts.
+
+The correction is the streaming compensator's (the same history, the centring preview of a
+known trajectory) with its flank term flank(t) h / l_w replaced by the planned one; away
+from the crossings both are bit for bit the same, and at rest the worm still takes up
+exactly half the play.  The causal path for live streams (the node's ``worm_angle_command``)
+is unchanged: it cannot know a reversal before it happens.  Measured in docs/compensation.md,
+"A soft crossing of the play".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .compensation import Compensator
+from .dynamics.model import DriveModel, gear_torque_demand, has_play
+from .params import Config
+
+__all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step',
+           'flank_series', 'plan_crossings', 'coast_error', 'flank_offset',
+           'soft_feedforward_series', 'crossing_time', 'CROSSING_PERIODS', 'SHORTEST_PERIODS',
+           'CROSSING_TOLERANCE']
+
+#: The longest crossing in antenna-mode periods (:func:`crossing_time`).
+CROSSING_PERIODS = 1.0
+#: The shortest crossing in command periods (a gentler approach needs more samples).
+SHORTEST_PERIODS = 3.0
+#: The antenna's stray while the mesh is free, as a share of half the play.
+CROSSING_TOLERANCE = 1e-2
+
+
+def smooth_step(u: ArrayLike) -> np.ndarray:
+    """0 -> 1 on u in [0, 1] with zero first, second and third derivatives at both ends
+    (the degree-7 'smootherstep'); 0 before, 1 after."""
+    v: np.ndarray = np.clip(np.asarray(u, float), 0.0, 1.0)
+    return v ** 4 * (35.0 + v * (-84.0 + v * (70.0 - 20.0 * v)))
+
+
+@dataclass(frozen=True)
+class CrossingPlan:
+    """One crossing of the play: the worm leaves flank ``start_flank`` at ``start`` [s] and
+    reaches ``end_flank`` at ``end``; ``zero`` is where the torque demand changes sign (or
+    where the streaming compensator changed flank, for a demand held at zero)."""
+
+    start: float
+    end: float
+    zero: float
+    start_flank: float
+    end_flank: float
+
+
+@dataclass
+class FlankSeries:
+    """The streaming compensator run on a sampled trajectory: its corrections ``delta``,
+    the flank it chose and the mesh torque demand [N m] it chose it from, at ``t``."""
+
+    t: np.ndarray
+    delta: np.ndarray
+    flank: np.ndarray
+    demand: np.ndarray
+    flank_step: float          # the correction per unit of flank: h / l_w [rad]
+    rest_flank: float          # the flank before the first sample
+
+
+def flank_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
+                 ) -> FlankSeries:
+    """Run :class:`Compensator` on the samples as the real-time pipeline does (each sample's
+    correction evaluated once the samples up to its time plus ``preview_time`` are in; the
+    reference rests at its ends): its corrections (those of
+    :func:`~worm_gear_sim.realtime.feedforward_series`, bit for bit), flanks and torque
+    demands.  ``t``: float seconds, or integer nanoseconds (then ``FlankSeries.t`` is in
+    seconds from the first sample)."""
+    m = DriveModel.of(model)
+    t_in = np.asarray(t).reshape(-1)
+    x = np.asarray(theta1_ref, float).reshape(-1)
+    if t_in.size == 0 or t_in.shape != x.shape:
+        raise ValueError('t and theta1_ref must be equal-length, non-empty 1-D arrays')
+    # the pipeline's clock: nanoseconds from the first sample (integer times: nanoseconds)
+    if np.issubdtype(t_in.dtype, np.integer):
+        rel = t_in.astype(np.int64) - np.int64(t_in[0])
+        t_out = rel * 1e-9
+    else:
+        t_out = t_in.astype(float)
+        rel = np.round((t_out - t_out[0]) * 1e9).astype(np.int64)
+    if rel.size > 1 and not np.all(np.diff(rel) > 0):
+        raise ValueError('times must be strictly increasing (to the nanosecond)')
+    ts = rel * 1e-9
+    comp = Compensator(m)
+    comp.reset(float(x[0]), float(ts[0]))
+    rest = comp.flank
+    n = ts.size
+    delta, flank, demand = np.empty(n), np.empty(n), np.empty(n)
+    preview_ns = int(round(comp.preview * 1e9))
+    c = m.output_per_input
+    j = 0
+    for i in range(n):
+        while j < n and (j <= i or rel[j - 1] < rel[i] + preview_ns):  # as the pipeline does
+            comp.add_sample(float(ts[j]), float(x[j]))
+            j += 1
+        delta[i] = comp.evaluate(float(ts[i]))
+        flank[i] = comp.flank
+        if comp.backlash_inverse:
+            r = comp._derivs                      # r..r'' (lead), then lead-free r', r''
+            demand[i] = gear_torque_demand(m.p, r[-2] * c, r[-1] * c, 0.0, 0.0, False)
+        else:
+            demand[i] = 0.0
+        comp.trim(float(ts[i]))
+    # half the play along the mesh approach, r_g b / 2, in worm angle (q = l_w theta2 - ...)
+    step = 0.5 * m.config.mesh.backlash / m.output_per_input if comp.backlash_inverse \
+        else 0.0
+    return FlankSeries(t_out, delta, flank, demand, step, rest)
+
+
+def crossing_time(model: DriveModel | Config) -> float:
+    """The longest crossing [s]: CROSSING_PERIODS periods of the antenna mode (a gentle
+    approach on a 1 kHz command; :func:`plan_crossings` shortens it where the demand
+    changes fast)."""
+    m = DriveModel.of(model)
+    return CROSSING_PERIODS / Compensator(m).mode_frequency_hz
+
+
+def _zero_time(t: np.ndarray, d: np.ndarray, i: int, old: float) -> float:
+    """Where the demand left the old flank's sign before sample i (the flank changes only
+    once |demand| exceeds a threshold): interpolated between the last sample of the old
+    sign and the next one; t[i] where the demand was held at zero."""
+    j = i
+    while j > 0 and not d[j - 1] * old > 0.0:
+        j -= 1
+    if j > 0 and d[j - 1] * old > 0.0 and d[j] * old <= 0.0 and d[j - 1] != d[j]:
+        return float(t[j - 1] + (t[j] - t[j - 1]) * d[j - 1] / (d[j - 1] - d[j]))
+    return float(t[i])
+
+
+def coast_error(t: np.ndarray, d: np.ndarray, a: float, b: float, inertia: float,
+                drag: float, mode_rate: float, n: int = 64) -> float:
+    """How far the antenna strays while the mesh is free over [a, b]: the rigid gear and
+    antenna (``inertia``, ``drag``) miss the torque demand d, J e'' + c e' = -d(t) from
+    e = e' = 0 (trapezoidal rule on ``n`` steps, d interpolated from the samples); the
+    stray at b as position and velocity, |e| + |e'| / ``mode_rate`` [rad] (a velocity
+    error rings the antenna mode with amplitude e' / w)."""
+    if b <= a:
+        return 0.0
+    tt = np.linspace(a, b, n + 1)
+    dd = np.interp(tt, t, d)
+    h = (b - a) / n
+    k = drag / inertia
+    e = v = 0.0
+    den = 1.0 + 0.5 * h * k
+    for i in range(n):
+        v_new = (v * (1.0 - 0.5 * h * k) - 0.5 * h * (dd[i] + dd[i + 1]) / inertia) / den
+        e += 0.5 * h * (v + v_new)
+        v = v_new
+    return abs(e) + abs(v) / mode_rate
+
+
+def plan_crossings(fs: FlankSeries, longest: float, shortest: float, inertia: float,
+                   drag: float, mode_rate: float, tolerance: float,
+                   placements: int = 21, durations: int = 8) -> list[CrossingPlan]:
+    """The crossings of the play (module docstring): one per change of flank of ``fs``.
+    Each is the longest of ``durations`` geometric steps from ``longest`` down to
+    ``shortest`` [s] whose best placement (``placements`` positions containing the sign
+    change, within the samples and half-way to the neighbouring crossings) keeps the
+    antenna's stray while coasting (:func:`coast_error`) within ``tolerance`` [rad]; where
+    none does (a fast reversal: the demand changes sign within a few milliseconds), the
+    streaming compensator's step at the sample where it changed flank (``start`` = ``end``).
+    """
+    t, f, d = fs.t, fs.flank, fs.demand
+    prev = np.concatenate(([fs.rest_flank], f[:-1]))
+    idx = np.flatnonzero(f != prev)
+    if idx.size == 0 or longest <= 0.0:
+        return [CrossingPlan(float(t[i]), float(t[i]), float(t[i]), float(prev[i]),
+                             float(f[i])) for i in idx]
+    zeros = [_zero_time(t, d, int(i), float(prev[i]) or -float(f[i])) for i in idx]
+    shortest = min(shortest, longest)
+    Ts = np.geomspace(longest, shortest, durations) if durations > 1 else [longest]
+    plans = []
+    for k, i in enumerate(idx):
+        t0 = zeros[k]
+        lo = float(t[0]) if k == 0 else 0.5 * (zeros[k - 1] + t0)
+        hi = float(t[-1]) if k == len(idx) - 1 else 0.5 * (t0 + zeros[k + 1])
+        plan = CrossingPlan(float(t[i]), float(t[i]), t0, float(prev[i]), float(f[i]))
+        for T in Ts:                      # the longest crossing that strays little enough
+            T = min(float(T), hi - lo)
+            cand: tuple[tuple[float, float], float] | None = None
+            for s in np.linspace(-T, 0.0, placements):
+                a = min(max(t0 + s, lo), hi - T)
+                err = coast_error(t, d, a, a + T, inertia, drag, mode_rate)
+                key = (err, abs(a + 0.5 * T - t0))
+                if cand is None or key < cand[0]:
+                    cand = (key, a)
+            assert cand is not None
+            if cand[0][0] <= tolerance:
+                plan = CrossingPlan(cand[1], cand[1] + T, t0, float(prev[i]), float(f[i]))
+                break
+        plans.append(plan)
+    return plans
+
+
+def flank_offset(t: ArrayLike, plans: list[CrossingPlan], first_flank: float) -> np.ndarray:
+    """The planned flank at times ``t`` (-1 coast .. +1 drive): ``first_flank`` before the
+    first crossing, a :func:`smooth_step` across each."""
+    tq = np.asarray(t, float)
+    out = np.full(tq.shape, float(first_flank))
+    for p in plans:
+        if p.end > p.start:
+            s = smooth_step((tq - p.start) / (p.end - p.start))
+        else:
+            s = (tq >= p.start).astype(float)
+        after = tq >= p.start
+        out[after] = p.start_flank + (p.end_flank - p.start_flank) * s[after]
+    return out
+
+
+def soft_feedforward_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike,
+                            longest: float | None = None, shortest: float | None = None,
+                            tolerance: float = CROSSING_TOLERANCE
+                            ) -> tuple[np.ndarray, list[CrossingPlan]]:
+    """The feed-forward of a known sampled trajectory with the soft crossing of the play:
+    (delta [rad] at ``t``, the crossings).  Crossings last at most ``longest`` [s]
+    (default :func:`crossing_time`; 0: the step of the streaming compensator) and at least
+    ``shortest`` (default SHORTEST_PERIODS command periods), the antenna's stray while
+    coasting kept within ``tolerance`` x half the play at the antenna.  Without play or
+    with the backlash inverse off: the streaming corrections unchanged."""
+    m = DriveModel.of(model)
+    fs = flank_series(m, t, theta1_ref)
+    if fs.flank_step == 0.0 or not has_play(m.p):
+        return fs.delta, []
+    T = crossing_time(m) if longest is None else float(longest)
+    if not (math.isfinite(T) and T >= 0.0):
+        raise ValueError(f'crossing duration {longest!r} s: must be >= 0')
+    period = 1.0 / m.config.node.publish_rate_hz
+    Tmin = SHORTEST_PERIODS * period if shortest is None else float(shortest)
+    half_play = 0.5 * m.config.mesh.backlash
+    plans = plan_crossings(fs, T, Tmin, m.derived.J_g + m.derived.J_4,
+                           m.config.load.output_viscous_coefficient,
+                           2.0 * math.pi * Compensator(m).mode_frequency_hz,
+                           tolerance * half_play)
+    planned = flank_offset(fs.t, plans, fs.rest_flank)
+    delta = fs.delta + (planned - fs.flank) * fs.flank_step
+    return delta, plans
+
+
+def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
+                           ) -> np.ndarray:
+    """The correction of a known trajectory (``compensate_trajectory``, the trajectory
+    bridge): with play and the backlash inverse, :func:`soft_feedforward_series`; else
+    :func:`~worm_gear_sim.realtime.feedforward_series` (the same corrections without play)."""
+    m = DriveModel.of(model)
+    cs = m.config.compensation
+    if has_play(m.p) and cs.backlash_inverse and cs.quasi_static and cs.enabled:
+        return soft_feedforward_series(m, t, theta1_ref)[0]
+    from .realtime import feedforward_series
+    return feedforward_series(m, t, theta1_ref)
