@@ -40,3 +40,18 @@ def stop_and_read(proc: subprocess.Popen, log: IO[str], sig: int = signal.SIGTER
     text = log.read()
     log.close()
     return rc, text
+
+
+def cli_in_process(*args: object) -> subprocess.CompletedProcess:
+    """``worm-gear-sim ARGS`` through its whole entry point (``cli.main``: parsing, the run,
+    the one-line errors and exit codes) in this process: what a process would show, without
+    the interpreter's start (~3 s a call).  test_cli.py runs the executable itself."""
+    import contextlib
+    import io
+
+    from worm_gear_sim import cli
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        status = cli.main([str(a) for a in args])
+    return subprocess.CompletedProcess([str(a) for a in args], status, out.getvalue(),
+                                       err.getvalue())

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import cli_in_process
 
 from worm_gear_sim.dynamics.simulation import KEEP_ROWS
 from worm_gear_sim.params import Config
@@ -23,18 +24,9 @@ REPO = Path(__file__).resolve().parents[1]
 DT = Config().integrator.time_step
 
 
-def cli(*args, timeout=120):
-    """``worm-gear-sim ARGS`` in this process (``cli.main``: the whole entry point but the
-    interpreter's start, ~3 s a call as a process; test_cli.py runs the executable itself
-    as a process): its exit status, standard output and standard error."""
-    import contextlib
-    import io
-
-    from worm_gear_sim import cli as cli_module
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        status = cli_module.main([str(a) for a in args])
-    return subprocess.CompletedProcess(list(args), status, out.getvalue(), err.getvalue())
+def cli(*args, timeout=None):
+    """The CLI's whole entry point in this process (``timeout`` kept for the callers)."""
+    return cli_in_process(*args)
 
 
 def one_line_error(r, *fragments):

@@ -4,13 +4,13 @@
 files, CLI), and absurd states or commands give a clear ValueError, never a NaN state."""
 
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import cli_in_process
 
 from worm_gear_sim.config_io import load_config
 from worm_gear_sim.dynamics.modal import modes
@@ -127,9 +127,7 @@ def test_config_file_with_an_unusable_value(tmp_path):
 
 
 def _cli(*args):
-    env = dict(os.environ, PYTHONPATH=str(REPO), MPLBACKEND='Agg')
-    return subprocess.run([sys.executable, '-m', 'worm_gear_sim', *args], capture_output=True,
-                          text=True, env=env, timeout=120, cwd=REPO)
+    return cli_in_process(*args)      # the whole entry point, in this process
 
 
 @pytest.mark.parametrize('setting, key', [
