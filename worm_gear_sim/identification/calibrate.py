@@ -27,6 +27,7 @@ applied anywhere: the caller writes the YAML or sets the node's parameters only 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import zlib
 from collections.abc import Callable, Sequence
@@ -38,7 +39,7 @@ import numpy as np
 from ..params import Config
 from ..records import Record
 from .data import IdentificationError, record_from_model
-from .excitation import RING_TIME, Limits, Move, design_excitation
+from .excitation import RING_TIME, Limits, Move, design_excitation, uses_sweeps
 from .fit import FitOptions, identify
 from .report import FitResult, prediction_errors
 
@@ -135,6 +136,11 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
     Raises IdentificationError (nothing fitted) when the limits or the records are
     unusable: no motion measured, motion unrelated to the command, a record that stops."""
     moves = design_excitation(limits, keys, base)
+    opt = options or FitOptions()
+    if uses_sweeps(keys) and opt.n_starts is None:
+        # the direct estimates and the play scan are the global stage: one local fit (from
+        # the frequency start) suffices, and halves the time
+        opt = dataclasses.replace(opt, n_starts=1)
     records = []
     for m in moves:
         rec = run(m)
@@ -142,7 +148,7 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
         records.append(rec)
     train = [r for r, m in zip(records, moves) if m.role == 'train']
     held = [r for r, m in zip(records, moves) if m.role == 'validate']
-    res = identify(base, train, keys, options=options, outputs=outputs)
+    res = identify(base, train, keys, options=opt, outputs=outputs)
     before = prediction_errors(base, held)
     after = prediction_errors(res.config, held)
     reasons = list(res.problems)
