@@ -9,8 +9,8 @@ Two designs, chosen by the fitted keys (:func:`design_excitation`):
   antenna mode), ``step_back`` (the same move reversed), ``small_step`` (a quarter of the
   amplitude: friction does not scale with the amplitude, the elastic terms do); held out:
   ``validate_scurve`` (a jerk-limited S-curve of half the amplitude back);
-* **sweeps** (when the play ``mesh.backlash``, the load torque ``load.output_torque`` or the
-  antenna drag ``load.output_viscous_coefficient`` is fitted): each move goes out and back at
+* **sweeps** (when the play ``mesh.backlash`` or the load torque ``load.output_torque`` is
+  fitted): each move goes out and back at
   a constant worm rate, so every record holds constant-rate segments both ways and a
   reversal: ``slow_sweep`` at a quarter of the rate limit (lost motion at low speed: the
   flank changes while the drive is slow), ``fast_sweep`` at the rate limit with ramps at the
@@ -55,8 +55,9 @@ SLOW_SHARE = 0.25
 #: base has less; the slow sweep's constant-rate travel must be twice the play seen at the
 #: worm so that the flank has changed before the second half of the segment.
 PLAY_DESIGN = 5.0 * math.pi / 180.0 / 60.0
-#: Keys for which the sweeps are designed.
-SWEEP_KEYS = ('mesh.backlash', 'load.output_torque', 'load.output_viscous_coefficient')
+#: Keys for which the sweeps are designed (the drag alone is seen by the steps' stops too:
+#: fitted with the elastic keys, it keeps the steps).
+SWEEP_KEYS = ('mesh.backlash', 'load.output_torque')
 
 
 @dataclass(frozen=True)
@@ -190,9 +191,9 @@ def design_excitation(limits: Limits, keys: Sequence[str] | None = None,
     total = sum(m.t_end for m in moves)
     if total > limits.duration:
         raise IdentificationError(
-            f'calibration limit duration = {limits.duration:g} s: the excitation needs '
-            f'{total:.3g} s ({len(moves)} moves with {RING_TIME * 1e3:.0f} ms of ring-down '
-            'each); allow more time, or raise the rate / acceleration limits')
+            f'calibration limit duration: the excitation needs {total:.3g} s ({len(moves)} '
+            f'moves with {RING_TIME * 1e3:.0f} ms of ring-down each) but the limit is '
+            f'{limits.duration:g} s: allow more time, or raise the rate / acceleration limits')
     return moves
 
 

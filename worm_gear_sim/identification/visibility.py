@@ -81,7 +81,8 @@ def key_visibility(cfg: Config, records: Sequence[Record], keys: Sequence[str],
         else:
             how = ('record a slow reversal (constant worm rate both ways, travel beyond the '
                    'play at the worm)')
-        out[PLAY] = (f'{PLAY}: not seen: the gear stays on one flank in every record; {how}')
+        out[PLAY] = (f'{PLAY}: not seen: the gear stays on one flank in every record, so the '
+                     f'play is not seen; {how}')
     if LOAD in keys:
         if not both_ways:
             out[LOAD] = (f'{LOAD}: not seen: no record moves at a constant worm rate both '
