@@ -270,7 +270,8 @@ def identify(base: Config, records: Sequence[Record], keys: Sequence[str], *,
     opt = options or FitOptions()
     use_freq, use_windows, n_starts = opt.resolved()
     params = fit_parameters(base, keys, bounds)
-    fit_base, direct_info = base, {}
+    fit_base: Config = base
+    direct_info: dict[str, Any] = {}
     if opt.global_stage:
         fit_base, direct_info = _global_stage(base, records, keys)
         if fit_base is not base:     # the fitted coordinates start from the estimates

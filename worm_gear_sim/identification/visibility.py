@@ -21,11 +21,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from ..model import DriveModel
-from ..params import Config
 from ..records import Record
 from ..simulation import SimulationError
 from .data import predict
@@ -34,7 +34,7 @@ from .direct import DRAG, LOAD, PLAY, Segment, steady_segments
 __all__ = ['flank_changes', 'key_visibility']
 
 
-def flank_changes(cfg: Config, records: Sequence[Record]) -> bool:
+def flank_changes(cfg: Any, records: Sequence[Record]) -> bool:
     """Whether the model ``cfg`` (with play > 0) touches both flanks in some record."""
     b = cfg.mesh.backlash
     if not b > 0:
@@ -53,7 +53,7 @@ def flank_changes(cfg: Config, records: Sequence[Record]) -> bool:
     return False
 
 
-def key_visibility(cfg: Config, records: Sequence[Record], keys: Sequence[str],
+def key_visibility(cfg: Any, records: Sequence[Record], keys: Sequence[str],
                    segments: Sequence[Segment] | None = None) -> dict[str, str]:
     """{key: one line naming the key and the move to record} for each fitted key of play,
     load and drag the records cannot show, judged with the fitted config ``cfg``."""
