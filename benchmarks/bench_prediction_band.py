@@ -25,7 +25,8 @@ import numpy as np
 
 from worm_gear_sim import Config
 from worm_gear_sim.identification import FitOptions
-from worm_gear_sim.identification.calibrate import Limits, calibrate, plant_runner
+from worm_gear_sim.identification.calibrate import calibrate, plant_runner
+from worm_gear_sim.identification.excitation import Limits
 from worm_gear_sim.identification.uncertainty import prediction_bound
 
 KG = 'materials.gear_shaft_shear_modulus'

@@ -19,13 +19,8 @@ from worm_gear_sim import Config, load_config
 from worm_gear_sim.cli import main
 from worm_gear_sim.cli.identify import write_params_yaml
 from worm_gear_sim.identification import IdentificationError, Record
-from worm_gear_sim.identification.calibrate import (
-    Limits,
-    calibrate,
-    design_excitation,
-    excitation_series,
-    plant_runner,
-)
+from worm_gear_sim.identification.calibrate import calibrate, excitation_series, plant_runner
+from worm_gear_sim.identification.excitation import Limits, design_excitation
 from worm_gear_sim.records import read_csv
 
 KG = 'materials.gear_shaft_shear_modulus'

@@ -10,7 +10,7 @@ the impact.  Offline, the whole trajectory is known: the crossing can be planned
 
 Physics.  While the worm is inside the play the mesh carries no force: the gear and the
 antenna coast under their own inertia, drag and load, while the antenna path wants the mesh
-torque demand D(t) = (J_g + J_4) y'' + c y' + T_load (:func:`~worm_gear_sim.model.
+torque demand D(t) = (J_g + J_4) y'' + c y' + T_load (:func:`~worm_gear_sim.dynamics.model.
 gear_torque_demand`).  Near the instant t0 where D changes sign it is small, D ~ D'(t0)
 (t - t0): the torque missing during a crossing [a, a + T] is D itself, and a window
 centred on t0 misses a torque of zero mean, so the antenna's error is of order

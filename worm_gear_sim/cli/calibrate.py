@@ -41,9 +41,11 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         'calibrate', help='excite, record, fit, validate, write: one-command calibration',
         description='Design an excitation within the limits (steps out and back, a small '
-        'step; a held-out S-curve), run it on the drive (--plant: a simulated drive), fit '
-        'the chosen parameters, validate on the held-out move, and write the fitted params '
-        'file when accepted. See docs/identification.md, "Calibrate in one command".')
+        'step, a held-out S-curve; or, when the play, load torque or drag is fitted, slow '
+        'and fast sweeps out and back at constant rates and a held-out sweep), run it on the '
+        'drive (--plant: a simulated drive), fit the chosen parameters, validate on the '
+        'held-out move, and write the fitted params file when accepted. See '
+        'docs/identification.md, "Calibrate in one command".')
     add_config_options(p, end_time=False)
     p.add_argument('--fit', action='append', required=True, metavar='KEY[,KEY...]',
                    help='parameters to fit (as for identify; repeatable)')
@@ -91,17 +93,13 @@ def add_limit_options(p: argparse.ArgumentParser) -> None:
 
 
 def limits_of(args: argparse.Namespace) -> Any:
-    from ..identification.calibrate import Limits
+    from ..identification.excitation import Limits
     return Limits(args.max_angle, args.max_rate, args.max_accel, args.duration, args.start)
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from ..identification.calibrate import (
-        calibrate,
-        design_excitation,
-        excitation_series,
-        plant_runner,
-    )
+    from ..identification.calibrate import calibrate, excitation_series, plant_runner
+    from ..identification.excitation import design_excitation
     cfg = config_from_args(args)
     keys = [k.strip() for item in args.fit for k in item.split(',') if k.strip()]
     out = Path(args.output)
@@ -112,7 +110,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.accept) and 0 < args.accept < 1):
         raise CliError(f'--accept {args.accept!r}: a share between 0 and 1')
     limits = limits_of(args)
-    moves = design_excitation(limits)          # IdentificationError: exit 2, one line
+    moves = design_excitation(limits, keys, cfg)   # IdentificationError: exit 2, one line
     for m in moves:
         say(args, f'move {m.name} ({m.role}): {m.profile.describe()}, {m.t_end:.3f} s')
     if args.export_excitation:
@@ -158,6 +156,14 @@ def report_calibration(res: Any, base: Any, keys: list[str], limits: Any, out: P
     command and the node's calibration (``worm_gear_sim_calibrate``).  Returns the report's
     path and the figures."""
     say_line(res.fit.table())
+    direct = res.fit.frequency_info.get('direct', {})
+    if direct.get('values'):
+        say_line('direct estimates (constant-rate lags): ' + ', '.join(
+            f'{k} = {v:.4g}' for k, v in direct['values'].items())
+            + ('' if direct.get('play_seen', True) else ' (play not seen)'))
+    say_line('the excitation shows: ' + (', '.join(res.seen) or 'none of the fitted keys'))
+    for line in res.not_seen.values():
+        say_line(f'NOT SEEN: {line}')
     for row_b, row_a in zip(res.validation_before, res.validation_after):
         for o in row_a:
             if o != 'name':
@@ -184,6 +190,7 @@ def report_calibration(res: Any, base: Any, keys: list[str], limits: Any, out: P
                                      'misfit_rad': b.misfit_rad, 'spread_rad': b.spread_rad}
                                     for b in res.bounds],
                   accepted=res.accepted, reasons=res.reasons, seconds=wall,
+                  seen=res.seen, not_seen=res.not_seen,
                   output_yaml=None)
     figures = []
     if plot:

@@ -3,19 +3,14 @@
 """Calibration in one call: design an excitation within the user's limits, run it on the
 drive, fit, validate on held-out moves, and say whether the result is accepted.
 
-The excitation (:func:`design_excitation`), all within ``max_angle`` of worm angle around the
-start, ``max_rate`` and ``max_accel``:
-
-* training moves, each a record starting at rest and ending with ``RING_TIME`` of rest:
-  ``step_out`` (trapezoid of the full amplitude at the rate and acceleration limits: the
-  stop rings the antenna mode, whose frequency and decay set the stiffness / inertia /
-  damping parameters), ``step_back`` (the same move reversed: the mesh changes flank, which
-  shows the play and the friction's direction) and ``small_step`` (a quarter of the
-  amplitude: friction does not scale with the amplitude, the elastic terms do, so two
-  amplitudes separate them);
-* a held-out move of another shape, ``validate_scurve`` (a jerk-limited S-curve of half the
-  amplitude back towards the start), never seen by the fit: the prediction error there is
-  the acceptance test.
+The excitation (:func:`~.excitation.design_excitation`, within ``max_angle`` of worm angle
+around the start, ``max_rate`` and ``max_accel``): steps out and back, a small step and a
+held-out S-curve for the elastic keys; slow and fast sweeps out and back at constant rates
+and a held-out sweep when the play, the load torque or the drag is fitted (those keys then
+get direct estimates before the local fit, :mod:`.direct`).  Each move is a record starting
+at rest and ending with ``RING_TIME`` of rest; the held-out move is never seen by the fit:
+the prediction error there is the acceptance test.  The result names every fitted key the
+excitation could not show (:mod:`.visibility`).
 
 Steps and reversals rather than a chirp: the antenna mode is lightly damped, so a stop
 excites it fully in one move and the ring-down is a clean free response; a chirp through
@@ -32,6 +27,7 @@ applied anywhere: the caller writes the YAML or sets the node's parameters only 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import zlib
 from collections.abc import Callable, Sequence
@@ -40,116 +36,18 @@ from typing import Any
 
 import numpy as np
 
-from ..dynamics.profiles import Profile, SCurveProfile, TrapezoidalProfile
 from ..params import Config
 from ..records import Record
 from .data import IdentificationError, record_from_model
+from .excitation import Limits, Move, design_excitation, uses_sweeps
 from .fit import FitOptions, identify
 from .report import FitResult, prediction_errors
 
-__all__ = ['Limits', 'Move', 'design_excitation', 'plant_runner', 'calibrate',
-           'CalibrationResult', 'excitation_series', 'RING_TIME', 'ACCEPT_REL']
+__all__ = ['plant_runner', 'calibrate', 'CalibrationResult', 'excitation_series', 'ACCEPT_REL']
 
-#: Rest after each move [s]: the antenna mode (~95 Hz) rings ~14 periods.
-RING_TIME = 0.15
-#: Rest before each move [s].
-LEAD_TIME = 0.005
 #: Accepted when every held-out move's theta4 RMS error is within this share of its
 #: oscillation amplitude (and the fit itself is trustworthy).
 ACCEPT_REL = 0.05
-
-
-@dataclass(frozen=True)
-class Limits:
-    """The excitation's limits, in worm angle (theta1): travel ``max_angle`` [rad] each way
-    from ``start`` [rad], ``max_rate`` [rad/s], ``max_accel`` [rad/s^2], and ``duration``
-    [s], the longest total time of all moves."""
-
-    max_angle: float
-    max_rate: float
-    max_accel: float
-    duration: float = 2.0
-    start: float = 0.0
-
-    def check(self) -> None:
-        for name in ('max_angle', 'max_rate', 'max_accel', 'duration'):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise IdentificationError(f'calibration limit {name} = {v!r}: must be a '
-                                          'positive number')
-        if not math.isfinite(self.start):
-            raise IdentificationError(f'calibration start {self.start!r} rad: not finite')
-
-
-@dataclass(frozen=True)
-class Move:
-    """One move of the excitation: a record of its own, starting at rest."""
-
-    name: str
-    role: str                 # 'train' | 'validate'
-    profile: Profile
-    t_end: float
-
-    @property
-    def amplitude(self) -> float:
-        return float(self.profile.theta1(np.array([self.t_end]))[0]
-                     - self.profile.theta1(np.array([0.0]))[0])
-
-
-class _Offset(Profile):
-    """A profile shifted by a constant angle (moves start at the current position)."""
-
-    def __init__(self, base: Profile, offset: float) -> None:
-        self.base, self.offset = base, float(offset)
-        self.name = base.name
-
-    def theta1(self, t):
-        return self.base.theta1(t) + self.offset
-
-    def theta1_dot(self, t):
-        return self.base.theta1_dot(t)
-
-    def describe(self) -> str:
-        return f'{self.base.describe()} from {self.offset:.6g} rad'
-
-
-def _trapezoid(amplitude: float, rate: float, accel: float) -> tuple[float, float]:
-    """(duration, accel_time) of the fastest trapezoid of ``amplitude`` within the limits
-    (a triangle when the rate limit is not reached)."""
-    a = abs(amplitude)
-    ta = rate / accel
-    if a <= rate * ta:                 # triangular: accelerate to the middle, decelerate
-        ta = math.sqrt(a / accel)
-        return 2 * ta, ta
-    return a / rate + ta, ta
-
-
-def design_excitation(limits: Limits) -> list[Move]:
-    """The moves of the calibration (module docstring), within ``limits``; raises
-    IdentificationError when they do not fit in ``limits.duration``."""
-    limits.check()
-    a, w, acc = limits.max_angle, limits.max_rate, limits.max_accel
-    moves = []
-    for name, role, amp, shape in (('step_out', 'train', a, 'trap'),
-                                   ('step_back', 'train', -a, 'trap'),
-                                   ('small_step', 'train', 0.25 * a, 'trap'),
-                                   ('validate_scurve', 'validate', -0.5 * a, 'scurve')):
-        dur, ta = _trapezoid(amp, w, acc)
-        if shape == 'scurve':            # raised-cosine ramps: peak acceleration pi/2 x
-            dur, ta = _trapezoid(amp, w, acc / (0.5 * math.pi))
-            prof: Profile = SCurveProfile(amp, dur, ta, LEAD_TIME)
-        else:
-            prof = TrapezoidalProfile(amp, dur, ta, LEAD_TIME)
-        # 'step_back' starts where 'step_out' ended: the reversal happens on the drive
-        start = limits.start + (a if name == 'step_back' else 0.0)
-        moves.append(Move(name, role, _Offset(prof, start), LEAD_TIME + dur + RING_TIME))
-    total = sum(m.t_end for m in moves)
-    if total > limits.duration:
-        raise IdentificationError(
-            f'the excitation needs {total:.3g} s (4 moves with {RING_TIME * 1e3:.0f} ms of '
-            f'ring-down each) but the limit is {limits.duration:g} s: allow more time, or '
-            'raise the rate / acceleration limits')
-    return moves
 
 
 def excitation_series(moves: Sequence[Move], sample_rate: float) -> tuple[np.ndarray,
@@ -206,6 +104,21 @@ class CalibrationResult:
     def config(self) -> Config:
         return self.fit.config
 
+    @property
+    def not_seen(self) -> dict[str, str]:
+        """Fitted keys the excitation could not show: key -> one line naming the move to
+        record (:mod:`.visibility`)."""
+        return self.fit.not_seen
+
+    @property
+    def seen(self) -> list[str]:
+        """The fitted keys the excitation showed."""
+        return [k for k in self.fit.keys if k not in self.fit.not_seen]
+
+    def estimate(self, key: str) -> float:
+        """The fitted value of ``key``."""
+        return self.fit.values[self.fit.keys.index(key)]
+
     def worst_held_out(self, output: str = 'theta4') -> float:
         """The largest held-out RMS error of ``output`` as a share of its amplitude."""
         rel = [r[output]['rel'] for r in self.validation_after if output in r]
@@ -221,7 +134,12 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
     trustworthy and every held-out theta4 error is within ``accept_rel`` of its amplitude.
     Raises IdentificationError (nothing fitted) when the limits or the records are
     unusable: no motion measured, motion unrelated to the command, a record that stops."""
-    moves = design_excitation(limits)
+    moves = design_excitation(limits, keys, base)
+    opt = options or FitOptions()
+    if uses_sweeps(keys) and opt.n_starts is None:
+        # the direct estimates and the play scan are the global stage: one local fit (from
+        # the frequency start) suffices, and halves the time
+        opt = dataclasses.replace(opt, n_starts=1)
     records = []
     for m in moves:
         rec = run(m)
@@ -229,7 +147,7 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
         records.append(rec)
     train = [r for r, m in zip(records, moves) if m.role == 'train']
     held = [r for r, m in zip(records, moves) if m.role == 'validate']
-    res = identify(base, train, keys, options=options, outputs=outputs)
+    res = identify(base, train, keys, options=opt, outputs=outputs)
     before = prediction_errors(base, held)
     after = prediction_errors(res.config, held)
     reasons = list(res.problems)

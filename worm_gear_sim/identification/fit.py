@@ -29,13 +29,15 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..dynamics.modal import modes
+from ..dynamics.stepping import SimulationError
 from ..params import Config
 from ..records import Record
 from ..validation import ConfigError
-from .data import IdentificationError, measured_frequencies
+from .data import IdentificationError, measured_frequencies, normalised
+from .direct import DIRECT_KEYS, PLAY, direct_estimates, lag_table, scan_play
 from .parameters import fit_parameters
 from .problem import DIFF_STEP, Problem
-from .report import FitResult, assess
+from .report import FitResult, assess, residual_rms
 
 __all__ = ['STRATEGIES', 'FitOptions', 'frequency_start', 'identify']
 
@@ -123,6 +125,9 @@ class FitOptions:
     xtol: float = 1e-8
     method: str = 'dogbox'     # least_squares method; trf creeps away from a start near a
     #                            bound (its step scales with the distance to the bound)
+    #: the global stage (:mod:`.direct`) when play, load or drag is fitted: direct estimates
+    #: from the records' constant-rate segments and a scan of the play, before the local fit
+    global_stage: bool = True
     workers: int | None = None
     scheduler: str | None = None
     serial: bool = False
@@ -224,6 +229,35 @@ def _starts(problem: Problem, x_first: list[np.ndarray], n_starts: int, seed: in
     return starts
 
 
+# ---- the global stage ------------------------------------------------------------------------
+def _global_stage(base: Config, records: Sequence[Record], keys: Sequence[str]
+                  ) -> tuple[Config, dict[str, Any]]:
+    """The base with the direct estimates of play, load and drag (:mod:`.direct`) when the
+    records allow them (else ``base`` itself), and what was found."""
+    if not any(k in DIRECT_KEYS for k in keys):
+        return base, {}
+    try:
+        est = direct_estimates(base, [normalised(r, i) for i, r in enumerate(records)], keys)
+    except (ConfigError, SimulationError, ValueError) as exc:
+        return base, {'note': f'direct estimates failed: {exc}'}
+    if est is None:
+        return base, {'note': 'no constant-rate segments both ways: no direct estimates'}
+    vals = dict(est.values)
+    if PLAY in vals and not est.play_seen:
+        vals.pop(PLAY)                      # not seen: keep the base's play
+    info: dict[str, Any] = {'values': dict(est.values), 'play_seen': est.play_seen,
+                            'compliance_rad_per_Nm': est.compliance,
+                            'misfit_rad': est.misfit_rad, 'notes': est.notes,
+                            'segments': lag_table(est.segments)}
+    if PLAY in vals and not vals[PLAY] > 0:
+        vals.pop(PLAY)
+    try:
+        return (base.replace(vals) if vals else base), info
+    except ConfigError as exc:
+        info['note'] = f'direct estimates not usable: {exc}'
+        return base, info
+
+
 # ---- the fit ---------------------------------------------------------------------------------
 def identify(base: Config, records: Sequence[Record], keys: Sequence[str], *,
              bounds: Mapping[str, tuple[float, float]] | None = None,
@@ -234,11 +268,21 @@ def identify(base: Config, records: Sequence[Record], keys: Sequence[str], *,
     ``outputs``: the measured outputs to fit (default: those observable at their sampling;
     the others are named in the result's ``output_verdicts``)."""
     t_begin = time.perf_counter()
+    keys = [str(k).strip() for k in keys]
     opt = options or FitOptions()
     use_freq, use_windows, n_starts = opt.resolved()
     params = fit_parameters(base, keys, bounds)
-    problem = Problem(base, params, records, outputs)
+    fit_base: Config = base
+    direct_info: dict[str, Any] = {}
+    if opt.global_stage:
+        fit_base, direct_info = _global_stage(base, records, keys)
+        if fit_base is not base:     # the fitted coordinates start from the estimates
+            params = fit_parameters(fit_base, keys, bounds)
+    problem = Problem(fit_base, params, records, outputs)
     x_base = np.zeros(problem.n)
+    if direct_info.get('play_seen') and PLAY in keys:
+        x_base, direct_info['play_scan'] = scan_play(problem, x_base,
+                                                          [p.key for p in params].index(PLAY))
     freq_info: dict[str, Any] = {}
     first = []
     if use_freq:
@@ -250,6 +294,15 @@ def identify(base: Config, records: Sequence[Record], keys: Sequence[str], *,
     results = _run_starts(problem, starts, windows, opt, on_start_done)
     results.sort(key=lambda r: r['index'])
     best, stats = assess(problem, results, opt.max_nfev)
+    if fit_base is not base:   # 'before' and the base values: the caller's base
+        rms_before, per_before = residual_rms(problem, base)
+        stats['rms_before'] = rms_before
+        for row, b in zip(stats['per_record'], per_before):
+            row['rms_before_rad'] = {k: v for k, v in b.items() if k != 'name'}
+        stats['base_values'] = [p.base for p in fit_parameters(base, keys, bounds)]
+        stats['base_config'] = base
+    if direct_info:
+        freq_info = dict(freq_info, direct=direct_info)
     return FitResult(
         **stats,
         strategy={'name': opt.strategy, 'frequency_start': use_freq,

@@ -22,6 +22,7 @@ from ..params import Config
 from ..records import Record
 from .data import OUTPUTS, IdentificationError, normalised, predict, rigid_motion
 from .problem import DIFF_STEP, Problem, jacobian
+from .visibility import key_visibility
 
 __all__ = ['CORRELATION_WARN', 'Z95', 'FitResult', 'assess', 'residual_rms',
            'prediction_errors', 'validate']
@@ -73,6 +74,8 @@ class FitResult:
     #: every measured output: 'matched', 'not matched: ...', or why it was not fitted
     #: ('... not observable at this sampling ...', 'not fitted ...')
     output_verdicts: dict[str, str] = field(default_factory=dict)
+    #: fitted keys the records cannot show: key -> one line naming it and the move to record
+    not_seen: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -92,7 +95,7 @@ class FitResult:
             'trustworthy': self.trustworthy, 'problems': self.problems,
             'warnings': self.warnings, 'strategy': self.strategy, 'starts': self.starts,
             'frequency_start': self.frequency_info, 'seconds': self.seconds,
-            'output_verdicts': self.output_verdicts,
+            'output_verdicts': self.output_verdicts, 'not_seen': self.not_seen,
         }
 
     def table(self) -> str:
@@ -193,35 +196,6 @@ def resolved_jacobian(problem: Problem, x: np.ndarray
     return J, steps, change
 
 
-def play_visibility(records: Sequence[Record], play: float, base: Config) -> list[str]:
-    """Warnings when no record can show the mesh play: the play is seen when the command
-    reverses after travelling more than the play seen at the worm (b / output_per_input) and
-    the drive moves slowly through the reversal (the gear at most ~1e-2 rad/s) at low load
-    (a load torque holds one flank through a reversal: the play is never crossed)."""
-    m = DriveModel.of(base)
-    worm_play = max(play, 1e-6) / m.output_per_input
-    seen = False
-    for rec in records:
-        th = np.asarray(rec.theta1, float)
-        d = np.diff(th)
-        moving = np.flatnonzero(np.abs(d) > 0)
-        if moving.size < 2:
-            continue
-        sgn = np.sign(d[moving])
-        rev = moving[np.flatnonzero(sgn[1:] != sgn[:-1]) + 1]
-        if rev.size and np.ptp(th) > 2.0 * worm_play:
-            seen = True
-    out = []
-    if not seen:
-        out.append(f'mesh.backlash: no record reverses the command after more than twice the '
-                   f'play seen at the worm ({2 * worm_play:.3g} rad): the play is not seen; '
-                   'record a slow reversal at low load (docs/identification.md)')
-    if abs(base.load.output_torque) > 0.0:
-        out.append('mesh.backlash: the base has a load torque; a load holds one flank through '
-                   'a reversal and hides the play (fit it on a record at low load)')
-    return out
-
-
 def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
            ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The statistics and the verdict of the best of ``results`` (local fits, each with
@@ -298,9 +272,10 @@ def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
             if math.isfinite(c) and abs(c) > CORRELATION_WARN:
                 warnings.append(f'{params[i].key} and {params[j].key} are correlated '
                                 f'({c:+.3f}): the data can hardly separate them')
-    for p, v in zip(params, values):
-        if p.key == 'mesh.backlash':
-            warnings.extend(play_visibility(problem.records, v, problem.base))
+    # which keys the records cannot show, judged with the fitted values (the play, load and
+    # drag the fit found), one line each naming the move to record
+    not_seen = key_visibility(model_fit.config, problem.records, [p.key for p in params])
+    warnings.extend(not_seen.values())
     for p, v, (clo, chi), si, sc, h in zip(params, values, ci, std, step_change, steps):
         bx = p.x_bounds
         xi = p.to_x(v)
@@ -349,7 +324,7 @@ def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
         warnings=warnings + list(problem.left_out.values()),
         output_verdicts={o: verdicts.get(o) or problem.left_out[o]
                          for o in OUTPUTS if o in verdicts or o in problem.left_out},
-        config=model_fit.config, base_config=problem.base,
+        config=model_fit.config, base_config=problem.base, not_seen=not_seen,
         step_consistency=[float(s) for s in step_change], jacobian_steps=steps)
 
 

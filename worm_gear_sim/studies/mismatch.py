@@ -273,7 +273,8 @@ def calibration_rows(base: Config, n: int, seed: int = 0,
     (accepted or not: the row says which) and with ``base`` (the nominal model).
     ``options``: the fit's :class:`~worm_gear_sim.identification.FitOptions` (None: its
     defaults, a Dask cluster of one process per core: call from a ``__main__`` guard)."""
-    from ..identification.calibrate import Limits, calibrate, plant_runner
+    from ..identification.calibrate import calibrate, plant_runner
+    from ..identification.excitation import Limits
     rows = []
     res_rad = 2.0 * math.pi / 2 ** encoder_bits if encoder_bits > 0 else 0.0
     for k, (v, drive) in enumerate(random_drives(base, n, seed, ranges)):

@@ -1,0 +1,220 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The global stage before the local fit: direct estimates of the play, the load torque and
+the antenna drag from the constant-rate segments of the records, then a scan of the play.
+
+Over a segment where the worm turns at a constant rate omega (after its transient), the lag
+of the antenna behind the rigid motion, e = theta4 - u theta1 (u = output_per_input), is
+steady (the antenna mode's ringing averages out):
+
+    e = -s b / 2 - (T + c u omega) C                                   (wind-up)
+
+with b the play (``mesh.backlash``), T the load torque (``load.output_torque``), c the drag
+(``load.output_viscous_coefficient``), C the compliance from the antenna to the worm (the
+gear shaft, the mesh and the bearings in series: computed by the model at the base values),
+and s = sign(T + c u omega) the flank in contact (+1 the driving flank).  Segments both
+ways at two rates give: the drag from the rate dependence (difference / 2 / rate), the load
+from their mean, and the play from the jump between the ways when the flank changes.
+:func:`direct_estimates` solves this for every flank pattern the physics allows (s rises
+with omega: T + c u omega is increasing) and keeps the consistent one with the smallest
+misfit; with one flank throughout, b and T C are one number and the play is not seen.
+The model then takes the drive's own friction into account: :func:`scan_play` evaluates the
+time-domain cost of the records on a few plays around the estimate (the others at their
+direct estimates) and keeps the best, the start of the local least-squares fit.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from ..dynamics.model import DriveModel
+from ..params import Config
+from ..records import Record
+from .data import predict
+
+__all__ = ['PLAY', 'LOAD', 'DRAG', 'DIRECT_KEYS', 'Segment', 'steady_segments', 'compliance',
+           'DirectEstimate', 'direct_estimates', 'scan_play', 'SCAN_FACTORS']
+
+PLAY = 'mesh.backlash'
+LOAD = 'load.output_torque'
+DRAG = 'load.output_viscous_coefficient'
+DIRECT_KEYS = (PLAY, LOAD, DRAG)
+#: Shortest constant-rate run used [s] and the share of it skipped at its start (the
+#: transient after the ramp, the flank change after a reversal).
+MIN_RUN = 0.03
+SKIP_SHARE = 0.4
+#: Relative tolerance of "constant" rate.
+RATE_TOL = 1e-3
+#: Absolute tolerance [N m] of the flank pattern's consistency (a gear with neither load
+#: nor drag floats in the play: its flank is undetermined).
+TORQUE_TOL = 0.02
+#: Factors on the play's direct estimate tried by :func:`scan_play`.
+SCAN_FACTORS = (0.8, 0.88, 0.94, 1.0, 1.06, 1.13, 1.25)
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A steady constant-rate segment of a record: its times, the worm rate [rad/s] and the
+    mean measured lag e = theta4 - u theta1 [rad]."""
+
+    record: str
+    t0: float
+    t1: float
+    rate: float
+    lag: float
+    samples: int
+
+
+def steady_segments(records: Sequence[Record], u: float) -> list[Segment]:
+    """The steady parts of the constant-rate runs of the commands (theta4 measured)."""
+    out = []
+    for r in records:
+        if 'theta4' not in r.measured:
+            continue
+        t = np.asarray(r.t, float)
+        th1 = np.asarray(r.theta1, float)
+        if t.size < 8:
+            continue
+        v = np.diff(th1) / np.diff(t)
+        n = v.size
+        i = 0
+        while i < n:
+            if abs(v[i]) <= 0.0:
+                i += 1
+                continue
+            j = i
+            while j + 1 < n and abs(v[j + 1] - v[i]) <= RATE_TOL * abs(v[i]):
+                j += 1
+            # samples i .. j + 1 lie on the run
+            t0, t1 = t[i], t[j + 1]
+            if t1 - t0 >= MIN_RUN:
+                ts = t0 + SKIP_SHARE * (t1 - t0)
+                sel = (t >= ts) & (t <= t1)
+                e = r.measured['theta4'][sel] - u * th1[sel]
+                out.append(Segment(r.name, float(ts), float(t1), float(np.mean(v[i:j + 1])),
+                                   float(np.mean(e)), int(sel.sum())))
+            i = j + 1
+    return out
+
+
+def compliance(base: Config) -> float:
+    """C [rad/(N m)]: the static lag theta4 - u theta1 per N m of load torque on the antenna
+    (play 0), from the model's static equilibria at +-1 N m."""
+    lags = []
+    t = np.arange(20) * 1e-3
+    for tl in (1.0, -1.0):
+        cfg = base.replace({PLAY: 0.0, LOAD: tl})
+        m = DriveModel(cfg)
+        rec = Record(name='rest', t=t, theta1=np.zeros_like(t), measured={'theta4': t})
+        p = predict(m, rec)
+        lags.append(float(p['theta4'][0]))
+    return -(lags[0] - lags[1]) / 2.0
+
+
+@dataclass
+class DirectEstimate:
+    """What the direct stage found: estimates of the fitted direct keys (play, load, drag),
+    whether the flank changed (the play seen), the segments and the misfit [rad]."""
+
+    values: dict[str, float]
+    play_seen: bool
+    segments: list[Segment]
+    compliance: float
+    misfit_rad: float
+    flanks: list[int] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def describe(self) -> str:
+        vals = ', '.join(f'{k} = {v:.4g}' for k, v in self.values.items())
+        return (f'direct estimates from {len(self.segments)} constant-rate segments: {vals} '
+                f'(misfit {self.misfit_rad:.3g} rad; play '
+                f'{"seen" if self.play_seen else "not seen: one flank throughout"})')
+
+
+def direct_estimates(base: Config, records: Sequence[Record], keys: Sequence[str]
+                     ) -> DirectEstimate | None:
+    """Estimates of the keys among DIRECT_KEYS from the records' constant-rate segments
+    (module docstring); None when the records hold fewer than two such segments or no
+    direct key is fitted.  Keys not fitted keep their base values."""
+    fitted = [k for k in DIRECT_KEYS if k in keys]
+    if not fitted:
+        return None
+    model = DriveModel(base)
+    u = model.output_per_input
+    segs = [s for s in steady_segments(records, u)]
+    if len(segs) < 2:
+        return None
+    C = compliance(base)
+    wg = np.array([u * s.rate for s in segs])        # gear rate [rad/s]
+    e = np.array([s.lag for s in segs])
+    fixed = {PLAY: base.mesh.backlash, LOAD: base.load.output_torque,
+             DRAG: base.load.output_viscous_coefficient}
+    order = np.argsort(wg)
+    best: tuple[float, dict[str, float], list[int], bool] | None = None
+    n = len(segs)
+    for j in range(n + 1):           # segments below the j-th slowest: the coasting flank
+        s = np.ones(n)
+        s[order[:j]] = -1.0
+        switch = 0 < j < n
+        cols = {PLAY: -0.5 * s, LOAD: -C * np.ones(n), DRAG: -C * wg}
+        use = [k for k in fitted if not (k == PLAY and not switch)]
+        rhs = e - sum(cols[k] * fixed[k] for k in DIRECT_KEYS if k not in use)
+        if use:   # play and drag >= 0, the load torque of either sign
+            A = np.column_stack([cols[k] for k in use])
+            lo = [-np.inf if k == LOAD else 0.0 for k in use]
+            sol = lsq_linear(A / C, rhs / C, bounds=(lo, [np.inf] * len(use))).x
+        else:
+            sol = np.zeros(0)
+        vals = dict(fixed)
+        vals.update({k: float(v) for k, v in zip(use, sol)})
+        torque = vals[LOAD] + vals[DRAG] * wg
+        # the flank pattern must be what the torques give (a tolerance of 5 % of the
+        # largest torque, and TORQUE_TOL, for a segment near the switch)
+        tol = 0.05 * float(np.max(np.abs(torque))) + TORQUE_TOL
+        if np.any(torque * s < -tol):
+            continue
+        pred = -s * 0.5 * vals[PLAY] - C * torque
+        mis = float(np.sqrt(np.mean((pred - e) ** 2)))
+        if best is None or mis < best[0]:
+            best = (mis, vals, [int(v) for v in s], switch)
+    if best is None:
+        return None
+    mis, vals, flanks, switch = best
+    est = DirectEstimate({k: vals[k] for k in fitted}, switch, segs, C, mis, flanks)
+    if PLAY in fitted and not switch:
+        est.notes.append('the gear stays on one flank in every constant-rate segment: the '
+                         'play is not seen, only b / 2 + T C')
+    return est
+
+
+def scan_play(problem, x0: np.ndarray, index: int,
+              factors: Sequence[float] = SCAN_FACTORS) -> tuple[np.ndarray, list[dict]]:
+    """1-D scan of the play (fitted coordinate ``index`` of ``problem``, log scale) around
+    ``x0`` on the time-domain cost of the whole records; returns the best x and the table."""
+    p = problem.params[index]
+    lo, hi = problem.x_bounds
+    rows = []
+    best_x, best_c = np.asarray(x0, float), math.inf
+    for f in factors:
+        x = np.asarray(x0, float).copy()
+        x[index] = x[index] + (math.log(f) if p.log else (f - 1.0) * p.from_x(x0[index])
+                               / p.scale)
+        x[index] = min(max(x[index], lo[index]), hi[index])
+        c = problem.cost(x)
+        rows.append({'factor': f, 'value': p.from_x(float(x[index])), 'cost': c})
+        if c < best_c:
+            best_x, best_c = x, c
+    return best_x, rows
+
+
+def lag_table(segments: Sequence[Segment]) -> list[str]:
+    """One line per segment (for reports)."""
+    return [f'{s.record} {s.t0:.3f}-{s.t1:.3f} s: worm {s.rate:+.4g} rad/s, lag '
+            f'{s.lag * 1e6:+.1f} urad' for s in segments]
+
+

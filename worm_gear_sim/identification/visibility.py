@@ -1,0 +1,101 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Which fitted keys the records can show, and for each one they cannot, one line naming
+the key and the move to record.
+
+* ``mesh.backlash`` is seen when the gear changes flank: the fitted model, simulated on the
+  records, has the relative mesh displacement q = l_w theta2 - r_g theta3 beyond both edges
+  of the play (|q| >= r_g b / 2 on either side).  A load torque larger than the drag torque
+  at every rate, and than the antenna's inertia torque at every deceleration, holds one
+  flank: the play is then not crossed (and only b / 2 + T C of play and load is seen).
+* ``load.output_torque`` and ``load.output_viscous_coefficient`` need constant-rate
+  segments (:func:`.direct.steady_segments`): the drag at two rates or both ways, the load
+  both ways (or at a known play).
+* A key whose Jacobian column is (numerically) zero on the records is not seen either (the
+  report's singular-Jacobian check names it).
+
+Computed from the *fitted* values (the play, load and drag the records gave), not the base's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..dynamics.model import DriveModel
+from ..dynamics.stepping import SimulationError
+from ..records import Record
+from .data import predict
+from .direct import DRAG, LOAD, PLAY, Segment, steady_segments
+
+__all__ = ['flank_changes', 'key_visibility']
+
+
+def flank_changes(cfg: Any, records: Sequence[Record]) -> bool:
+    """Whether the model ``cfg`` (with play > 0) touches both flanks in some record."""
+    b = cfg.mesh.backlash
+    if not b > 0:
+        return False
+    m = DriveModel(cfg)
+    lw, rg = m.derived.l_w, cfg.geometry.gear_pitch_radius
+    edge = 0.5 * rg * b
+    for r in records:
+        try:
+            p = predict(m, r)
+        except (SimulationError, ValueError):
+            continue
+        q = lw * p['theta2'] - rg * p['theta3']
+        if float(np.max(q)) >= edge * (1 - 1e-6) and float(np.min(q)) <= -edge * (1 - 1e-6):
+            return True
+    return False
+
+
+def key_visibility(cfg: Any, records: Sequence[Record], keys: Sequence[str],
+                   segments: Sequence[Segment] | None = None) -> dict[str, str]:
+    """{key: one line naming the key and the move to record} for each fitted key of play,
+    load and drag the records cannot show, judged with the fitted config ``cfg``."""
+    out: dict[str, str] = {}
+    m = DriveModel(cfg)
+    u = m.output_per_input
+    segs = list(segments) if segments is not None else steady_segments(records, u)
+    rates = [s.rate for s in segs]
+    both_ways = any(r > 0 for r in rates) and any(r < 0 for r in rates)
+    T, c = cfg.load.output_torque, cfg.load.output_viscous_coefficient
+    w_max = max((abs(r) for r in rates), default=0.0)
+    play_hidden = False
+    if PLAY in keys and not flank_changes(cfg, records):
+        play_hidden = True
+        if c > 0 and abs(T) > 0:
+            need = abs(T) / (c * u)
+            how = (f'record a reversal at a constant worm rate above {need:.3g} rad/s (the '
+                   f'drag torque then exceeds the load torque of {abs(T):.3g} N m; the '
+                   f'records reach {w_max:.3g} rad/s), or unload the axis')
+        elif abs(T) > 0:
+            J4 = m.derived.J_4 + m.derived.J_g
+            how = (f'record a stop with a worm deceleration above '
+                   f'{abs(T) / (J4 * u):.3g} rad/s^2 (the inertia torque then exceeds the '
+                   f'load torque of {abs(T):.3g} N m), or unload the axis')
+        else:
+            how = ('record a slow reversal (constant worm rate both ways, travel beyond the '
+                   'play at the worm)')
+        out[PLAY] = (f'{PLAY}: not seen: the gear stays on one flank in every record, so the '
+                     f'play is not seen; {how}')
+    if LOAD in keys:
+        if not both_ways:
+            out[LOAD] = (f'{LOAD}: not seen: no record moves at a constant worm rate both '
+                         'ways; record a slow reversal (e.g. slew reversals at a constant '
+                         'rate)')
+        elif play_hidden:
+            out[LOAD] = (f'{LOAD}: not separable from the play: with one flank throughout, '
+                         'the records show only the sum of the load wind-up and half the '
+                         'play; record the move named for mesh.backlash')
+    if DRAG in keys:
+        distinct = {round(math.copysign(abs(r), r), 6) for r in rates}
+        if len(distinct) < 2:
+            out[DRAG] = (f'{DRAG}: not seen: the records hold {len(distinct)} constant-rate '
+                         'segment(s); record constant-rate segments at two rates or both '
+                         'ways')
+    return out
