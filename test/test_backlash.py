@@ -340,9 +340,11 @@ def test_identify_fits_the_play_and_predicts_a_held_out_reversal(arcmin, variant
     )
     drag = {'load.output_viscous_coefficient': 2.0}
     truth = Config().replace({'mesh.backlash': arcmin * ARCMIN, **drag, **variant})
-    w = 1e-3 * 56.0                                  # worm rate: the gear at 1e-3 rad/s
-    slow = SampledProfile(np.array([0.0, 2.0, 4.0]), np.array([0.0, 2 * w, 0.0]), 'linear')
-    rec = record_from_model(truth, slow, 4.0, sample_rate=1000, outputs=('theta4',),
+    # worm rate: the gear at 2e-3 rad/s, 2e-3 rad out and back (> the 5 arcmin play); the
+    # former 1e-3 rad/s over 4 s fitted the same play, at twice the cost
+    w = 2e-3 * 56.0
+    slow = SampledProfile(np.array([0.0, 1.0, 2.0]), np.array([0.0, w, 0.0]), 'linear')
+    rec = record_from_model(truth, slow, 2.0, sample_rate=1000, outputs=('theta4',),
                             noise_rad=2e-6, resolution_rad=1e-6, seed=2)
     base = Config().replace({'mesh.backlash': ARCMIN, **drag})
     res = identify(base, [rec], ['mesh.backlash'],
