@@ -76,8 +76,8 @@ def test_kernel_error_matches_its_definition():
         e, e2, e3, e22, e33 = transmission_error(p, th2, th3)
         h = 1e-5
         assert e == pytest.approx(error_of(WORM, GEAR, th2, th3), abs=1e-18)
-        for d, d2, f in ((e2, e22, lambda x: error_of(WORM, GEAR, th2 + x, th3)),
-                         (e3, e33, lambda x: error_of(WORM, GEAR, th2, th3 + x))):
+        for d, d2, f in ((e2, e22, lambda x, a=th2, b=th3: error_of(WORM, GEAR, a + x, b)),
+                         (e3, e33, lambda x, a=th2, b=th3: error_of(WORM, GEAR, a, b + x))):
             assert d == pytest.approx((f(h) - f(-h)) / (2 * h), rel=1e-6, abs=1e-14)
             assert d2 == pytest.approx((f(h) - 2 * f(0) + f(-h)) / h ** 2, rel=1e-3,
                                        abs=1e-9)
