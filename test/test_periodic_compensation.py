@@ -10,8 +10,9 @@ import pytest
 
 from worm_gear_sim import Config
 from worm_gear_sim.compensation import Compensator
+from worm_gear_sim.dynamics.inverse import inverse_theta1
 from worm_gear_sim.dynamics.modal import static_equilibrium
-from worm_gear_sim.dynamics.model import DriveModel, inverse_theta1, transmission_error
+from worm_gear_sim.dynamics.model import DriveModel, transmission_error
 from worm_gear_sim.play_crossing import trajectory_feedforward
 from worm_gear_sim.realtime import RealtimePredictor, feedforward_series
 from worm_gear_sim.studies.mismatch import MISMATCH_DRIVE, sector_scan
