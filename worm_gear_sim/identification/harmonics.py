@@ -53,9 +53,9 @@ def parse_orders(text: str) -> tuple[int, int]:
             raise IdentificationError(f'--fit-harmonics {text!r}: each part is worm:N or '
                                       f'gear:N (N orders), got {part!r}')
         orders[name] = int(n)
-    for name, n in orders.items():
-        if n > MAX_ERROR_ORDERS:
-            raise IdentificationError(f'--fit-harmonics: {name}:{n}, at most '
+    for name, count in orders.items():
+        if count > MAX_ERROR_ORDERS:
+            raise IdentificationError(f'--fit-harmonics: {name}:{count}, at most '
                                       f'{MAX_ERROR_ORDERS} orders')
     if orders['worm'] + orders['gear'] == 0:
         raise IdentificationError(f'--fit-harmonics {text!r}: no order to fit')
