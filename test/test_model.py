@@ -28,6 +28,8 @@ VARIANTS = {
     'load': {'load.output_torque': 3.0, 'load.output_viscous_coefficient': 0.5},
     'sawtooth_mapping': {'mesh.contact_mapping': 'sawtooth'},
     'tanh_friction': {'friction.direction': 'regularized'},
+    'periodic_error': {'mesh.worm_error_harmonics': [2e-4, -1e-4, 1e-4, 5e-5, -5e-5, 3e-5],
+                       'mesh.gear_error_harmonics': [3e-4, 1e-4, -1e-4, 2e-4]},
 }
 
 

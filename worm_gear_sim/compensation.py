@@ -36,7 +36,7 @@ Design (computed from the NOMINAL model at construction / :meth:`Compensator.rec
 
 3. Across the mesh play (``mesh.backlash`` > 0, ``compensation.backlash_inverse``): the
    inverse also takes up half the play on the flank the move needs, the sign of the mesh
-   torque demand (:func:`worm_gear_sim.dynamics.model.gear_torque_demand`) of the filtered
+   torque demand (:func:`worm_gear_sim.dynamics.inverse.gear_torque_demand`) of the filtered
    reference without the lead (two more rows of weights; the lead's overshoot at rate changes would
    flip the flank back and forth).  A change of flank steps the correction by the whole
    play, so the worm crosses it in one command period; it is timely only with a preview
@@ -48,7 +48,7 @@ Design (computed from the NOMINAL model at construction / :meth:`Compensator.rec
 ``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one compiled kernel
 (:func:`compensation_kernel`: an interpolation walk over the history at ~120 quadrature
 nodes, the weights and the model inverse
-:func:`worm_gear_sim.dynamics.model.inverse_theta1`), about 2 us with the Python call
+:func:`worm_gear_sim.dynamics.inverse.inverse_theta1`), about 2 us with the Python call
 (``benchmarks/bench_realtime.py``).  Structural damping (``damping.*``) is not in the
 inverse (zero by default; it only makes the drive ring less).
 
@@ -70,8 +70,9 @@ import numpy as np
 from numba import njit
 from scipy.interpolate import BSpline
 
+from .dynamics.inverse import gear_torque_demand, inverse_theta1
 from .dynamics.modal import modes
-from .dynamics.model import DriveModel, gear_torque_demand, has_play, inverse_theta1, rest_flank
+from .dynamics.model import DriveModel, has_play, rest_flank
 from .params import Config
 from .schema import Parameters
 

@@ -40,7 +40,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .compensation import Compensator
-from .dynamics.model import DriveModel, gear_torque_demand, has_play
+from .dynamics.inverse import gear_torque_demand
+from .dynamics.model import DriveModel, has_play
 from .params import Config
 
 __all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step',

@@ -43,7 +43,8 @@ from .validation import (
 
 __all__ = [
     'Parameters', 'sections_from_mapping', 'NODE_NAME', 'ANGLE_LIMIT', 'LOAD_LIMIT', 'SECTIONS',
-    'DEG', 'PHASE_AT_MEAN_STIFFNESS', 'Geometry', 'Materials', 'Shafts', 'Mesh', 'Friction',
+    'DEG', 'PHASE_AT_MEAN_STIFFNESS', 'MAX_ERROR_ORDERS', 'ERROR_HARMONIC_LIMIT',
+    'ERROR_SLOPE_LIMIT', 'Geometry', 'Materials', 'Shafts', 'Mesh', 'Friction',
     'Damping', 'Load', 'Integrator', 'InputProfile', 'NodeSettings', 'CompensationSettings',
 ]
 
@@ -58,6 +59,16 @@ LOAD_LIMIT = 1e5
 # Mesh phase at which the mesh stiffness k_Y of the cosine contact mapping equals its mean
 # over the cycle (default parameters; test_model checks it)
 PHASE_AT_MEAN_STIFFNESS = 1.8373
+#: Most harmonic orders of each periodic transmission error (``mesh.worm_error_harmonics``,
+#: ``mesh.gear_error_harmonics``): the compiled kernel holds a fixed number.
+MAX_ERROR_ORDERS = 8
+#: Largest |coefficient| [rad at the gear] of a periodic-error harmonic: 1e-3 rad (3.4 arcmin,
+#: 20x the worst telescope drive's 100 arcsec peak to peak).  A cross-field check also
+#: bounds the slope: r_g |de/dtheta2| <= ERROR_SLOPE_LIMIT l_w (the approach keeps rising
+#: with the worm, the mesh force its virtual-work direction).
+ERROR_HARMONIC_LIMIT = 1e-3
+#: Largest r_g max|de/dtheta2| / l_w (and max|de/dtheta3|) the harmonics may give.
+ERROR_SLOPE_LIMIT = 0.1
 
 
 def _f(default: Any, description: str, unit: str = '', lo: float | None = None,
@@ -189,6 +200,19 @@ class Mesh:
                             ' coast: on the other one (q = -r_g b/2), center: in the middle of '
                             'the play. Under a load it rests on the loaded flank',
                             choices=('drive', 'coast', 'center'))
+    worm_error_harmonics: tuple = _f([], 'Periodic transmission error of the worm, '
+                                     '[s1, c1, s2, c2, ...]: e += sum_k s_k sin(k theta2) + '
+                                     'c_k cos(k theta2), in rad at the gear (the approach '
+                                     'q = l_w theta2 - r_g theta3 + r_g e). Empty: none. At '
+                                     f'most {MAX_ERROR_ORDERS} orders, each entry within '
+                                     f'+-{ERROR_HARMONIC_LIMIT:g} rad', 'rad',
+                                     -ERROR_HARMONIC_LIMIT, ERROR_HARMONIC_LIMIT)
+    gear_error_harmonics: tuple = _f([], 'Periodic transmission error of the gear (runout), '
+                                     '[S1, C1, S2, C2, ...]: e += sum_m S_m sin(m theta3) + '
+                                     'C_m cos(m theta3), in rad at the gear. Empty: none. At '
+                                     f'most {MAX_ERROR_ORDERS} orders, each entry within '
+                                     f'+-{ERROR_HARMONIC_LIMIT:g} rad', 'rad',
+                                     -ERROR_HARMONIC_LIMIT, ERROR_HARMONIC_LIMIT)
 
 
 @dataclass(frozen=True)
@@ -491,6 +515,25 @@ def validate(cfg: Parameters) -> None:
         raise ConfigError('mesh.backlash', f'{cfg.mesh.backlash:g} rad is more play than a '
                           f'tooth pitch allows: at most half the gear pitch, pi / z_g = '
                           f'{half_pitch:.6g} rad')
+    for key in ('worm_error_harmonics', 'gear_error_harmonics'):
+        coeffs = getattr(cfg.mesh, key)
+        if len(coeffs) % 2:
+            raise ConfigError(f'mesh.{key}', f'needs pairs [s1, c1, s2, c2, ...]: got an odd '
+                              f'number of entries ({len(coeffs)})')
+        if len(coeffs) > 2 * MAX_ERROR_ORDERS:
+            raise ConfigError(f'mesh.{key}', f'at most {MAX_ERROR_ORDERS} orders '
+                              f'({2 * MAX_ERROR_ORDERS} entries), got {len(coeffs)} entries')
+        # bound of |de/dtheta|: sum_k k sqrt(s_k^2 + c_k^2)
+        slope = sum((k + 1) * math.hypot(coeffs[2 * k], coeffs[2 * k + 1])
+                    for k in range(len(coeffs) // 2))
+        if key == 'worm_error_harmonics':
+            l_w = g.lead / (2.0 * math.pi) if g.lead_convention == 'kinematic' else g.lead
+            slope *= g.gear_pitch_radius / l_w
+        if slope > ERROR_SLOPE_LIMIT:
+            raise ConfigError(f'mesh.{key}', f'too steep: its slope bound sum_k k |a_k| '
+                              f'{"r_g / l_w " if key[0] == "w" else ""}is {slope:.3g}, at most '
+                              f'{ERROR_SLOPE_LIMIT:g} (the error must stay a small '
+                              'correction of the ratio)')
     if cfg.integrator.time_step * cfg.node.publish_rate_hz > 1.0 + 1e-9:
         raise ConfigError('integrator.time_step', 'must not exceed the node tick period '
                           f'1/publish_rate_hz = {1.0 / cfg.node.publish_rate_hz:g} s')

@@ -53,7 +53,10 @@ def register(subparsers: Any) -> None:
         'intervals, correlations, residual RMS) and PNG figures. See docs/identification.md.')
     p.add_argument('data', nargs='+', metavar='DATA', help='records: CSV (columns t, theta1 '
                    'and theta2/theta3/theta4 by header) or rosbag2 (directory, .db3, .mcap)')
-    p.add_argument('--fit', action='append', required=True, metavar='KEY[,KEY...]',
+    p.add_argument('--fit-harmonics', metavar='worm:N,gear:M', help='also fit the first N '
+                   'worm and M gear orders of the periodic error (mesh.*_error_harmonics) as '
+                   'linear parameters, alternating with the --fit keys')
+    p.add_argument('--fit', action='append', default=[], metavar='KEY[,KEY...]',
                    help='parameters to fit, e.g. materials.gear_shaft_shear_modulus,'
                    'damping.modal_damping_ratios[0] (repeatable)')
     p.add_argument('--output', '-o', required=True, metavar='FITTED.yaml',
@@ -193,6 +196,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     outputs = [o.strip() for o in args.outputs.split(',') if o.strip()] \
         if args.outputs else None
+    if args.fit_harmonics:
+        return _identify_harmonics(args, cfg, records, keys, bounds, opt, out)
+    if not keys:
+        raise CliError('nothing to fit: give --fit KEY[,KEY...] or --fit-harmonics')
     res = identify(cfg, records, keys, bounds=bounds, options=opt, outputs=outputs)
     wall = time.perf_counter() - t0
     say(args, f'fitted {len(keys)} parameter(s) to {len(records)} record(s) in {wall:.1f} s '
@@ -256,3 +263,35 @@ def _jsonable(obj: Any) -> Any:
         return _jsonable(obj.item())
     return obj
 
+
+
+def _identify_harmonics(args: argparse.Namespace, cfg: Config, records: list, keys: list,
+                        bounds: dict, opt: FitOptions, out: Path) -> int:
+    """``--fit-harmonics``: the periodic-error harmonics (and the --fit keys, alternating),
+    identification/harmonics.py; writes the fitted YAML and the JSON report."""
+    from ..identification.data import IdentificationError
+    from ..identification.harmonics import identify_with_harmonics, parse_orders
+    try:
+        nw, ng = parse_orders(args.fit_harmonics)
+    except IdentificationError as exc:
+        raise CliError(str(exc)) from exc
+    t0 = time.perf_counter()
+    fit = identify_with_harmonics(cfg, records, keys, nw, ng, options=opt, bounds=bounds)
+    say(args, f'fitted {nw} worm and {ng} gear order(s) of the periodic error'
+        + (f' with {len(keys)} key(s)' if keys else '')
+        + f' to {len(records)} record(s) in {time.perf_counter() - t0:.1f} s')
+    say(args, fit.table())
+    if fit.nonlinear is not None:
+        say(args, fit.nonlinear.table())
+    report = fit.to_dict()
+    report.update(command=' '.join(args._argv), data=[str(p) for p in args.data],
+                  base_config=args.config or 'package default')
+    out.parent.mkdir(parents=True, exist_ok=True)
+    header = [f'worm_gear_sim parameters fitted by: worm-gear-sim {report["command"]}',
+              f'data: {", ".join(report["data"])}']
+    header += [f'{n} = {v:.9g}  ({fit.verdicts[n]})' for n, v in zip(fit.names, fit.values)]
+    write_params_yaml(fit.config, out, header)
+    json_path = out.with_suffix('.json')
+    json_path.write_text(json.dumps(_jsonable(report), indent=2, allow_nan=True) + '\n')
+    say(args, f'wrote {json_path}, {out}')
+    return 0

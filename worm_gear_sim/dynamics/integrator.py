@@ -47,7 +47,6 @@ from .model import (
     P_JG,
     P_JW_STEP,
     P_KG,
-    P_LW,
     P_MAXIT,
     P_MAXSUB,
     P_MESH_COSINE,
@@ -62,6 +61,7 @@ from .model import (
     P_TLOAD,
     P_VEPS,
     P_ZG,
+    mesh_approach,
     mesh_forces,
     mesh_forces_mu,
     slip_coefficient,
@@ -196,7 +196,7 @@ def _contact_region(gap, q):
 @njit(cache=True, error_model='numpy')
 def _in_play(p, u):
     """Inside the mesh clearance (no tooth force, no friction): never without play."""
-    return abs(p[P_LW] * u[0] - p[P_RG] * u[1]) < p[P_GAP_HALF]
+    return abs(mesh_approach(p, u[0], u[1])) < p[P_GAP_HALF]
 
 
 @njit(cache=True, error_model='numpy')
@@ -206,13 +206,12 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     maxit = int(p[P_MAXIT])
     k_vs2, k_vs3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
     veps = p[P_VEPS]
-    lw, rg = p[P_LW], p[P_RG]
     friction_on = p[P_FRIC_MODEL] != 0.0
     gap = p[P_GAP_HALF]
     c_a, c_v, gdt, (us0, us1, us2), (vs0, vs1, vs2), (x0, x1, x2) = _newmark_start(
         p, u0, v0, a0, dt)
     vs_start = k_vs2 * v0[0] + k_vs3 * v0[1]
-    q_start = lw * u0[0] - rg * u0[1]
+    q_start = mesh_approach(p, u0[0], u0[1])
     cycle_start = _phase_cycle(p, u0[0], u0[1])
     n_solves = 0
     n_evals = 0
@@ -270,7 +269,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
             a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
                                                      c_a, gdt)
             vs_end = k_vs2 * w0 + k_vs3 * w1
-            q_end = lw * x0 - rg * x1
+            q_end = mesh_approach(p, x0, x1)
             clear_of_stick = (vs_start * vs_end > 0.0 and abs(vs_start) > SMOOTH_ZONE * veps
                               and abs(vs_end) > SMOOTH_ZONE * veps)
             if gap > 0.0:       # with play: no contact event (loss, impact) in the step
@@ -303,7 +302,6 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
     r3 = p[P_OUTPUT_PER_INPUT]
     maxit = int(p[P_MAXIT])
     k2, k3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
-    lw, rg = p[P_LW], p[P_RG]
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = C
     c_a, c_v, gdt, (us0, us1, us2), (vs0, vs1, vs2), (x0, x1, x2) = _newmark_start(
         p, u0, v0, a0, dt)
@@ -319,7 +317,7 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
     while True:
         a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
                                                  c_a, gdt)
-        sq = 1.0 if lw * x0 - rg * x1 >= 0.0 else -1.0
+        sq = 1.0 if mesh_approach(p, x0, x1) >= 0.0 else -1.0
         v_s = k2 * w0 + k3 * w1
         if stick:
             mu, dmu_dv = e, 0.0
@@ -403,7 +401,6 @@ def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0):
     one).  Returns (ok, u, v, a, n_solves, n_evals, mode, mu_eff)."""
     mu_s = p[P_MU_STATIC] * (1.0 + 1e-12)
     k2, k3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
-    lw, rg = p[P_LW], p[P_RG]
     ns = 0
     ne = 0
     if mode0 != 0:
@@ -420,7 +417,7 @@ def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0):
     if ok_st and abs(lam) <= mu_s:
         return True, u_st, v_st, a_st, ns, ne, 0, lam
     if ok_st:
-        sq = 1.0 if lw * u_st[0] - rg * u_st[1] >= 0.0 else -1.0
+        sq = 1.0 if mesh_approach(p, u_st[0], u_st[1]) >= 0.0 else -1.0
         s = 1 if lam * sq > 0.0 else -1
     else:
         # no stick solution (no normal force to hold it): slip the way the drive moves
@@ -490,7 +487,6 @@ def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, si
     a part of length f dt), then the rest of the step (with the damping ``Cb`` of the
     region the step ends in; ``Ct`` that of its start).  Returns (ok, u, v, a, rho, since,
     mode, mu, n_solves, n_evals); ok False leaves the caller's whole step in force."""
-    lw, rg = p[P_LW], p[P_RG]
     ra = _contact_region(gap, qa)
     if ra != 0:
         edge = gap if ra > 0 else -gap          # leaving a flank
@@ -513,7 +509,7 @@ def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, si
         ne += e1
         if not ok:
             return False, u0, v0, a0, rho, since, mode, mu, ns, ne
-        g = lw * u1[0] - rg * u1[1] - edge
+        g = mesh_approach(p, u1[0], u1[1]) - edge
         found = True
         if abs(g) <= 1e-6 * gap:
             break
@@ -558,7 +554,6 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
         Co = (C[3, 0], C[3, 1], C[3, 2], C[4, 0], C[4, 1], C[4, 2], C[5, 0], C[5, 1], C[5, 2])
     max_level = int(p[P_MAXSUB])
     gap = p[P_GAP_HALF]
-    lw, rg = p[P_LW], p[P_RG]
     uu = (u[0], u[1], u[2])
     vv = (v[0], v[1], v[2])
     aa = (a[0], a[1], a[2])
@@ -586,7 +581,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 break
             p[P_TLOAD] = ld_b                                      # Eq. 6 (+ load), at t_k+1
         Cs = Ct
-        if gap > 0.0 and abs(lw * uu[0] - rg * uu[1]) < gap:
+        if gap > 0.0 and abs(mesh_approach(p, uu[0], uu[1])) < gap:
             Cs = Co                              # the step starts inside the play
         ok, un, vn, an, rho, since, ns, ne, ver, mode_n, mu_n = _step(
             p, Cs, uu, vv, aa, th_b, td_b, dt, rho, since, mode, mu)
@@ -624,8 +619,8 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
             status = STATUS_FAILED
             break
         if gap > 0.0 and level == 1:
-            qa = lw * uu[0] - rg * uu[1]
-            qb = lw * un[0] - rg * un[1]
+            qa = mesh_approach(p, uu[0], uu[1])
+            qb = mesh_approach(p, un[0], un[1])
             rb = _contact_region(gap, qb)
             if _contact_region(gap, qa) != rb:
                 # a contact event (loss, impact, re-engagement) inside the step: split the

@@ -14,11 +14,13 @@ from ..schema import ANGLE_LIMIT, Parameters
 from .model import (
     DriveModel,
     forces,
+    has_periodic_error,
     has_play,
     linear_stiffness,
     mass_matrix,
     play_rest_shift,
     rigid_motion_vector,
+    transmission_error,
     without_play,
 )
 
@@ -52,7 +54,21 @@ def _rest_with_play(p: np.ndarray, theta1: float, tol: float, max_iter: int) -> 
     ``mesh.initial_flank`` (:func:`~worm_gear_sim.dynamics.model.play_rest_shift`)."""
     shift, loaded = play_rest_shift(p)
     if not loaded:
-        return rigid_motion_vector(p) * theta1 - shift
+        u = rigid_motion_vector(p) * theta1 - shift
+        if has_periodic_error(p):
+            # the gear (and the antenna with it) shifted by d so that the approach keeps
+            # its flank value: r_g e(theta2, theta3 + d) = r_g d, a contraction (|de/dth3|
+            # <= 0.1, schema), converged to round-off in a few iterations
+            d = 0.0
+            for _ in range(60):
+                d_new = transmission_error(p, u[0], u[1] + d)[0]
+                if abs(d_new - d) <= 1e-16 * (1.0 + abs(u[1])):
+                    d = d_new
+                    break
+                d = d_new
+            u[1] += d
+            u[2] += d
+        return u
     # the drive without play at rest, shifted onto the loaded flank: the same region
     u = static_equilibrium(without_play(p), theta1, None, tol, max_iter) - shift
     return static_equilibrium(p, theta1, u, tol, max_iter)

@@ -47,7 +47,7 @@ from numba import njit
 from numpy.typing import ArrayLike
 
 from ..derived import Derived, derive
-from ..schema import Parameters
+from ..schema import MAX_ERROR_ORDERS, Parameters
 
 # ---- packed parameter vector layout (compile-time constants for numba) -------------------
 P_JW, P_JG, P_J4 = 0, 1, 2
@@ -70,7 +70,12 @@ P_FRIC_SET_VALUED, P_MU_STATIC = 47, 48              # set-valued law; mu(0), th
 P_VCUSP = 49                                         # Stribeck cusp rounding speed
 P_JW_STEP = 50                                       # worm inertia in the Newmark step
 P_GAP_HALF, P_INIT_FLANK = 51, 52     # half the play along q, r_g b / 2 [m]; +1/-1/0 flank
-N_PARAMS = 53
+# periodic transmission error e(theta2, theta3) [rad at the gear]: orders of the worm and of
+# the gear harmonics in use, then [s1, c1, s2, c2, ...] of each (MAX_ERROR_ORDERS pairs)
+P_PE_NW, P_PE_NG = 53, 54
+P_PE_WORM = 55
+P_PE_GEAR = P_PE_WORM + 2 * MAX_ERROR_ORDERS
+N_PARAMS = P_PE_GEAR + 2 * MAX_ERROR_ORDERS
 
 # layout of the flat output of mesh_eval: Q (3), dQ/du (3x3 row-major), dQ/dv (3x3), aux
 O_Q, O_DQDU, O_DQDV, O_AUX = 0, 3, 12, 21
@@ -165,6 +170,10 @@ def pack_parameters(cfg: Parameters, derived: Derived | None = None) -> np.ndarr
     p[P_LIN_COMPLIANCE] = 1.0 / p[P_CWKW_LIN] + 1.0 / p[P_CGKG_LIN]
     p[P_GAP_HALF] = 0.5 * g.gear_pitch_radius * mesh.backlash
     p[P_INIT_FLANK] = {'drive': 1.0, 'coast': -1.0, 'center': 0.0}[mesh.initial_flank]
+    for n_at, at, coeffs in ((P_PE_NW, P_PE_WORM, mesh.worm_error_harmonics),
+                             (P_PE_NG, P_PE_GEAR, mesh.gear_error_harmonics)):
+        p[n_at] = len(coeffs) // 2
+        p[at:at + len(coeffs)] = coeffs
     p[P_JW_STEP] = p[P_JW]
     if integ.worm_frequency_matching:
         p[P_JW_STEP] = p[P_JW] * worm_inertia_factor(p, integ.time_step)
@@ -299,6 +308,54 @@ class DriveModel:
     def worm_frequency(self) -> float:
         """Highest linearised natural frequency [rad/s] (see :func:`worm_frequency`)."""
         return worm_frequency(self.p)
+
+
+# ---- the periodic transmission error and the mesh approach (Eq. 8 + r_g e) -----------------
+@njit(cache=True, error_model='numpy')
+def _harmonic_sum(p, at, n, theta):
+    """(f, f', f'') of f = sum_k s_k sin(k theta) + c_k cos(k theta), k = 1..n, the pairs
+    (s_k, c_k) from p[at]; sin/cos of k theta by the angle-addition recurrence."""
+    s1, c1 = math.sin(theta), math.cos(theta)
+    sk, ck = s1, c1
+    f = df = d2f = 0.0
+    for j in range(n):
+        k = j + 1.0
+        a, b = p[at + 2 * j], p[at + 2 * j + 1]
+        f += a * sk + b * ck
+        df += k * (a * ck - b * sk)
+        d2f -= k * k * (a * sk + b * ck)
+        sk, ck = sk * c1 + ck * s1, ck * c1 - sk * s1
+    return f, df, d2f
+
+
+def has_periodic_error(p: np.ndarray) -> bool:
+    """The model has a periodic transmission error (``mesh.*_error_harmonics``)."""
+    return bool(p[P_PE_NW] > 0.0 or p[P_PE_NG] > 0.0)
+
+
+@njit(cache=True, error_model='numpy')
+def transmission_error(p, th2, th3):
+    """(e, de/dth2, de/dth3, d2e/dth2^2, d2e/dth3^2) of the periodic transmission error
+    e = sum_k s_k sin k th2 + c_k cos k th2 + sum_m S_m sin m th3 + C_m cos m th3 [rad at the
+    gear]; all 0.0 without harmonics."""
+    e = e2 = e22 = e3 = e33 = 0.0
+    nw, ng = int(p[P_PE_NW]), int(p[P_PE_NG])
+    if nw > 0:
+        e, e2, e22 = _harmonic_sum(p, P_PE_WORM, nw, th2)
+    if ng > 0:
+        f, e3, e33 = _harmonic_sum(p, P_PE_GEAR, ng, th3)
+        e += f
+    return e, e2, e3, e22, e33
+
+
+@njit(cache=True, error_model='numpy')
+def mesh_approach(p, th2, th3):
+    """q = l_w th2 - r_g th3 + r_g e(th2, th3): the mesh approach along Y (Eq. 8 with the
+    periodic transmission error; exactly Eq. 8 without harmonics)."""
+    q = p[P_LW] * th2 - p[P_RG] * th3
+    if p[P_PE_NW] > 0.0 or p[P_PE_NG] > 0.0:
+        q += p[P_RG] * transmission_error(p, th2, th3)[0]
+    return q
 
 
 # ---- Eqs. 16-17: tooth stiffness over the mesh cycle ----------------------------------------
@@ -483,24 +540,36 @@ def mesh_forces_mu(p, th2, th3, th4, w4, theta1, mu):
     lw, rw, rg = p[P_LW], p[P_RW], p[P_RG]
     sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
     q = lw * th2 - rg * th3                                          # Eq. 8 right side
-    A = cphi * sl + mu * cl                                          # F_X / W_n, Eq. 1
-    B = cphi * cl - mu * sl                                          # F_Y / W_n, Eq. 2
+    dq2, dq3 = lw, -rg
+    g2 = g3 = 1.0                   # normal-force torque factors (dq/dth2)/l_w, -(dq/dth3)/r_g
+    dg2 = dg3 = 0.0                 # their derivatives in th2, th3 (e is separable)
+    if p[P_PE_NW] > 0.0 or p[P_PE_NG] > 0.0:
+        # periodic transmission error: q += r_g e; the normal force acts through dq/dtheta
+        # (virtual work), friction stays along the thread (docs/model-notes.md)
+        e, e2, e3, e22, e33 = transmission_error(p, th2, th3)
+        q += rg * e
+        dq2 += rg * e2
+        dq3 += rg * e3
+        g2, g3 = dq2 / lw, 1.0 - e3
+        dg2, dg3 = rg * e22 / lw, -e33
+    A = cphi * sl * g2 + mu * cl                                     # F_X / W_n, Eq. 1
+    B = cphi * cl * g3 - mu * sl                                     # F_Y / W_n, Eq. 2
     kgws, dK_dphase, dK_dmu, cwkw, cgkg = mesh_compliance(p, th2, th3, mu)
     ikg = 1.0 / kgws
     qe, dqe = penetration(p, q)                                      # the play
     Wn = qe * cl * ikg                                               # Eq. 9
     dWn_dq = cl * ikg * dqe
     dWn_dK = -Wn * ikg
-    dWn_dth2 = dWn_dq * lw + dWn_dK * dK_dphase * 0.5
-    dWn_dth3 = -dWn_dq * rg + dWn_dK * dK_dphase * 0.5 * p[P_ZG]
+    dWn_dth2 = dWn_dq * dq2 + dWn_dK * dK_dphase * 0.5
+    dWn_dth3 = dWn_dq * dq3 + dWn_dK * dK_dphase * 0.5 * p[P_ZG]
     dWn_dmu = dWn_dK * dK_dmu
     Kw, Kg = p[P_KW], p[P_KG]
     Q2 = -rw * A * Wn - Kw * (th2 - theta1)                          # Eq. 11
     Q3 = rg * B * Wn - Kg * (th3 - th4)                              # Eq. 13
     Q4 = -Kg * (th4 - th3) - p[P_COUT] * w4 - p[P_TLOAD]             # Eq. 6 (+ load)
     return (Q2, Q3, Q4,
-            -rw * A * dWn_dth2 - Kw, -rw * A * dWn_dth3,
-            rg * B * dWn_dth2, rg * B * dWn_dth3 - Kg,
+            -rw * (A * dWn_dth2 + cphi * sl * dg2 * Wn) - Kw, -rw * A * dWn_dth3,
+            rg * B * dWn_dth2, rg * (B * dWn_dth3 + cphi * cl * dg3 * Wn) - Kg,
             -rw * (cl * Wn + A * dWn_dmu), rg * (-sl * Wn + B * dWn_dmu),
             Wn, cwkw, cgkg, A * Wn, B * Wn, q)
 
@@ -518,7 +587,7 @@ def mesh_forces(p, th2, th3, th4, w2, w3, w4, theta1):
     friction at exactly zero sliding speed).  Scalars in, scalars out: the hot path."""
     rw, rg = p[P_RW], p[P_RG]
     sl, cl = p[P_SINL], p[P_COSL]
-    q = p[P_LW] * th2 - rg * th3
+    q = mesh_approach(p, th2, th3)
     v_s = rw * cl * w2 + rg * sl * w3                                # sliding speed
     mu, dmu_dvs = friction_coefficient(p, v_s, q)
     r = mesh_forces_mu(p, th2, th3, th4, w4, theta1, mu)
@@ -572,7 +641,7 @@ def mesh_stiffness_y(p, theta2, theta3):
 def mechanical_energy(p, u, v, theta1):
     """Kinetic + shaft torsion + mesh energy 0.5 k_Y q^2 [J] (exact invariant of the
     frictionless linear model)."""
-    q, _ = penetration(p, p[P_LW] * u[0] - p[P_RG] * u[1])
+    q, _ = penetration(p, mesh_approach(p, u[0], u[1]))
     kin = 0.5 * (p[P_JW] * v[0] ** 2 + p[P_JG] * v[1] ** 2 + p[P_J4] * v[2] ** 2)
     shaft = 0.5 * p[P_KW] * (u[0] - theta1) ** 2 + 0.5 * p[P_KG] * (u[1] - u[2]) ** 2
     return kin + shaft + 0.5 * mesh_stiffness_y(p, u[0], u[1]) * q * q
@@ -614,58 +683,3 @@ def forces(p: np.ndarray, u: ArrayLike, v: ArrayLike,
                        Q, dQdu, dQdv, aux)
     names = ('W_n', 'mu', 'cwkw', 'cgkg', 'v_s', 'F_X', 'F_Y', 'q')
     return Q, dQdu, dQdv, dict(zip(names, aux))
-
-
-# ---- the inverse: theta1 that makes theta4 follow a path (feed-forward compensation) --------
-@njit(cache=True, error_model='numpy')
-def gear_torque_demand(p, y1, y2, y3, y4, dynamic):
-    """The mesh torque on the gear [N m] that moves the antenna along theta4 = y(t) (Eq. 6
-    and the gear body, as :func:`inverse_theta1` takes it): its sign tells the flank that
-    must carry it (> 0 the drive flank, < 0 the coast flank)."""
-    Jg, J4, Kg = p[P_JG], p[P_J4], p[P_KG]
-    cout, Tload = p[P_COUT], p[P_TLOAD]
-    if dynamic:
-        Ts = J4 * y2 + cout * y1 + Tload                  # gear-shaft torque, Eq. 6
-        return Jg * (y2 + (J4 * y4 + cout * y3) / Kg) + Ts
-    return (Jg + J4) * y2 + cout * y1 + Tload
-
-
-@njit(cache=True, error_model='numpy')
-def inverse_theta1(p, y0, y1, y2, y3, y4, dynamic, flank):
-    """Flat-output inverse of the nominal chain (packed parameters ``p``): the worm-shaft
-    input theta1 that makes theta4 = y(t), from y and its derivatives; ``dynamic`` keeps
-    the third and fourth derivative terms.  With play (``mesh.backlash`` > 0) the worm
-    must also take up half the play on the flank ``flank`` (+1 drive, -1 coast, 0 the
-    centre): the approach is q = q_e + flank h (the inverse of :func:`penetration`)."""
-    Jw, J4 = p[P_JW], p[P_J4]
-    Kw, Kg = p[P_KW], p[P_KG]
-    lw, rw, rg = p[P_LW], p[P_RW], p[P_RG]
-    sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
-    cout, Tload = p[P_COUT], p[P_TLOAD]
-    ratio = rg / lw                                       # theta1 per theta4
-    if not dynamic:
-        y3 = 0.0
-        y4 = 0.0
-    Ts = J4 * y2 + cout * y1 + Tload                      # gear-shaft torque, Eq. 6
-    th3 = y0 + Ts / Kg
-    th3_1 = y1 + (J4 * y3 + cout * y2) / Kg
-    th3_2 = y2 + (J4 * y4 + cout * y3) / Kg
-    Tm = gear_torque_demand(p, y1, y2, y3, y4, dynamic)
-    # friction of the rigid sliding speed, flank from the sign of the mesh torque
-    th2_1 = th3_1 * ratio
-    v_s = rw * cl * th2_1 + rg * sl * th3_1
-    mu = friction_coefficient(p, v_s, Tm)[0]
-    A = cphi * sl + mu * cl
-    B = cphi * cl - mu * sl
-    Wn = Tm / (rg * B)                                    # Eq. 13 at the flat path
-    th2_rigid = th3 * ratio
-    kgws = mesh_compliance(p, th2_rigid, th3, mu)[0]      # Eq. 10, the model's own
-    q = Wn * kgws / cl                                    # Eq. 9
-    h = p[P_GAP_HALF]
-    if h > 0.0:
-        q += flank * h                                    # the play, on the flank in contact
-    th2 = (q + rg * th3) / lw                             # Eq. 8
-    Tw = rw * A * Wn                                      # mesh torque on the worm
-    if dynamic:
-        Tw += Jw * th3_2 * ratio                          # worm-body inertia (rigid)
-    return th2 + Tw / Kw                                  # Eq. 11

@@ -98,10 +98,22 @@ def declare_config(node: Any, defaults: Config) -> dict[str, Any]:
     """Declare every model parameter on ``node`` (defaults from ``defaults``; values given
     by ``--params-file`` or ``parameter_overrides`` win).  Returns dotted name -> value."""
     meta = Config.metadata()
+    flat = defaults.to_flat_dict()
+    # rclpy types a parameter from its default, and an empty list reads as a byte array
+    # (a params file's [] as not set): an empty double array is declared by its type, then
+    # given its empty value explicitly typed (mesh.*_error_harmonics)
+    empty = {name for name, value in flat.items()
+             if isinstance(value, list) and not value and value_kind(value) == 'float_list'}
     declared = node.declare_parameters('', [
-        (name, value, descriptor_for(name, value, meta[name]))
-        for name, value in defaults.to_flat_dict().items()])
-    return {p.name: to_core_value(p.value) for p in declared}
+        (name, Parameter.Type.DOUBLE_ARRAY if name in empty else value,
+         descriptor_for(name, value, meta[name]))
+        for name, value in flat.items()])
+    unset = [Parameter(p.name, Parameter.Type.DOUBLE_ARRAY, list(flat[p.name]))
+             for p in declared if p.name in empty and p.type_ == Parameter.Type.NOT_SET]
+    if unset:
+        node.set_parameters(unset)
+    return {p.name: to_core_value(node.get_parameter(p.name).value) if p.name in empty
+            else to_core_value(p.value) for p in declared}
 
 
 def check_overrides(node: Any) -> None:
