@@ -87,8 +87,9 @@ def test_streaming_memory_does_not_grow_with_duration(tmp_path):
         finally:
             tracemalloc.stop()
 
-    short, long_ = peak(0.05), peak(0.2)
+    # 0.025 s and 0.1 s (25 and 100 chunks; was 0.05 and 0.2 s, at twice the cost)
+    short, long_ = peak(0.025), peak(0.1)
     assert long_ < 1.3 * short + 200_000, (short, long_)
-    assert long_ < 0.5 * (0.2 / DT) * ROW_BYTES           # below the whole run (8 MB)
+    assert long_ < 0.5 * (0.1 / DT) * ROW_BYTES           # below the whole run (4 MB)
     lines = sum(1 for line in open(tmp_path / 'run.csv') if not line.startswith('#'))
-    assert lines == round(0.2 / DT) + 1 + 1                # header line + every row
+    assert lines == round(0.1 / DT) + 1 + 1                # header line + every row
