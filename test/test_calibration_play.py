@@ -86,6 +86,32 @@ def test_direct_estimates_from_slow_and_fast_reversals(sweeps, play, load, drag)
     assert est.values[DRAG] == pytest.approx(drag, rel=0.03)
 
 
+def test_one_rate_each_way_finds_the_play_along_the_play_drag_line():
+    """Slew reversals at one rate (1.5 rad/s of worm, trapezoid-free: the user's record):
+    the static lags give only b + 2 C c w, so the direct stage offers the play along that
+    line and the simulation of the records picks it: play within 3 %, load within
+    0.05 N m, drag within 5 %, before any fit (the teeth and bearings of the drive differ
+    from the base's; benchmarks/bench_identify_reversals.py runs the whole identify)."""
+    from worm_gear_sim.dynamics.profiles import SampledProfile
+    from worm_gear_sim.identification.data import record_from_model
+    from worm_gear_sim.identification.direct import best_on_family
+    plant = _drive(3.0, 1.0, 50.0, **{'mesh.gear_tooth_stiffness_multiplier': 0.85,
+                                      'shafts.gear_bearing_axial_stiffness': 1.5e8})
+    t = np.array([0.0, 0.05, 0.317, 0.367, 0.9, 0.95, 1.483])
+    x = np.array([0.0, 0.0, 0.4, 0.4, -0.4, -0.4, 0.4])
+    rec = record_from_model(plant, SampledProfile(t, x, 'linear'), 1.483, 1000,
+                            ('theta4',), 1e-6, 2 * math.pi / 2 ** 20, 0)
+    est = direct_estimates(Config(), [rec], KEYS + ['mesh.gear_tooth_stiffness_multiplier'])
+    assert est is not None and est.play_seen and len(est.family) >= 5
+    plays = [v[PLAY] for v in est.family]
+    assert min(plays) < 0.5 * 3 * ARCMIN < 2 * 3 * ARCMIN < max(plays) * 2   # brackets it
+    vals, rows = best_on_family(Config(), [rec], est.family)
+    assert len(rows) >= len(est.family)
+    assert vals[PLAY] / ARCMIN == pytest.approx(3.0, rel=0.03), vals
+    assert vals[LOAD] == pytest.approx(1.0, abs=0.05), vals
+    assert vals[DRAG] == pytest.approx(50.0, rel=0.05), vals
+
+
 def test_a_load_that_holds_one_flank_hides_the_play_and_says_which_move(sweeps):
     """5 N m of load and no drag: the gear never leaves its flank in the sweeps; the direct
     stage says the play is not seen, and the visibility lines name the play (a stop faster

@@ -33,12 +33,14 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from ..dynamics.model import DriveModel
+from ..dynamics.stepping import SimulationError
 from ..params import Config
 from ..records import Record
+from ..validation import ConfigError
 from .data import predict
 
 __all__ = ['PLAY', 'LOAD', 'DRAG', 'DIRECT_KEYS', 'Segment', 'steady_segments', 'compliance',
-           'DirectEstimate', 'direct_estimates', 'scan_play', 'SCAN_FACTORS']
+           'DirectEstimate', 'direct_estimates', 'best_on_family', 'scan_play', 'SCAN_FACTORS']
 
 PLAY = 'mesh.backlash'
 LOAD = 'load.output_torque'
@@ -55,6 +57,9 @@ RATE_TOL = 1e-3
 TORQUE_TOL = 0.02
 #: Factors on the play's direct estimate tried by :func:`scan_play`.
 SCAN_FACTORS = (0.8, 0.88, 0.94, 1.0, 1.06, 1.13, 1.25)
+#: Shares of the lag jump between the flanks tried as the play when one rate each way
+#: cannot separate the play from the drag (:attr:`DirectEstimate.family`).
+FAMILY_SHARES = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.97)
 
 
 @dataclass(frozen=True)
@@ -128,12 +133,85 @@ class DirectEstimate:
     misfit_rad: float
     flanks: list[int] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: When the segments' rates cannot separate the play from the drag (one rate each way:
+    #: only b + 2 C c w is determined), the candidate value sets along that line, the
+    #: play from small to the whole lag jump; :func:`best_on_family` picks one by simulation.
+    family: list[dict[str, float]] = field(default_factory=list)
 
     def describe(self) -> str:
         vals = ', '.join(f'{k} = {v:.4g}' for k, v in self.values.items())
         return (f'direct estimates from {len(self.segments)} constant-rate segments: {vals} '
                 f'(misfit {self.misfit_rad:.3g} rad; play '
                 f'{"seen" if self.play_seen else "not seen: one flank throughout"})')
+
+
+def _solve(fixed: dict[str, float], free: Sequence[str], cols: dict[str, np.ndarray],
+           e: np.ndarray, C: float) -> dict[str, float]:
+    """The static lags' least squares for the keys ``free`` (play and drag >= 0, the load
+    torque of either sign), the other direct keys at ``fixed``."""
+    rhs = e - sum(cols[k] * fixed[k] for k in DIRECT_KEYS if k not in free)
+    vals = dict(fixed)
+    if free:
+        A = np.column_stack([cols[k] for k in free])
+        lo = [-np.inf if k == LOAD else 0.0 for k in free]
+        sol = lsq_linear(A / C, rhs / C, bounds=(lo, [np.inf] * len(free))).x
+        vals.update({k: float(v) for k, v in zip(free, sol)})
+    return vals
+
+
+def _separates_poorly(columns: Sequence[np.ndarray]) -> bool:
+    """The columns (scaled to unit length) are nearly dependent: smallest singular value
+    below 1e-3, e.g. the play and the drag from one rate each way."""
+    A = np.column_stack([c / np.linalg.norm(c) for c in columns])
+    return bool(np.linalg.svd(A, compute_uv=False)[-1] < 1e-3)
+
+
+def _consistent(vals: dict[str, float], wg: np.ndarray, s: np.ndarray) -> bool:
+    """The flank pattern ``s`` is what the torques give (a tolerance of 5 % of the largest
+    torque, and TORQUE_TOL, for a segment near the switch)."""
+    torque = vals[LOAD] + vals[DRAG] * wg
+    tol = 0.05 * float(np.max(np.abs(torque))) + TORQUE_TOL
+    return not np.any(torque * s < -tol)
+
+
+def _misfit(vals: dict[str, float], s: np.ndarray, wg: np.ndarray, e: np.ndarray,
+            C: float) -> float:
+    pred = -s * 0.5 * vals[PLAY] - C * (vals[LOAD] + vals[DRAG] * wg)
+    return float(np.sqrt(np.mean((pred - e) ** 2)))
+
+
+def best_on_family(base: Config, records: Sequence[Record], family: Sequence[dict[str, float]]
+                   ) -> tuple[dict[str, float], list[dict[str, float]]]:
+    """The member of a direct estimate's family whose simulation fits the records' theta4
+    best (RMS over all samples), refined once between its neighbours; and the table."""
+    rows: list[dict[str, float]] = []
+
+    def cost(vals: dict[str, float]) -> float:
+        try:
+            m = DriveModel(base.replace(vals))
+            sq, n = 0.0, 0
+            for r in records:
+                if 'theta4' not in r.measured:
+                    continue
+                d = predict(m, r)['theta4'] - r.measured['theta4']
+                sq, n = sq + float(np.sum(d * d)), n + d.size
+            c = math.sqrt(sq / n) if n else math.inf
+        except (ConfigError, SimulationError, ValueError):
+            c = math.inf
+        rows.append({**vals, 'rms_rad': c})
+        return c
+
+    costs = [cost(v) for v in family]
+    i = int(np.argmin(costs))
+    best, best_c = family[i], costs[i]
+    for j in (i - 1, i + 1):            # halfway to each neighbour, twice
+        if 0 <= j < len(family):
+            for w in (0.5, 0.25):
+                mid = {k: (1 - w) * family[i][k] + w * family[j][k] for k in family[i]}
+                c = cost(mid)
+                if c < best_c:
+                    best, best_c = mid, c
+    return best, rows
 
 
 def direct_estimates(base: Config, records: Sequence[Record], keys: Sequence[str]
@@ -156,6 +234,7 @@ def direct_estimates(base: Config, records: Sequence[Record], keys: Sequence[str
              DRAG: base.load.output_viscous_coefficient}
     order = np.argsort(wg)
     best: tuple[float, dict[str, float], list[int], bool] | None = None
+    best_family: list[dict[str, float]] = []
     n = len(segs)
     for j in range(n + 1):           # segments below the j-th slowest: the coasting flank
         s = np.ones(n)
@@ -163,29 +242,37 @@ def direct_estimates(base: Config, records: Sequence[Record], keys: Sequence[str
         switch = 0 < j < n
         cols = {PLAY: -0.5 * s, LOAD: -C * np.ones(n), DRAG: -C * wg}
         use = [k for k in fitted if not (k == PLAY and not switch)]
-        rhs = e - sum(cols[k] * fixed[k] for k in DIRECT_KEYS if k not in use)
-        if use:   # play and drag >= 0, the load torque of either sign
-            A = np.column_stack([cols[k] for k in use])
-            lo = [-np.inf if k == LOAD else 0.0 for k in use]
-            sol = lsq_linear(A / C, rhs / C, bounds=(lo, [np.inf] * len(use))).x
-        else:
-            sol = np.zeros(0)
-        vals = dict(fixed)
-        vals.update({k: float(v) for k, v in zip(use, sol)})
-        torque = vals[LOAD] + vals[DRAG] * wg
-        # the flank pattern must be what the torques give (a tolerance of 5 % of the
-        # largest torque, and TORQUE_TOL, for a segment near the switch)
-        tol = 0.05 * float(np.max(np.abs(torque))) + TORQUE_TOL
-        if np.any(torque * s < -tol):
+        if switch and PLAY in use and _separates_poorly([cols[k] for k in use]):
+            # one rate each way: only b + 2 C c w is seen; the play along that line
+            jump = float(np.mean(e[s < 0]) - np.mean(e[s > 0]))
+            family = []
+            for share in FAMILY_SHARES:
+                vals = _solve(dict(fixed, **{PLAY: share * jump}),
+                              [k for k in use if k != PLAY], cols, e, C)
+                if _consistent(vals, wg, s):
+                    family.append(vals)
+            if family:
+                mid = family[len(family) // 2]
+                mis = _misfit(mid, s, wg, e, C)
+                if best is None or mis <= best[0] + 1e-15:
+                    best = (mis, mid, [int(v) for v in s], switch)
+                    best_family = family
             continue
-        pred = -s * 0.5 * vals[PLAY] - C * torque
-        mis = float(np.sqrt(np.mean((pred - e) ** 2)))
+        vals = _solve(fixed, use, cols, e, C)
+        if not _consistent(vals, wg, s):
+            continue
+        mis = _misfit(vals, s, wg, e, C)
         if best is None or mis < best[0]:
             best = (mis, vals, [int(v) for v in s], switch)
+            best_family = []
     if best is None:
         return None
     mis, vals, flanks, switch = best
-    est = DirectEstimate({k: vals[k] for k in fitted}, switch, segs, C, mis, flanks)
+    est = DirectEstimate({k: vals[k] for k in fitted}, switch, segs, C, mis, flanks,
+                         family=[{k: v[k] for k in fitted} for v in best_family])
+    if est.family:
+        est.notes.append('one rate each way: the play and the drag are told apart by the '
+                         'reversals\' transients only (a second rate would separate them)')
     if PLAY in fitted and not switch:
         est.notes.append('the gear stays on one flank in every constant-rate segment: the '
                          'play is not seen, only b / 2 + T C')

@@ -34,7 +34,7 @@ from ..params import Config
 from ..records import Record
 from ..validation import ConfigError
 from .data import IdentificationError, measured_frequencies, normalised
-from .direct import DIRECT_KEYS, PLAY, direct_estimates, lag_table, scan_play
+from .direct import DIRECT_KEYS, PLAY, best_on_family, direct_estimates, lag_table, scan_play
 from .parameters import fit_parameters
 from .problem import DIFF_STEP, Problem
 from .report import FitResult, assess, residual_rms
@@ -236,12 +236,16 @@ def _global_stage(base: Config, records: Sequence[Record], keys: Sequence[str]
     records allow them (else ``base`` itself), and what was found."""
     if not any(k in DIRECT_KEYS for k in keys):
         return base, {}
+    recs = [normalised(r, i) for i, r in enumerate(records)]
     try:
-        est = direct_estimates(base, [normalised(r, i) for i, r in enumerate(records)], keys)
+        est = direct_estimates(base, recs, keys)
     except (ConfigError, SimulationError, ValueError) as exc:
         return base, {'note': f'direct estimates failed: {exc}'}
     if est is None:
         return base, {'note': 'no constant-rate segments both ways: no direct estimates'}
+    family_rows: list[dict[str, float]] = []
+    if est.family:                      # play and drag along a line: simulate to choose
+        est.values, family_rows = best_on_family(base, recs, est.family)
     vals = dict(est.values)
     if PLAY in vals and not est.play_seen:
         vals.pop(PLAY)                      # not seen: keep the base's play
@@ -249,6 +253,8 @@ def _global_stage(base: Config, records: Sequence[Record], keys: Sequence[str]
                             'compliance_rad_per_Nm': est.compliance,
                             'misfit_rad': est.misfit_rad, 'notes': est.notes,
                             'segments': lag_table(est.segments)}
+    if family_rows:
+        info['family_scan'] = family_rows
     if PLAY in vals and not vals[PLAY] > 0:
         vals.pop(PLAY)
     try:
