@@ -529,7 +529,7 @@ def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, si
     return True, u2, v2, a2, rho2, since2, mode2, mu2, ns, ne
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', nogil=True)   # batch.py runs it on threads
 def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, rec_a,
             rec_aux, stats, ctl, load):
     """Advance len(theta1)-1 steps of size dt; theta1[k] is the command at the start of

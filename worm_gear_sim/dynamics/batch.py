@@ -1,0 +1,317 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Many simulations in one call, spread over the cores: :func:`simulate_batch` (N parameter
+sets and/or N commands, each run as :func:`~worm_gear_sim.dynamics.simulation.simulate`) and
+:func:`map_batch` (any per-item function whose time goes into the compiled kernel: a fit's
+cost over N candidate sets, the draws of a prediction band, the cases of a sweep).
+
+**Same numbers.** Item i of a batch is computed by exactly the call a serial loop makes
+(``simulate(set_i, profile_i, ...)``, ``fn(item_i)``), on one of ``workers`` threads: same
+code, same arithmetic, so the rows equal N serial calls bit for bit on one machine.  Nothing
+is shared between the items but read-only inputs (Configs and models are immutable, the
+usable-set cache has its lock).
+
+**Why threads.** The kernel (:func:`~worm_gear_sim.dynamics.integrator.advance`) is compiled
+with ``nogil=True``: it releases the interpreter lock for the whole integration, so N threads
+integrate N drives at once; only the Python around it (config, packing, profile sampling,
+metrics) takes turns.  Against the alternatives:
+
+* *processes* (a pool, Dask) pay 2-3 s per process to import numpy/scipy/numba and load
+  the cached kernels, and pickle every result back (a 0.5 s record at 4 us is 16 MB);
+* a *numba prange batch kernel* (one compiled loop over drives calling ``advance`` with
+  per-drive packed parameter rows: it works, the entry point is re-entrant) would re-implement
+  everything :class:`~worm_gear_sim.dynamics.stepping.Stepper` does around the kernel (rest
+  state, profile and load on the grid, chunking, records), i.e. a second source of truth, with
+  a fixed split of the drives over the threads (drives of unequal cost leave a core idle) and
+  one drive's failure stopping the loop.  Threads take the next item when one is done.
+
+``benchmarks/bench_batch.py`` measures all three side by side (docs/performance.md).
+
+**Bad input.** ``errors='raise'`` (default) refuses the whole batch with a
+:class:`BatchError` naming every bad set (its index and its keys); :func:`simulate_batch`
+validates every set (overrides, :func:`~worm_gear_sim.dynamics.usability.check_usable`) and
+every argument before it simulates anything.  ``errors='collect'`` runs the others and puts a
+:class:`BatchFailure` (index, keys, the error) in the bad set's place.  A result row is never
+silently wrong: each is either the item's complete result or its failure.
+
+For identification (calibration's global stage, multi-start, the prediction band's draws),
+the pattern is::
+
+    from worm_gear_sim.dynamics.batch import map_batch
+    costs = map_batch(lambda x: cost(x), candidates, errors='collect')
+    devs = map_batch(lambda cfg: predict(cfg, move)['theta4'], cfgs, errors='collect')
+
+with ``fn`` free of shared mutable state (each call builds its own Simulator).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import FIRST_EXCEPTION, Future, ThreadPoolExecutor, wait
+from dataclasses import dataclass
+from numbers import Real
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import numpy as np
+
+from ..schema import Parameters
+from ..validation import ConfigError
+from .load import LoadSignal
+from .model import DriveModel
+from .profiles import Profile, make_profile
+from .simulation import simulate
+from .stepping import RUN_MEMORY_LIMIT, SimulationError
+from .trajectory import ROW_BYTES, Trajectory
+from .usability import check_usable
+
+if TYPE_CHECKING:
+    from ..params import Config
+
+__all__ = ['simulate_batch', 'map_batch', 'BatchFailure', 'BatchError', 'default_workers',
+           'ITEM_ERRORS']
+
+T = TypeVar('T')
+R = TypeVar('R')
+
+#: What makes one item unusable or its run fail (a bad value, an unusable set, a failed
+#: integration, a numeric domain error).  Any other exception is a bug: it stops the batch
+#: and propagates unchanged, whatever ``errors`` says.
+ITEM_ERRORS: tuple[type[BaseException], ...] = (ConfigError, SimulationError, ValueError,
+                                                ArithmeticError)
+
+#: A parameter set: a validated Config, a built model, or overrides (dotted keys) on ``base``.
+SetLike = Parameters | DriveModel | Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class BatchFailure:
+    """Item ``index`` of a batch could not be used or run: ``error`` says why, ``keys`` the
+    parameters it blames (a :class:`ConfigError`'s keys; empty for a failed run)."""
+
+    index: int
+    error: BaseException
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        return tuple(getattr(self.error, 'keys', ()) or ())
+
+    def __str__(self) -> str:
+        return f'set {self.index}: {self.error}'
+
+
+class BatchError(ValueError):
+    """A batch refused (``errors='raise'``): ``failures`` lists every bad item found
+    (:class:`BatchFailure`: index, keys, error); ``indices`` and ``keys`` summarise them."""
+
+    def __init__(self, failures: Sequence[BatchFailure], total: int) -> None:
+        self.failures: tuple[BatchFailure, ...] = tuple(sorted(failures, key=lambda f: f.index))
+        self.indices: tuple[int, ...] = tuple(f.index for f in self.failures)
+        self.keys: tuple[str, ...] = tuple(dict.fromkeys(k for f in self.failures
+                                                         for k in f.keys))
+        shown = '; '.join(str(f) for f in self.failures[:5])
+        more = len(self.failures) - 5
+        if more > 0:
+            shown += f'; and {more} more'
+        super().__init__(f'batch of {total} refused, {len(self.failures)} bad: {shown}')
+
+
+def default_workers() -> int:
+    """Threads of a batch by default: the cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:          # pragma: no cover - not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _check_errors(errors: str) -> None:
+    if errors not in ('raise', 'collect'):
+        raise ValueError(f"errors={errors!r}: 'raise' (refuse the batch) or 'collect' "
+                         '(a BatchFailure in the bad item\'s place)')
+
+
+def map_batch(fn: Callable[[T], R], items: Iterable[T], *, workers: int | None = None,
+              errors: str = 'raise',
+              on_result: Callable[[int, R | BatchFailure], None] | None = None,
+              ) -> list[R | BatchFailure]:
+    """``[fn(x) for x in items]`` on ``workers`` threads (default :func:`default_workers`;
+    1 runs in the calling thread), results in item order, each equal bit for bit to the
+    serial call's.  Worth it when ``fn`` spends its time in the compiled kernel (which
+    releases the interpreter lock), e.g. a simulation or a fit's cost of one candidate.
+
+    An item whose call raises one of :data:`ITEM_ERRORS`: with ``errors='raise'`` no new item
+    starts, the running ones finish, and :class:`BatchError` names every failed index; with
+    ``'collect'`` its place holds a :class:`BatchFailure` and the others run.  Any other
+    exception propagates at once (pending items cancelled).  ``on_result(index, result)`` is
+    called in the calling thread as each item completes (progress bars, streaming)."""
+    _check_errors(errors)
+    seq = list(items)
+    n = len(seq)
+    w = default_workers() if workers is None else int(workers)
+    if w < 1:
+        raise ValueError(f'workers = {workers!r}: must be >= 1')
+    out: list[Any] = [None] * n
+    failures: list[BatchFailure] = []
+
+    def settle(i: int, result: Any) -> None:
+        out[i] = result
+        if isinstance(result, BatchFailure):
+            failures.append(result)
+        if on_result is not None:
+            on_result(i, result)
+
+    if w == 1 or n <= 1:
+        for i, x in enumerate(seq):
+            try:
+                r: Any = fn(x)
+            except ITEM_ERRORS as exc:
+                r = BatchFailure(i, exc)
+                if errors == 'raise':
+                    failures.append(r)
+                    raise BatchError(failures, n) from exc
+            settle(i, r)
+        return out
+
+    def call(i: int) -> Any:
+        try:
+            return fn(seq[i])
+        except ITEM_ERRORS as exc:
+            return BatchFailure(i, exc)
+
+    with ThreadPoolExecutor(max_workers=min(w, n), thread_name_prefix='wgs-batch') as ex:
+        pending: dict[Future, int] = {ex.submit(call, i): i for i in range(n)}
+        try:
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_EXCEPTION)
+                for fut in done:
+                    i = pending.pop(fut)
+                    settle(i, fut.result())     # a bug (not an ITEM_ERROR) raises here
+                if failures and errors == 'raise':
+                    for fut in pending:
+                        fut.cancel()            # no new item; the running ones finish
+                    for fut in wait(pending).done:
+                        if not fut.cancelled():
+                            r = fut.result()
+                            if isinstance(r, BatchFailure):
+                                failures.append(r)
+                    raise BatchError(failures, n)
+        except BaseException:
+            for fut in pending:
+                fut.cancel()
+            raise
+    return out
+
+
+def _per_item(name: str, value: Any, single: Callable[[Any], bool]) -> Sequence[Any] | None:
+    """``value`` as a per-item sequence, or None when it is one value for every item."""
+    if single(value):
+        return None
+    if isinstance(value, np.ndarray) and value.ndim == 1:
+        return value.tolist()
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+        raise TypeError(f'{name}: one value or a sequence of one per item, got '
+                        f'{type(value).__name__}')
+    return value
+
+
+def simulate_batch(sets: SetLike | Sequence[SetLike], profiles: Profile | Sequence[Profile]
+                   | None = None, t_end: float | Sequence[float] | None = None,
+                   record_every: int = 1, *, base: Config | None = None,
+                   loads: LoadSignal | Sequence[LoadSignal | None] | None = None,
+                   workers: int | None = None, errors: str = 'raise',
+                   max_bytes: float | None = None) -> list[Trajectory | BatchFailure]:
+    """N runs from rest, ``simulate(set_i, profile_i, t_end_i, record_every, load=load_i)``
+    each, on ``workers`` threads (:func:`map_batch`); the i-th Trajectory equals that serial
+    call's bit for bit.
+
+    ``sets``: one parameter set or a sequence, each a Config, a :class:`DriveModel` or a
+    mapping of dotted-key overrides on ``base`` (``{'friction.mu_kinetic': 0.06}``).
+    ``profiles`` (None: each set's own ``input`` section), ``t_end`` (None: its
+    ``input.end_time``) and ``loads`` (None: the constant ``load.output_torque``): one for
+    all or one per item.  Every sequence given has the batch's length N.
+
+    Every set and argument is checked before anything runs (a bad override or an unusable set
+    is a :class:`ConfigError` naming its keys); with ``errors='raise'`` a bad item refuses
+    the batch (:class:`BatchError` with the indices and keys), with ``'collect'`` its place
+    holds a :class:`BatchFailure` and the others run.  ``max_bytes``: the limit on the rows of
+    the whole batch, which are all in memory (default ``RUN_MEMORY_LIMIT``): raise
+    ``record_every``, or reduce each run inside ``fn`` with :func:`map_batch`."""
+    _check_errors(errors)
+    set_seq = _per_item('sets', sets, lambda v: isinstance(v, (Parameters, DriveModel, Mapping)))
+    prof_seq = _per_item('profiles', profiles, lambda v: v is None or isinstance(v, Profile))
+    tend_seq = _per_item('t_end', t_end, lambda v: v is None or isinstance(v, Real))
+    load_seq = _per_item('loads', loads, lambda v: v is None or isinstance(v, LoadSignal))
+    lengths = {name: len(s) for name, s in (('sets', set_seq), ('profiles', prof_seq),
+                                             ('t_end', tend_seq), ('loads', load_seq))
+               if s is not None}
+    if len(set(lengths.values())) > 1:
+        raise ValueError('batch lengths differ: ' + ', '.join(f'{k} {v}' for k, v in
+                                                              lengths.items()))
+    n = next(iter(lengths.values())) if lengths else 1
+    stride = int(record_every)
+    if stride < 1:
+        raise ValueError(f'record_every must be >= 1, got {record_every!r}')
+
+    def pick(seq: Sequence[Any] | None, one: Any, i: int) -> Any:
+        return one if seq is None else seq[i]
+
+    # 1. every item checked before any run: model, profile, duration, memory
+    jobs: list[tuple[DriveModel, Profile, float, LoadSignal | None] | None] = [None] * n
+    failures: list[BatchFailure] = []
+    total_bytes = 0.0
+    for i in range(n):
+        try:
+            model = _model_of(pick(set_seq, sets, i), base)
+            profile = pick(prof_seq, profiles, i)
+            profile = make_profile(model.config.input) if profile is None else profile
+            te = pick(tend_seq, t_end, i)
+            te = model.config.input.end_time if te is None else float(te)
+            dt = model.config.integrator.time_step
+            if not (math.isfinite(te) and te >= 0.0):
+                raise ValueError(f't_end = {te!r} s: must be finite and >= 0')
+            total_bytes += (math.floor(te / dt + 1e-9) // stride + 1) * ROW_BYTES
+            jobs[i] = (model, profile, te, pick(load_seq, loads, i))
+        except ITEM_ERRORS as exc:
+            failures.append(BatchFailure(i, exc))
+    if failures and errors == 'raise':
+        raise BatchError(failures, n)
+    limit = RUN_MEMORY_LIMIT if max_bytes is None else float(max_bytes)
+    if total_bytes > limit:
+        raise ValueError(
+            f'the batch records {total_bytes / 1e9:.3g} GB, above max_bytes = '
+            f'{limit / 1e9:.3g} GB: raise record_every, shorten t_end, pass max_bytes=..., '
+            'or reduce each run inside map_batch')
+
+    # 2. the runs
+    def run(i: int) -> Trajectory | BatchFailure:
+        job = jobs[i]
+        if job is None:     # failed its check ('collect')
+            return next(f for f in failures if f.index == i)
+        model, profile, te, load = job
+        try:
+            return simulate(model, profile, te, stride, max_bytes=limit, load=load)
+        except ITEM_ERRORS as exc:
+            return BatchFailure(i, exc)
+
+    res = map_batch(run, range(n), workers=workers, errors='collect')
+    if errors == 'raise':
+        bad = [r for r in res if isinstance(r, BatchFailure)]
+        if bad:
+            raise BatchError(bad, n)
+    return res
+
+
+def _model_of(s: SetLike, base: Config | None) -> DriveModel:
+    """The set's model, proven usable (ConfigError naming the keys otherwise)."""
+    if isinstance(s, DriveModel):
+        check_usable(s.config)
+        return s
+    if isinstance(s, Parameters):
+        check_usable(s)
+        return DriveModel(s)
+    if base is None:
+        raise ValueError('a set given as overrides needs base= (the Config they change)')
+    cfg = base.replace(dict(s))       # ConfigError naming a bad key; checks usability
+    check_usable(cfg)
+    return DriveModel(cfg)
