@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Study logic (worm_gear_sim.studies): cases, metrics, engines (serial vs Dask)."""
+"""Study logic (worm_gear_sim.studies): cases, metrics, engines (serial, threads, Dask)."""
 
 import math
 
@@ -148,17 +148,21 @@ def test_experiment_cases_cover_models_and_conventions():
     assert lin['friction.constant_coefficient'] == 0.145
 
 
-def test_run_cases_rejects_bad_override_in_worker_config(base):
-    with pytest.raises(ConfigError):
-        S.run_cases(base, [S.Case('x', 's', 0.0, 'bad', {'mesh.nope': 1.0})], serial=True)
+@pytest.mark.parametrize('serial', [True, False])
+def test_run_cases_rejects_bad_override_in_worker_config(base, serial):
+    """On threads as serially: the failed case's own ConfigError naming the key."""
+    cases = [S.Case('x', 's', 0.0, 'ok', {}), S.Case('x', 's', 1.0, 'bad', {'mesh.nope': 1.0})]
+    with pytest.raises(ConfigError, match='mesh.nope'):
+        S.run_cases(base, cases, serial=serial, workers=2)
 
 
-def test_serial_and_local_cluster_give_identical_numbers(base):
+@pytest.mark.parametrize('engine', S.ENGINES)
+def test_serial_threads_and_local_cluster_give_identical_numbers(base, engine):
     cases = [S.Case('t', 'tooth', m, f'x{m}', {'mesh.gear_tooth_stiffness_multiplier': m})
              for m in (0.5, 1.0, 2.0)]
     cases.append(S.Case('t', 'fly', 0.0, 'off', {'geometry.flywheel_enabled': False}))
     serial = S.run_cases(base, cases, serial=True)
-    parallel = S.run_cases(base, cases, workers=2)
+    parallel = S.run_cases(base, cases, workers=2, engine=engine)
     assert [r['label'] for r in parallel] == [c.label for c in cases]     # case order kept
     for a, b in zip(serial, parallel):
         for k in S.METRIC_COLUMNS:

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -64,10 +63,15 @@ def register(sub: Any) -> None:
     p.add_argument('--out-dir', '-o', default='sweep', metavar='DIR',
                    help='output directory (default: %(default)s)')
     p.add_argument('--workers', '-j', type=int, metavar='N',
-                   help='LocalCluster worker processes (default: all cores)')
+                   help='threads (--engine threads) or LocalCluster worker processes '
+                   '(--engine dask); default: all cores')
+    p.add_argument('--engine', choices=('threads', 'dask'), default='threads',
+                   help='cases on threads of this process (default) or on a Dask '
+                   'LocalCluster of processes')
     p.add_argument('--scheduler', metavar='ADDRESS', help='run on an existing Dask cluster, '
                    'e.g. tcp://10.0.0.5:8786 (workers need worm_gear_sim installed)')
-    p.add_argument('--serial', action='store_true', help='run in this process (no Dask)')
+    p.add_argument('--serial', action='store_true', help='run in this process, one case '
+                   'after the other')
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
     p.add_argument('--traces', action='store_true', help='also plot the time traces of '
                    'studies with at most 8 cases (e.g. flywheel, Figs. 12-13)')
@@ -375,6 +379,7 @@ def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> N
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    from ..dynamics.batch import default_workers
     from ..studies import ENVELOPE_COLUMNS, envelope_rows, rows_to_csv, run_cases
     from .plotting import plot_sweep
     cfg = config_from_args(args)
@@ -393,14 +398,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     outdir = Path(args.out_dir)
     outdir.mkdir(parents=True, exist_ok=True)
     all_cases = [c for st in studies for c in st.cases]
+    n_workers = args.workers or default_workers()
     engine = ('this process' if args.serial else f'Dask scheduler {args.scheduler}'
-              if args.scheduler else
-              f'Dask LocalCluster, {args.workers or os.cpu_count()} worker processes')
+              if args.scheduler else f'{n_workers} threads' if args.engine == 'threads' else
+              f'Dask LocalCluster, {n_workers} worker processes')
     say(args, f'{len(all_cases)} cases in {len(studies)} '
          f'stud{"y" if len(studies) == 1 else "ies"} on {engine}')
     t0 = time.perf_counter()
     rows = run_cases(cfg, all_cases, workers=args.workers, scheduler=args.scheduler,
-                     serial=args.serial, progress=not args.no_progress)
+                     serial=args.serial, progress=not args.no_progress,
+                     engine=args.engine)
     wall = time.perf_counter() - t0
     params_json_dump(params_document(cfg), outdir / 'sweep_params.json')
     k = 0

@@ -25,7 +25,15 @@ from .cases import (
     param_study,
     parse_values,
 )
-from .engine import WORKER_ENV, case_config, local_cluster_client, run_case, run_cases, warm_up
+from .engine import (
+    ENGINES,
+    WORKER_ENV,
+    case_config,
+    local_cluster_client,
+    run_case,
+    run_cases,
+    warm_up,
+)
 from .experiment import EXPERIMENT_COLUMNS, experiment_cases, experiment_table
 from .metrics import (
     METRIC_COLUMNS,
@@ -43,5 +51,5 @@ __all__ = [
     'run_cases', 'case_config', 'paper_study', 'param_study', 'module_overrides',
     'experiment_cases', 'experiment_table', 'EXPERIMENT_COLUMNS', 'parse_values',
     'envelope_rows', 'ENVELOPE_COLUMNS', 'COMPARE_SEP', 'rows_to_csv', 'warm_up',
-    'local_cluster_client', 'WORKER_ENV',
+    'local_cluster_client', 'WORKER_ENV', 'ENGINES',
 ]

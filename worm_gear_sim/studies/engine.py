@@ -1,7 +1,8 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Running study cases: one case in this process, many cases serially or on Dask
-(LocalCluster, a remote scheduler or a given Client)."""
+"""Running study cases: one case in this process, many cases serially, on threads in this
+process (the default: :func:`worm_gear_sim.dynamics.batch.map_batch`) or on Dask (a remote
+scheduler, a given Client, or a LocalCluster of processes)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..dynamics.batch import BatchError, BatchFailure, map_batch
 from ..dynamics.modal import amplitude_time_step, static_equilibrium
 from ..dynamics.model import DriveModel
 from ..dynamics.profiles import Profile, make_profile
@@ -22,7 +24,10 @@ from .cases import Case
 from .metrics import move_end_time, oscillation_metrics
 
 __all__ = ['run_case', 'run_cases', 'case_config', 'warm_up', 'local_cluster_client',
-           'WORKER_ENV']
+           'WORKER_ENV', 'ENGINES']
+
+#: Engines of :func:`run_cases` on this machine: threads (default) or a Dask LocalCluster.
+ENGINES = ('threads', 'dask')
 
 
 # ---- running one case ---------------------------------------------------------------------
@@ -122,17 +127,25 @@ def _progress(total: int, enabled: bool, desc: str):
 def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None,
               scheduler: str | None = None, serial: bool = False, progress: bool = False,
               t_end: float | None = None, client: Any = None, chunk_size: int | None = None,
-              on_result: Callable[[dict], None] | None = None) -> list[dict[str, Any]]:
+              on_result: Callable[[dict], None] | None = None,
+              engine: str = 'threads') -> list[dict[str, Any]]:
     """Run the cases and return one result dict per case, in case order.
 
-    Engines: ``serial=True`` runs in this process; ``client`` uses a given
-    dask.distributed Client; ``scheduler`` connects to a running Dask scheduler
-    (``tcp://host:8786``); otherwise a Dask LocalCluster is started with ``workers``
-    processes (default: all cores), one thread each.  The base config goes to every worker
+    Engines: ``serial=True`` runs in this process, one case after the other; ``client`` uses
+    a given dask.distributed Client; ``scheduler`` connects to a running Dask scheduler
+    (``tcp://host:8786``: many machines); otherwise ``engine='threads'`` (default) runs the
+    cases on ``workers`` threads of this process (default: all cores;
+    :func:`~worm_gear_sim.dynamics.batch.map_batch`: the kernel releases the interpreter lock,
+    nothing starts up, nothing is pickled) and ``engine='dask'`` starts a Dask LocalCluster
+    of ``workers`` processes, one thread each.  On Dask the base config goes to every worker
     once (as a plain dict); each task carries a chunk of cases (their overrides; default
     chunk: about 16 tasks per worker, at most 16 cases) and returns only their metrics.
-    Results do not depend on the engine (same code, same arithmetic, bit for bit).
+    A case that fails raises its own error (a ConfigError naming the key, a
+    SimulationError) on every engine.  Results do not depend on the engine (same code, same
+    arithmetic, bit for bit).
     """
+    if engine not in ENGINES:
+        raise ValueError(f'engine {engine!r}: one of {", ".join(ENGINES)}')
     base_map = base.to_nested_dict()
     items = [(i, dict(c.overrides), t_end) for i, c in enumerate(cases)]
     results: list[dict[str, Any] | None] = [None] * len(cases)
@@ -155,6 +168,14 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
             start_bar()
             for i, ov, te in items:
                 done(_run_payload((i, base_map, ov, te)))
+        elif client is None and scheduler is None and engine == 'threads':
+            start_bar()
+            try:
+                map_batch(lambda it: _run_payload((it[0], base_map, it[1], it[2])), items,
+                          workers=workers,
+                          on_result=lambda _, r: None if isinstance(r, BatchFailure) else done(r))
+            except BatchError as exc:      # the first failed case's own error, as serially
+                raise exc.failures[0].error from None
         else:
             with _dask_client(client, scheduler, workers) as cl:
                 from distributed import as_completed
