@@ -134,6 +134,17 @@ def test_sweep_on_an_existing_scheduler_equals_serial(tmp_path, capsys):
     assert a == (tmp_path / 'serial' / 'flywheel.csv').read_bytes()   # same numbers
 
 
+def test_sweep_on_threads_equals_serial(tmp_path, capsys):
+    """The default engine (threads of this process) writes the serial run's bytes."""
+    status, stdout, _ = run(capsys, 'sweep', 'flywheel', *SHORT, '--workers', '2',
+                            '--no-progress', '-o', tmp_path / 'threads')
+    assert status == 0 and 'on 2 threads' in stdout
+    assert run(capsys, 'sweep', 'flywheel', *SHORT, '--serial', '--no-progress', '-o',
+               tmp_path / 'serial')[0] == 0
+    a = (tmp_path / 'threads' / 'flywheel.csv').read_bytes()
+    assert a == (tmp_path / 'serial' / 'flywheel.csv').read_bytes()   # same numbers
+
+
 def test_sweep_user_parameter_with_compare(tmp_path, capsys):
     status, stdout, _ = run(capsys, 'sweep', '--param', 'mesh.phase_offset', '--values',
                             '0,3', '--compare', 'input.move_time=0.02,0.025', '--name',
