@@ -1,7 +1,9 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Sweep throughput: a 200-case sweep in this process, on a Dask LocalCluster with 1 worker
-and with 2 workers; cases/second, scaling, and per-case overhead beyond the kernel time.
+"""Sweep throughput: a 200-case sweep in this process, on 1 and 2 threads of this process
+(the default engine, worm_gear_sim.dynamics.batch.map_batch) and on a Dask LocalCluster with 1
+worker and with 2 workers; cases/second, scaling, and per-case overhead beyond the kernel
+time.
 
     python benchmarks/bench_sweep.py [--cases 200] [--end-time 0.5] [--workers 1,2]
 
@@ -78,6 +80,16 @@ def main() -> int:
     else:
         ref = None
     for n in (int(w) for w in args.workers.split(',')):
+        t1, c1 = time.perf_counter(), time.process_time()
+        rows = S.run_cases(base, cases, workers=n, engine='threads')
+        wall, cpu = time.perf_counter() - t1, time.process_time() - c1
+        res[f't{n}'] = _summary(f'threads {n}', rows, wall, n,
+                               cpu - sum(r['case_cpu_s'] for r in rows))
+        print(f'{"":26s} nothing to start (threads of this process)')
+        if ref is not None:
+            same = all(a[k] == b[k] for a, b in zip(ref, rows) for k in ('amp2', 'amp4'))
+            print(f'{"":26s} amplitudes identical to the serial run: {same}')
+    for n in (int(w) for w in args.workers.split(',')):
         t0 = time.perf_counter()
         with S.local_cluster_client(n) as client:
             client.run(S.warm_up)
@@ -90,6 +102,10 @@ def main() -> int:
         if ref is not None:
             same = all(a[k] == b[k] for a, b in zip(ref, rows) for k in ('amp2', 'amp4'))
             print(f'{"":26s} amplitudes identical to the serial run: {same}')
+    if 0 in res and 't2' in res:
+        print(f'threads 2 / serial: {res["t2"]["rate"] / res[0]["rate"]:.2f}x; threads 2 / '
+              f'LocalCluster 2: {res["t2"]["rate"] / res[2]["rate"]:.2f}x'
+              if 2 in res else '')
     if 1 in res and 2 in res:
         print(f'scaling 2 workers / 1 worker: {res[2]["rate"] / res[1]["rate"]:.2f}x '
               f'(target >= 1.8x); at equal utilisation '
