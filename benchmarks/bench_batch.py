@@ -15,8 +15,10 @@ the machine's load.  Figures are printed, never asserted.
 
 Under load: Linux shares the CPU between sessions (``sched_autogroup``: every shell command
 of another job is a group); threads or child processes of this one session then get only
-its group's share, whatever their number.  The ratio measured under load is printed as such;
-``CPU/wall`` shows how many cores the run actually had.
+its group's share, whatever their number.  The ratio measured under load is printed as such,
+beside the *ceiling*: the same ratio for a trivial compiled loop on the threads, measured
+before and after (what the machine gave this process at the time); ``CPU/wall`` shows how
+many cores each run actually had.
 """
 
 from __future__ import annotations
@@ -75,6 +77,34 @@ def line(label: str, n: int, clk: Clock, ref_wall: float | None, note: str = '')
     ratio = f'{ref_wall / clk.wall:5.2f}x' if ref_wall else '   1x'
     print(f'{label:<34s} {clk.wall:7.3f} s {n / clk.wall:7.1f} drives/s  CPU {clk.cpu:7.3f} s '
           f'(CPU/wall {clk.cpu / clk.wall:4.2f})  vs serial {ratio} {note}')
+
+
+def ceiling(workers: int, n_spin: int = 4_000_000) -> float:
+    """What the machine gives ``workers`` threads of this process right now: a compiled
+    nogil loop (no memory, no Python) 2 * workers times serially and on the threads; the
+    wall ratio is the best any batch can do under the current load."""
+    import math
+
+    from numba import njit
+
+    @njit(nogil=True, cache=False)
+    def spin(n):
+        s = 0.0
+        for i in range(n):
+            s += math.sin(i * 1e-3)
+        return s
+
+    spin(10)
+    from concurrent.futures import ThreadPoolExecutor
+    t0 = time.perf_counter()
+    for _ in range(2 * workers):
+        spin(n_spin)
+    ts = time.perf_counter() - t0
+    with ThreadPoolExecutor(workers) as ex:
+        t0 = time.perf_counter()
+        list(ex.map(spin, [n_spin] * (2 * workers)))
+        tt = time.perf_counter() - t0
+    return ts / tt
 
 
 # ---- numba prange over the kernel (for comparison; not the library's path) ---------------
@@ -162,6 +192,7 @@ def main() -> int:
           f'steps, {w} workers; {_load()}')
     simulate(sets[0], t_end=0.01)                  # load the cached kernels
 
+    print(f'machine ceiling now ({w} threads of a compiled loop vs 1): {ceiling(w):.2f}x')
     best: dict[str, Clock] = {}
     ref = None
     for rep in range(args.repeats):
@@ -210,7 +241,8 @@ def main() -> int:
         print(f'{"":34s} cold pass alone {cold_only:7.3f} s ({ref_wall / cold_only:.2f}x); '
               f'CPU of the workers not in "CPU"')
         line(f'process pool {w} (spawn, warm)', n, warm, ref_wall, 'results pickled back')
-    print(_load())
+    print(f'machine ceiling now ({w} threads of a compiled loop vs 1): {ceiling(w):.2f}x; '
+          f'{_load()}')
     return 0
 
 
