@@ -36,6 +36,8 @@ _EXPORTS: dict[str, str] = {
     'SimState': 'dynamics.trajectory', 'Trajectory': 'dynamics.trajectory',
     'SimulationError': 'dynamics.stepping', 'Simulator': 'dynamics.simulation',
     'simulate': 'dynamics.simulation', 'simulate_to_csv': 'dynamics.simulation',
+    'simulate_batch': 'dynamics.batch', 'map_batch': 'dynamics.batch',
+    'BatchError': 'dynamics.batch', 'BatchFailure': 'dynamics.batch',
     'Compensator': 'compensation', 'feedforward_series': 'realtime',
     'RealtimePredictor': 'realtime',
     'resolve_config': 'config_io', 'params_document': 'config_io',
@@ -46,7 +48,8 @@ __all__ = [
     'check_usable', 'DriveModel', 'simulate_to_csv', 'Profile', 'StepProfile', 'RampProfile',
     'TrapezoidalProfile', 'SCurveProfile', 'SampledProfile', 'make_profile', 'Simulator',
     'Trajectory', 'SimState',
-    'SimulationError', 'simulate', 'modes', 'ModalResult', 'static_equilibrium',
+    'SimulationError', 'simulate', 'simulate_batch', 'map_batch', 'BatchError', 'BatchFailure',
+    'modes', 'ModalResult', 'static_equilibrium',
     'damping_matrix', 'Compensator', 'feedforward_series', 'RealtimePredictor',
     'resolve_config', 'params_document', '__version__',
 ]
@@ -55,6 +58,7 @@ if TYPE_CHECKING:  # static analysers see the eager imports
     from .compensation import Compensator
     from .config_io import load_config, params_document, resolve_config
     from .derived import Derived, derive
+    from .dynamics.batch import BatchError, BatchFailure, map_batch, simulate_batch
     from .dynamics.modal import ModalResult, damping_matrix, modes, static_equilibrium
     from .dynamics.model import DriveModel
     from .dynamics.profiles import (
