@@ -366,7 +366,9 @@ def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> N
                      ('reversal_rms_err4', 'reversal RMS [rad]', '.3e'),
                      ('improvement', 'improvement', '.3g')]
         else:
-            rows = play_rows(cfg) if n == 'play' else gust_rows(cfg)
+            workers = 1 if args.serial else args.workers      # runs on threads
+            rows = play_rows(cfg, workers=workers) if n == 'play' else \
+                gust_rows(cfg, workers=workers)
             rows_to_csv(rows, PLAY_GUST_COLUMNS, csv_path)
             plot_error_study(rows, png_path, title, x_label)
             table = [('series', 'series', ''), ('label', 'case', ''),

@@ -25,11 +25,12 @@ phase to 100 ms into the second), and the mean over the last 50 ms (the static e
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from ..compensation import centring_preview
+from ..dynamics.batch import BatchError, map_batch
 from ..dynamics.load import WindLoad
 from ..params import Config
 from .backlash_reversal import ARCMIN, REVERSAL_DAMPING
@@ -58,9 +59,21 @@ def _metrics(run: Any) -> dict[str, float]:
             'static_err4': float(np.mean(e[last])), 'max_err4': float(np.max(np.abs(e)))}
 
 
-def play_rows(base: Config, plays_arcmin: Sequence[float] = PLAYS_ARCMIN) -> list[dict]:
-    """Rows of the play study (module docstring)."""
-    rows = []
+def _run_all(jobs: Sequence[tuple], workers: int | None) -> list[dict[str, float]]:
+    """The metrics of ``run_scenario(*job)`` for every job, on ``workers`` threads
+    (:func:`~worm_gear_sim.dynamics.batch.map_batch`; 1: in order in this thread): the same
+    numbers either way; a failed run raises its own error."""
+    try:
+        out = map_batch(lambda job: _metrics(run_scenario(*job)), jobs, workers=workers)
+    except BatchError as exc:
+        raise exc.failures[0].error from None
+    return cast(list[dict[str, float]], out)      # errors='raise': no BatchFailure in it
+
+
+def play_rows(base: Config, plays_arcmin: Sequence[float] = PLAYS_ARCMIN,
+              workers: int | None = None) -> list[dict]:
+    """Rows of the play study (module docstring); the runs on ``workers`` threads."""
+    rows, jobs = [], []
     for b in plays_arcmin:
         plant = base.replace({**PLAY_LOAD, **REVERSAL_DAMPING, 'mesh.backlash': float(b) * ARCMIN,
                               'compensation.backlash_inverse': True})
@@ -69,26 +82,33 @@ def play_rows(base: Config, plays_arcmin: Sequence[float] = PLAYS_ARCMIN) -> lis
         ahead = plant.replace({'compensation.preview_time': centring_preview(plant)})
         for series, comp in (('uncompensated', None), ('blind', blind), ('compensated', plant),
                              ('compensated, preview', ahead)):
-            m = _metrics(run_scenario(plant, sc, comp))
+            jobs.append((plant, sc, comp))
             rows.append({'study': 'play', 'series': series, 'label': f'{b:g} arcmin',
-                         'x': float(b), 'runs': 1, **m})
-    return rows
+                         'x': float(b), 'runs': 1})
+    return [{**r, **m} for r, m in zip(rows, _run_all(jobs, workers))]
 
 
 def gust_rows(base: Config, intensities: Sequence[float] = GUST_INTENSITIES,
-              seeds: Sequence[int] = GUST_SEEDS) -> list[dict]:
+              seeds: Sequence[int] = GUST_SEEDS, workers: int | None = None) -> list[dict]:
     """Rows of the gust study (module docstring): metrics averaged over the seeds (the
-    static error as the mean of its magnitude)."""
+    static error as the mean of its magnitude); the runs on ``workers`` threads."""
     plant = base.replace({'load.output_torque': GUST_MEAN,
                           'load.output_viscous_coefficient': 2.0})
     sc = radar_slew_scenario(plant)
-    rows = []
+    rows: list[dict] = []
+    jobs: list[tuple] = []
     for inten in intensities:
         for series, comp in (('uncompensated', None), ('compensated', plant)):
-            ms = [_metrics(run_scenario(plant, sc, comp, load=WindLoad(
-                GUST_MEAN, float(inten), GUST_TIME_SCALE, int(seed)))) for seed in seeds]
-            m = {k: float(np.mean([abs(x[k]) if k == 'static_err4' else x[k] for x in ms]))
-                 for k in ms[0]}
+            jobs.extend((plant, sc, comp, 10, WindLoad(GUST_MEAN, float(inten),
+                                                       GUST_TIME_SCALE, int(seed)))
+                        for seed in seeds)
             rows.append({'study': 'gust', 'series': series, 'label': f'I = {inten:g}',
-                         'x': float(inten), 'runs': len(ms), **m})
-    return rows
+                         'x': float(inten), 'runs': len(seeds)})
+    ms_all = _run_all(jobs, workers)
+    out = []
+    for i, r in enumerate(rows):
+        ms = ms_all[i * len(seeds):(i + 1) * len(seeds)]
+        m = {k: float(np.mean([abs(x[k]) if k == 'static_err4' else x[k] for x in ms]))
+             for k in ms[0]}
+        out.append({**r, **m})
+    return out
