@@ -77,6 +77,20 @@ def test_map_batch_keeps_order_reports_progress_and_lets_bugs_through():
         B.map_batch(abs, [1], errors='ignore')
 
 
+def test_map_like_serial_raises_the_failed_items_own_error():
+    def fn(x):
+        if x in (2, 5):
+            raise ConfigError(f'k{x}', 'bad')
+        return -x
+
+    seen = []
+    for w in (1, 2):
+        with pytest.raises(ConfigError, match='k2: bad'):
+            B.map_like_serial(fn, range(8), workers=w, on_result=lambda i, r: seen.append(r))
+    assert all(isinstance(r, int) for r in seen)
+    assert B.map_like_serial(fn, [0, 1, 3], workers=2) == [0, -1, -3]
+
+
 BAD_KEY = 'friction.mu_kinetic'
 
 

@@ -52,7 +52,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_EXCEPTION, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from numbers import Real
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import numpy as np
 
@@ -69,8 +69,8 @@ from .usability import check_usable
 if TYPE_CHECKING:
     from ..params import Config
 
-__all__ = ['simulate_batch', 'map_batch', 'BatchFailure', 'BatchError', 'default_workers',
-           'ITEM_ERRORS']
+__all__ = ['simulate_batch', 'map_batch', 'map_like_serial', 'BatchFailure', 'BatchError',
+           'default_workers', 'ITEM_ERRORS']
 
 T = TypeVar('T')
 R = TypeVar('R')
@@ -201,6 +201,22 @@ def map_batch(fn: Callable[[T], R], items: Iterable[T], *, workers: int | None =
                 fut.cancel()
             raise
     return out
+
+
+def map_like_serial(fn: Callable[[T], R], items: Iterable[T], *, workers: int | None = None,
+                    on_result: Callable[[int, R], None] | None = None) -> list[R]:
+    """:func:`map_batch` with a serial loop's contract, for code that replaces one (the
+    studies): the results, or the failed item's own exception (of the lowest failed index
+    found; no :class:`BatchError`).  ``on_result`` sees the successful items only."""
+    def told(i: int, r: R | BatchFailure) -> None:
+        if on_result is not None and not isinstance(r, BatchFailure):
+            on_result(i, r)
+
+    try:
+        out = map_batch(fn, items, workers=workers, on_result=told)
+    except BatchError as exc:
+        raise exc.failures[0].error from None
+    return cast(list[R], out)         # errors='raise': no BatchFailure in it
 
 
 def _per_item(name: str, value: Any, single: Callable[[Any], bool]) -> Sequence[Any] | None:

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..dynamics.batch import BatchError, BatchFailure, map_batch
+from ..dynamics.batch import map_like_serial
 from ..dynamics.modal import amplitude_time_step, static_equilibrium
 from ..dynamics.model import DriveModel
 from ..dynamics.profiles import Profile, make_profile
@@ -170,12 +170,8 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
                 done(_run_payload((i, base_map, ov, te)))
         elif client is None and scheduler is None and engine == 'threads':
             start_bar()
-            try:
-                map_batch(lambda it: _run_payload((it[0], base_map, it[1], it[2])), items,
-                          workers=workers,
-                          on_result=lambda _, r: None if isinstance(r, BatchFailure) else done(r))
-            except BatchError as exc:      # the first failed case's own error, as serially
-                raise exc.failures[0].error from None
+            map_like_serial(lambda it: _run_payload((it[0], base_map, it[1], it[2])), items,
+                            workers=workers, on_result=lambda _, r: done(r))
         else:
             with _dask_client(client, scheduler, workers) as cl:
                 from distributed import as_completed

@@ -25,12 +25,12 @@ phase to 100 ms into the second), and the mean over the last 50 ms (the static e
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
 from ..compensation import centring_preview
-from ..dynamics.batch import BatchError, map_batch
+from ..dynamics.batch import map_like_serial
 from ..dynamics.load import WindLoad
 from ..params import Config
 from .backlash_reversal import ARCMIN, REVERSAL_DAMPING
@@ -61,13 +61,9 @@ def _metrics(run: Any) -> dict[str, float]:
 
 def _run_all(jobs: Sequence[tuple], workers: int | None) -> list[dict[str, float]]:
     """The metrics of ``run_scenario(*job)`` for every job, on ``workers`` threads
-    (:func:`~worm_gear_sim.dynamics.batch.map_batch`; 1: in order in this thread): the same
-    numbers either way; a failed run raises its own error."""
-    try:
-        out = map_batch(lambda job: _metrics(run_scenario(*job)), jobs, workers=workers)
-    except BatchError as exc:
-        raise exc.failures[0].error from None
-    return cast(list[dict[str, float]], out)      # errors='raise': no BatchFailure in it
+    (:func:`~worm_gear_sim.dynamics.batch.map_like_serial`; 1: in order in this thread): the
+    same numbers either way; a failed run raises its own error."""
+    return map_like_serial(lambda job: _metrics(run_scenario(*job)), jobs, workers=workers)
 
 
 def play_rows(base: Config, plays_arcmin: Sequence[float] = PLAYS_ARCMIN,
