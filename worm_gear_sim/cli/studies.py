@@ -251,7 +251,8 @@ def _crossing_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None
         raise CliError(f'--damping {args.damping!r}: must be in [0, 1)')
     if not 0.0 <= args.scan_rest <= 10.0:
         raise CliError(f'--scan-rest {args.scan_rest!r}: must be in [0, 10] s')
-    rows = crossing_rows(cfg, plays, loads, drags, args.damping, args.scan_rest)
+    rows = crossing_rows(cfg, plays, loads, drags, args.damping, args.scan_rest,
+                         workers=1 if args.serial else args.workers)
     rows_to_csv(rows, CROSSING_COLUMNS, outdir / 'crossing.csv')
     title = ERROR_STUDIES['crossing'][0]
     plot_crossing_study(rows, outdir / 'crossing.png', title)
@@ -305,7 +306,7 @@ def _mismatch_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None
         raise CliError(f'--fit-strategy {args.fit_strategy!r}: one of '
                        f'{", ".join(STRATEGIES)}')
     drive = cfg.replace(MISMATCH_DRIVE)
-    rows = mismatch_rows(drive, axes, errors, moves)
+    rows = mismatch_rows(drive, axes, errors, moves, workers=1 if args.serial else args.workers)
     rows_to_csv(rows, MISMATCH_COLUMNS, outdir / 'mismatch.csv')
     say(args, fmt_table(rows, [('move', 'move', ''), ('axis', 'axis', ''),
                                ('error', 'error', '+.0%'),
@@ -358,7 +359,7 @@ def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> N
             say(args, f'({time.perf_counter() - t0:.1f} s)')
             continue
         if n == 'reversal':
-            rows = reversal_rows(cfg)
+            rows = reversal_rows(cfg, workers=1 if args.serial else args.workers)
             rows_to_csv(rows, REVERSAL_COLUMNS, csv_path)
             plot_reversal_study(rows, png_path, title)
             table = [('move', 'move', ''), ('load', 'load', ''),

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from ..compensation import centring_preview
+from ..dynamics.batch import map_like_serial
 from ..params import Config
 from .compensation_eval import CompensationRun, Scenario, radar_slew_scenario, run_scenario
 
@@ -112,8 +113,12 @@ def reversal_case(base: Config, move: str = 'slew', load: str = 'drag',
 
 def reversal_rows(base: Config, moves: Sequence[str] = tuple(REVERSAL_MOVES),
                   loads: Sequence[str] = tuple(REVERSAL_LOADS),
-                  previews: Sequence[bool] = (False, True)) -> list[dict]:
-    """Rows of the whole study: every move x load x preview case."""
-    return [r for m in moves for ld in loads for pv in previews
-            for r in reversal_case(base, m, ld, pv)]
+                  previews: Sequence[bool] = (False, True),
+                  workers: int | None = None) -> list[dict]:
+    """Rows of the whole study: every move x load x preview case, the cases on ``workers``
+    threads (:func:`~worm_gear_sim.dynamics.batch.map_like_serial`; 1: in order in this
+    thread), the same rows either way."""
+    cases = [(m, ld, pv) for m in moves for ld in loads for pv in previews]
+    per_case = map_like_serial(lambda c: reversal_case(base, *c), cases, workers=workers)
+    return [r for rows in per_case for r in rows]
 

@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from ..dynamics.batch import map_like_serial
 from ..dynamics.model import DriveModel
 from ..params import Config
 from ..play_crossing import soft_feedforward_series, trajectory_feedforward
@@ -139,34 +140,37 @@ def crossing_rows(base: Config, plays: Sequence[float] = CROSSING_PLAYS,
                   loads: Sequence[float] = CROSSING_LOADS,
                   drags: Sequence[float] = CROSSING_DRAGS, damping: float = 0.0,
                   rest: float = 0.0,
-                  progress: Callable[[dict], None] | None = None) -> list[dict]:
+                  progress: Callable[[dict], None] | None = None,
+                  workers: int | None = None) -> list[dict]:
     """The sector scan (after ``rest`` s at rest) with perfect knowledge on every (play,
-    load, drag) case: raw, causal, step crossing and soft crossing (module docstring)."""
-    rows = []
-    for play in plays:
-        for load in loads:
-            for drag in drags:
-                plant = base.replace({'mesh.backlash': play * ARCMIN,
-                                      'load.output_torque': load,
-                                      'load.output_viscous_coefficient': drag,
-                                      'damping.modal_damping_ratios': [damping] * 3})
-                move = sector_scan(plant, rest=rest)
-                raw = _rms(antenna_error(plant, move.t, move.theta1, move.theta1))
-                r = {'study': 'crossing', 'play_arcmin': play, 'load_torque': load,
-                     'drag': drag, 'damping': damping, 'raw_rms': raw}
-                for how, key in (('causal', 'causal'), ('step', 'step'),
-                                 ('trajectory', 'soft')):
-                    b = benefit(plant, None, move, raw, how)
-                    r[f'{key}_rms'] = b['compensated_rms']
-                    r[f'{key}_x'] = b['improvement']
-                _, plans = soft_feedforward_series(trajectory_model(DriveModel(plant)),
-                                                   move.t, move.theta1)
-                r['crossings'] = len(plans)
-                r['crossing_ms'] = ' '.join(f'{1e3 * (p.end - p.start):.3g}' for p in plans)
-                rows.append(r)
-                if progress is not None:
-                    progress(r)
-    return rows
+    load, drag) case: raw, causal, step crossing and soft crossing (module docstring).  The
+    cases run on ``workers`` threads (:func:`~worm_gear_sim.dynamics.batch.map_like_serial`;
+    1: in order in this thread), the same rows either way; ``progress`` sees each row as it
+    is done (on threads, in the order they finish)."""
+    cases = [(play, load, drag) for play in plays for load in loads for drag in drags]
+    return map_like_serial(lambda c: _crossing_case(base, *c, damping, rest), cases,
+                           workers=workers,
+                           on_result=None if progress is None else lambda _, r: progress(r))
+
+
+def _crossing_case(base: Config, play: float, load: float, drag: float, damping: float,
+                   rest: float) -> dict:
+    plant = base.replace({'mesh.backlash': play * ARCMIN, 'load.output_torque': load,
+                          'load.output_viscous_coefficient': drag,
+                          'damping.modal_damping_ratios': [damping] * 3})
+    move = sector_scan(plant, rest=rest)
+    raw = _rms(antenna_error(plant, move.t, move.theta1, move.theta1))
+    r = {'study': 'crossing', 'play_arcmin': play, 'load_torque': load, 'drag': drag,
+         'damping': damping, 'raw_rms': raw}
+    for how, key in (('causal', 'causal'), ('step', 'step'), ('trajectory', 'soft')):
+        b = benefit(plant, None, move, raw, how)
+        r[f'{key}_rms'] = b['compensated_rms']
+        r[f'{key}_x'] = b['improvement']
+    _, plans = soft_feedforward_series(trajectory_model(DriveModel(plant)), move.t,
+                                       move.theta1)
+    r['crossings'] = len(plans)
+    r['crossing_ms'] = ' '.join(f'{1e3 * (p.end - p.start):.3g}' for p in plans)
+    return r
 
 
 # ---- one model error at a time -------------------------------------------------------------
@@ -197,20 +201,24 @@ def mismatched(drive: Config, axis: str, error: float) -> Config:
 def mismatch_rows(drive: Config, axes: Sequence[str] = tuple(MISMATCH_AXES),
                   errors: Sequence[float] = MISMATCH_ERRORS,
                   moves: Sequence[str] = tuple(MOVES),
-                  progress: Callable[[dict], None] | None = None) -> list[dict]:
-    """The benefit on ``drive`` of a model off by each error, one axis at a time."""
-    rows = []
-    for mv in moves:
-        move = MOVES[mv](drive)
-        raw = _rms(antenna_error(drive, move.t, move.theta1, move.theta1))
-        for axis in axes:
-            for err in errors:
-                b = benefit(drive, mismatched(drive, axis, err), move, raw)
-                rows.append({'study': 'mismatch', 'move': mv, 'axis': axis, 'error': err,
-                             **b})
-                if progress is not None:
-                    progress(rows[-1])
-    return rows
+                  progress: Callable[[dict], None] | None = None,
+                  workers: int | None = None) -> list[dict]:
+    """The benefit on ``drive`` of a model off by each error, one axis at a time; the runs
+    on ``workers`` threads as in :func:`crossing_rows`."""
+    mvs = {mv: MOVES[mv](drive) for mv in moves}
+    raws = map_like_serial(lambda mv: _rms(antenna_error(drive, mvs[mv].t, mvs[mv].theta1,
+                                                          mvs[mv].theta1)),
+                           list(mvs), workers=workers)
+    raw = dict(zip(mvs, raws))
+    cases = [(mv, axis, err) for mv in moves for axis in axes for err in errors]
+
+    def one(case: tuple[str, str, float]) -> dict:
+        mv, axis, err = case
+        b = benefit(drive, mismatched(drive, axis, err), mvs[mv], raw[mv])
+        return {'study': 'mismatch', 'move': mv, 'axis': axis, 'error': err, **b}
+
+    return map_like_serial(one, cases, workers=workers,
+                           on_result=None if progress is None else lambda _, r: progress(r))
 
 
 # ---- calibrate, then compensate, on random drives ------------------------------------------
