@@ -77,6 +77,23 @@ def test_map_batch_keeps_order_reports_progress_and_lets_bugs_through():
         B.map_batch(abs, [1], errors='ignore')
 
 
+def test_a_refused_batch_starts_no_new_item():
+    """errors='raise': after the first failure only the items already running finish."""
+    import threading
+    go, started = threading.Event(), []
+
+    def fn(x):
+        started.append(x)
+        if x == 0:
+            raise ValueError('item 0 is bad')
+        go.wait(timeout=5.0)           # held until the failure is seen
+        return x
+
+    with pytest.raises(B.BatchError, match='set 0: item 0 is bad'):
+        B.map_batch(fn, range(40), workers=2, on_result=lambda i, r: go.set())
+    assert len(started) <= 4, started
+
+
 def test_map_like_serial_raises_the_failed_items_own_error():
     def fn(x):
         if x in (2, 5):

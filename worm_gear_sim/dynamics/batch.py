@@ -49,7 +49,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import FIRST_EXCEPTION, Future, ThreadPoolExecutor, wait
+from concurrent.futures import Future, ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
 from numbers import Real
 from typing import TYPE_CHECKING, Any, TypeVar, cast
@@ -180,26 +180,22 @@ def map_batch(fn: Callable[[T], R], items: Iterable[T], *, workers: int | None =
             return BatchFailure(i, exc)
 
     with ThreadPoolExecutor(max_workers=min(w, n), thread_name_prefix='wgs-batch') as ex:
-        pending: dict[Future, int] = {ex.submit(call, i): i for i in range(n)}
+        futures: dict[Future, int] = {ex.submit(call, i): i for i in range(n)}
         try:
-            while pending:
-                done, _ = wait(pending, return_when=FIRST_EXCEPTION)
-                for fut in done:
-                    i = pending.pop(fut)
-                    settle(i, fut.result())     # a bug (not an ITEM_ERROR) raises here
+            for fut in as_completed(futures):
+                settle(futures[fut], fut.result())      # a bug (not an ITEM_ERROR) raises
                 if failures and errors == 'raise':
-                    for fut in pending:
-                        fut.cancel()            # no new item; the running ones finish
-                    for fut in wait(pending).done:
-                        if not fut.cancelled():
-                            r = fut.result()
-                            if isinstance(r, BatchFailure):
-                                failures.append(r)
-                    raise BatchError(failures, n)
-        except BaseException:
-            for fut in pending:
-                fut.cancel()
-            raise
+                    break
+        finally:
+            for fut in futures:
+                fut.cancel()                # no new item starts; the running ones finish
+        if failures and errors == 'raise':
+            for fut, i in futures.items():
+                if out[i] is None and not fut.cancelled():
+                    r = fut.result()
+                    if isinstance(r, BatchFailure):
+                        failures.append(r)
+            raise BatchError(failures, n)
     return out
 
 
