@@ -386,6 +386,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from ..studies import ENVELOPE_COLUMNS, envelope_rows, rows_to_csv, run_cases
     from .plotting import plot_sweep
     cfg = config_from_args(args)
+    if args.workers is not None and args.workers < 1:
+        raise CliError('--workers must be >= 1 (use --serial to run in this process)')
+    if args.serial and args.scheduler:
+        raise CliError('--serial and --scheduler exclude each other')
     special = [n for n in (args.study or []) if n in ERROR_STUDIES]
     if special:
         if len(special) != len(args.study) or args.param or args.compare:
@@ -393,10 +397,6 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                            'or --compare)')
         _error_studies(args, cfg, list(dict.fromkeys(special)))
         return 0
-    if args.workers is not None and args.workers < 1:
-        raise CliError('--workers must be >= 1 (use --serial to run in this process)')
-    if args.serial and args.scheduler:
-        raise CliError('--serial and --scheduler exclude each other')
     studies = _sweep_studies(args, cfg)
     outdir = Path(args.out_dir)
     outdir.mkdir(parents=True, exist_ok=True)
