@@ -16,14 +16,17 @@ with ``nogil=True``: it releases the interpreter lock for the whole integration,
 integrate N drives at once; only the Python around it (config, packing, profile sampling,
 metrics) takes turns.  Against the alternatives:
 
-* *processes* (a pool, Dask) pay 2-3 s per process to import numpy/scipy/numba and load
-  the cached kernels, and pickle every result back (a 0.5 s record at 4 us is 16 MB);
+* *processes* (a pool, Dask) pay their start-up (1-4 s measured for two: numpy, scipy,
+  numba and the cached kernels loaded in each) and pickle every result back (a 0.5 s record
+  of every 4 us step is 20 MB); a pool kept alive (a Dask cluster) is the tool for many
+  machines;
 * a *numba prange batch kernel* (one compiled loop over drives calling ``advance`` with
   per-drive packed parameter rows: it works, the entry point is re-entrant) would re-implement
   everything :class:`~worm_gear_sim.dynamics.stepping.Stepper` does around the kernel (rest
   state, profile and load on the grid, chunking, records), i.e. a second source of truth, with
-  a fixed split of the drives over the threads (drives of unequal cost leave a core idle) and
-  one drive's failure stopping the loop.  Threads take the next item when one is done.
+  a fixed split of the drives over the threads (drives of unequal cost leave a core idle), one
+  shape for all (same step, same record length) and a failed drive's row left for the caller
+  to find.  Threads take the next item when one is done.
 
 ``benchmarks/bench_batch.py`` measures all three side by side (docs/performance.md).
 
