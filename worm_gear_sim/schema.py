@@ -526,9 +526,9 @@ def validate(cfg: Parameters) -> None:
         # bound of |de/dtheta|: sum_k k sqrt(s_k^2 + c_k^2)
         slope = sum((k + 1) * math.hypot(coeffs[2 * k], coeffs[2 * k + 1])
                     for k in range(len(coeffs) // 2))
-        if key == 'worm_error_harmonics':
+        if key == 'worm_error_harmonics' and slope > 0.0:
             l_w = g.lead / (2.0 * math.pi) if g.lead_convention == 'kinematic' else g.lead
-            slope *= g.gear_pitch_radius / l_w
+            slope = slope * g.gear_pitch_radius / l_w if l_w > 0.0 else math.inf
         if slope > ERROR_SLOPE_LIMIT:
             raise ConfigError(f'mesh.{key}', f'too steep: its slope bound sum_k k |a_k| '
                               f'{"r_g / l_w " if key[0] == "w" else ""}is {slope:.3g}, at most '

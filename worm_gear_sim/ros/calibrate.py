@@ -130,14 +130,17 @@ class RosDrive:
         return first, self.next_ns - period
 
     def _wait_for(self, stamp_ns: int, timeout: float) -> None:
-        """Spin until a measurement stamped at or after ``stamp_ns`` came in."""
+        """Spin until a measurement stamped at or after ``stamp_ns`` came in, holding the
+        last position meanwhile (a servo keeps streaming its reference: a drive that fell
+        behind and dropped the last samples answers the next ones)."""
         t0 = time.monotonic()
+        hold = np.full(max(1, int(self.rate * 0.005)), self.position)
         while not (self.samples and self.samples[-1][0] >= stamp_ns):
             if time.monotonic() - t0 > timeout:
                 raise CalibrationAborted(
                     f'no measured joint states on {self.measured_topic} after the command '
                     f'(is the encoder topic right, does the servo take {self.servo_topic}?)')
-            self.ex.spin_once(timeout_sec=0.01)
+            self._stream(hold)
 
     def settle(self) -> None:
         """Hold the position until the measured antenna is at rest (or the timeout)."""
