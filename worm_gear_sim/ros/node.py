@@ -88,7 +88,7 @@ from .interface import (
 from .node_status import CallbackLoad, backdrive_status, model_check_status, node_statuses
 from .param_updates import ParameterUpdates
 from .params_bridge import check_overrides, declare_config, parameter_type
-from .trajectory_bridge import TrajectoryBridge
+from .trajectory_bridge import TrajectoryBridge, trajectory_status
 
 __all__ = ['WormGearSimNode', 'LogThrottle', 'file_defaults', 'COMMAND_TOPIC',
            'REFERENCE_TOPIC', 'REFERENCE_DEPTH', 'JOINT_STATES_TOPIC', 'REJECT_REASONS',
@@ -583,12 +583,16 @@ class WormGearSimNode(Node):
     # ---- diagnostics -------------------------------------------------------------------------
     def diagnostic_statuses(self) -> list[diag.DiagnosticStatus]:
         """The statuses of /diagnostics (closes the load window)."""
-        name = self.get_name()
+        name, hardware_id = diag.identity(self)
         margin, at_rest = self.backdrive_margins()
-        return node_statuses(name, self.rt, self.counters, self.load, self._mode,
-                             self.config.node.command_timing, self.last_error) + \
+        statuses = node_statuses(name, self.rt, self.counters, self.load, self._mode,
+                                 self.config.node.command_timing, self.last_error) + \
             [model_check_status(name, self._check, self._clock.now().nanoseconds),
-             backdrive_status(name, margin, at_rest, self.config.node.backdrive_margin_warn)]
+             backdrive_status(name, margin, at_rest, self.config.node.backdrive_margin_warn),
+             trajectory_status(name, self.counters, self.trajectories, hardware_id)]
+        for s in statuses:
+            s.hardware_id = hardware_id
+        return statuses
 
     def backdrive_margins(self) -> tuple[float, float]:
         """(margin at the predicted state's sliding speed, margin at rest): the core's
