@@ -35,7 +35,7 @@ docs/pedestal.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -461,18 +461,21 @@ class TrajectoryCompensator:
             return None                                 # held: at rest, nothing to carry
         return th, xh
 
-    def compensate(self, traj: JointTrajectoryData, now_ns: int = 0, predict: bool = False
+    def compensate(self, traj: JointTrajectoryData, now_ns: int = 0, predict: bool = False,
+                   run: Callable[..., CompensatedTrajectory] | None = None
                    ) -> TrajectoryResult:
         """Check, split, compensate and merge ``traj`` (class docstring); remembers what it
-        sent for the next trajectory's start.  ``predict``: also the antenna errors."""
+        sent for the next trajectory's start.  ``predict``: also the antenna errors.
+        ``run``: calls :func:`compensate_trajectory` with the drive's Config and the same
+        arguments (e.g. in a worker process; default: here)."""
         self.check(traj, now_ns)
         start_ns = traj.stamp_ns or now_ns
         axes: dict[str, CompensatedTrajectory] = {}
         for k, joint in enumerate(traj.joint_names):
             try:
                 start = self.start_position(joint, start_ns)
-                axes[joint] = ct = compensate_trajectory(
-                    self.drives[joint], traj.time_from_start, traj.positions[:, k],
+                axes[joint] = ct = (run or compensate_trajectory)(
+                    self.drives[joint].config, traj.time_from_start, traj.positions[:, k],
                     _column(traj.velocities, k), _column(traj.accelerations, k),
                     start_position=start,
                     settle=self.settle, predict=predict, rate=self.rate,

@@ -15,23 +15,32 @@ costs one compensation per pass of the worker, not one each (issue 28, case 4). 
 worker compensates and publishes the dense trajectory with the input's joint names,
 header and timing, serialized by :mod:`.trajectory_cdr` (numpy, milliseconds for 100 000
 points) instead of a message object of 100 000 points, whose construction and conversion
-held the interpreter lock for 120-680 ms and stalled the per-sample path (case 3).  While
-it works the interpreter's switch interval is lowered (:data:`WORKER_SWITCH_INTERVAL`), so
-the executor thread waits less for the lock.  :func:`trajectory_status` is its
+held the interpreter lock for 120-680 ms and stalled the per-sample path (case 3).  A
+trajectory of :data:`PROCESS_POINTS` compensated points or more is compensated in a worker
+process (the same core function, so the same numbers): the per-sample correction loop of
+a 100 s trajectory takes the interpreter ~1.5 s, and sharing the lock with the executor
+for that long left samples too_old.  While the thread works the interpreter's switch
+interval is lowered (:data:`WORKER_SWITCH_INTERVAL`), so the executor waits less for the
+lock.  :func:`trajectory_status` is its
 /diagnostics status.
 """
 
 from __future__ import annotations
 
+import multiprocessing
 import sys
 import threading
 from collections import deque
 from collections.abc import Callable, Mapping
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any
 
 from builtin_interfaces.msg import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..topics import COMPENSATED_TRAJECTORY_TOPIC, TRAJECTORY_TOPIC
@@ -41,9 +50,10 @@ from ..trajectories import (
     TrajectoryCompensator,
     TrajectoryRejected,
     TrajectoryResult,
+    compensate_trajectory,
 )
 from . import diagnostics as diag
-from .trajectory_cdr import serialize_trajectory
+from .trajectory_cdr import parse_trajectory, serialize_trajectory
 
 __all__ = ['TrajectoryBridge', 'TRAJECTORY_COUNTERS', 'to_message', 'from_message',
            'trajectory_status', 'QUEUE_DEPTH']
@@ -62,6 +72,9 @@ QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)   # as the co
 #: The interpreter's switch interval while the worker computes [s] (Python's default,
 #: 5 ms, is how long the executor thread may wait for the lock each time it needs it).
 WORKER_SWITCH_INTERVAL = 0.0005
+#: Compensated points from which a trajectory is compensated in the worker process (20 s
+#: at 1 kHz; shorter ones take the interpreter less than ~0.3 s and stay in the thread).
+PROCESS_POINTS = 20_000
 #: Compensated points waiting for the worker at most (~16 s of its work); a trajectory that
 #: would exceed it is rejected as ``busy`` (a flood of long trajectories must not queue
 #: without bound); one is always taken when none waits.  A burst of short trajectories
@@ -102,6 +115,40 @@ def to_message(traj: JointTrajectoryData, header: Any) -> JointTrajectory:
         points.append(p)
     msg.points = points
     return msg
+
+
+_POOL: list[ProcessPoolExecutor] = []
+_POOL_LOCK = threading.Lock()
+
+
+def _process_pool() -> ProcessPoolExecutor:
+    """The worker process of this process's bridges (one, shared; spawned: no fork of the
+    middleware's threads; it ends with the process)."""
+    with _POOL_LOCK:
+        if not _POOL:
+            _POOL.append(ProcessPoolExecutor(1, mp_context=multiprocessing.get_context('spawn')))
+        return _POOL[0]
+
+
+def _drop_pool() -> None:
+    with _POOL_LOCK:
+        if _POOL:
+            _POOL.pop().shutdown(wait=False, cancel_futures=True)
+
+
+def _import_core() -> bool:
+    import worm_gear_sim.trajectories  # noqa: F401
+    return True
+
+
+def _warm_process() -> None:
+    """Start the worker process and import the core in it now, in the background, so
+    that the first long trajectory does not pay for it."""
+    if not _POOL:
+        try:
+            _process_pool().submit(_import_core)
+        except (OSError, RuntimeError):
+            _drop_pool()
 
 
 @dataclass
@@ -146,8 +193,22 @@ class TrajectoryBridge:
         self._cond = threading.Condition()
         self._pub = node.create_publisher(JointTrajectory, COMPENSATED_TRAJECTORY_TOPIC, QOS)
         self._sub = self._subscribe(guard)
+        _warm_process()
         self._thread = threading.Thread(target=self._run, name='trajectory', daemon=True)
         self._thread.start()
+
+    def _in_process(self, *args: Any, **kwargs: Any) -> Any:
+        """compensate_trajectory(*args, **kwargs) in the worker process (started on first
+        use, spawned: no fork of the middleware's threads); here if it cannot run."""
+        try:
+            return _process_pool().submit(compensate_trajectory, *args, **kwargs).result()
+        except (BrokenProcessPool, OSError, RuntimeError) as exc:
+            if self._stop:
+                raise
+            _drop_pool()
+            self._warn('trajectory_process', f'{self.topic}: worker process failed '
+                       f'({type(exc).__name__}: {exc}); compensating in the node')
+            return compensate_trajectory(*args, **kwargs)
 
     def _subscribe(self, guard: Callable[[Any], Any]) -> Any:
         """The input; where the middleware reports messages lost, they are counted."""
@@ -156,10 +217,10 @@ class TrajectoryBridge:
             events = SubscriptionEventCallbacks(message_lost=self._on_lost)
             return self._node.create_subscription(JointTrajectory, self.topic,
                                                   guard(self.on_trajectory), QOS_IN,
-                                                  event_callbacks=events)
+                                                  event_callbacks=events, raw=True)
         except Exception:  # noqa: BLE001 - an rmw without the event: subscribe without
             return self._node.create_subscription(JointTrajectory, self.topic,
-                                                  guard(self.on_trajectory), QOS_IN)
+                                                  guard(self.on_trajectory), QOS_IN, raw=True)
 
     def _on_lost(self, info: Any) -> None:
         self._counters['trajectory_messages_lost'] = int(info.total_count)
@@ -179,12 +240,26 @@ class TrajectoryBridge:
     def pending_points(self) -> int:
         return self._pending
 
-    def on_trajectory(self, msg: JointTrajectory) -> None:
-        """Validate in the callback, queue for the worker."""
+    def on_trajectory(self, msg: JointTrajectory | bytes) -> None:
+        """Validate in the callback, queue for the worker.  ``msg``: the serialized
+        message (the subscription is raw: a 100 000-point message object took the
+        executor ~2 s to convert; :func:`~.trajectory_cdr.parse_trajectory` reads it in
+        milliseconds) or a message object."""
         self._counters['trajectories_received'] += 1
         now_ns = self._node.get_clock().now().nanoseconds
         try:
-            traj = from_message(msg)
+            traj = None
+            if isinstance(msg, bytes):
+                parsed = parse_trajectory(msg)
+                if parsed is None:                  # ragged, efforts...: the usual way
+                    msg = deserialize_message(msg, JointTrajectory)
+                else:
+                    traj, (sec, nanosec, frame) = parsed
+                    header = Header(frame_id=frame)
+                    header.stamp.sec, header.stamp.nanosec = sec, nanosec
+            if traj is None:
+                traj = from_message(msg)
+                header = msg.header
             self.compensator.check(traj, now_ns)
             points = self.compensator.dense_points(traj)
             with self._cond:
@@ -194,7 +269,7 @@ class TrajectoryBridge:
                                              f'exceed {MAX_PENDING_POINTS}')
                 self._pending += points
                 self._seq += 1
-                self._queue.append(_Item(self._seq, traj, msg.header, now_ns, points))
+                self._queue.append(_Item(self._seq, traj, header, now_ns, points))
                 self._cond.notify_all()
         except TrajectoryRejected as exc:
             self._reject(exc)
@@ -247,7 +322,8 @@ class TrajectoryBridge:
             comp = self.compensator
             if any(comp.drives.get(j) is not m for j, m in models.items()):
                 comp = self.compensator = comp.with_drives(models)
-            result = comp.compensate(traj, now_ns)
+            big = comp.dense_points(traj) * len(traj.joint_names) >= PROCESS_POINTS
+            result = comp.compensate(traj, now_ns, run=self._in_process if big else None)
         except TrajectoryRejected as exc:
             self._reject(exc)
             return
@@ -271,6 +347,7 @@ class TrajectoryBridge:
             self._stop = True
             self._queue.clear()
             self._cond.notify_all()
+
 
 
 def trajectory_status(name: str, counters: Mapping[str, Any], bridge: TrajectoryBridge,

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..trajectories import JointTrajectoryData
 
-__all__ = ['serialize_trajectory']
+__all__ = ['serialize_trajectory', 'parse_trajectory']
 
 _ENCAPSULATION = b'\x00\x01\x00\x00'          # CDR, little endian
 _NS = 1_000_000_000
@@ -122,3 +122,109 @@ def serialize_trajectory(traj: JointTrajectoryData, header: Any) -> bytes:
     if n > first:
         parts.append(_rows(layouts[first:], cols, counts, dur, first, n))
     return b''.join([_ENCAPSULATION, head, *parts])
+
+
+class _Reader:
+    def __init__(self, body: memoryview) -> None:
+        self.body = body
+        self.o = 0
+
+    def u32(self, fmt: str = 'I') -> int:
+        self.o = _align(self.o, 4)
+        (v,) = struct.unpack_from('<' + fmt, self.body, self.o)
+        self.o += 4
+        return int(v)
+
+    def string(self) -> str:
+        n = self.u32()
+        text = bytes(self.body[self.o:self.o + max(0, n - 1)]).decode()
+        self.o += n
+        return text
+
+
+def parse_trajectory(data: bytes) -> tuple[JointTrajectoryData, tuple[int, int, str]] | None:
+    """The trajectory and (stamp sec, nanosec, frame_id) of a serialized
+    ``JointTrajectory`` whose points all carry the same numbers of values (read with numpy,
+    milliseconds for 100 000 points); None for anything else (ragged points, efforts, a
+    big-endian or short buffer): the caller deserializes those the usual way."""
+    if len(data) < 8 or data[:2] != _ENCAPSULATION[:2]:
+        return None
+    body = memoryview(data)[4:]
+    try:
+        r = _Reader(body)
+        sec, nanosec = r.u32('i'), r.u32()
+        frame = r.string()
+        names = tuple(r.string() for _ in range(r.u32()))
+        n = r.u32()
+        start = r.o
+        if n == 0 or not names:
+            return None
+        counts = []
+        for _ in range(4):
+            c = r.u32()
+            counts.append(c)
+            r.o = _align(r.o, 8) + 8 * c if c else r.o
+        nj = len(names)
+        if counts[0] != nj or counts[1] not in (0, nj) or counts[2] not in (0, nj) or \
+                counts[3] or (counts[2] and not counts[1]):
+            return None
+    except (struct.error, UnicodeDecodeError, ValueError):
+        return None
+    cnt = tuple(counts)
+    layouts, phases, o = [], [], start
+    while o % 8 not in phases:
+        phases.append(o % 8)
+        layouts.append(_point_layout(o, cnt))
+        o += layouts[-1][1]
+    first = phases.index(o % 8)
+    total = sum(size for _, size in layouts[:first]) + sum(
+        size for _, size in (layouts[first:] * n)[:n - first]) if n > first else \
+        sum(size for _, size in layouts[:n])
+    if len(body) < start + total:
+        return None
+    cols = [np.empty((n, c)) if c else None for c in cnt[:3]]
+    ns = np.empty((n, 2))                      # (sec, nanosec) of time_from_start
+    pos = start
+    for i in range(min(first, n)):            # the transient point, if any
+        if not _read_rows(body, pos, [layouts[i]], cnt, cols, ns, i, i + 1):
+            return None
+        pos += layouts[i][1]
+    if n > first and not _read_rows(body, pos, layouts[first:], cnt, cols, ns, first, n):
+        return None
+    traj = JointTrajectoryData(names, ns[:, 0] + ns[:, 1] * 1e-9, cols[0], cols[1], cols[2],
+                               sec * _NS + nanosec)
+    return traj, (sec, nanosec, frame)
+
+
+def _read_rows(body: memoryview, pos: int, layouts: list, counts: tuple[int, ...],
+               cols: list, ns: np.ndarray, a: int, b: int) -> bool:
+    """Points a..b-1 from ``pos`` laid out by the cycle ``layouts`` into ``cols`` / ``ns``;
+    False when a point's counts differ from the first point's."""
+    n, period = b - a, len(layouts)
+    width = sum(size for _, size in layouts)
+    groups = n // period
+    full = np.frombuffer(body, np.uint8, count=groups * width, offset=pos).reshape(
+        groups, width) if groups else np.zeros((0, width), np.uint8)
+    rest = n - groups * period
+    tail = np.zeros((1, width), np.uint8)
+    if rest:
+        used = sum(size for _, size in layouts[:rest])
+        tail[0, :used] = np.frombuffer(body, np.uint8, count=used, offset=pos + groups * width)
+    rows = np.concatenate((full, tail)) if rest else full
+    base = 0
+    for k, (fields, size) in enumerate(layouts):
+        m = len(range(a + k, b, period))
+        sel = slice(a + k, b, period)
+        block = rows[:m]
+        for (length, data), c, col in zip(fields[:4], counts, cols + [None]):
+            got = block[:, base + length:base + length + 4].copy().view('<u4')[:, 0]
+            if np.any(got != c):
+                return False
+            if c:
+                col[sel] = block[:, base + data:base + data + 8 * c].copy().view('<f8')
+        off = base + fields[4][0]
+        d = block[:, off:off + 8].copy().view('<u4')
+        ns[sel, 0] = d[:, 0].view('<i4')
+        ns[sel, 1] = d[:, 1]
+        base += size
+    return True
