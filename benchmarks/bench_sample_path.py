@@ -69,7 +69,7 @@ def callbacks(samples: int, points: int = 100_000, duration: float = 100.0,
     for _ in range(50):
         ex.spin_once(timeout_sec=0.01)
     msg = JointState(name=[node.config.node.joint_names[0]], position=[0.0])
-    base = node.get_clock().now().nanoseconds + 10_000_000
+    base = [node.get_clock().now().nanoseconds + 10_000_000]
     push_ns = [0]
     push = node.rt.push
 
@@ -86,7 +86,7 @@ def callbacks(samples: int, points: int = 100_000, duration: float = 100.0,
         wall, cpu = [], 0
         lag[0] = 0
         for k in range(k0, k0 + n):
-            st = base + k * 1_000_000
+            st = base[0] + k * 1_000_000
             while time.time_ns() < st:     # real time: the sample's own instant
                 pass
             lag[0] = max(lag[0], time.time_ns() - st)
@@ -98,13 +98,10 @@ def callbacks(samples: int, points: int = 100_000, duration: float = 100.0,
             wall.append(time.perf_counter_ns() - t)
         return np.array(wall) / 1e3, cpu / n / 1e3
 
-    run(1000, 0)
-    push_ns[0] = 0
-    quiet, cpu = run(samples, 1000)
-    out = {'cpu_us': cpu, 'push_us': push_ns[0] / samples / 1e3, 'quiet': quiet}
+    # the trajectory, serialized as the (raw) subscription hands it over: built first
     traj = JointTrajectory()
     traj.joint_names = [node.config.node.joint_names[0]]
-    st = node.get_clock().now().nanoseconds + 10**9
+    st = node.get_clock().now().nanoseconds + 30 * 10**9      # starts after the runs
     traj.header.stamp.sec, traj.header.stamp.nanosec = divmod(st, 10**9)
     for s in range(1, points + 1):
         p = JointTrajectoryPoint()
@@ -113,21 +110,26 @@ def callbacks(samples: int, points: int = 100_000, duration: float = 100.0,
         sec = int(t)
         p.time_from_start = Duration(sec=sec, nanosec=int(round((t - sec) * 1e9)))
         traj.points.append(p)
+    from rclpy.serialization import serialize_message
+    raw = serialize_message(traj)
+    base[0] = node.get_clock().now().nanoseconds + 10_000_000
+    run(1000, 0)
+    push_ns[0] = 0
+    quiet, cpu = run(samples, 1000)
+    out = {'cpu_us': cpu, 'push_us': push_ns[0] / samples / 1e3, 'quiet': quiet}
     c = {**node.rt.counters, **node.counters}
     before = {k: c[k] for k in ('rejected_too_old', 'overruns', 'corrections',
                                 'trajectories_compensated')}
-    from rclpy.serialization import serialize_message
-    raw = serialize_message(traj)          # as the (raw) subscription hands it over
     t_sent = time.perf_counter()
     node.trajectories.on_trajectory(raw)
     out['busy'], _ = run(samples, 1000 + samples)
     out['lag_s'] = lag[0] / 1e9
+    out['published_within_run'] = node.counters['trajectories_compensated'] > \
+        before['trajectories_compensated']
     done = node.trajectories.wait(120.0)
     c = {**node.rt.counters, **node.counters}
     out['after'] = {k: c[k] - before[k] for k in before}
     out['published_s'] = time.perf_counter() - t_sent if done else float('nan')
-    out['published_within_run'] = node.counters['trajectories_compensated'] > \
-        before['trajectories_compensated']
     ex.shutdown()
     node.destroy_node()
     probe.destroy_node()
