@@ -1,7 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""The trajectory interface of a drive node process under hostile input (issue 28, cases 1,
-3, 4, 5), one process for every check: a far-future trajectory does not move the next
+"""The trajectory interface of a drive node process under hostile input (cases 1,
+3, 4, 5 of the hostile review), one process for every check: a far-future trajectory does not move the next
 start; 3000 replacements at 1 kHz, the last one out within 1 s of its sending, every one
 counted (compensated, superseded or rejected: none dropped silently); the stamped path
 answers every sample, none too_old, no overrun, while a 100 000-point, 100 s trajectory
@@ -240,7 +240,7 @@ def test_the_stamped_path_is_answered_while_a_100s_trajectory_is_compensated(nod
     assert p.answers - answers0 == sent
     assert p.last().positions.shape == (n + 101, 1)
     overruns = int(after_sim['overruns']) - int(before_sim['overruns'])
-    if overruns > gaps[0]:          # target missed (issue 28): reported, not loosened
+    if overruns > gaps[0]:          # target missed: reported, not loosened
         pytest.xfail(f'{overruns} overrun(s) in the node process while the 100 s trajectory '
                      f'was handled ({gaps[0]} pause(s) > 50 ms of this probe); in-process '
                      'bench_sample_path.py measures 0')

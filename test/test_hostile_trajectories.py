@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Trajectories under hostile input, in the core (issue 28, cases 1 and 2; the node's
+"""Trajectories under hostile input, in the core (the hostile review's cases 1 and 2; the node's
 side: test_hostile_node.py): a far-future trajectory replaced before it starts does not
 move the next start; sub-period waypoints give dense velocities and accelerations that
 the controller's interpolation reads back without a jump beyond the dense points; the

@@ -9,7 +9,7 @@ header stamp, or its reception for stamp 0); what was sent before goes on until 
 whatever was sent to start at or after that instant (a trajectory stamped further ahead)
 is dropped.  So a trajectory stamped far ahead and then replaced by one starting earlier
 never counts, and the next trajectory starts from where the joint is commanded to be at
-its start (issue 28, case 1: with only the last trajectory remembered, a stamp of 2^31 s
+its start (with only the last trajectory remembered, a stamp of 2^31 s
 followed by a stamp-0 trajectory started from the far one's first waypoint, a 1 rad
 step).
 """

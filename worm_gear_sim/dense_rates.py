@@ -7,7 +7,7 @@ positions and velocities, quintic with accelerations too) stays with them.
 A spline read at the dense instants gives its own slope and curvature there; when the
 waypoints are closer together than one dense period those belong to a feature between two
 dense points (waypoints 1e-12 s apart: a slope of 1e11 rad/s on a 0.1 rad step, read back
-as 1.5e7 rad; issue 28, case 2).  The rule, per dense point i with the secants
+as 1.5e7 rad).  The rule, per dense point i with the secants
 m = (p[i+1] - p[i]) / dt on either side (0 before the first point and after the last:
 the trajectory starts and ends at rest):
 

@@ -452,7 +452,7 @@ class TrajectoryCompensator:
         k = np.arange(-int(round(self.history * self.rate)), 0)
         th = k / self.rate
         at = start_ns + np.round(th * 1e9).astype(np.int64)
-        keep = at >= sent.first_ns                      # not before the first start
+        keep = at >= (sent.first_ns or 0)               # not before the first start
         th, at = th[keep], at[keep]
         if th.size == 0:
             return None
@@ -466,8 +466,8 @@ class TrajectoryCompensator:
                    ) -> TrajectoryResult:
         """Check, split, compensate and merge ``traj`` (class docstring); remembers what it
         sent for the next trajectory's start.  ``predict``: also the antenna errors.
-        ``run``: calls :func:`compensate_trajectory` with the drive's Config and the same
-        arguments (e.g. in a worker process; default: here)."""
+        ``run``: calls :func:`compensate_trajectory` with the same arguments (e.g. in a
+        worker process, with the model's Config; default: here)."""
         self.check(traj, now_ns)
         start_ns = traj.stamp_ns or now_ns
         axes: dict[str, CompensatedTrajectory] = {}
@@ -475,7 +475,7 @@ class TrajectoryCompensator:
             try:
                 start = self.start_position(joint, start_ns)
                 axes[joint] = ct = (run or compensate_trajectory)(
-                    self.drives[joint].config, traj.time_from_start, traj.positions[:, k],
+                    self.drives[joint], traj.time_from_start, traj.positions[:, k],
                     _column(traj.velocities, k), _column(traj.accelerations, k),
                     start_position=start,
                     settle=self.settle, predict=predict, rate=self.rate,

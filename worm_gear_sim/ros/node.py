@@ -587,9 +587,9 @@ class WormGearSimNode(Node):
         margin, at_rest = self.backdrive_margins()
         statuses = node_statuses(name, self.rt, self.counters, self.load, self._mode,
                                  self.config.node.command_timing, self.last_error) + \
-            [model_check_status(name, self._check, self._clock.now().nanoseconds),
-             backdrive_status(name, margin, at_rest, self.config.node.backdrive_margin_warn),
-             trajectory_status(name, self.counters, self.trajectories, hardware_id)]
+            [trajectory_status(name, self.counters, self.trajectories, hardware_id),
+             model_check_status(name, self._check, self._clock.now().nanoseconds),
+             backdrive_status(name, margin, at_rest, self.config.node.backdrive_margin_warn)]
         for s in statuses:
             s.hardware_id = hardware_id
         return statuses

@@ -11,11 +11,11 @@ counted as ``rejected_trajectory_<reason>``, nothing forwarded) and queued; one 
 thread takes the queue in arrival order.  A queued trajectory that a later one replaces
 before it could run (every joint named again by a later trajectory that starts by now) is
 dropped before it is compensated (``trajectories_superseded``), so a flood of replacements
-costs one compensation per pass of the worker, not one each (issue 28, case 4).  The
+costs one compensation per pass of the worker, not one each .  The
 worker compensates and publishes the dense trajectory with the input's joint names,
 header and timing, serialized by :mod:`.trajectory_cdr` (numpy, milliseconds for 100 000
 points) instead of a message object of 100 000 points, whose construction and conversion
-held the interpreter lock for 120-680 ms and stalled the per-sample path (case 3).  A
+held the interpreter lock for 120-680 ms and stalled the per-sample path.  A
 trajectory of :data:`PROCESS_POINTS` compensated points or more is compensated in a worker
 process (the same core function, so the same numbers): the per-sample correction loop of
 a 100 s trajectory takes the interpreter ~1.5 s, and sharing the lock with the executor
@@ -197,18 +197,19 @@ class TrajectoryBridge:
         self._thread = threading.Thread(target=self._run, name='trajectory', daemon=True)
         self._thread.start()
 
-    def _in_process(self, *args: Any, **kwargs: Any) -> Any:
+    def _in_process(self, model: Any, *args: Any, **kwargs: Any) -> Any:
         """compensate_trajectory(*args, **kwargs) in the worker process (started on first
         use, spawned: no fork of the middleware's threads); here if it cannot run."""
         try:
-            return _process_pool().submit(compensate_trajectory, *args, **kwargs).result()
+            return _process_pool().submit(compensate_trajectory, model.config, *args,
+                                          **kwargs).result()
         except (BrokenProcessPool, OSError, RuntimeError) as exc:
             if self._stop:
                 raise
             _drop_pool()
             self._warn('trajectory_process', f'{self.topic}: worker process failed '
                        f'({type(exc).__name__}: {exc}); compensating in the node')
-            return compensate_trajectory(*args, **kwargs)
+            return compensate_trajectory(model, *args, **kwargs)
 
     def _subscribe(self, guard: Callable[[Any], Any]) -> Any:
         """The input; where the middleware reports messages lost, they are counted."""

@@ -4,7 +4,7 @@
 ``Publisher.publish(bytes)``: the CDR (little-endian, XCDR1) bytes the middleware would
 write for the message object, built column by column in a few milliseconds for 100 000
 points, where building the message object point by point and converting it held the
-interpreter lock for 120-680 ms (issue 28, case 3).  Every point has the same fields, so
+interpreter lock for 120-680 ms.  Every point has the same fields, so
 a point's layout depends only on its start modulo 8 (a cycle of one or two points);
 deserialized, :func:`serialize_trajectory`'s bytes are the message object
 (test_hostile_node.py).
