@@ -3,10 +3,11 @@
 """The trajectory interface of a drive node process under hostile input (cases 1, 3, 4,
 5 of the hostile review), one process for every check: a far-future trajectory does not
 move the next start; 3000 replacements at 1 kHz, the last one out within 1 s of its
-sending, every one counted (compensated, superseded or rejected: none dropped silently); the stamped path
-answers every sample, none too_old, no overrun, while a 100 000-point, 100 s trajectory
-is compensated and published; the counters on /diagnostics under the node's name.  The
-serialization of the dense output (numpy) equals the message object."""
+sending, every one counted (compensated, superseded or rejected: none dropped
+silently); the stamped path answers every sample, none too_old, no overrun, while a
+100 000-point, 100 s trajectory is compensated and published; the counters on
+/diagnostics under the node's name.  The serialization of the dense output (numpy)
+equals the message object."""
 
 from __future__ import annotations
 
