@@ -396,7 +396,8 @@ def test_diagnostics_follow_diagnostic_updater_conventions(ros_harness):
     msg = h.diagnostics[-1]
     names = [s.name for s in msg.status]
     assert names == ['worm_gear_sim: simulation', 'worm_gear_sim: inputs',
-                     'worm_gear_sim: feedforward', 'worm_gear_sim: model check',
+                     'worm_gear_sim: feedforward', 'worm_gear_sim: trajectories',
+                     'worm_gear_sim: model check',
                      'worm_gear_sim: back-drive']
     for s in msg.status:
         assert s.hardware_id == 'worm_gear_sim'

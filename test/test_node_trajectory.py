@@ -140,6 +140,7 @@ BAD = [
     ('too_long', lambda: message([4000.0], [1.0])),
     ('too_long', lambda: message([700.0], [1.0])),      # 700 101 dense points > 600 000
     ('past_stamp', lambda: message([0.1], [1.0], stamp_ns=NOW_NS - 10**9)),
+    ('future_stamp', lambda: message([0.1], [1.0], stamp_ns=NOW_NS + 3601 * 10**9)),
     ('command_limits', lambda: message([0.001], [2e4])),      # beyond node.max_command_abs
 ]
 

@@ -82,7 +82,7 @@ def test_the_pedestal_process_splits_compensates_and_merges_like_the_twin(
     ex = SingleThreadedExecutor(context=ros_dds_context)
     ex.add_node(node)
     out: dict[str, list] = {'pedestal': [], 'azimuth': []}
-    pub = node.create_publisher(JointTrajectory, 'reference_trajectory', 10)
+    pub = node.create_publisher(JointTrajectory, '/pedestal/reference_trajectory', 10)
     pub_az = node.create_publisher(JointTrajectory, '/azimuth/reference_trajectory', 10)
     node.create_subscription(JointTrajectory, '/pedestal/compensated_trajectory',
                              out['pedestal'].append, 10)

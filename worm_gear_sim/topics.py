@@ -13,7 +13,7 @@ __all__ = ['NODE_NAMESPACE', 'COMMAND_TOPIC', 'REFERENCE_TOPIC', 'JOINT_STATES_T
            'MEASURED_TOPIC', 'POSITIONING_ERROR_TOPIC', 'WORM_ERROR_TOPIC', 'FEEDFORWARD_TOPIC',
            'COMPENSATED_COMMAND_TOPIC', 'RESIDUAL_TOPIC', 'DIAGNOSTICS_TOPIC', 'FLOAT64',
            'BACKDRIVE_MARGIN_TOPIC', 'LOAD_TORQUE_TOPIC', 'TRAJECTORY_TOPIC',
-           'COMPENSATED_TRAJECTORY_TOPIC',
+           'COMPENSATED_TRAJECTORY_TOPIC', 'PEDESTAL_TRAJECTORY_TOPIC',
            'JOINT_STATE', 'private_topic']
 
 NODE_NAMESPACE = NODE_NAME          # the node's name: its ~/ topics live under it
@@ -30,6 +30,7 @@ COMPENSATED_COMMAND_TOPIC = '~/compensated_command'  # out, JointState (theta1_r
 RESIDUAL_TOPIC = '~/prediction_residual'           # out, JointState (measured - predicted)
 BACKDRIVE_MARGIN_TOPIC = '~/backdrive_margin'      # out, Float64 (> 1: the worm holds)
 TRAJECTORY_TOPIC = 'reference_trajectory'         # in, trajectory_msgs/JointTrajectory
+PEDESTAL_TRAJECTORY_TOPIC = '~/reference_trajectory'  # the pedestal node's (/pedestal/...)
 COMPENSATED_TRAJECTORY_TOPIC = '~/compensated_trajectory'  # out, JointTrajectory (dense)
 DIAGNOSTICS_TOPIC = '/diagnostics'                 # out, diagnostic_msgs/DiagnosticArray
 

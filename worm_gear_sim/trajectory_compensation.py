@@ -36,13 +36,15 @@ docs/pedestal.md.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .command_timeline import CommandTimeline
 from .compensation import centring_preview, with_preview
+from .dense_rates import consistent_rates
 from .dynamics.model import DriveModel, has_play
 from .dynamics.profiles import SampledProfile
 from .dynamics.simulation import simulate
@@ -53,7 +55,8 @@ __all__ = ['jtc_sample', 'compensate_trajectory', 'trajectory_model', 'antenna_e
            'CompensatedTrajectory',
            'JointTrajectoryData',
            'TrajectoryCompensator', 'TrajectoryRejected', 'TRAJECTORY_REJECT_REASONS',
-           'MAX_TRAJECTORY_POINTS', 'MAX_TRAJECTORY_DURATION', 'MAX_DENSE_POINTS']
+           'MAX_TRAJECTORY_POINTS', 'MAX_TRAJECTORY_DURATION', 'MAX_DENSE_POINTS',
+           'MAX_START_AHEAD']
 
 #: Seconds of the replaced trajectory's command the correction's filter runs through at a
 #: hand-over (longer than the drive's transients take to decay: 0.2 s at the defaults).
@@ -64,6 +67,10 @@ MAX_TRAJECTORY_DURATION = 3600.0
 #: The most points of a compensated (dense) trajectory: 10 min at 1 kHz (a 38 MB message,
 #: ~5 s to build, ~0.8 GB peak).  Longer: stream overlapping trajectories (docs/pedestal.md).
 MAX_DENSE_POINTS = 600_000
+#: The furthest a trajectory's stamp may lie ahead of now [s] (``future_stamp`` beyond).
+MAX_START_AHEAD = 3600.0
+#: Seconds of what was sent kept for the next start (a stamp further back reads the oldest).
+TIMELINE_KEEP = 10.0
 
 
 class TrajectoryRejected(ValueError):
@@ -78,7 +85,7 @@ class TrajectoryRejected(ValueError):
 #: Why a trajectory is refused (each a counter of the node).
 TRAJECTORY_REJECT_REASONS = ('empty', 'unknown_joint', 'duplicate_joint', 'length_mismatch',
                              'not_finite', 'not_increasing', 'too_long', 'past_stamp',
-                             'command_limits', 'busy')
+                             'future_stamp', 'command_limits', 'busy')
 
 
 def _check(times: np.ndarray, pos: np.ndarray, vel: np.ndarray | None,
@@ -239,7 +246,9 @@ def compensate_trajectory(model: DriveModel | Config, times: ArrayLike,
     dt = 1.0 / rate
     ddelta = np.gradient(delta, dt) if n > 2 else np.zeros(n)
     dddelta = np.gradient(ddelta, dt) if n > 2 else np.zeros(n)
-    out = CompensatedTrajectory(t, ref + delta, vref + ddelta, aref + dddelta, ref, delta)
+    pos = ref + delta
+    vel, acc = consistent_rates(pos, vref + ddelta, aref + dddelta, dt)
+    out = CompensatedTrajectory(t, pos, vel, acc, ref, delta)
     if predict and n > 1:
         out.predicted_error = antenna_error(m, t, ref + delta, ref)
         out.raw_error = antenna_error(m, t, ref, ref)
@@ -312,6 +321,25 @@ class JointTrajectoryData:
                    int(stamp_ns))
 
 
+def _check_jumps(model: DriveModel, ct: CompensatedTrajectory, start: float | None) -> None:
+    """ValueError when the compensated command steps more than ``node.max_command_jump``
+    between two dense points, or its reference starts further than that from ``start``
+    (the position commanded before): the limit the drive node puts on what it receives
+    holds for what it sends."""
+    limit = model.config.node.max_command_jump
+    steps = np.abs(np.diff(ct.position))
+    if steps.size and steps.max() > limit:
+        i = int(np.argmax(steps))
+        raise ValueError(f'the compensated command would step {float(steps[i]):.6g} rad '
+                         f'at {float(ct.t[i + 1]):.6g} s (reference step '
+                         f'{float(abs(ct.reference[i + 1] - ct.reference[i])):.6g} rad), '
+                         f'more than node.max_command_jump = {limit:g} rad')
+    if start is not None and abs(ct.reference[0] - start) > limit:
+        raise ValueError(f'the reference starts {float(abs(ct.reference[0] - start)):.6g} '
+                         f'rad from the position commanded before ({start:.6g} rad), '
+                         f'more than node.max_command_jump = {limit:g} rad')
+
+
 def _column(a: np.ndarray | None, k: int) -> np.ndarray | None:
     return None if a is None else a[:, k]
 
@@ -338,10 +366,13 @@ class TrajectoryCompensator:
     ``node.publish_rate_hz`` of the drives) and merged back in the trajectory's order.
 
     Replacement, as the controller does it: a trajectory starts at its header stamp (0:
-    at ``now_ns``, its reception); each joint starts from the position this object last
-    sent for it at that instant (the previous compensated trajectory's reference there, or
-    its last point once it has ended), or from the trajectory's first waypoint when nothing
-    was sent yet.  The correction continues through a hand-over: its filter first runs
+    at ``now_ns``, its reception) and takes over there (a splice,
+    :class:`~worm_gear_sim.command_timeline.CommandTimeline`: what was sent before runs
+    until then, whatever was sent to start at or after it is dropped); each joint starts
+    from the position commanded for it at that instant by the trajectories sent before,
+    or from the trajectory's first waypoint when nothing was sent.  A stamp more than
+    :data:`MAX_START_AHEAD` ahead of ``now_ns`` is refused (``future_stamp``).  The
+    correction continues through a hand-over: its filter first runs
     through the last ``history`` seconds of the reference sent before (at rest when
     nothing was sent), so trajectories streamed back to back, each replacing the last in
     the middle of a move, are compensated as one long trajectory would be (the difference
@@ -357,8 +388,8 @@ class TrajectoryCompensator:
         self.rate = max(m.config.node.publish_rate_hz for m in self.drives.values())
         self.settle = float(settle)
         self.history = float(history)
-        # per joint: (start_ns, reference times [s from start], reference positions)
-        self._sent: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}
+        # per joint: the reference commanded over time by the trajectories sent
+        self._sent: dict[str, CommandTimeline] = {}
 
     @property
     def joints(self) -> tuple[str, ...]:
@@ -391,6 +422,10 @@ class TrajectoryCompensator:
                 traj.stamp_ns + int(traj.time_from_start[-1] * 1e9) < now_ns:
             late = (now_ns - traj.stamp_ns) / 1e9 - traj.time_from_start[-1]
             raise TrajectoryRejected('past_stamp', f'ends {late:.3g} s before now')
+        if now_ns and traj.stamp_ns > now_ns + MAX_START_AHEAD * 1e9:
+            ahead = (traj.stamp_ns - now_ns) / 1e9
+            raise TrajectoryRejected('future_stamp', f'starts {ahead:.6g} s after now, '
+                                     f'more than {MAX_START_AHEAD:g} s ahead')
 
     def with_drives(self, drives: Mapping[str, DriveModel | Config]) -> TrajectoryCompensator:
         """The same with new models (a parameter set), keeping what was sent."""
@@ -403,12 +438,10 @@ class TrajectoryCompensator:
         return int(math.floor((traj.time_from_start[-1] + self.settle) * self.rate)) + 1
 
     def start_position(self, joint: str, start_ns: int) -> float | None:
-        """The position last sent for ``joint`` at ``start_ns`` (None: nothing sent)."""
+        """The position commanded for ``joint`` at ``start_ns`` by the trajectories sent
+        that start before it (None: nothing sent)."""
         sent = self._sent.get(joint)
-        if sent is None:
-            return None
-        t0, t, ref = sent
-        return float(np.interp((start_ns - t0) / 1e9, t, ref))
+        return None if sent is None else sent.position(start_ns)
 
     def commanded_before(self, joint: str, start_ns: int
                          ) -> tuple[np.ndarray, np.ndarray] | None:
@@ -417,39 +450,46 @@ class TrajectoryCompensator:
         sent = self._sent.get(joint)
         if sent is None or self.history <= 0:
             return None
-        t0, t, ref = sent
         k = np.arange(-int(round(self.history * self.rate)), 0)
         th = k / self.rate
-        th = th[(start_ns - t0) / 1e9 + th >= 0]       # not before the previous start
+        at = start_ns + np.round(th * 1e9).astype(np.int64)
+        keep = at >= (sent.first_ns or 0)               # not before the first start
+        th, at = th[keep], at[keep]
         if th.size == 0:
             return None
-        xh = np.interp((start_ns - t0) / 1e9 + th, t, ref)
+        xh = sent.at(at)
         if np.ptp(xh) == 0.0:
             return None                                 # held: at rest, nothing to carry
         return th, xh
 
-    def compensate(self, traj: JointTrajectoryData, now_ns: int = 0, predict: bool = False
+    def compensate(self, traj: JointTrajectoryData, now_ns: int = 0, predict: bool = False,
+                   run: Callable[..., CompensatedTrajectory] | None = None
                    ) -> TrajectoryResult:
         """Check, split, compensate and merge ``traj`` (class docstring); remembers what it
-        sent for the next trajectory's start.  ``predict``: also the antenna errors."""
+        sent for the next trajectory's start.  ``predict``: also the antenna errors.
+        ``run``: calls :func:`compensate_trajectory` with the same arguments (e.g. in a
+        worker process, with the model's Config; default: here)."""
         self.check(traj, now_ns)
         start_ns = traj.stamp_ns or now_ns
         axes: dict[str, CompensatedTrajectory] = {}
         for k, joint in enumerate(traj.joint_names):
             try:
-                axes[joint] = compensate_trajectory(
+                start = self.start_position(joint, start_ns)
+                axes[joint] = ct = (run or compensate_trajectory)(
                     self.drives[joint], traj.time_from_start, traj.positions[:, k],
                     _column(traj.velocities, k), _column(traj.accelerations, k),
-                    start_position=self.start_position(joint, start_ns),
+                    start_position=start,
                     settle=self.settle, predict=predict, rate=self.rate,
                     history=self.commanded_before(joint, start_ns))
+                _check_jumps(self.drives[joint], ct, start)
             except TrajectoryRejected:
                 raise
             except ValueError as exc:      # node.max_command_abs / max_command_jump
                 raise TrajectoryRejected('command_limits', f'joint {joint!r}: {exc}') \
                     from None
         for joint, ct in axes.items():
-            self._sent[joint] = (start_ns, ct.t, ct.reference)
+            self._sent.setdefault(joint, CommandTimeline(TIMELINE_KEEP + self.history)
+                                  ).splice(start_ns, ct.t, ct.reference)
         first = axes[traj.joint_names[0]]
         dense = JointTrajectoryData(traj.joint_names, first.t,
                            np.column_stack([axes[j].position for j in traj.joint_names]),

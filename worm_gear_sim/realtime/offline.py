@@ -51,7 +51,7 @@ def feedforward_series(model: DriveModel | Config, times: ArrayLike,
     for i in range(x.size):
         o = p.push(origin + int(rel[i]), float(x[i]))
         if o.rejected is not None:
-            raise ValueError(f'sample {i} (theta1_ref = {x[i]!r}) rejected: '
+            raise ValueError(f'sample {i} (theta1_ref = {float(x[i])!r}) rejected: '
                              f'{o.rejected.value}')
         for c in o.corrections:
             out[k] = c.delta

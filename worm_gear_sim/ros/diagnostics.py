@@ -5,7 +5,9 @@
 ``diagnostic_updater`` has no PyPI wheel, so the node publishes on the absolute topic
 ``/diagnostics`` itself: one ``DiagnosticStatus`` per task, named ``"<node>: <task>"``, with
 ``hardware_id``, a ``level`` byte (``DiagnosticStatus.OK/WARN/ERROR/STALE``) and values as
-``KeyValue`` strings.
+``KeyValue`` strings.  ``<node>`` is the node's fully qualified name without the leading
+slash (:func:`identity`): ``worm_gear_sim`` in the root namespace,
+``azimuth/worm_gear_sim`` in a pedestal, so an aggregator tells the drives apart.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from typing import Any
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-__all__ = ['OK', 'WARN', 'ERROR', 'STALE', 'status', 'array', 'level_name']
+__all__ = ['OK', 'WARN', 'ERROR', 'STALE', 'status', 'array', 'level_name', 'identity']
 
 OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN
@@ -29,6 +31,13 @@ _LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 def level_name(level: bytes) -> str:
     """'OK', 'WARN', 'ERROR' or 'STALE'."""
     return _LEVEL_NAMES.get(level, repr(level))
+
+
+def identity(node: Any, hardware: str = 'worm_gear_sim') -> tuple[str, str]:
+    """(status name prefix, hardware_id) of ``node``: its fully qualified name without the
+    leading slash, and ``hardware`` followed by ``:<namespace>`` outside the root."""
+    ns = node.get_namespace().strip('/')
+    return node.get_fully_qualified_name().lstrip('/'), f'{hardware}:{ns}' if ns else hardware
 
 
 def _text(v: Any) -> str:

@@ -91,7 +91,7 @@ from .param_updates import ParameterUpdates
 from .params_bridge import check_overrides, declare_config, file_defaults, parameter_type
 from .publishers import PredictionPublishing
 from .statuses import CallbackLoad, backdrive_status, model_check_status, node_statuses
-from .trajectory_bridge import TrajectoryBridge
+from .trajectory_bridge import TrajectoryBridge, trajectory_status
 
 __all__ = ['WormGearSimNode', 'WATCH_PERIOD']
 
@@ -460,12 +460,16 @@ class WormGearSimNode(PredictionPublishing, Node):
     # ---- diagnostics -------------------------------------------------------------------------
     def diagnostic_statuses(self) -> list[diag.DiagnosticStatus]:
         """The statuses of /diagnostics (closes the load window)."""
-        name = self.get_name()
+        name, hardware_id = diag.identity(self)
         margin, at_rest = self.backdrive_margins()
-        return node_statuses(name, self.rt, self.counters, self.load, self._mode,
-                             self.config.node.command_timing, self.last_error) + \
-            [model_check_status(name, self._check, self._clock.now().nanoseconds),
+        statuses = node_statuses(name, self.rt, self.counters, self.load, self._mode,
+                                 self.config.node.command_timing, self.last_error) + \
+            [trajectory_status(name, self.counters, self.trajectories, hardware_id),
+             model_check_status(name, self._check, self._clock.now().nanoseconds),
              backdrive_status(name, margin, at_rest, self.config.node.backdrive_margin_warn)]
+        for s in statuses:
+            s.hardware_id = hardware_id
+        return statuses
 
     def backdrive_margins(self) -> tuple[float, float]:
         """(margin at the predicted state's sliding speed, margin at rest): the core's

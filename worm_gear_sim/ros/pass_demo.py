@@ -2,7 +2,7 @@
 # Licensed under the Apache License, Version 2.0
 """The tracking pass through the ROS nodes (``scripts/run_pass.sh``): a planner's stand-in
 that streams a satellite pass (:mod:`worm_gear_sim.studies.tracking_pass`) to a running
-``worm_gear_sim_pedestal`` as two-joint trajectories on ``reference_trajectory``, stamped
+``worm_gear_sim_pedestal`` as two-joint trajectories on ``/pedestal/reference_trajectory``, stamped
 on the ROS clock a moment ahead, collects ``/pedestal/compensated_trajectory``, checks
 each against the offline twin, and reports the per-axis pointing error with and without
 compensation (the drives simulated on the stitched commands) with a CSV and a figure.
@@ -55,8 +55,9 @@ def main(argv: list[str] | None = None) -> int:
     from ..cli.tracking_pass import pass_table, write_pass
     from ..pedestal import load_pedestal
     from ..studies.tracking_pass import evaluate_pass, pass_window, stream_pass
-    from ..topics import TRAJECTORY_TOPIC
+    from ..topics import PEDESTAL_TRAJECTORY_TOPIC, private_topic
     from ..trajectory_compensation import TrajectoryCompensator
+    from .pedestal import PEDESTAL_NODE_NAME
     from .trajectory_bridge import from_message, to_message
 
     drives = load_pedestal(opts.pedestal)
@@ -70,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     ex = SingleThreadedExecutor()
     ex.add_node(node)
     qos = QoSProfile(depth=len(sent) + 10, reliability=ReliabilityPolicy.RELIABLE)
-    pub = node.create_publisher(JointTrajectory, TRAJECTORY_TOPIC, qos)
+    pub = node.create_publisher(
+        JointTrajectory, '/' + private_topic(PEDESTAL_TRAJECTORY_TOPIC, PEDESTAL_NODE_NAME), qos)
     got: list = []
     node.create_subscription(JointTrajectory, '/pedestal/compensated_trajectory',
                              got.append, qos)
