@@ -21,21 +21,32 @@ previous parameters stay in use.
 
 Exit status: 0 accepted (and applied, unless ``--dry-run``); 1 not accepted or the node
 refused the set; 2 bad arguments, no node, or a drive that did not follow (no measured
-motion, motion unrelated to the command, records that stop, never at rest).
+motion, motion unrelated to the command, records that stop, never at rest); 130
+interrupted (Ctrl-C, SIGINT) before the fitted set was sent: one line "interrupted;
+nothing applied".  While the set is being applied (one atomic request, at most 30 s)
+SIGINT is ignored, so the answer is always reported.  This module imports only the
+standard library at its top, so the handler is in place before numpy and rclpy load.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
+import signal
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ['main', 'RosDrive']
+
+PROG = 'worm_gear_sim_calibrate'
+INTERRUPTED = f'{PROG}: interrupted; nothing applied'
+EXIT_INTERRUPTED = 130    # 128 + SIGINT, as a shell reports it
 
 LEAD_S = 0.05             # references are sent this far ahead of their instant
 SETTLE_WINDOW_S = 0.05    # at rest: the measured antenna angle moves less than
@@ -49,7 +60,7 @@ class CalibrationAborted(Exception):
 
 def _args(argv: list[str]) -> argparse.Namespace:
     from ..cli.calibrate import add_limit_options
-    ap = argparse.ArgumentParser(prog='worm_gear_sim_calibrate',
+    ap = argparse.ArgumentParser(prog=PROG,
                                  description=__doc__.split('\n\n')[0])
     ap.add_argument('--fit', action='append', required=True, metavar='KEY[,KEY...]',
                     help='parameters to fit (repeatable)')
@@ -133,6 +144,7 @@ class RosDrive:
         """Spin until a measurement stamped at or after ``stamp_ns`` came in, holding the
         last position meanwhile (a servo keeps streaming its reference: a drive that fell
         behind and dropped the last samples answers the next ones)."""
+        import numpy as np
         t0 = time.monotonic()
         hold = np.full(max(1, int(self.rate * 0.005)), self.position)
         while not (self.samples and self.samples[-1][0] >= stamp_ns):
@@ -144,6 +156,7 @@ class RosDrive:
 
     def settle(self) -> None:
         """Hold the position until the measured antenna is at rest (or the timeout)."""
+        import numpy as np
         t0 = time.monotonic()
         hold = np.full(int(self.rate * SETTLE_WINDOW_S), self.position)
         while True:
@@ -161,6 +174,8 @@ class RosDrive:
                     f'{SETTLE_WINDOW_S:g} s): raise --settle-timeout or check the servo')
 
     def __call__(self, move: Any) -> Any:
+        import numpy as np
+
         from ..records import Record
         self.settle()
         n = int(math.floor(move.t_end * self.rate + 1e-9)) + 1
@@ -202,26 +217,76 @@ def _node_config(node: Any, executor: Any, target: str) -> Any:
     return config_from_mapping(values, source=f'{target} parameters'), client
 
 
+def _exit_interrupted(signum: int, frame: Any) -> None:
+    """SIGINT while starting (imports, arguments, ``rclpy.init``): the line, exit 130 at
+    once; unwinding could interrupt a C extension's initialisation (see
+    :mod:`.signals`)."""
+    try:
+        print(INTERRUPTED, file=sys.stderr, flush=True)
+    finally:
+        os._exit(EXIT_INTERRUPTED)
+
+
+def bad_arguments(opts: argparse.Namespace) -> str | None:
+    """The first option out of its range, as one line (None: all valid)."""
+    measure = [o.strip() for o in opts.measure.split(',') if o.strip()]
+    bad = [o for o in measure if o not in OUTPUTS]
+    if bad:
+        return f'--measure {",".join(bad)}: not one of {", ".join(OUTPUTS)}'
+    if Path(opts.output).suffix.lower() not in ('.yaml', '.yml'):
+        return f'-o {opts.output}: the fitted parameter file must end in .yaml'
+    if not (math.isfinite(opts.accept) and 0 < opts.accept < 1):
+        return f'--accept {opts.accept!r}: a share between 0 and 1'
+    if not (math.isfinite(opts.settle_timeout) and opts.settle_timeout > 0):
+        return (f'--settle-timeout {opts.settle_timeout!r}: a finite number of seconds > 0 '
+                '(the longest wait for the drive to come to rest)')
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The command (module docstring); Ctrl-C at any point before the fitted set is sent:
+    one line, exit 130, nothing applied."""
+    previous = signal.signal(signal.SIGINT, _exit_interrupted)
+    try:
+        opts = _args(sys.argv[1:] if argv is None else argv)
+        why = bad_arguments(opts)
+        if why is not None:
+            print(f'{PROG}: {why}', file=sys.stderr)
+            return 2
+        # the heavy imports while a Ctrl-C still ends the process at once
+        import rclpy
+        from rclpy.signals import SignalHandlerOptions
+
+        from ..cli import calibrate as _cli  # noqa: F401
+        from ..identification import calibrate as _fit  # noqa: F401
+        rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            # from here a Ctrl-C unwinds (KeyboardInterrupt): the node is destroyed cleanly
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            return _run(opts, argv)
+        except KeyboardInterrupt:
+            print(INTERRUPTED, file=sys.stderr)
+            return EXIT_INTERRUPTED
+        finally:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C: no traceback
+            rclpy.try_shutdown()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _run(opts: argparse.Namespace, argv: list[str] | None) -> int:
+    from ..cli.calibrate import limits_of, report_calibration
     from ..identification import FitOptions
     from ..identification.calibrate import calibrate
     from ..identification.data import IdentificationError
     from ..validation import ConfigError
-    opts = _args(sys.argv[1:] if argv is None else argv)
     keys = [k.strip() for item in opts.fit for k in item.split(',') if k.strip()]
     measure = [o.strip() for o in opts.measure.split(',') if o.strip()]
     out = Path(opts.output)
-    bad = [o for o in measure if o not in OUTPUTS]
-    if bad or out.suffix.lower() not in ('.yaml', '.yml') or not 0 < opts.accept < 1:
-        print(f'worm_gear_sim_calibrate: bad arguments (--measure {bad or "ok"}, -o must end '
-              'in .yaml, --accept in (0, 1))', file=sys.stderr)
-        return 2
-    from ..cli.calibrate import limits_of, report_calibration
     limits = limits_of(opts)
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
-    rclpy.init(args=[])
     node = rclpy.create_node('worm_gear_sim_calibrator')
     ex = SingleThreadedExecutor()
     ex.add_node(node)
@@ -257,6 +322,7 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         fitted = res.config.to_flat_dict()
         params = [Parameter(k, value=float(fitted[k])) for k in keys]
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # the answer is always reported
         fut = client.set_parameters_atomically(params)
         ex.spin_until_future_complete(fut, timeout_sec=30.0)
         result = fut.result().result if fut.done() and fut.result() is not None else None
@@ -269,12 +335,11 @@ def main(argv: list[str] | None = None) -> int:
             f'{k} = {fitted[k]:.6g}' for k in keys))
         return 0
     except CalibrationAborted as exc:
-        print(f'worm_gear_sim_calibrate: {exc}; nothing applied', file=sys.stderr)
+        print(f'{PROG}: {exc}; nothing applied', file=sys.stderr)
         return 2
     finally:
         ex.shutdown()
         node.destroy_node()
-        rclpy.try_shutdown()
 
 
 if __name__ == '__main__':   # pragma: no cover
