@@ -265,6 +265,10 @@ class Load:
                               'N*m', -LOAD_LIMIT, LOAD_LIMIT)
     output_viscous_coefficient: float = _f(0.0, 'Viscous bearing drag on theta4', 'N*m*s/rad',
                                            0.0, 1e5)
+    max_elastic_windup: float = _f(0.02, 'Static wind-up of the antenna against the held '
+                                   'worm beyond which a load is warned about (not carried '
+                                   'elastically by a real drive; the model integrates it)',
+                                   'rad', 0.0, 10.0, lo_open=True)
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,11 @@ turning the antenna back (the sign of ``load.output_torque``, Eq. 6 + load).
 * :class:`SampledLoad`: a recorded or designed series (a CSV column ``load_torque``),
   linear between samples, held before the first and after the last;
 * :class:`WindLoad`: gusts on a dish from a documented model (below), reproducible from a
-  seed.
+  seed;
+* :func:`elastic_windup` / :func:`elastic_load_limit`: how far a load winds the antenna
+  up against the held worm (the static compliance of Eq. 15's stiffness, play removed),
+  and the load at which that reaches ``load.max_elastic_windup`` (beyond it the model
+  still integrates, but a real drive would no longer be elastic: a warning, not an error).
 
 Both give ``torque(t)`` on arrays; the integrator takes the values on its own grid
 (:func:`worm_gear_sim.dynamics.integrator.advance`, ``load[k+1]`` at the end of step k) and
@@ -38,8 +42,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..schema import LOAD_LIMIT
+from .model import DriveModel, linear_stiffness, without_play
 
-__all__ = ['LoadSignal', 'SampledLoad', 'WindLoad', 'load_grid']
+__all__ = ['LoadSignal', 'SampledLoad', 'WindLoad', 'load_grid', 'elastic_windup',
+           'elastic_load_limit', 'ElasticLimitCheck']
 
 
 class LoadSignal:
@@ -177,3 +183,41 @@ def load_grid(signal: LoadSignal | None, t_now: float, grid: np.ndarray) -> np.n
     out[0] = float(signal.torque(np.array([t_now]))[0])
     out[1:] = signal.torque(grid)
     return out
+
+
+def elastic_windup(model: DriveModel, torque: float) -> float:
+    """Static wind-up of the antenna [rad] under a load ``torque`` [N m] with the worm
+    held: torque x the theta4 entry of the inverse of Eq. 15's stiffness (frictionless,
+    play removed, at the mesh's rest position).  Linear in the torque."""
+    k = linear_stiffness(without_play(model.p))
+    return abs(float(torque)) * float(np.linalg.inv(k)[2, 2])
+
+
+def elastic_load_limit(model: DriveModel) -> float:
+    """The load [N m] whose static wind-up (:func:`elastic_windup`) is
+    ``load.max_elastic_windup``: what the drive carries elastically."""
+    return model.config.load.max_elastic_windup / elastic_windup(model, 1.0)
+
+
+class ElasticLimitCheck:
+    """Load samples beyond :func:`elastic_load_limit` of the current model: call with the
+    model (a new one, e.g. after a parameter set, recomputes the limit) and the torque;
+    returns one line to warn with (None within the limit) and counts them in
+    :attr:`count`."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.limit = math.inf
+        self._model: DriveModel | None = None
+
+    def __call__(self, model: DriveModel, torque: float) -> str | None:
+        if model is not self._model:
+            self._model, self.limit = model, elastic_load_limit(model)
+        if abs(torque) <= self.limit:
+            return None
+        self.count += 1
+        return (f'load {torque:.6g} N m winds the antenna {elastic_windup(model, torque):.3g} '
+                f'rad against the held worm, more than load.max_elastic_windup = '
+                f'{model.config.load.max_elastic_windup:g} rad (|load| <= {self.limit:.6g} '
+                f'N m): beyond what the drive carries elastically, simulated all the same; '
+                f'{self.count} such sample(s)')

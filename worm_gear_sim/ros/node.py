@@ -61,6 +61,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from ..dynamics.load import ElasticLimitCheck
 from ..dynamics.modal import StepResolutionWarning, step_resolution_warning
 from ..params import Config, config_from_mapping
 from ..realtime import Output, RealtimePredictor
@@ -131,7 +132,8 @@ class WormGearSimNode(PredictionPublishing, Node):
             **{f'rejected_{r}': 0 for r in NODE_REJECT_REASONS},
             ticks=0, missed_ticks=0, held_predictions=0, rejected_parameter_sets=0,
             accepted_parameter_sets=0, parameter_build_errors=0, rejected_clock_messages=0,
-            publish_failures=0, same_name_nodes=0)
+            publish_failures=0, same_name_nodes=0, loads_beyond_elastic_limit=0)
+        self._elastic = ElasticLimitCheck()
         self.last_error = ''
         self._throttle = LogThrottle(LOG_THROTTLE_S)
         self.load = CallbackLoad(self.rt)
@@ -311,6 +313,9 @@ class WormGearSimNode(PredictionPublishing, Node):
             n = self.rt.counters['rejected_load_' + reason.value]
             self._warn('load_' + reason.value, f'rejected {LOAD_TORQUE_TOPIC}: '
                        f'load_{reason.value}; {n} so far')
+        elif over := self._elastic(self.rt.model, torque):      # taken, implausible
+            self.counters['loads_beyond_elastic_limit'] = self._elastic.count
+            self._warn('load_elastic', over)
 
     def _reject_load(self, reason: str, text: str) -> None:
         self.counters['rejected_' + reason] += 1

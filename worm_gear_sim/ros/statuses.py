@@ -36,7 +36,8 @@ _INPUT_COUNTERS = ('samples_received', 'samples_accepted', 'rejected_samples',
                    *(f'rejected_load_{r}' for r in REJECT_REASONS if r != 'jump'),
                    'late_load_samples')
 _PARAMETER_COUNTERS = ('rejected_parameter_sets', 'accepted_parameter_sets',
-                       'parameter_build_errors', 'rejected_clock_messages')
+                       'parameter_build_errors', 'rejected_clock_messages',
+                       'loads_beyond_elastic_limit')
 
 
 class CallbackLoad:
