@@ -19,6 +19,7 @@ from ..pedestal import load_pedestal
 from ..records import write_csv_columns
 from ..studies.tracking_pass import PassResult, pass_window, stream_pass
 from ..studies.tracking_pass import evaluate_pass as _evaluate
+from ..trajectory_compensation import MAX_TRAJECTORY_POINTS
 from .common import CliError, fmt_table, say
 from .plotting import plot_pass
 
@@ -74,6 +75,12 @@ def write_pass(result: PassResult, out: Path, title: str) -> tuple[Path, Path]:
     return csv, plot_pass(result, out / 'pass.png', title)
 
 
+#: Bounds of the work of a pass (``--every`` small against ``--duration``): trajectories,
+#: and seconds of compensated trajectory in all (~0.1 s of CPU and ~50 kB kept per second).
+MAX_PASS_TRAJECTORIES = 1000
+MAX_PASS_COMPENSATED_S = 3600.0
+
+
 def _check(args: argparse.Namespace) -> None:
     for name in ('duration', 'chunk', 'every', 'waypoint_period', 'altitude'):
         v = getattr(args, name)
@@ -85,6 +92,21 @@ def _check(args: argparse.Namespace) -> None:
         raise CliError('--every must not exceed --chunk (trajectories must overlap)')
     if args.duration > 1200:
         raise CliError(f'--duration = {args.duration:g} s: at most 1200 s')
+    for name in ('duration', 'chunk'):
+        if getattr(args, name) < args.waypoint_period:
+            raise CliError(f'--{name} = {getattr(args, name):g} s: shorter than '
+                           f'--waypoint-period = {args.waypoint_period:g} s (a trajectory '
+                           'needs two waypoints)')
+    if args.chunk / args.waypoint_period > MAX_TRAJECTORY_POINTS - 2:
+        raise CliError(f'--waypoint-period = {args.waypoint_period:g} s: '
+                       f'{args.chunk / args.waypoint_period:.6g} waypoints per --chunk, at '
+                       f'most {MAX_TRAJECTORY_POINTS - 2}')
+    n = math.ceil(args.duration / args.every) + 1
+    if n > MAX_PASS_TRAJECTORIES or n * args.chunk > MAX_PASS_COMPENSATED_S:
+        raise CliError(f'--every = {args.every:g} s: {n} trajectories of {args.chunk:g} s '
+                       f'({n * args.chunk:.6g} s to compensate); at most '
+                       f'{MAX_PASS_TRAJECTORIES} and {MAX_PASS_COMPENSATED_S:g} s: raise '
+                       '--every or shorten --chunk')
 
 
 def cmd_pass(args: argparse.Namespace) -> int:

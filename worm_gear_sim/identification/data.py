@@ -26,8 +26,8 @@ from ..params import Config
 from ..records import Record
 from ..studies import dominant_frequency
 
-__all__ = ['OUTPUTS', 'MIN_SAMPLES', 'MAX_FIT_SAMPLES', 'decimation', 'IdentificationError',
-           'record_name', 'check_record',
+__all__ = ['OUTPUTS', 'MIN_SAMPLES', 'MAX_FIT_SAMPLES', 'MAX_RECORD_ANGLE', 'FIT_EVERY',
+           'RECORDED_SAMPLES', 'decimation', 'IdentificationError', 'record_name', 'check_record',
            'normalised', 'motion_times', 'rigid_motion', 'predict', 'record_from_model',
            'measured_frequencies']
 
@@ -35,6 +35,12 @@ OUTPUTS: tuple[str, ...] = ('theta2', 'theta3', 'theta4')
 MIN_SAMPLES = 20
 #: Samples per record a fit uses at most (a longer record keeps every k-th sample).
 MAX_FIT_SAMPLES = 200_000
+#: The key of a normalised record's ``source`` holding its decimation stride (if > 1).
+FIT_EVERY = 'fit_every'
+RECORDED_SAMPLES = 'recorded_samples'
+#: Largest angle a record may hold [rad] (theta1 and the measured outputs): 1.6e5 turns;
+#: beyond it a value is a unit or parsing error, and squares of it overflow the fit.
+MAX_RECORD_ANGLE = 1e6
 
 
 class IdentificationError(ValueError):
@@ -51,7 +57,8 @@ def record_name(rec: Record, index: int | None = None) -> str:
 def check_record(rec: Record, index: int | None = None) -> None:
     """Raise IdentificationError unless the record is usable: 1-D finite arrays of equal length,
     strictly increasing times, at least MIN_SAMPLES samples, at least one measured output among
-    theta2/theta3/theta4 (any other name is refused)."""
+    theta2/theta3/theta4 (any other name is refused), angles within MAX_RECORD_ANGLE, and
+    no measured output constant over a record whose command moves (nothing to fit)."""
     nm = record_name(rec, index)
     t = np.asarray(rec.t, float)
     th1 = np.asarray(rec.theta1, float)
@@ -82,6 +89,16 @@ def check_record(rec: Record, index: int | None = None) -> None:
         bad = np.flatnonzero(~np.isfinite(a))
         if bad.size:
             raise IdentificationError(f'{nm}: {key} is not finite at sample {bad[0]}')
+        if float(np.ptp(a)) == 0.0 and float(np.ptp(th1)) > 0.0:
+            raise IdentificationError(f'{nm}: {key} is constant ({float(a[0]):.6g} rad at '
+                                      f'every sample) while theta1 moves: no measured motion '
+                                      'to fit')
+    for key, arr in (('theta1', th1), *rec.measured.items()):
+        big = np.flatnonzero(np.abs(np.asarray(arr, float)) > MAX_RECORD_ANGLE)
+        if big.size:
+            raise IdentificationError(
+                f'{nm}: {key} = {float(np.asarray(arr)[big[0]]):.6g} rad at sample {big[0]}, '
+                f'beyond {MAX_RECORD_ANGLE:g} rad (a unit or parsing error?)')
 
 
 def decimation(n: int) -> int:
@@ -97,13 +114,17 @@ def normalised(rec: Record, index: int) -> Record:
     noise level is estimated on the samples kept)."""
     check_record(rec, index)
     k = decimation(len(rec.t))
+    source = dict(rec.source)
+    if k > 1:
+        source[FIT_EVERY] = k           # said by the sampling verdict and the report
+        source[RECORDED_SAMPLES] = len(rec.t)
     return Record(name=record_name(rec, index), t=np.ascontiguousarray(rec.t[::k], float),
                   theta1=np.ascontiguousarray(rec.theta1[::k], float),
                   measured={o: np.ascontiguousarray(v[::k], float)
                             for o, v in rec.measured.items()},
                   t0_ns=rec.t0_ns,
                   load_torque=None if rec.load_torque is None else
-                  np.ascontiguousarray(rec.load_torque[::k], float))
+                  np.ascontiguousarray(rec.load_torque[::k], float), source=source)
 
 
 def motion_times(t: np.ndarray, th1: np.ndarray) -> tuple[float, float]:

@@ -29,7 +29,7 @@ from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
 from ..params import Config
 from ..records import Record
-from .data import OUTPUTS, motion_times, predict, rigid_motion
+from .data import FIT_EVERY, MAX_FIT_SAMPLES, OUTPUTS, motion_times, predict, rigid_motion
 
 __all__ = ['ALIASED_SHARE', 'DENSE_SPAN', 'OutputSampling', 'sampling_check',
            'sampling_advice']
@@ -58,18 +58,24 @@ class OutputSampling:
     mode_hz: float | None             # the strongest model mode above Nyquist, if any
     record: str                       # the record of the worst share
     observable: bool
+    fit_every: int = 1                # that record decimated for the fit: every k-th sample
 
     def describe(self) -> str:
+        cut = (f' (the fit keeps every {self.fit_every}th sample of {self.record}, recorded '
+               f'at {self.sample_rate_hz * self.fit_every:.6g} Hz: at most {MAX_FIT_SAMPLES} '
+               'samples per record; fit a shorter record, or several)'
+               if self.fit_every > 1 else '')
         if self.observable:
             return (f'{self.output}: sampled at {self.sample_rate_hz:.6g} Hz, '
-                    f'{100 * self.share_above_nyquist:.1f} % of its motion above Nyquist')
+                    f'{100 * self.share_above_nyquist:.1f} % of its motion above '
+                    f'Nyquist{cut}')
         mode = f'its {self.mode_hz:.0f} Hz mode' if self.mode_hz else 'its modes'
         need = (f'; sample at >= {ADVISED_SAMPLES_PER_PERIOD * self.mode_hz:.0f} Hz to use it'
                 if self.mode_hz else '')
         return (f'{self.output}: not observable at this sampling: {self.record} samples it at '
                 f'{self.sample_rate_hz:.6g} Hz (Nyquist {self.sample_rate_hz / 2:.6g} Hz) and '
                 f'{100 * self.share_above_nyquist:.0f} % of its motion is in {mode} above '
-                f'that{need}')
+                f'that{need}{cut}')
 
 
 def _sample_rate(t: np.ndarray) -> float:
@@ -144,7 +150,8 @@ def sampling_check(base: DriveModel | Config, records: Sequence[Record]
                 got = dense_cache[i]
                 if got is not None:
                     share, mode_hz = _share_above(got, o, rigid[j], dt, nyq, above)
-            cands.append(OutputSampling(o, fs, share, mode_hz, r.name, share <= ALIASED_SHARE))
+            cands.append(OutputSampling(o, fs, share, mode_hz, r.name, share <= ALIASED_SHARE,
+                                        int(r.source.get(FIT_EVERY, 1))))
         if cands:   # the worst record decides: not observable first, then the largest share
             out[o] = max(cands, key=lambda c: (not c.observable, c.share_above_nyquist))
     return out

@@ -20,7 +20,16 @@ from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
 from ..params import Config
 from ..records import Record
-from .data import OUTPUTS, IdentificationError, normalised, predict, rigid_motion
+from .data import (
+    FIT_EVERY,
+    MAX_FIT_SAMPLES,
+    OUTPUTS,
+    RECORDED_SAMPLES,
+    IdentificationError,
+    normalised,
+    predict,
+    rigid_motion,
+)
 from .problem import DIFF_STEP, Problem, jacobian
 from .visibility import key_visibility
 
@@ -321,7 +330,10 @@ def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
         rms_before=rms_before, rms_after=rms_after, scale=dict(problem.scale),
         noise=dict(problem.noise), per_record=per_record, cost=float(0.5 * r @ r),
         converged=converged, trustworthy=not problems, problems=problems,
-        warnings=warnings + list(problem.left_out.values()),
+        warnings=warnings + list(problem.left_out.values()) + [
+            f'{r.name}: the fit kept every {r.source[FIT_EVERY]}th sample ({len(r.t)} of '
+            f'{r.source[RECORDED_SAMPLES]}; at most {MAX_FIT_SAMPLES} per record)'
+            for r in problem.records if r.source.get(FIT_EVERY, 1) > 1],
         output_verdicts={o: verdicts.get(o) or problem.left_out[o]
                          for o in OUTPUTS if o in verdicts or o in problem.left_out},
         config=model_fit.config, base_config=problem.base, not_seen=not_seen,

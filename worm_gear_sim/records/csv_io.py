@@ -126,11 +126,11 @@ def _read_csv_stream(fh: Any, p: Path, columns: Mapping[str, str], name: str | N
 
     def lines() -> Any:
         nonlocal line_no
-        for ln in fh:
-            line_no += 1
+        while ln := fh.readline(MAX_CSV_LINE_CHARS + 1):    # bounded: never a whole
+            line_no += 1                                      # huge line in memory
             if len(ln) > MAX_CSV_LINE_CHARS:
-                raise RecordError(f'{where}: line {line_no}: {len(ln)} characters; a CSV line '
-                                  f'is at most {MAX_CSV_LINE_CHARS}')
+                raise RecordError(f'{where}: line {line_no}: over {MAX_CSV_LINE_CHARS} '
+                                  f'characters; a CSV line is at most {MAX_CSV_LINE_CHARS}')
             if ln.strip() and not ln.lstrip().startswith('#'):
                 yield ln
 
