@@ -77,3 +77,12 @@ def test_the_node_warns_once_and_counts_every_load_beyond_the_limit(ros_harness)
     vals = {kv.key: kv.value for s in h.node.diagnostic_statuses() for kv in s.values}
     assert vals['loads_beyond_elastic_limit'] == '3'
     assert np.isfinite(rt.load_torque)
+    # the node's own load rejections (another joint, no effort) count in the inputs' total
+    for name, effort in ((['worm_input_joint'], [1.0]), (['antenna_joint'], [])):
+        m = JointState(name=name, effort=effort)
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(now + 10 * 10**6, 10**9)
+        pub.publish(m)
+    assert h.spin_until(lambda: h.counters()['rejected_load_empty_effort'] == 1 and
+                        h.counters()['rejected_load_wrong_joint'] == 1)
+    inputs = [s for s in h.node.diagnostic_statuses() if s.name.endswith(': inputs')][0]
+    assert inputs.message == '2 rejected input(s)', inputs.message

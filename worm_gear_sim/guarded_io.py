@@ -11,6 +11,7 @@ overflows the parser's recursion.  Both are refused here with a message naming t
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,9 @@ class GuardedFileError(ValueError):
 
 
 class _GuardedLoader(yaml.SafeLoader):
-    """yaml.SafeLoader without aliases and with a nesting limit."""
+    """yaml.SafeLoader without aliases and with a nesting limit, reading ``1.6e8`` and
+    ``1e-3`` as floats as YAML 1.2 and the node's params parser do (PyYAML's YAML 1.1
+    wants a dot: ``1.6e+8``, and left them strings)."""
 
     def __init__(self, stream: Any) -> None:
         super().__init__(stream)
@@ -51,6 +54,11 @@ class _GuardedLoader(yaml.SafeLoader):
             return super().compose_node(parent, index)
         finally:
             self._depth -= 1
+
+
+_GuardedLoader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'), list('-+0123456789'))
 
 
 def read_text_file(path: str | Path, max_bytes: int, what: str) -> str:

@@ -193,8 +193,8 @@ class Mesh:
     backlash: float = _f(0.0, 'Total angular play b of the worm gear with the worm held: no '
                          'tooth force and no friction while |q| < r_g b / 2 (q = l_w theta2 - '
                          'r_g theta3); beyond it the flank in contact carries the mesh law of '
-                         'the penetration q -/+ r_g b / 2. At most half a tooth pitch '
-                         '(pi / z_g)', 'rad', 0.0, 0.1)
+                         'the penetration q -/+ r_g b / 2. Less than half a tooth pitch, '
+                         '0.5 lead / r_g', 'rad', 0.0, 0.1)
     initial_flank: str = _f('drive', 'Where a drive with play starts at rest without a load '
                             'torque: drive: on the flank the worm drives forward (q = +r_g b/2),'
                             ' coast: on the other one (q = -r_g b/2), center: in the middle of '
@@ -516,9 +516,10 @@ def validate(cfg: Parameters) -> None:
         raise ConfigError('geometry.lead', 'must be > 0')
     half_pitch = 0.5 * g.lead / g.gear_pitch_radius     # pi / z_g, z_g = 2 pi r_g / lead
     if cfg.mesh.backlash >= half_pitch:
-        raise ConfigError('mesh.backlash', f'{cfg.mesh.backlash:g} rad is more play than a '
-                          f'tooth pitch allows: at most half the gear pitch, pi / z_g = '
-                          f'{half_pitch:.6g} rad')
+        raise ConfigError('mesh.backlash', f'{float(cfg.mesh.backlash)!r} rad is more play '
+                          f'than a tooth pitch allows: it must be less than half the gear '
+                          f'pitch, 0.5 geometry.lead / geometry.gear_pitch_radius = 0.5 * '
+                          f'{g.lead!r} / {g.gear_pitch_radius!r} = {half_pitch!r} rad')
     for key in ('worm_error_harmonics', 'gear_error_harmonics'):
         coeffs = getattr(cfg.mesh, key)
         if len(coeffs) % 2:
