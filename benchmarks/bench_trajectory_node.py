@@ -7,7 +7,8 @@ A node process (the package's params file) and a probe over DDS (localhost): the
 streams 1 kHz stamped samples; after 0.1 s of each run it sends a ``--points``-waypoint
 trajectory (1 ms apart: 100 s at the default) and streams until the compensated
 trajectory comes back.  Per run: samples sent and answered, rejected too_old, the node's
-overruns (a stamp gap over node.max_catch_up = 50 ms), the probe's own stamp gaps over
+overruns (the simulation more than node.max_catch_up = 50 ms behind a sample) with the
+simulated time they dropped, the stale events, the probe's own stamp gaps over
 50 ms (a loaded machine pausing the probe), and the seconds from sending to the
 compensated trajectory's arrival.  The first run starts the node's worker process (it is
 started by the first long trajectory), the next ones find it running.
@@ -42,11 +43,14 @@ def main(argv: list[str] | None = None) -> int:
             node_and_probe(Path(tmp) / 'node.log', domain,
                            ['-p', 'node.diagnostic_period:=0.1']) as p:
         p.stream(lambda: False, 1.0)                            # the stream runs
-        print('run  sent  answered  too_old  overruns  probe_gaps  out_after_s')
+        print('run  sent  answered  too_old  overruns  dropped_ms  stale_events  probe_gaps  '
+              'out_after_s')
         first = 0
         for run in range(opts.runs):
             old0 = int(p.fresh_status('inputs')['rejected_too_old'])
-            over0 = int(p.fresh_status('simulation')['overruns'])
+            sim0 = p.fresh_status('simulation')
+            over0, stale0 = int(sim0['overruns']), int(sim0['stale_events'])
+            drop0 = int(sim0['dropped_time_ns'])
             answers0, n_out = p.answers, len(p.out)
             stamp = p.node.get_clock().now().nanoseconds + 2 * 10**9
             first = first or stamp                  # each continues the first one's curve
@@ -56,9 +60,13 @@ def main(argv: list[str] | None = None) -> int:
             out_after = p.out[-1][0] - t0 - 0.1 if len(p.out) > n_out else float('nan')
             p.spin_until(lambda a=answers0 + r['sent']: p.answers >= a, 5.0)
             old = int(p.fresh_status('inputs')['rejected_too_old']) - old0
-            over = int(p.fresh_status('simulation')['overruns']) - over0
+            sim1 = p.fresh_status('simulation')
+            over = int(sim1['overruns']) - over0
+            stale = int(sim1['stale_events']) - stale0
+            drop = (int(sim1['dropped_time_ns']) - drop0) / 1e6
             print(f'{run:3d}  {r["sent"]:5d}  {p.answers - answers0:8d}  {old:7d}  '
-                  f'{over:8d}  {r["probe_gaps"]:10d}  {out_after:11.2f}')
+                  f'{over:8d}  {drop:10.1f}  {stale:12d}  {r["probe_gaps"]:10d}  '
+                  f'{out_after:11.2f}')
             if len(p.out) == n_out:
                 print('     no compensated trajectory:', {
                     k: v for k, v in p.fresh_status('trajectories').items() if v != '0'})
