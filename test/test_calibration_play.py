@@ -104,7 +104,7 @@ def test_one_rate_each_way_finds_the_play_along_the_play_drag_line():
     est = direct_estimates(Config(), [rec], KEYS + ['mesh.gear_tooth_stiffness_multiplier'])
     assert est is not None and est.play_seen and len(est.family) >= 5
     plays = [v[PLAY] for v in est.family]
-    assert min(plays) < 0.5 * 3 * ARCMIN < 2 * 3 * ARCMIN < max(plays) * 2   # brackets it
+    assert min(plays) < 3 * ARCMIN < max(plays)          # the line brackets the true play
     vals, rows = best_on_family(Config(), [rec], est.family)
     assert len(rows) >= len(est.family)
     assert vals[PLAY] / ARCMIN == pytest.approx(3.0, rel=0.03), vals
