@@ -722,6 +722,54 @@ def test_a_lagging_stream_that_stops_goes_stale_on_its_own_time():
     assert max(abs(live[s] - w) for s, w in zip(st.tolist(), want)) <= 1e-9
 
 
+@pytest.mark.parametrize('preview', [0.0, 0.005])
+def test_a_transport_stall_is_retracted_not_a_pause(preview):
+    """The samples stop arriving for 0.4 s (a reliable transport repairing a loss: they
+    come later in a burst, stamps 1 ms apart): the watch holds the stream as stale, then
+    the late samples retract that hold: every sample accepted, the corrections those of
+    the twin fed the same pairs (corrections the hold released are released again), and
+    the state after it is the state without the stall.  A real pause still rests."""
+    cfg = Config().replace({**LOADED, 'compensation.preview_time': preview})
+    st = EPOCH + np.arange(400, dtype=np.int64) * MS
+    x = 0.2 * np.sin(np.arange(400) * 2e-2)
+    p = RealtimePredictor(cfg, stale_margin=NODE_STALE_MARGIN)
+    ref = RealtimePredictor(cfg, stale_margin=NODE_STALE_MARGIN)     # no stall
+    live: dict[int, float] = {}
+    held = []
+    for k, (s, v) in enumerate(zip(st.tolist(), x.tolist())):
+        if k == 150:                          # arrivals stop; the watch every 20 ms
+            for h in range(s + 20 * MS, s + 400 * MS, 20 * MS):
+                o = p.hold(h)
+                held += o.predictions
+                live.update({c.stamp_ns: c.delta for c in o.corrections})
+            assert p.stale and held and p.counters['stale_events'] == 1
+            now = s + 400 * MS
+        elif k < 150:
+            now = s
+        o = p.push(s, v, now_ns=now if k >= 150 else s)
+        assert o.accepted, (k, o.rejected)
+        if k == 150:
+            assert 'stale_retracted' in kinds(o) and not p.stale
+        live.update({c.stamp_ns: c.delta for c in o.corrections})
+        r = ref.push(s, v, now_ns=s)
+        assert [c.delta for c in o.corrections if c.stamp_ns >= s - 50 * MS] == \
+            [c.delta for c in r.corrections if c.stamp_ns >= s - 50 * MS]
+        if k > 150:
+            assert [q.theta for q in o.predictions] == [q.theta for q in r.predictions]
+    c = p.counters
+    assert c['stale_retractions'] == 1 and c['rejected_samples'] == 0
+    assert c['samples_accepted'] == 400 and c['rejected_out_of_order'] == 0
+    want = feedforward_series(cfg, st, x)
+    got = [live[s] for s in st.tolist() if s in live]
+    assert len(got) >= 395 and max(abs(g - w) for g, w in zip(got, want)) <= 1e-12
+    # a real pause: the next stamp after the held time rests the reference, no retraction
+    last, arrived = int(st[-1]), int(st[150]) + 400 * MS
+    for h in range(arrived + 20 * MS, arrived + 400 * MS, 20 * MS):
+        p.hold(h)
+    o = p.push(last + 400 * MS, float(x[-1]), now_ns=arrived + 400 * MS)
+    assert o.accepted and p.counters['stale_retractions'] == 1 and p.counters['stale_events'] == 2
+
+
 def test_switching_inputs_is_counted_not_a_clock_restart():
     """The node reads ROS time for stamped references and the monotonic clock for
     Float64 ticks: interleaving the two inputs switches the pipeline (``input_switches``),

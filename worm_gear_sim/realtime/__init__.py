@@ -65,9 +65,14 @@ Gaps, pauses and the stale stream
     that held prediction stamped with it; ``stale`` is True (event ``stream_stale``
     once).  Samples older than the accepted window (``max_stamp_age``) are rejected as
     ``too_old``.  The next accepted sample ends it (``stream_resumed``).
-    A sample that arrives after its stale time with a stamp before an inserted rest sample
-    is rejected (``out_of_order``): the only case where the live deltas can differ from
-    the offline twin.
+    A sample that arrives while the stream is held as stale with a stamp after the last
+    sample but before an inserted rest sample was late, not paused (a reliable transport
+    repairing a loss delivers the samples of 0.1-0.5 s in a burst): the stale hold is
+    retracted, the state before it restored (one copy per stale event), and the late
+    samples are taken as if in time (``stale_retractions``, event ``stale_retracted``).
+    The held predictions stay published; corrections the hold released (with a preview)
+    are released again with the late samples.  Load samples accepted meanwhile make the
+    hold final (a retraction would lose them).
 
 Resync policy (jumps and restarts)
     A rejected ``jump`` sample, or an ``out_of_order`` one more than 100 ms older than the

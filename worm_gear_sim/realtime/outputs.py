@@ -119,7 +119,8 @@ COUNTER_NAMES = (
     'commands_received', 'commands_used', 'commands_merged', 'commands_restamped',
     'commands_dropped', 'merged_samples', 'rest_samples', 'corrections',
     'corrections_dropped', 'predictions', 'late_for_simulation', 'resyncs',
-    'clock_restarts', 'input_switches', 'stale_events', 'overruns', 'dropped_time_ns', 'steps',
+    'clock_restarts', 'input_switches', 'stale_events',
+    'stale_retractions', 'overruns', 'dropped_time_ns', 'steps',
     'simulation_errors', 'compensation_errors', 'reconfigurations', 'stream_relocks',
     'stream_outliers',
     # the load torque input (push_load): the same rules as the reference samples

@@ -146,6 +146,7 @@ class RealtimePredictor:
         if self.sim is not None:
             self.sim.reconfigure(prepared.model)
         self._set_config(prepared)
+        self._before_stale: dict | None = None   # no retraction to the old set
         if self._stream.period0 != float(self._period_ns):  # pragma: no cover - read-only
             self._stream = StreamClock(float(self._period_ns))
         self.counters['reconfigurations'] += 1
@@ -173,6 +174,7 @@ class RealtimePredictor:
         self._rest_k = 0                         # rest samples inserted after it
         self._pending: collections.deque = collections.deque()   # (ns, theta1_ref, real)
         self._stale = False
+        self._before_stale = None          # the state a stale hold retracts to
         self._delta = 0.0                        # last correction [rad]
         self._last_load_ns: int | None = None    # last accepted load sample [ns]
         # load samples before the start: (stamp [ns], N m), the newest LOAD_PENDING
@@ -245,6 +247,13 @@ class RealtimePredictor:
         if reason is None and self._mode == 'command':   # the stamped stream takes over
             self._restart(out, 'input_changed', 'stamped references after Float64 '
                           'commands: the pipeline restarts on the stamped stream', drop=False)
+        if reason is None and self._before_stale is not None and \
+                self._last_real_ns < stamp_ns <= self._last_ns:
+            # a late sample (a stalled transport, not a paused servo): the stale hold is
+            # retracted, the state before it restored (module doc)
+            vars(self).update(self._before_stale)
+            self.counters['stale_retractions'] += 1
+            self._event(out, 'stale_retracted', 'a late sample: the stale hold is retracted')
         if reason is None and self._started:
             reason = adm.order_reason(stamp_ns, self._last_ns)
             if reason is None:
@@ -269,6 +278,7 @@ class RealtimePredictor:
             return out
         self._drop_candidates()
         self._accept(stamp_ns, theta1_ref, out, predict=True)
+        self._before_stale = None
         self._last_arrival_ns = arrival_ns
         out.stale = self._stale
         return out
@@ -300,6 +310,7 @@ class RealtimePredictor:
             c['rejected_load_' + reason.value] += 1
             return reason
         self._last_load_ns = stamp_ns
+        self._before_stale = None          # a retraction would lose it
         c['load_samples_accepted'] += 1
         if self.sim is None:
             return None
@@ -336,6 +347,8 @@ class RealtimePredictor:
         lag = self._last_arrival_ns - self._last_real_ns
         stream_ns = now_ns - lag if lag > 0 else now_ns
         if stream_ns - self._last_real_ns > self._gap_ns + self.stale_margin_ns:
+            if not self._stale:
+                self._before_stale = self._state_copy()
             self._go_stale(stream_ns, out)
             self._hold_to(stream_ns, out)
         out.stale = self._stale
@@ -663,6 +676,11 @@ class RealtimePredictor:
         if self.apply_compensation and self._pending:
             ns = min(ns, self._pending[0][0])
         self._drive.hold_to(ns, self._time(ns), self._stale, out)
+
+    def _state_copy(self) -> dict:
+        """The stream's state copied (counters, model and configuration shared)."""
+        keep = {id(x): x for x in (self, self.counters, self.model, self.config)}
+        return copy.deepcopy({k: v for k, v in vars(self).items() if k != 'counters'}, keep)
 
     def _go_stale(self, now_ns: int, out: Output) -> None:
         if not self._stale:

@@ -25,7 +25,8 @@ HARDWARE_ID = 'worm_gear_sim'
 
 #: the pipeline's counters reported under 'simulation' and 'inputs'
 _SIMULATION_COUNTERS = ('predictions', 'steps', 'overruns', 'dropped_time_ns', 'resyncs',
-                        'clock_restarts', 'input_switches', 'stale_events', 'late_for_simulation',
+                        'clock_restarts', 'input_switches', 'stale_events', 'stale_retractions',
+                        'late_for_simulation',
                         'simulation_errors')
 _INPUT_COUNTERS = ('samples_received', 'samples_accepted', 'rejected_samples',
                    *(f'rejected_{r}' for r in REJECT_REASONS),
