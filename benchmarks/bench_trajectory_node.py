@@ -31,6 +31,22 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / 'test'))
 from trajectory_probe import big_trajectory, node_and_probe  # noqa: E402
 
+#: counters read from /diagnostics ('inputs' and 'simulation') before and after each run
+COUNTED = ('rejected_too_old', 'rejected_out_of_order', 'overruns', 'dropped_time_ns',
+           'stale_events', 'stale_retractions')
+
+
+def statuses(p) -> tuple[dict[str, int], int]:
+    """The counters of the node's next statuses, taken while the 1 kHz stream goes on (a
+    pause would make the stream stale), and the samples sent meanwhile."""
+    want = ('worm_gear_sim: inputs', 'worm_gear_sim: simulation')
+    for name in want:
+        p.diag.pop(name, None)
+    r = p.stream(lambda: all(n in p.diag for n in want), 5.0)
+    assert all(n in p.diag for n in want), 'no statuses'
+    vals = {**p.diag[want[0]], **p.diag[want[1]]}
+    return {k: int(vals[k]) for k in COUNTED}, r['sent']
+
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -43,30 +59,29 @@ def main(argv: list[str] | None = None) -> int:
             node_and_probe(Path(tmp) / 'node.log', domain,
                            ['-p', 'node.diagnostic_period:=0.1']) as p:
         p.stream(lambda: False, 1.0)                            # the stream runs
-        print('run  sent  answered  too_old  overruns  dropped_ms  stale_events  probe_gaps  '
-              'out_after_s')
+        print('run  sent  answered  too_old  out_of_order  overruns  dropped_ms  stale_events  '
+              'retracted  probe_gaps  widest_ms  out_after_s')
         first = 0
         for run in range(opts.runs):
-            old0 = int(p.fresh_status('inputs')['rejected_too_old'])
-            sim0 = p.fresh_status('simulation')
-            over0, stale0 = int(sim0['overruns']), int(sim0['stale_events'])
-            drop0 = int(sim0['dropped_time_ns'])
-            answers0, n_out = p.answers, len(p.out)
             stamp = p.node.get_clock().now().nanoseconds + 2 * 10**9
             first = first or stamp                  # each continues the first one's curve
             big = big_trajectory(stamp, opts.points, phase=(stamp - first) / 1e9)
+            p.stream(lambda: False, 0.5)            # building it paused the stream
+            base, _ = statuses(p)
+            answers0, n_out = p.answers, len(p.out)
             t0 = time.monotonic()
             r = p.stream(lambda n=n_out: len(p.out) > n, 60.0, extra=big)
             out_after = p.out[-1][0] - t0 - 0.1 if len(p.out) > n_out else float('nan')
-            p.spin_until(lambda a=answers0 + r['sent']: p.answers >= a, 5.0)
-            old = int(p.fresh_status('inputs')['rejected_too_old']) - old0
-            sim1 = p.fresh_status('simulation')
-            over = int(sim1['overruns']) - over0
-            stale = int(sim1['stale_events']) - stale0
-            drop = (int(sim1['dropped_time_ns']) - drop0) / 1e6
-            print(f'{run:3d}  {r["sent"]:5d}  {p.answers - answers0:8d}  {old:7d}  '
-                  f'{over:8d}  {drop:10.1f}  {stale:12d}  {r["probe_gaps"]:10d}  '
-                  f'{out_after:11.2f}')
+            sent = r['sent'] + p.stream(lambda: False, 0.3)['sent']   # the stream goes on
+            now, more = statuses(p)
+            sent += more
+            d = {k: now[k] - base[k] for k in COUNTED}
+            p.spin_until(lambda a=answers0 + sent: p.answers >= a, 5.0)
+            print(f'{run:3d}  {sent:5d}  {p.answers - answers0:8d}  '
+                  f'{d["rejected_too_old"]:7d}  {d["rejected_out_of_order"]:12d}  '
+                  f'{d["overruns"]:8d}  {d["dropped_time_ns"] / 1e6:10.1f}  '
+                  f'{d["stale_events"]:12d}  {d["stale_retractions"]:9d}  '
+                  f'{r["probe_gaps"]:10d}  {r["widest_gap_ms"]:9.1f}  {out_after:11.2f}')
             if len(p.out) == n_out:
                 print('     no compensated trajectory:', {
                     k: v for k, v in p.fresh_status('trajectories').items() if v != '0'})

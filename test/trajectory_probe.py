@@ -119,28 +119,30 @@ class Probe:
                extra: Any = None, extra_at: int = 100) -> dict[str, int]:
         """Stamped 1 kHz reference samples (position 0) until ``until()`` (checked every
         sample) or ``timeout`` s; ``extra`` published on the trajectory topic after
-        ``extra_at`` samples.  Returns the samples sent and this probe's own stamp gaps
-        over node.max_catch_up (a loaded machine pausing the probe, not the node)."""
+        ``extra_at`` samples.  Returns the samples sent, this probe's own stamp gaps over
+        node.max_catch_up (a loaded machine pausing the probe, not the node) and the
+        widest one [ms]."""
         from builtin_interfaces.msg import Time
         from sensor_msgs.msg import JointState
         msg = JointState(name=[JOINT], position=[0.0])
         clock = self.node.get_clock()
         t0 = time.monotonic()
-        k = gaps = 0
+        k = gaps = widest = 0
         last = None
         while time.monotonic() - t0 < timeout and not (k > extra_at and until()):
             if time.monotonic() >= t0 + k * 1e-3:
                 if k == extra_at and extra is not None:
                     self.pub.publish(extra)
                 ns = clock.now().nanoseconds
-                if last is not None and ns - last > MAX_CATCH_UP_NS:
-                    gaps += 1
+                if last is not None:
+                    gaps += ns - last > MAX_CATCH_UP_NS
+                    widest = max(widest, ns - last)
                 last = ns
                 msg.header.stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
                 self.ref.publish(msg)
                 k += 1
             self.ex.spin_once(timeout_sec=0.0)
-        return {'sent': k, 'probe_gaps': gaps}
+        return {'sent': k, 'probe_gaps': gaps, 'widest_gap_ms': widest / 1e6}
 
 
 @contextlib.contextmanager

@@ -67,7 +67,7 @@ Gaps, pauses and the stale stream
     ``too_old``.  The next accepted sample ends it (``stream_resumed``).
     A sample that arrives while the stream is held as stale with a stamp after the last
     sample but before an inserted rest sample was late, not paused (a reliable transport
-    repairing a loss delivers the samples of 0.1-0.5 s in a burst): the stale hold is
+    repairing a loss delivers the samples held back in a burst): the stale hold is
     retracted, the state before it restored (one copy per stale event), and the late
     samples are taken as if in time (``stale_retractions``, event ``stale_retracted``).
     The held predictions stay published; corrections the hold released (with a preview)
