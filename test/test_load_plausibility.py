@@ -14,10 +14,21 @@ import numpy as np
 import pytest
 
 from worm_gear_sim import Config, DriveModel, load_config
-from worm_gear_sim.dynamics.load import ElasticLimitCheck, elastic_load_limit, elastic_windup
+from worm_gear_sim.dynamics.load import (
+    ElasticLimitCheck,
+    ElasticLoadWarning,
+    SampledLoad,
+    elastic_load_limit,
+    elastic_windup,
+)
 from worm_gear_sim.dynamics.modal import static_equilibrium
 from worm_gear_sim.dynamics.model import with_load_torque, without_play
 from worm_gear_sim.validation import ConfigError
+
+try:
+    from rclpy.parameter import Parameter
+except ImportError:  # the offline tests run without ROS
+    Parameter = None
 
 
 @pytest.fixture(scope='module')
@@ -51,6 +62,38 @@ def test_the_check_counts_the_samples_beyond_and_names_the_key(model):
     assert line is not None and 'load.max_elastic_windup = 0.02 rad' in line
     assert '3.7 rad' in line and '\n' not in line
     assert check(model, 2 * limit) is not None and check.count == 2
+
+
+def test_offline_runs_warn_of_a_constant_load_or_a_load_column_beyond_the_limit():
+    """The constant load.output_torque and a sampled load (a CSV column) beyond what the
+    drive carries elastically: one ElasticLoadWarning naming the key / the sample, the
+    run made all the same; within the limit, none."""
+    import warnings
+
+    from worm_gear_sim.dynamics.simulation import simulate
+    base = load_config().replace({'input.end_time': 2e-3})
+    limit = elastic_load_limit(DriveModel(base))
+    with pytest.warns(ElasticLoadWarning, match=r'load\.output_torque = .*max_elastic_windup'
+                      ) as got:
+        traj = simulate(base.replace({'load.output_torque': 1.1 * limit}))
+    assert len([w for w in got if w.category is ElasticLoadWarning]) == 1
+    assert np.isfinite(traj.theta).all()
+    t = np.array([0.0, 1e-3, 2e-3])
+    beyond = SampledLoad(t, [0.0, -3 * limit, 0.0], source='wind.csv')
+    with pytest.warns(ElasticLoadWarning, match=r'sample of wind\.csv at t = 0\.001 s'):
+        simulate(base, load=beyond)
+    with warnings.catch_warnings():
+        warnings.simplefilter('error', ElasticLoadWarning)
+        simulate(base.replace({'load.output_torque': 0.9 * limit}))
+        simulate(base, load=SampledLoad(t, [0.0, -0.9 * limit, 0.0]))
+
+
+def test_the_node_warns_of_a_parameter_set_whose_constant_load_is_beyond(ros_harness):
+    h = ros_harness()
+    limit = elastic_load_limit(h.node.rt.model)
+    h.set_parameters([Parameter('load.output_torque', value=2.0 * limit)])
+    assert h.spin_until(lambda: 'load.output_torque' in (h.node.last_error or ''))
+    assert 'load.max_elastic_windup' in h.node.last_error
 
 
 def test_the_backdrive_margin_does_not_depend_on_the_load():

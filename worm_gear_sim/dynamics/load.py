@@ -45,7 +45,8 @@ from ..schema import LOAD_LIMIT
 from .model import DriveModel, linear_stiffness, without_play
 
 __all__ = ['LoadSignal', 'SampledLoad', 'WindLoad', 'load_grid', 'elastic_windup',
-           'elastic_load_limit', 'ElasticLimitCheck']
+           'elastic_load_limit', 'ElasticLimitCheck', 'ElasticLoadWarning',
+           'elastic_load_warning']
 
 
 class LoadSignal:
@@ -199,6 +200,39 @@ def elastic_load_limit(model: DriveModel) -> float:
     return model.config.load.max_elastic_windup / elastic_windup(model, 1.0)
 
 
+def _beyond(model: DriveModel, what: str, torque: float, limit: float) -> str:
+    """The line that says a load is beyond what the drive carries elastically."""
+    return (f'{what} {torque:.6g} N m winds the antenna {elastic_windup(model, torque):.3g} '
+            f'rad against the held worm, more than load.max_elastic_windup = '
+            f'{model.config.load.max_elastic_windup:g} rad (|load| <= {limit:.6g} N m): '
+            f'beyond what the drive carries elastically, simulated all the same')
+
+
+class ElasticLoadWarning(UserWarning):
+    """The load of a run is beyond what the drive carries elastically
+    (``load.max_elastic_windup``): simulated all the same."""
+
+
+def elastic_load_warning(model: DriveModel, load: LoadSignal | None = None) -> str:
+    """One line when the load of a run is beyond :func:`elastic_load_limit` ('' within
+    it): the constant ``load.output_torque`` (``load`` None), the largest |sample| of a
+    :class:`SampledLoad`, the mean of a :class:`WindLoad` (its gusts are not known
+    before the run)."""
+    if load is None:
+        what, torque = 'load.output_torque =', float(model.config.load.output_torque)
+    elif isinstance(load, SampledLoad):
+        i = int(np.argmax(np.abs(load.values)))
+        src = f' of {load.source}' if load.source else ''
+        what, torque = f'the load sample{src} at t = {load.times[i]:.6g} s,', float(
+            load.values[i])
+    elif isinstance(load, WindLoad):
+        what, torque = 'the mean wind load', float(load.mean)
+    else:
+        return ''
+    limit = elastic_load_limit(model)
+    return _beyond(model, what, torque, limit) if abs(torque) > limit else ''
+
+
 class ElasticLimitCheck:
     """Load samples beyond :func:`elastic_load_limit` of the current model: call with the
     model (a new one, e.g. after a parameter set, recomputes the limit) and the torque;
@@ -216,8 +250,4 @@ class ElasticLimitCheck:
         if abs(torque) <= self.limit:
             return None
         self.count += 1
-        return (f'load {torque:.6g} N m winds the antenna {elastic_windup(model, torque):.3g} '
-                f'rad against the held worm, more than load.max_elastic_windup = '
-                f'{model.config.load.max_elastic_windup:g} rad (|load| <= {self.limit:.6g} '
-                f'N m): beyond what the drive carries elastically, simulated all the same; '
-                f'{self.count} such sample(s)')
+        return f'{_beyond(model, "load", torque, self.limit)}; {self.count} such sample(s)'

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..schema import Parameters
-from .load import LoadSignal
+from .load import ElasticLoadWarning, LoadSignal, elastic_load_warning
 from .modal import StepResolutionWarning, step_resolution_warning
 from .model import DriveModel
 from .profiles import Profile, make_profile
@@ -106,6 +106,9 @@ def _at_rest(model: DriveModel | Parameters, profile: Profile, theta1_initial: f
     sim = Simulator(model, theta1=th0)
     if load is not None:
         sim.reset(th0, load_torque=float(load.torque(np.array([0.0]))[0]))
+    msg = elastic_load_warning(sim.model, load)
+    if msg:                 # allowed: the model integrates it, a real drive would yield
+        warnings.warn(msg, ElasticLoadWarning, stacklevel=3)
     return sim
 
 

@@ -61,7 +61,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..dynamics.load import ElasticLimitCheck
+from ..dynamics.load import ElasticLimitCheck, elastic_load_warning
 from ..dynamics.modal import StepResolutionWarning, step_resolution_warning
 from ..params import Config, config_from_mapping
 from ..realtime import Output, RealtimePredictor
@@ -203,9 +203,10 @@ class WormGearSimNode(PredictionPublishing, Node):
             f'1:{self.rt.model.derived.ratio:.6g}; waiting for '
             f'{self.resolve_topic_name(REFERENCE_TOPIC)} (stamped) or '
             f'{self.resolve_topic_name(COMMAND_TOPIC)}')
-        step_note = step_resolution_warning(self.rt.model)
-        if step_note:                       # allowed, but theta2 is not trustworthy pointwise
-            self.get_logger().warning(step_note)
+        for note in (step_resolution_warning(self.rt.model),  # allowed, but not trustworthy
+                     elastic_load_warning(self.rt.model)):
+            if note:
+                self.get_logger().warning(note)
         if self.rt.compensator is None:
             self.get_logger().error(
                 f'feed-forward unavailable ({self.rt.compensation_error}); no corrections')

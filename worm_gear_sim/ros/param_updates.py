@@ -21,6 +21,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from ..dynamics.load import elastic_load_warning
 from ..params import Config
 from ..realtime import RealtimePredictor
 from ..validation import ConfigError
@@ -136,6 +137,9 @@ class ParameterUpdates:
             prepared = fut.result()
             if prepared.config is self.config:   # else a newer set superseded it
                 self.rt.reconfigure(prepared)
+                note = elastic_load_warning(self.rt.model)   # allowed, not plausible
+                if note:
+                    self._warn('load_elastic_parameter', note)
         except (ConfigError, ValueError) as exc:
             self._counters['parameter_build_errors'] += 1
             self._warn('parameters', f'could not apply parameters: {exc}')
