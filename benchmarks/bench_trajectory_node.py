@@ -36,18 +36,6 @@ COUNTED = ('rejected_too_old', 'rejected_out_of_order', 'overruns', 'dropped_tim
            'stale_events', 'stale_retractions')
 
 
-def statuses(p) -> tuple[dict[str, int], int]:
-    """The counters of the node's next statuses, taken while the 1 kHz stream goes on (a
-    pause would make the stream stale), and the samples sent meanwhile."""
-    want = ('worm_gear_sim: inputs', 'worm_gear_sim: simulation')
-    for name in want:
-        p.diag.pop(name, None)
-    r = p.stream(lambda: all(n in p.diag for n in want), 5.0)
-    assert all(n in p.diag for n in want), 'no statuses'
-    vals = {**p.diag[want[0]], **p.diag[want[1]]}
-    return {k: int(vals[k]) for k in COUNTED}, r['sent']
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--runs', type=int, default=3)
@@ -67,14 +55,15 @@ def main(argv: list[str] | None = None) -> int:
             first = first or stamp                  # each continues the first one's curve
             big = big_trajectory(stamp, opts.points, phase=(stamp - first) / 1e9)
             p.stream(lambda: False, 0.5)            # building it paused the stream
-            base, _ = statuses(p)
-            answers0, n_out = p.answers, len(p.out)
+            base = p.counters(COUNTED)
+            p.spin_until(lambda: p.answers >= p.sent, 0.05)      # all answered so far
+            answers0, sent0, n_out = p.answers, p.sent, len(p.out)
             t0 = time.monotonic()
             r = p.stream(lambda n=n_out: len(p.out) > n, 60.0, extra=big)
             out_after = p.out[-1][0] - t0 - 0.1 if len(p.out) > n_out else float('nan')
-            sent = r['sent'] + p.stream(lambda: False, 0.3)['sent']   # the stream goes on
-            now, more = statuses(p)
-            sent += more
+            p.stream(lambda: False, 0.3)                             # the stream goes on
+            now = p.counters(COUNTED)
+            sent = p.sent - sent0
             d = {k: now[k] - base[k] for k in COUNTED}
             p.spin_until(lambda a=answers0 + sent: p.answers >= a, 5.0)
             print(f'{run:3d}  {sent:5d}  {p.answers - answers0:8d}  '

@@ -81,6 +81,7 @@ class Probe:
             JointTrajectory, '/worm_gear_sim/compensated_trajectory',
             lambda m: self.out.append((time.monotonic(), m)), 100, raw=True)
         self.answers = 0
+        self.sent = 0                                # stamped samples, every stream
         self.node.create_subscription(JointState, '/worm_gear_sim/compensated_command',
                                       self._answer, 1000)
         self.diag: dict[str, dict[str, str]] = {}
@@ -115,6 +116,17 @@ class Probe:
         self.spin_until(lambda: name in self.diag and pred(self.diag[name]), timeout)
         return self.diag.get(name, {})
 
+    def counters(self, names: Sequence[str]) -> dict[str, int]:
+        """The counters ``names`` of the node's next 'inputs' and 'simulation' statuses,
+        read while the 1 kHz stream goes on (a pause would make the stream stale)."""
+        want = ('worm_gear_sim: inputs', 'worm_gear_sim: simulation')
+        for name in want:
+            self.diag.pop(name, None)
+        self.stream(lambda: all(n in self.diag for n in want), 5.0)
+        assert all(n in self.diag for n in want), 'no statuses'
+        vals = {**self.diag[want[0]], **self.diag[want[1]]}
+        return {k: int(vals[k]) for k in names}
+
     def stream(self, until: Callable[[], bool], timeout: float,
                extra: Any = None, extra_at: int = 100) -> dict[str, int]:
         """Stamped 1 kHz reference samples (position 0) until ``until()`` (checked every
@@ -141,6 +153,7 @@ class Probe:
                 msg.header.stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
                 self.ref.publish(msg)
                 k += 1
+                self.sent += 1
             self.ex.spin_once(timeout_sec=0.0)
         return {'sent': k, 'probe_gaps': gaps, 'widest_gap_ms': widest / 1e6}
 
