@@ -247,17 +247,17 @@ class RealtimePredictor:
         if reason is None and self._mode == 'command':   # the stamped stream takes over
             self._restart(out, 'input_changed', 'stamped references after Float64 '
                           'commands: the pipeline restarts on the stamped stream', drop=False)
-        if reason is None and self._before_stale is not None and \
-                self._last_real_ns < stamp_ns <= self._last_ns:
-            # a late sample (a stalled transport, not a paused servo): the stale hold is
-            # retracted, the state before it restored (module doc)
-            vars(self).update(self._before_stale)
-            self.counters['stale_retractions'] += 1
-            self._event(out, 'stale_retracted', 'a late sample: the stale hold is retracted')
         if reason is None and self._started:
-            reason = adm.order_reason(stamp_ns, self._last_ns)
-            if reason is None:
-                reason = adm.jump_reason(theta1_ref, self._last_real_ref)
+            late = self._before_stale is not None and \
+                self._last_real_ns < stamp_ns <= self._last_ns
+            reason = adm.jump_reason(theta1_ref, self._last_real_ref)
+            if reason is None and late:
+                # a late sample (a stalled transport, not a paused servo): the stale hold
+                # is retracted, the state before it restored (module doc)
+                vars(self).update(self._before_stale or {})
+                self.counters['stale_retractions'] += 1
+                self._event(out, 'stale_retracted', 'a late sample: stale hold retracted')
+            reason = adm.order_reason(stamp_ns, self._last_ns) or reason
         arrival_ns = stamp_ns if now_ns is None else now_ns
         if reason is not None:
             restart = reason is Reject.OUT_OF_ORDER and \
