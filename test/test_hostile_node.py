@@ -101,7 +101,8 @@ def test_the_stamped_path_is_answered_while_a_100s_trajectory_is_compensated(nod
     assert children(p.proc.pid) == [], 'the worker process started before it was needed'
     big = big_trajectory(p.node.get_clock().now().nanoseconds + 2 * 10**9)
     p.stream(lambda: False, 0.3)                     # the stream runs
-    names = ('rejected_too_old', 'rejected_out_of_order', 'overruns', 'stale_events')
+    names = ('samples_received', 'samples_accepted', 'rejected_too_old',
+             'rejected_out_of_order', 'overruns', 'stale_events', 'stale_retractions')
     base = p.counters(names)
     p.spin_until(lambda: p.answers >= p.sent, 0.05)
     answers0, sent0, n_out = p.answers, p.sent, len(p.out)
@@ -112,7 +113,8 @@ def test_the_stamped_path_is_answered_while_a_100s_trajectory_is_compensated(nod
     got = p.counters(names)
     sent = p.sent - sent0
     p.spin_until(lambda: p.answers - answers0 >= sent, 5.0)
-    assert p.answers - answers0 == sent
+    diff = {k: got[k] - base[k] for k in names}
+    assert p.answers - answers0 == sent, (sent, diff, run, tail)
     assert got['rejected_too_old'] == base['rejected_too_old']
     assert got['rejected_out_of_order'] == base['rejected_out_of_order']
     if max(run['widest_gap_ms'], tail['widest_gap_ms']) < 100.0:
