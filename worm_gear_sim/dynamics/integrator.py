@@ -59,6 +59,7 @@ from .model import (
     P_RW,
     P_SINL,
     P_TLOAD,
+    P_VCUSP,
     P_VEPS,
     P_ZG,
     mesh_approach,
@@ -79,6 +80,9 @@ C_MODE, C_MU = 2, 3        # set-valued friction: +1/-1 slipping, 0 stuck; last 
 N_CTL = 4
 VERIFY_EVERY = 8
 SMOOTH_ZONE = 10.0          # |v_s| > SMOOTH_ZONE * v_eps counts as clear of the stick zone
+EXIT_EDGE_MARGIN = 1e-3     # a stick step's early exit keeps |mu_eff| this far inside the cone
+SLIP_EDGE_SOLVES = 4        # a slip trial at |v_s| <= SLIP_EDGE_CUSPS v_c after this many
+SLIP_EDGE_CUSPS = 10.0      # solves is given up (no slip solution: the edge fallback)
 
 STATUS_OK = 0
 STATUS_FAILED = 1          # Newton did not converge even at the finest subdivision
@@ -285,7 +289,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
 
 
 @njit(cache=True, error_model='numpy')
-def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
+def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, may_exit):
     """One Newmark step with the set-valued friction law in a fixed mode.
 
     mode 0, stick: the sliding speed at the end of the step is zero (a linear constraint on
@@ -296,8 +300,17 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
     and lambda' is the force the cone test needs.
     mode +1/-1, slip in that direction: W_f = mode mu(mode v_s) |W_n| (mu_eff = sgn(q) mode
     mu), Eq. 18 with its cusp at v = 0 rounded below friction.cusp_velocity.
-    Returns (ok, u, v, a, mu_eff, n_solves, n_evals, da/dmu of theta2, theta3 (stick));
-    ok False also when the slip hypothesis cannot hold (the speed would change sign)."""
+    Early exit (stick only, ``may_exit``): after the first solve the remaining residual is
+    predicted from the contraction ``rho`` of the last verified stick step (as in
+    :func:`_newmark_step`); when rho |R_0| is far below tolerance and the multiplier is
+    clear of the cone's edge the step is accepted without a second force evaluation (the
+    forces at the update then agree with the Newmark acceleration to the predicted residual).
+    A slip trial whose iterates keep to the edge of its hypothesis (|v_s| within a few cusp
+    speeds after 4 solves, no convergence) is given up: the sliding contact has no solution
+    there (the stick trial's edge fallback ends the step).
+    Returns (ok, u, v, a, mu_eff, n_solves, n_evals, da/dmu of theta2, theta3 (stick),
+    rho, verified); ok False also when the slip hypothesis cannot hold (the speed would
+    change sign)."""
     m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
     r3 = p[P_OUTPUT_PER_INPUT]
     maxit = int(p[P_MAXIT])
@@ -314,6 +327,8 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
     d0 = d1 = d2 = de = 0.0
     p0 = p1 = p2 = pe = 0.0
     mu = 0.0
+    r0 = 0.0
+    mu_edge = p[P_MU_STATIC] * (1.0 - EXIT_EDGE_MARGIN)
     while True:
         a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
                                                  c_a, gdt)
@@ -333,7 +348,11 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
                                       f[8] * dmu_dv * k2, f[8] * dmu_dv * k3)
         if not finite:
             break
-        if n_solves > 0 and r_norm <= 1.0:
+        if n_solves == 0:
+            r0 = r_norm
+        elif r_norm <= 1.0:
+            if stick and n_solves == 1:
+                rho = r_norm / r0 if r0 > 0.0 else 0.0
             if stick:
                 rel0 = w0 - th1dot
                 rel1 = w1 - r3 * th1dot
@@ -352,9 +371,12 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
                 if m2 > 0.0:
                     a_2 = (f[2] - c20 * rel0 - c21 * rel1 - c22 * rel2) / m2
                 return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), mu, n_solves,
-                        n_evals, s0, s1)
+                        n_evals, s0, s1, rho, True)
             return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), mu, n_solves, n_evals,
-                    0.0, 0.0)
+                    0.0, 0.0, rho, True)
+        elif (not stick and n_solves >= SLIP_EDGE_SOLVES
+              and abs(v_s) <= SLIP_EDGE_CUSPS * p[P_VCUSP]):
+            break               # iterating at the edge of the slip hypothesis: no solution
         if n_solves > 0 and r_norm > r_prev and alpha > 1.0 / 64.0:
             alpha *= 0.5            # damped Newton: backtrack along the last update
             x0 = p0 + alpha * d0
@@ -387,35 +409,56 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
         r_prev = r_norm
         alpha = 1.0
         n_solves += 1
+        if stick and may_exit and n_solves == 1 and rho * r0 <= 0.25 and abs(e) <= mu_edge:
+            # early exit: the forces at the update are those of the Newton model, so the
+            # acceleration from them is the Newmark one up to the predicted residual
+            a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
+                                                     c_a, gdt)
+            s0, s1 = f[7] / m0, f[8] / m1
+            den = k2 * s0 + k3 * s1
+            if den != 0.0 and math.isfinite(den):
+                delta = -(k2 * a_0 + k3 * a_1) / den
+                if abs(e + delta) <= mu_edge:
+                    if m2 > 0.0:        # Eq. 6 is linear: its force is exact
+                        q4 = -p[P_KG] * (x2 - x1) - p[P_COUT] * w2 - p[P_TLOAD]
+                        a_2 = (q4 - c20 * (w0 - th1dot) - c21 * (w1 - r3 * th1dot)
+                               - c22 * (w2 - r3 * th1dot)) / m2
+                    return (True, (x0, x1, x2), (w0, w1, w2),
+                            (a_0 + s0 * delta, a_1 + s1 * delta, a_2), e + delta, n_solves,
+                            n_evals, s0, s1, rho, False)
     return (False, (x0, x1, x2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), mu, n_solves, n_evals,
-            0.0, 0.0)
+            0.0, 0.0, rho, False)
 
 
 @njit(cache=True, error_model='numpy')
-def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0):
+def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since):
     """One step with exact stick-slip: the set-valued law W_f in mu(|v_s|) |W_n| Sgn(v_s)
     resolved by trials (as a return mapping): a slipping contact first tries to keep
     slipping; if its sliding speed would reverse, or the contact was stuck, it tries to
     stick, accepted when the holding force fits inside the cone |W_f| <= mu(0) |W_n|;
     otherwise it slips in the direction of the force the cone cannot hold (then the other
-    one).  Returns (ok, u, v, a, n_solves, n_evals, mode, mu_eff)."""
+    one).  A contact that stays stuck may end its step without verifying it (early exit of
+    :func:`_sv_trial`, every VERIFY_EVERY-th step verified).  Returns (ok, u, v, a, n_solves,
+    n_evals, mode, mu_eff, rho, since, verified)."""
     mu_s = p[P_MU_STATIC] * (1.0 + 1e-12)
     k2, k3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
     ns = 0
     ne = 0
     if mode0 != 0:
-        ok, u, v, a, mu, n1, e1, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode0,
-                                                  lam0)
+        ok, u, v, a, mu, n1, e1, _, _, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt,
+                                                        mode0, lam0, rho, False)
         ns += n1
         ne += e1
         if ok and (mode0 * (k2 * v[0] + k3 * v[1]) >= 0.0 or _in_play(p, u)):
-            return True, u, v, a, ns, ne, mode0, mu     # (in the play: no friction to slip)
-    ok_st, u_st, v_st, a_st, lam, n1, e1, s0, s1 = _sv_trial(p, C, u0, v0, a0, th1, th1dot,
-                                                             dt, 0, lam0)
+            # (in the play: no friction to slip)
+            return True, u, v, a, ns, ne, mode0, mu, rho, since, True
+    ok_st, u_st, v_st, a_st, lam, n1, e1, s0, s1, rho, ver = _sv_trial(
+        p, C, u0, v0, a0, th1, th1dot, dt, 0, lam0, rho, mode0 == 0 and since < VERIFY_EVERY)
     ns += n1
     ne += e1
+    since = 0.0 if ver else since + 1.0
     if ok_st and abs(lam) <= mu_s:
-        return True, u_st, v_st, a_st, ns, ne, 0, lam
+        return True, u_st, v_st, a_st, ns, ne, 0, lam, rho, since, ver
     if ok_st:
         sq = 1.0 if mesh_approach(p, u_st[0], u_st[1]) >= 0.0 else -1.0
         s = 1 if lam * sq > 0.0 else -1
@@ -426,12 +469,12 @@ def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0):
     for s_try in (s, -s):
         if s_try == mode0:
             continue            # tried first
-        ok, u, v, a, mu, n1, e1, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, s_try,
-                                                  lam0)
+        ok, u, v, a, mu, n1, e1, _, _, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt,
+                                                        s_try, lam0, rho, False)
         ns += n1
         ne += e1
         if ok and (s_try * (k2 * v[0] + k3 * v[1]) >= 0.0 or _in_play(p, u)):
-            return True, u, v, a, ns, ne, s_try, mu
+            return True, u, v, a, ns, ne, s_try, mu, rho, since, True
     if ok_st:
         # No mode is consistent over the whole step: the trapezoidal rule carries the old
         # friction in a_n, so a contact that stops inside the step reverses in both slip
@@ -441,8 +484,8 @@ def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0):
         lam_edge = mu_s if lam > 0.0 else -mu_s
         dl = lam_edge - lam
         a_edge = (a_st[0] + s0 * dl, a_st[1] + s1 * dl, a_st[2])
-        return True, u_st, v_st, a_edge, ns, ne, 0, lam_edge
-    return False, u0, v0, a0, ns, ne, mode0, lam0
+        return True, u_st, v_st, a_edge, ns, ne, 0, lam_edge, rho, since, ver
+    return False, u0, v0, a0, ns, ne, mode0, lam0, rho, since, False
 
 
 @njit(cache=True, error_model='numpy')
@@ -450,9 +493,9 @@ def _step(p, Ct, u0, v0, a0, th1, th1dot, dt, rho, since, mode, mu):
     """One step with the configured friction law: (ok, u, v, a, rho, since, n_solves,
     n_evals, verified, mode, mu_eff)."""
     if p[P_FRIC_SET_VALUED] != 0.0:
-        ok, u, v, a, ns, ne, mode, mu = _step_set_valued(p, Ct, u0, v0, a0, th1, th1dot, dt,
-                                                          mode, mu)
-        return ok, u, v, a, rho, since, ns, ne, ok, mode, mu
+        ok, u, v, a, ns, ne, mode, mu, rho, since, ver = _step_set_valued(
+            p, Ct, u0, v0, a0, th1, th1dot, dt, mode, mu, rho, since)
+        return ok, u, v, a, rho, since, ns, ne, ver, mode, mu
     ok, u, v, a, rho, since, ns, ne, ver = _newmark_step(p, Ct, u0, v0, a0, th1, th1dot, dt,
                                                          rho, since)
     return ok, u, v, a, rho, since, ns, ne, ver, mode, mu

@@ -311,7 +311,7 @@ class DriveModel:
 
 
 # ---- the periodic transmission error and the mesh approach (Eq. 8 + r_g e) -----------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def _harmonic_sum(p, at, n, theta):
     """(f, f', f'') of f = sum_k s_k sin(k theta) + c_k cos(k theta), k = 1..n, the pairs
     (s_k, c_k) from p[at]; sin/cos of k theta by the angle-addition recurrence."""
@@ -333,7 +333,7 @@ def has_periodic_error(p: np.ndarray) -> bool:
     return bool(p[P_PE_NW] > 0.0 or p[P_PE_NG] > 0.0)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def transmission_error(p, th2, th3):
     """(e, de/dth2, de/dth3, d2e/dth2^2, d2e/dth3^2) of the periodic transmission error
     e = sum_k s_k sin k th2 + c_k cos k th2 + sum_m S_m sin m th3 + C_m cos m th3 [rad at the
@@ -348,7 +348,7 @@ def transmission_error(p, th2, th3):
     return e, e2, e3, e22, e33
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def mesh_approach(p, th2, th3):
     """q = l_w th2 - r_g th3 + r_g e(th2, th3): the mesh approach along Y (Eq. 8 with the
     periodic transmission error; exactly Eq. 8 without harmonics)."""
@@ -359,7 +359,7 @@ def mesh_approach(p, th2, th3):
 
 
 # ---- Eqs. 16-17: tooth stiffness over the mesh cycle ----------------------------------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def tooth_stiffness(p, theta2, theta3):
     """Return (c_w k_w, c_g k_g, d(c_w k_w)/d(phase), d(c_g k_g)/d(phase)); phase in rad."""
     if p[P_MESH_LINEAR] != 0.0:
@@ -382,7 +382,7 @@ def tooth_stiffness(p, theta2, theta3):
 
 
 # ---- Eq. 18: friction coefficient and its direction ---------------------------------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def slip_coefficient(p, v):
     """Friction coefficient of the set-valued law while slipping at speed v = |v_s| (v < 0:
     the slip hypothesis is violated; mu(0), slope 0), and d mu / d v.  Eq. 18 with the
@@ -449,7 +449,7 @@ def friction_coefficient(p, v_s, q):
 
 
 # ---- the mesh clearance: penetration of the flank in contact --------------------------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def penetration(p, q):
     """(q_e, dq_e/dq): the approach q = l_w theta2 - r_g theta3 less half the play h =
     r_g b / 2 on the flank in contact (q - h for q > h, q + h for q < -h), 0 inside the
@@ -507,7 +507,7 @@ def play_rest_shift(p: np.ndarray) -> tuple[np.ndarray, bool]:
 
 
 # ---- Eqs. 7 and 10: compliance of the mesh along the contact normal -----------------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def mesh_compliance(p, th2, th3, mu):
     """KGWS of Eq. 10 at a mesh position and signed friction coefficient mu:
     (KGWS, dKGWS/dphase, dKGWS/dmu, c_w k_w, c_g k_g).  The friction terms are kept only
@@ -531,7 +531,7 @@ def mesh_compliance(p, th2, th3, mu):
 
 
 # ---- Eqs. 4-15: generalized forces with their analytic Jacobians ---------------------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def mesh_forces_mu(p, th2, th3, th4, w4, theta1, mu):
     """Generalized forces of Eqs. 11, 13 and 6 for a given signed friction coefficient mu
     (W_f = mu W_n): the slip law's value or, in stick, the multiplier the integrator solves
