@@ -77,7 +77,8 @@ N_STATS = 9
 # controller state (float64, carried between calls): contraction estimate, steps since verify
 C_RHO, C_SINCE = 0, 1
 C_MODE, C_MU = 2, 3        # set-valued friction: +1/-1 slipping, 0 stuck; last mu_eff
-N_CTL = 4
+C_DA = 4                   # 4..6: change of the acceleration over the last whole step
+N_CTL = 7
 VERIFY_EVERY = 8
 SMOOTH_ZONE = 10.0          # |v_s| > SMOOTH_ZONE * v_eps counts as clear of the stick zone
 EXIT_EDGE_MARGIN = 1e-3     # a stick step's early exit keeps |mu_eff| this far inside the cone
@@ -89,6 +90,7 @@ STATUS_FAILED = 1          # Newton did not converge even at the finest subdivis
 STATUS_NONFINITE = 2       # NaN/inf input or state
 
 _EPS = 2.220446049250313e-16
+ZERO3 = (0.0, 0.0, 0.0)
 
 
 @njit(cache=True, error_model='numpy')
@@ -129,10 +131,11 @@ def _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2, c_a, gdt):
 
 
 @njit(cache=True, error_model='numpy', inline='always')
-def _newmark_start(p, u0, v0, a0, dt):
+def _newmark_start(p, u0, v0, a0, dt, da):
     """Set-up of one Newmark step from (u0, v0, a0) (3-tuples), shared by both Newton kernels:
     c_a = 1/(beta dt^2), c_v = gamma/(beta dt), gamma dt, the known parts u*, v* of
-    a = c_a (u - u*), v = v* + gamma dt a, and the constant-acceleration predictor of u."""
+    a = c_a (u - u*), v = v* + gamma dt a, and the predictor of u: the acceleration
+    extrapolated linearly by ``da`` (its change over the last step; zeros: constant)."""
     beta, gamma = p[P_BETA], p[P_GAMMA]
     c_a = 1.0 / (beta * dt * dt)
     c_v = gamma / (beta * dt)
@@ -141,8 +144,10 @@ def _newmark_start(p, u0, v0, a0, dt):
           u0[2] + dt * v0[2] + h2 * a0[2])
     g1 = dt * (1.0 - gamma)
     vs = (v0[0] + g1 * a0[0], v0[1] + g1 * a0[1], v0[2] + g1 * a0[2])
-    x = (u0[0] + dt * v0[0] + 0.5 * dt * dt * a0[0], u0[1] + dt * v0[1] + 0.5 * dt * dt * a0[1],
-         u0[2] + dt * v0[2] + 0.5 * dt * dt * a0[2])
+    h = dt * dt / 6.0
+    x = (u0[0] + dt * v0[0] + h * (3.0 * a0[0] + da[0]),
+         u0[1] + dt * v0[1] + h * (3.0 * a0[1] + da[1]),
+         u0[2] + dt * v0[2] + h * (3.0 * a0[2] + da[2]))
     return c_a, c_v, gamma * dt, us, vs, x
 
 
@@ -204,7 +209,7 @@ def _in_play(p, u):
 
 
 @njit(cache=True, error_model='numpy')
-def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
+def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since, da):
     """One Newmark step from (u0, v0, a0) (3-tuples).  Returns
     (ok, u, v, a, rho, since, n_solves, n_evals, verified)."""
     maxit = int(p[P_MAXIT])
@@ -213,7 +218,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     friction_on = p[P_FRIC_MODEL] != 0.0
     gap = p[P_GAP_HALF]
     c_a, c_v, gdt, (us0, us1, us2), (vs0, vs1, vs2), (x0, x1, x2) = _newmark_start(
-        p, u0, v0, a0, dt)
+        p, u0, v0, a0, dt, da)
     vs_start = k_vs2 * v0[0] + k_vs3 * v0[1]
     q_start = mesh_approach(p, u0[0], u0[1])
     cycle_start = _phase_cycle(p, u0[0], u0[1])
@@ -289,7 +294,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
 
 
 @njit(cache=True, error_model='numpy')
-def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, may_exit):
+def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da):
     """One Newmark step with the set-valued friction law in a fixed mode.
 
     mode 0, stick: the sliding speed at the end of the step is zero (a linear constraint on
@@ -300,11 +305,15 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, may_exit):
     and lambda' is the force the cone test needs.
     mode +1/-1, slip in that direction: W_f = mode mu(mode v_s) |W_n| (mu_eff = sgn(q) mode
     mu), Eq. 18 with its cusp at v = 0 rounded below friction.cusp_velocity.
-    Early exit (stick only, ``may_exit``): after the first solve the remaining residual is
-    predicted from the contraction ``rho`` of the last verified stick step (as in
-    :func:`_newmark_step`); when rho |R_0| is far below tolerance and the multiplier is
-    clear of the cone's edge the step is accepted without a second force evaluation (the
-    forces at the update then agree with the Newmark acceleration to the predicted residual).
+    Early exit (``exit_mode`` 2: the step's first trial, not due for verification; 1: the
+    first trial, verified, measures ``rho``; 0: a later trial): after the first solve the
+    remaining residual is predicted from the contraction ``rho`` = |R_1| / |R_0| of the
+    last verified first trial (as in :func:`_newmark_step`); when rho |R_0| is far below
+    tolerance the step is accepted without a second force evaluation: in stick if the
+    multiplier is clear of the cone's edge (the forces at the update then agree with the
+    Newmark acceleration to the predicted residual), in slip if the sliding speed keeps
+    its direction clear of the stick zone (|v_s| > SMOOTH_ZONE v_eps at both ends) and
+    the contact its flank.
     A slip trial whose iterates keep to the edge of its hypothesis (|v_s| within a few cusp
     speeds after 4 solves, no convergence) is given up: the sliding contact has no solution
     there (the stick trial's edge fallback ends the step).
@@ -317,7 +326,7 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, may_exit):
     k2, k3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
     c00, c01, c02, c10, c11, c12, c20, c21, c22 = C
     c_a, c_v, gdt, (us0, us1, us2), (vs0, vs1, vs2), (x0, x1, x2) = _newmark_start(
-        p, u0, v0, a0, dt)
+        p, u0, v0, a0, dt, da)
     stick = mode == 0
     e = lam0 if stick else 0.0
     n_solves = 0
@@ -329,6 +338,9 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, may_exit):
     mu = 0.0
     r0 = 0.0
     mu_edge = p[P_MU_STATIC] * (1.0 - EXIT_EDGE_MARGIN)
+    gap = p[P_GAP_HALF]
+    q_start = mesh_approach(p, u0[0], u0[1])
+    v_start = mode * (k2 * v0[0] + k3 * v0[1])
     while True:
         a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
                                                  c_a, gdt)
@@ -351,8 +363,8 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, may_exit):
         if n_solves == 0:
             r0 = r_norm
         elif r_norm <= 1.0:
-            if stick and n_solves == 1:
-                rho = r_norm / r0 if r0 > 0.0 else 0.0
+            if exit_mode > 0:
+                rho = (r_norm / r0 if r0 > 0.0 else 0.0) if n_solves == 1 else 1.0
             if stick:
                 rel0 = w0 - th1dot
                 rel1 = w1 - r3 * th1dot
@@ -409,7 +421,23 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, may_exit):
         r_prev = r_norm
         alpha = 1.0
         n_solves += 1
-        if stick and may_exit and n_solves == 1 and rho * r0 <= 0.25 and abs(e) <= mu_edge:
+        if exit_mode == 2 and n_solves == 1 and rho * r0 <= 0.25 and not stick:
+            a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
+                                                     c_a, gdt)
+            v_end = mode * (k2 * w0 + k3 * w1)
+            clear = SMOOTH_ZONE * p[P_VEPS]
+            q_end = mesh_approach(p, x0, x1)
+            if gap > 0.0:
+                same_contact = _contact_region(gap, q_start) == _contact_region(gap, q_end)
+            else:
+                same_contact = q_start * q_end > 0.0
+            if v_start > clear and v_end > clear and same_contact:
+                mag, _ = slip_coefficient(p, v_end)
+                return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2),
+                        (1.0 if q_end >= 0.0 else -1.0) * mode * mag, n_solves, n_evals,
+                        0.0, 0.0, rho, False)
+        if (stick and exit_mode == 2 and n_solves == 1 and rho * r0 <= 0.25
+                and abs(e) <= mu_edge):
             # early exit: the forces at the update are those of the Newton model, so the
             # acceleration from them is the Newmark one up to the predicted residual
             a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
@@ -431,7 +459,7 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, may_exit):
 
 
 @njit(cache=True, error_model='numpy')
-def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since):
+def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since, da):
     """One step with exact stick-slip: the set-valued law W_f in mu(|v_s|) |W_n| Sgn(v_s)
     resolved by trials (as a return mapping): a slipping contact first tries to keep
     slipping; if its sliding speed would reverse, or the contact was stuck, it tries to
@@ -445,18 +473,22 @@ def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since)
     ns = 0
     ne = 0
     if mode0 != 0:
-        ok, u, v, a, mu, n1, e1, _, _, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt,
-                                                        mode0, lam0, rho, False)
+        ok, u, v, a, mu, n1, e1, _, _, rho, ver = _sv_trial(
+            p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho,
+            2 if since < VERIFY_EVERY else 1, da)
         ns += n1
         ne += e1
+        since = 0.0 if ver else since + 1.0
         if ok and (mode0 * (k2 * v[0] + k3 * v[1]) >= 0.0 or _in_play(p, u)):
             # (in the play: no friction to slip)
-            return True, u, v, a, ns, ne, mode0, mu, rho, since, True
+            return True, u, v, a, ns, ne, mode0, mu, rho, since, ver
     ok_st, u_st, v_st, a_st, lam, n1, e1, s0, s1, rho, ver = _sv_trial(
-        p, C, u0, v0, a0, th1, th1dot, dt, 0, lam0, rho, mode0 == 0 and since < VERIFY_EVERY)
+        p, C, u0, v0, a0, th1, th1dot, dt, 0, lam0, rho,
+        0 if mode0 != 0 else 2 if since < VERIFY_EVERY else 1, da)
     ns += n1
     ne += e1
-    since = 0.0 if ver else since + 1.0
+    if mode0 == 0:
+        since = 0.0 if ver else since + 1.0
     if ok_st and abs(lam) <= mu_s:
         return True, u_st, v_st, a_st, ns, ne, 0, lam, rho, since, ver
     if ok_st:
@@ -470,7 +502,7 @@ def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since)
         if s_try == mode0:
             continue            # tried first
         ok, u, v, a, mu, n1, e1, _, _, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt,
-                                                        s_try, lam0, rho, False)
+                                                        s_try, lam0, rho, 0, da)
         ns += n1
         ne += e1
         if ok and (s_try * (k2 * v[0] + k3 * v[1]) >= 0.0 or _in_play(p, u)):
@@ -489,15 +521,15 @@ def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since)
 
 
 @njit(cache=True, error_model='numpy')
-def _step(p, Ct, u0, v0, a0, th1, th1dot, dt, rho, since, mode, mu):
+def _step(p, Ct, u0, v0, a0, th1, th1dot, dt, rho, since, mode, mu, da):
     """One step with the configured friction law: (ok, u, v, a, rho, since, n_solves,
     n_evals, verified, mode, mu_eff)."""
     if p[P_FRIC_SET_VALUED] != 0.0:
         ok, u, v, a, ns, ne, mode, mu, rho, since, ver = _step_set_valued(
-            p, Ct, u0, v0, a0, th1, th1dot, dt, mode, mu, rho, since)
+            p, Ct, u0, v0, a0, th1, th1dot, dt, mode, mu, rho, since, da)
         return ok, u, v, a, rho, since, ns, ne, ver, mode, mu
     ok, u, v, a, rho, since, ns, ne, ver = _newmark_step(p, Ct, u0, v0, a0, th1, th1dot, dt,
-                                                         rho, since)
+                                                         rho, since, da)
     return ok, u, v, a, rho, since, ns, ne, ver, mode, mu
 
 
@@ -547,7 +579,7 @@ def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, si
         f = min(max(f, 1e-6), 1.0 - 1e-6)
         ok, u1, v1, a1, rho1, since1, n1, e1, _, mode1, mu1 = _step(
             p, Ct, u0, v0, a0, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a), f * dt,
-            rho, since, mode, mu)
+            rho, since, mode, mu, ZERO3)
         ns += n1
         ne += e1
         if not ok:
@@ -564,7 +596,7 @@ def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, si
     if not found:
         return False, u0, v0, a0, rho, since, mode, mu, ns, ne
     ok, u2, v2, a2, rho2, since2, n2, e2, _, mode2, mu2 = _step(
-        p, Cb, u1, v1, a1, th_b, td_b, (1.0 - f) * dt, rho1, since1, mode1, mu1)
+        p, Cb, u1, v1, a1, th_b, td_b, (1.0 - f) * dt, rho1, since1, mode1, mu1, ZERO3)
     ns += n2
     ne += e2
     if not ok:
@@ -602,6 +634,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
     aa = (a[0], a[1], a[2])
     rho, since = ctl[C_RHO], ctl[C_SINCE]
     mode, mu = int(ctl[C_MODE]), ctl[C_MU]
+    da = (ctl[C_DA], ctl[C_DA + 1], ctl[C_DA + 2])
     for i in range(3):
         if not (math.isfinite(u[i]) and math.isfinite(v[i]) and math.isfinite(a[i])):
             return 0, STATUS_NONFINITE
@@ -627,7 +660,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
         if gap > 0.0 and abs(mesh_approach(p, uu[0], uu[1])) < gap:
             Cs = Co                              # the step starts inside the play
         ok, un, vn, an, rho, since, ns, ne, ver, mode_n, mu_n = _step(
-            p, Cs, uu, vv, aa, th_b, td_b, dt, rho, since, mode, mu)
+            p, Cs, uu, vv, aa, th_b, td_b, dt, rho, since, mode, mu, da)
         n_solves += ns
         n_evals += ne
         n_verified += ver
@@ -646,7 +679,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                     p[P_TLOAD] = ld_a + f * (ld_b - ld_a)
                 ok, us, vs, as_, rho, since, ns, ne, ver, mode_n, mu_n = _step(
                     p, Cs, us, vs, as_, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a),
-                    h, rho, since, mode_n, mu_n)
+                    h, rho, since, mode_n, mu_n, ZERO3)
                 n_solves += ns
                 n_evals += ne
                 n_verified += ver
@@ -655,6 +688,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 stats[S_SUBSTEPS] += 1
             un, vn, an = us, vs, as_
             level += 1
+        whole = level == 1
         if varying:
             p[P_TLOAD] = ld_b
         if not ok:
@@ -677,7 +711,12 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 if ok_e:
                     un, vn, an, rho, since, mode_n, mu_n = ue, ve, ae, rho_e, since_e, \
                         mode_e, mu_e
+                    whole = False
                     stats[S_CONTACT_EVENTS] += 1
+        # a whole step (not subdivided, not split at a contact event) extrapolates the
+        # acceleration into the next step's predictor; not with play, where the contact
+        # events make the acceleration jump
+        da = (an[0] - aa[0], an[1] - aa[1], an[2] - aa[2]) if whole and gap == 0.0 else ZERO3
         uu, vv, aa = un, vn, an
         mode, mu = mode_n, mu_n
         done += 1
@@ -696,6 +735,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
     ctl[C_SINCE] = since
     ctl[C_MODE] = mode
     ctl[C_MU] = mu
+    ctl[C_DA], ctl[C_DA + 1], ctl[C_DA + 2] = da
     stats[S_STEPS] += done
     stats[S_SOLVES] += n_solves
     stats[S_EVALS] += n_evals

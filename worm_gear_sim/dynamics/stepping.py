@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike
 from ..derived import Derived
 from ..schema import ANGLE_LIMIT, LOAD_LIMIT, Parameters
 from .integrator import (
+    C_DA,
     C_MODE,
     C_MU,
     C_RHO,
@@ -239,6 +240,7 @@ class Stepper:
         self._set_model(model, C)
         self._a = a
         self._ctl[C_RHO], self._ctl[C_SINCE] = 1.0, 0.0
+        self._ctl[C_DA:C_DA + 3] = 0.0       # no extrapolation across the change
 
     def _slip_mode(self) -> float:
         """Friction mode of the set-valued law at the current state: sign of the sliding
