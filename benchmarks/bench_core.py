@@ -53,6 +53,7 @@ ROWS = [
     ('linear, constant mu', {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'}),
     ('linear, frictionless', {'mesh.stiffness_model': 'linear', 'friction.model': 'off'}),
 ]
+SLEW = {'input.profile': 'ramp', 'input.target_angle': 4.0, 'input.move_time': 2.0}
 MODELS = {
     'nonlinear (default)': {},
     'linear, constant mu': {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'},
@@ -210,15 +211,16 @@ def radau_comparison(horizon: float = 0.05):
 def floor_rows(rounds: int = 3) -> None:
     """The kernel's default row and the plain floor of the same step, measured in
     alternation (min over ``rounds``), and their ratio."""
-    from kernel_floor import floor_ns_per_step
+    from kernel_floor import floor_constants, floor_ns_per_step
     cfg = Config()
     dt = cfg.integrator.time_step
     th, _ = move_grid(cfg)
     sim = Simulator(cfg)
+    k = floor_constants(sim.model)
     fl1 = fl2 = kern = np.inf
     for _ in range(rounds):
-        fl1 = min(fl1, floor_ns_per_step(sim.p, sim._u, sim._v, sim._a, th, dt, 1, 3))
-        fl2 = min(fl2, floor_ns_per_step(sim.p, sim._u, sim._v, sim._a, th, dt, 2, 3))
+        fl1 = min(fl1, floor_ns_per_step(k, sim._u, sim._v, sim._a, th, dt, 1, 3))
+        fl2 = min(fl2, floor_ns_per_step(k, sim._u, sim._v, sim._a, th, dt, 2, 3))
         kern = min(kern, kernel_ns_per_step(cfg, repeats=3)[0])
     print(f'# floor: the default step written plainly (kernel_floor.py), same move, min of '
           f'{rounds} alternating rounds')
@@ -261,6 +263,11 @@ def main(argv=None) -> int:
     a, b, c = (ticks[n] for n, _ in ROWS[:3])
     print(f'  ratio to the old setting: set-valued at 10 us {b / a:.2f}, default (4 us) '
           f'{c / a:.2f}; default / set-valued at 10 us {c / b:.2f}')
+    slew = Config().replace(SLEW)
+    t_slew = min(advance_to_call_us(slew) for _ in range(3))
+    ns, solves, evals = kernel_ns_per_step(slew, t_end=0.25, repeats=3)
+    print(f'  default, worm slewing at 2 rad/s    {t_slew:7.1f} us  (kernel {ns:.1f} ns/step, '
+          f'{solves:.3f} solves, {evals:.3f} evaluations per step)')
     floor_rows()
     print()
     print('# accuracy at the node step, pointwise at every step over 25 ms (move + 5 ms '

@@ -19,54 +19,43 @@ import math
 import numpy as np
 from numba import njit
 
-from worm_gear_sim.dynamics.model import (
-    P_BETA,
-    P_COSL,
-    P_COSPHI,
-    P_COUT,
-    P_GAMMA,
-    P_GEAR_B,
-    P_GEAR_SCALE,
-    P_GEAR_X0,
-    P_INV_KGS,
-    P_INV_KWS,
-    P_INV_SQRT_VS,
-    P_J4,
-    P_JG,
-    P_JW_STEP,
-    P_KG,
-    P_KW,
-    P_LW,
-    P_MU_DROP,
-    P_MU_K,
-    P_PHASE0,
-    P_RG,
-    P_RW,
-    P_SINL,
-    P_TLOAD,
-    P_VCUSP,
-    P_WORM_B,
-    P_WORM_SCALE,
-    P_WORM_X0,
-    P_ZG,
-)
+from worm_gear_sim import DriveModel
+from worm_gear_sim.dynamics.model import worm_inertia_factor
+
+
+def floor_constants(model: DriveModel) -> np.ndarray:
+    """The constants of the floor's step, read from the model by name."""
+    cfg, d = model.config, model.derived
+    g, mesh, fr, integ = cfg.geometry, cfg.mesh, cfg.friction, cfg.integrator
+    jw = d.J_w
+    if integ.worm_frequency_matching:
+        jw *= worm_inertia_factor(model.p, integ.time_step)
+    m_scale = g.module * mesh.worm_tooth_stiffness_multiplier
+    g_scale = g.module * mesh.gear_tooth_stiffness_multiplier
+    x0w, x0g = model.contact_origins_deg
+    return np.array([
+        jw, d.J_g, d.J_4, d.K_w, d.K_g, d.l_w, g.worm_pitch_radius, g.gear_pitch_radius,
+        math.sin(d.lead_angle), math.cos(d.lead_angle), math.cos(g.pressure_angle),
+        m_scale * math.exp(mesh.worm_fit_a) * (1.0 + math.exp(360.0 * mesh.worm_fit_b)),
+        mesh.worm_fit_b, x0w,
+        g_scale * math.exp(mesh.gear_fit_a) * (1.0 + math.exp(360.0 * mesh.gear_fit_b)),
+        mesh.gear_fit_b, x0g, d.gear_teeth, mesh.phase_offset, fr.mu_kinetic,
+        fr.mu_stribeck_drop, 1.0 / math.sqrt(fr.stribeck_velocity), fr.cusp_velocity,
+        1.0 / d.k_gs, 1.0 / d.k_ws, cfg.load.output_viscous_coefficient,
+        cfg.load.output_torque, integ.newmark_beta, integ.newmark_gamma])
 
 
 @njit(cache=True, error_model='numpy')
-def floor_steps(p, u, v, a, theta1, dt, n_evals):
+def floor_steps(c, u, v, a, theta1, dt, n_evals):
     """len(theta1) - 1 steps from (u, v, a) (updated in place), ``n_evals`` Newton
-    iterations each."""
-    m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]
-    Kw, Kg, lw, rw, rg = p[P_KW], p[P_KG], p[P_LW], p[P_RW], p[P_RG]
-    sl, cl, cphi = p[P_SINL], p[P_COSL], p[P_COSPHI]
+    iterations each; ``c``: :func:`floor_constants`."""
+    m0, m1, m2, Kw, Kg, lw, rw, rg, sl, cl, cphi = c[0], c[1], c[2], c[3], c[4], c[5], c[6], \
+        c[7], c[8], c[9], c[10]
+    ws, wb, wx, gs, gb, gx, zg, ph0 = c[11], c[12], c[13], c[14], c[15], c[16], c[17], c[18]
+    muk, mud, isv, vc, inv_kgs, inv_kws = c[19], c[20], c[21], c[22], c[23], c[24]
+    cout, tl, beta, gamma = c[25], c[26], c[27], c[28]
     k2, k3 = rw * cl, rg * sl
-    zg, ph0 = p[P_ZG], p[P_PHASE0]
-    ws, wb, wx = p[P_WORM_SCALE], p[P_WORM_B], p[P_WORM_X0]
-    gs, gb, gx = p[P_GEAR_SCALE], p[P_GEAR_B], p[P_GEAR_X0]
-    muk, mud, isv, vc = p[P_MU_K], p[P_MU_DROP], p[P_INV_SQRT_VS], p[P_VCUSP]
-    k_shafts = cphi * sl * sl * p[P_INV_KGS] + cphi * cl * cl * p[P_INV_KWS]
-    cout, tl = p[P_COUT], p[P_TLOAD]
-    beta, gamma = p[P_BETA], p[P_GAMMA]
+    k_shafts = cphi * sl * sl * inv_kgs + cphi * cl * cl * inv_kws
     c_a = 1.0 / (beta * dt * dt)
     c_v = gamma / (beta * dt)
     gdt = gamma * dt
@@ -93,12 +82,12 @@ def floor_steps(p, u, v, a, theta1, dt, n_evals):
             mu = sg * (muk + mud * ex)
             dmu = -mud * isv * ex * (av + 2.0 * vc) / (2.0 * r * r * r)
             ph = 0.5 * (x0 + zg * x1) + ph0               # Eqs. 16-17, cosine mapping
-            c, s = math.cos(ph), math.sin(ph)
-            cw = ws * math.exp(wb * (wx + 180.0 * (1.0 - c)))
-            cg = gs * math.exp(gb * (gx + 180.0 * (1.0 - c)))
+            cph, sph = math.cos(ph), math.sin(ph)
+            cw = ws * math.exp(wb * (wx + 180.0 * (1.0 - cph)))
+            cg = gs * math.exp(gb * (gx + 180.0 * (1.0 - cph)))
             icw, icg = 1.0 / cw, 1.0 / cg
             kgws = icw + icg + k_shafts                   # Eqs. 7, 10
-            dk = -(cw * wb * 180.0 * s) * icw * icw - (cg * gb * 180.0 * s) * icg * icg
+            dk = -(cw * wb * 180.0 * sph) * icw * icw - (cg * gb * 180.0 * sph) * icg * icg
             ik = 1.0 / kgws
             q = lw * x0 - rg * x1                         # Eq. 8
             A, B = cphi * sl + mu * cl, cphi * cl - mu * sl
@@ -132,16 +121,16 @@ def floor_steps(p, u, v, a, theta1, dt, n_evals):
     a[0], a[1], a[2] = a0, a1, a2
 
 
-def floor_ns_per_step(p: np.ndarray, u: np.ndarray, v: np.ndarray, a: np.ndarray,
+def floor_ns_per_step(k: np.ndarray, u: np.ndarray, v: np.ndarray, a: np.ndarray,
                       theta1: np.ndarray, dt: float, n_evals: int = 1,
                       repeats: int = 7) -> float:
     """Minimum over ``repeats`` of the floor's ns per step from the state (u, v, a)."""
     import time
-    floor_steps(p, u.copy(), v.copy(), a.copy(), theta1[:3], dt, n_evals)    # compile
+    floor_steps(k, u.copy(), v.copy(), a.copy(), theta1[:3], dt, n_evals)    # compile
     best = np.inf
     for _ in range(repeats):
         uu, vv, aa = u.copy(), v.copy(), a.copy()
         t0 = time.perf_counter()
-        floor_steps(p, uu, vv, aa, theta1, dt, n_evals)
+        floor_steps(k, uu, vv, aa, theta1, dt, n_evals)
         best = min(best, time.perf_counter() - t0)
     return best / (theta1.shape[0] - 1) * 1e9

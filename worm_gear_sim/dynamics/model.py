@@ -48,6 +48,7 @@ from numpy.typing import ArrayLike
 
 from ..derived import Derived, derive
 from ..schema import MAX_ERROR_ORDERS, Parameters
+from .periodic import harmonic_sum, table_lookup, with_table
 
 # ---- packed parameter vector layout (compile-time constants for numba) -------------------
 P_JW, P_JG, P_J4 = 0, 1, 2
@@ -75,15 +76,11 @@ P_GAP_HALF, P_INIT_FLANK = 51, 52     # half the play along q, r_g b / 2 [m]; +1
 P_PE_NW, P_PE_NG = 53, 54
 P_PE_WORM = 55
 P_PE_GEAR = P_PE_WORM + 2 * MAX_ERROR_ORDERS
-# the tooth compliance 1/c_w k_w + 1/c_g k_g of the cosine mapping tabulated over the mesh
-# cycle (TEETH_TABLE_INTERVALS nodes, value and slope: cubic Hermite), after the fixed part
-P_TEETH_N = P_PE_GEAR + 2 * MAX_ERROR_ORDERS        # intervals of the table; 0: no table
-P_TEETH_SCALE = P_TEETH_N + 1                       # intervals per radian of phase
-N_PARAMS = P_TEETH_SCALE + 1                        # the table's nodes follow from here
-P_TEETH_AT = N_PARAMS
-TEETH_TABLE_INTERVALS = 1024
-TEETH_TABLE_RTOL = 1e-12        # the table is used only where it is this close to Eq. 7
-TEETH_SLOPE_RTOL = 1e-9         # and its slope (Jacobian only) this close, relative to it
+# 1: the tooth compliance of the cosine mapping is tabulated over the mesh cycle at the end
+# of the vector (periodic.with_table: 1024 intervals, kept within 1e-12 of Eq. 7; its slope,
+# which enters only the Jacobian, within 1e-9)
+P_TEETH_TABLE = P_PE_GEAR + 2 * MAX_ERROR_ORDERS
+N_PARAMS = P_TEETH_TABLE + 1
 
 # layout of the flat output of mesh_eval: Q (3), dQ/du (3x3 row-major), dQ/dv (3x3), aux
 O_Q, O_DQDU, O_DQDV, O_AUX = 0, 3, 12, 21
@@ -188,39 +185,22 @@ def pack_parameters(cfg: Parameters, derived: Derived | None = None) -> np.ndarr
     return _with_teeth_table(p)
 
 
-def _teeth_nodes(p: np.ndarray, phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. 7's tooth compliance 1/c_w k_w + 1/c_g k_g and its slope in the phase, exactly
-    (Eqs. 16-17, cosine mapping), at an array of mesh phases."""
-    vals = np.array([tooth_stiffness(p, 2.0 * (s - p[P_PHASE0]), 0.0) for s in phase])
-    cw, cg, dcw, dcg = vals.T
-    return 1.0 / cw + 1.0 / cg, -dcw / cw ** 2 - dcg / cg ** 2
-
-
 def _with_teeth_table(p: np.ndarray) -> np.ndarray:
-    """``p`` with the tooth compliance of the cosine mapping tabulated over one mesh cycle
-    (computed once per parameter set; the force evaluation then interpolates instead of two
-    exponentials and a sine/cosine pair).  The table is kept only when it reproduces Eq. 7
-    within TEETH_TABLE_RTOL at the quarter and mid points of its intervals (the mid point is
-    the worst place of a cubic Hermite interpolant) and its slope, which enters only the
-    Newton Jacobian, within TEETH_SLOPE_RTOL there; otherwise the force evaluation uses
-    Eqs. 16-17 directly."""
+    """``p`` with Eq. 7's tooth compliance 1/c_w k_w + 1/c_g k_g of the cosine mapping
+    tabulated over the mesh cycle (once per parameter set: the force evaluation then
+    interpolates instead of two exponentials and a sine/cosine pair), if the table is
+    within its tolerances of Eqs. 16-17 (otherwise they are evaluated directly)."""
     if p[P_MESH_LINEAR] != 0.0 or p[P_MESH_COSINE] == 0.0:
         return p
-    n = TEETH_TABLE_INTERVALS
-    h = TWO_PI / n
-    s = np.arange(n + 1) * h
-    with np.errstate(all='ignore'):
-        val, slope = _teeth_nodes(p, s)
-        q = np.concatenate((p, np.ravel(np.column_stack((val, slope * h)))))
-        q[P_TEETH_N], q[P_TEETH_SCALE] = n, n / TWO_PI
-        mid = np.concatenate([s[:-1] + f * h for f in (0.25, 0.5, 0.75)])
-        exact, exact_slope = _teeth_nodes(p, mid)
-        got = np.array([teeth_compliance(q, x) for x in mid])
-        err = np.abs(got[:, 0] - exact) / np.abs(exact)
-        err_slope = np.abs(got[:, 1] - exact_slope) / np.abs(exact).max()
-    if not (np.all(np.isfinite(q)) and err.max() <= TEETH_TABLE_RTOL
-            and err_slope.max() <= TEETH_SLOPE_RTOL):
+
+    def exact(phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        cw, cg, dcw, dcg = np.array([tooth_stiffness(p, 2.0 * (s - p[P_PHASE0]), 0.0)
+                                     for s in phase]).T
+        return 1.0 / cw + 1.0 / cg, -dcw / cw ** 2 - dcg / cg ** 2
+    q = with_table(p, exact, 1024, 1e-12, 1e-9)
+    if q is None:
         return p
+    q[P_TEETH_TABLE] = 1.0
     return q
 
 
@@ -355,23 +335,6 @@ class DriveModel:
 
 
 # ---- the periodic transmission error and the mesh approach (Eq. 8 + r_g e) -----------------
-@njit(cache=True, error_model='numpy', inline='always')
-def _harmonic_sum(p, at, n, theta):
-    """(f, f', f'') of f = sum_k s_k sin(k theta) + c_k cos(k theta), k = 1..n, the pairs
-    (s_k, c_k) from p[at]; sin/cos of k theta by the angle-addition recurrence."""
-    s1, c1 = math.sin(theta), math.cos(theta)
-    sk, ck = s1, c1
-    f = df = d2f = 0.0
-    for j in range(n):
-        k = j + 1.0
-        a, b = p[at + 2 * j], p[at + 2 * j + 1]
-        f += a * sk + b * ck
-        df += k * (a * ck - b * sk)
-        d2f -= k * k * (a * sk + b * ck)
-        sk, ck = sk * c1 + ck * s1, ck * c1 - sk * s1
-    return f, df, d2f
-
-
 def has_periodic_error(p: np.ndarray) -> bool:
     """The model has a periodic transmission error (``mesh.*_error_harmonics``)."""
     return bool(p[P_PE_NW] > 0.0 or p[P_PE_NG] > 0.0)
@@ -385,9 +348,9 @@ def transmission_error(p, th2, th3):
     e = e2 = e22 = e3 = e33 = 0.0
     nw, ng = int(p[P_PE_NW]), int(p[P_PE_NG])
     if nw > 0:
-        e, e2, e22 = _harmonic_sum(p, P_PE_WORM, nw, th2)
+        e, e2, e22 = harmonic_sum(p, P_PE_WORM, nw, th2)
     if ng > 0:
-        f, e3, e33 = _harmonic_sum(p, P_PE_GEAR, ng, th3)
+        f, e3, e33 = harmonic_sum(p, P_PE_GEAR, ng, th3)
         e += f
     return e, e2, e3, e22, e33
 
@@ -423,23 +386,6 @@ def tooth_stiffness(p, theta2, theta3):
     cwkw = p[P_WORM_SCALE] * math.exp(bw * (p[P_WORM_X0] + s_deg))
     cgkg = p[P_GEAR_SCALE] * math.exp(bg * (p[P_GEAR_X0] + s_deg))
     return cwkw, cgkg, cwkw * bw * DEG_PER_RAD, cgkg * bg * DEG_PER_RAD
-
-
-@njit(cache=True, error_model='numpy', inline='always')
-def teeth_compliance(p, phase):
-    """(1/c_w k_w + 1/c_g k_g, its derivative in the phase) of Eq. 7 from the table of
-    :func:`pack_parameters` (cubic Hermite on value and slope at the nodes)."""
-    n = p[P_TEETH_N]
-    x = (phase - TWO_PI * math.floor(phase / TWO_PI)) * p[P_TEETH_SCALE]   # in [0, n]
-    i = min(int(x), int(n) - 1)
-    t = x - i
-    j = P_TEETH_AT + 2 * i
-    y0, m0, y1, m1 = p[j], p[j + 1], p[j + 2], p[j + 3]
-    t2 = t * t
-    dy = y1 - y0
-    val = y0 + t * m0 + t2 * (3.0 * dy - 2.0 * m0 - m1) + t2 * t * (m0 + m1 - 2.0 * dy)
-    slope = m0 + t * (6.0 * dy - 4.0 * m0 - 2.0 * m1) + 3.0 * t2 * (m0 + m1 - 2.0 * dy)
-    return val, slope * p[P_TEETH_SCALE]
 
 
 # ---- Eq. 18: friction coefficient and its direction ---------------------------------------
@@ -582,8 +528,8 @@ def mesh_compliance(p, th2, th3, mu):
     if p[P_MESH_LINEAR] != 0.0:
         teeth, dK_dphase = p[P_LIN_COMPLIANCE], 0.0
         cwkw, cgkg = p[P_CWKW_LIN], p[P_CGKG_LIN]
-    elif p[P_TEETH_N] != 0.0:
-        teeth, dK_dphase = teeth_compliance(p, 0.5 * (th2 + p[P_ZG] * th3) + p[P_PHASE0])
+    elif p[P_TEETH_TABLE] != 0.0:
+        teeth, dK_dphase = table_lookup(p, 0.5 * (th2 + p[P_ZG] * th3) + p[P_PHASE0])
         cwkw, cgkg, _, _ = tooth_stiffness(p, th2, th3)     # (unused in the hot path)
     else:
         cwkw, cgkg, dcw, dcg = tooth_stiffness(p, th2, th3)
