@@ -6,7 +6,7 @@ test/data/no_play_golden.npz``.  First written by the code before ``mesh.backlas
 extrapolated) and early exits (stuck and slipping steps without a verifying evaluation)
 changed the numerics at the Newton tolerance: the trajectories agree to 1e-9 of each
 column's largest value until a stick-slip decision of the ring-down flips, after which they
-differ by up to 5.5e-4 (angles) and 8.4e-3 (speeds); against a 0.25 us reference the new
+differ by up to 5.5e-4 (angles) and 8.3e-3 (speeds); against a 0.25 us reference the new
 records are as close as the old ones or closer (set-valued slew: theta4 1.6e-5 against
 3.2e-5 of its largest value).  test_backlash.py checks that ``mesh.backlash: 0``
 reproduces them within a stated rounding tolerance (numba compiles for the host

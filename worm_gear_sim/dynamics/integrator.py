@@ -86,7 +86,8 @@ N_STATS = 9
 C_RHO, C_SINCE = 0, 1
 C_MODE, C_MU = 2, 3        # set-valued friction: +1/-1 slipping, 0 stuck; last mu_eff
 C_DA = 4                   # 4..6: change of the acceleration over the last whole step
-N_CTL = 7
+C_RHO2 = 7                 # contraction of a second Newton solve (set-valued slip)
+N_CTL = 8
 
 STATUS_OK = 0
 STATUS_FAILED = 1          # Newton did not converge even at the finest subdivision
@@ -127,7 +128,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since, da):
         if n_solves == 0:
             r0 = r_norm
         elif r_norm <= 1.0:
-            rho = (r_norm / r0 if r0 > 0.0 else 0.0) if n_solves == 1 else 1.0
+            rho = ((r_norm / r0 if r0 > 0.0 else 0.0) if n_solves == 1 else 1.0, rho[1])
             return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), rho, 0.0,
                     n_solves, n_evals, True)
         if n_solves > 0 and r_norm > r_prev and alpha > 1.0 / 64.0:
@@ -158,7 +159,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since, da):
         r_prev = r_norm
         alpha = 1.0
         n_solves += 1
-        if n_solves == 1 and since < VERIFY_EVERY and rho * r0 <= 0.25:
+        if n_solves == 1 and since < VERIFY_EVERY and rho[0] * r0 <= 0.25:
             # early exit without a second force evaluation if the step is smooth
             a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
                                                      c_a, gdt)
@@ -174,8 +175,8 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since, da):
                     and _phase_cycle(p, x0, x1) == cycle_start):
                 return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), rho, since + 1.0,
                         n_solves, n_evals, False)
-    return (False, (x0, x1, x2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 1.0, since, n_solves,
-            n_evals, False)
+    return (False, (x0, x1, x2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, rho[1]), since,
+            n_solves, n_evals, False)
 
 
 @njit(cache=True, error_model='numpy')
@@ -290,7 +291,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
     uu = (u[0], u[1], u[2])
     vv = (v[0], v[1], v[2])
     aa = (a[0], a[1], a[2])
-    rho, since = ctl[C_RHO], ctl[C_SINCE]
+    rho, since = (ctl[C_RHO], ctl[C_RHO2]), ctl[C_SINCE]
     mode, mu = int(ctl[C_MODE]), ctl[C_MU]
     da = (ctl[C_DA], ctl[C_DA + 1], ctl[C_DA + 2])
     for i in range(3):
@@ -389,7 +390,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
         u[i] = uu[i]
         v[i] = vv[i]
         a[i] = aa[i]
-    ctl[C_RHO] = rho
+    ctl[C_RHO], ctl[C_RHO2] = rho
     ctl[C_SINCE] = since
     ctl[C_MODE] = mode
     ctl[C_MU] = mu

@@ -62,9 +62,11 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da)
     mu), Eq. 18 with its cusp at v = 0 rounded below friction.cusp_velocity.
     Early exit (``exit_mode`` 2: the step's first trial, not due for verification; 1: the
     first trial, verified, measures ``rho``; 0: a later trial): after the first solve the
-    remaining residual is predicted from the contraction ``rho`` = |R_1| / |R_0| of the
-    last verified first trial (as in :func:`_newmark_step`); when rho |R_0| is far below
-    tolerance the step is accepted without a second force evaluation: in stick if the
+    remaining residual is predicted from the contraction ``rho[0]`` = |R_1| / |R_0| of the
+    last verified first trial that converged in one solve (as in :func:`_newmark_step`),
+    after the second from ``rho[1]`` = |R_2| / |R_1| of the last one that needed two
+    (undamped); when that prediction is far below tolerance the step is accepted without
+    another force evaluation: in stick (after the first solve only) if the
     multiplier is clear of the cone's edge (the forces at the update then agree with the
     Newmark acceleration to the predicted residual), in slip if the sliding speed keeps
     its direction clear of the stick zone (|v_s| > SMOOTH_ZONE v_eps at both ends) and
@@ -92,6 +94,7 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da)
     p0 = p1 = p2 = pe = 0.0
     mu = 0.0
     r0 = 0.0
+    damped = False
     mu_edge = p[P_MU_STATIC] * (1.0 - EXIT_EDGE_MARGIN)
     gap = p[P_GAP_HALF]
     q_start = mesh_approach(p, u0[0], u0[1])
@@ -119,7 +122,12 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da)
             r0 = r_norm
         elif r_norm <= 1.0:
             if exit_mode > 0:
-                rho = (r_norm / r0 if r0 > 0.0 else 0.0) if n_solves == 1 else 1.0
+                if n_solves == 1:
+                    rho = (r_norm / r0 if r0 > 0.0 else 0.0, rho[1])
+                elif n_solves == 2 and not damped:
+                    rho = (1.0, r_norm / r_prev if r_prev > 0.0 else 0.0)
+                else:
+                    rho = (1.0, 1.0)
             if stick:
                 rel0 = w0 - th1dot
                 rel1 = w1 - r3 * th1dot
@@ -146,6 +154,7 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da)
             break               # iterating at the edge of the slip hypothesis: no solution
         if n_solves > 0 and r_norm > r_prev and alpha > 1.0 / 64.0:
             alpha *= 0.5            # damped Newton: backtrack along the last update
+            damped = True
             x0 = p0 + alpha * d0
             x1 = p1 + alpha * d1
             x2 = p2 + alpha * d2
@@ -176,7 +185,9 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da)
         r_prev = r_norm
         alpha = 1.0
         n_solves += 1
-        if exit_mode == 2 and n_solves == 1 and rho * r0 <= 0.25 and not stick:
+        if (exit_mode == 2 and not stick and not damped
+                and ((n_solves == 1 and rho[0] * r0 <= 0.25)
+                     or (n_solves == 2 and rho[1] * r_prev <= 0.25))):
             a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
                                                      c_a, gdt)
             v_end = mode * (k2 * w0 + k3 * w1)
@@ -191,7 +202,7 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da)
                 return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2),
                         (1.0 if q_end >= 0.0 else -1.0) * mode * mag, n_solves, n_evals,
                         0.0, 0.0, rho, False)
-        if (stick and exit_mode == 2 and n_solves == 1 and rho * r0 <= 0.25
+        if (stick and exit_mode == 2 and n_solves == 1 and rho[0] * r0 <= 0.25
                 and abs(e) <= mu_edge):
             # early exit: the forces at the update are those of the Newton model, so the
             # acceleration from them is the Newmark one up to the predicted residual

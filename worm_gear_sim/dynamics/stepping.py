@@ -29,6 +29,7 @@ from .integrator import (
     C_MODE,
     C_MU,
     C_RHO,
+    C_RHO2,
     C_SINCE,
     N_CTL,
     N_STATS,
@@ -207,7 +208,7 @@ class Stepper:
         self._cmd_t = self._t0
         self._cmd_value = theta1
         self._ctl[:] = 0.0
-        self._ctl[C_RHO] = 1.0
+        self._ctl[C_RHO] = self._ctl[C_RHO2] = 1.0
         self._ctl[C_MODE] = self._slip_mode()
 
     def _set_model(self, model: DriveModel, C: np.ndarray | None = None) -> None:
@@ -239,7 +240,7 @@ class Stepper:
             raise ValueError('the new parameters give a non-finite acceleration')
         self._set_model(model, C)
         self._a = a
-        self._ctl[C_RHO], self._ctl[C_SINCE] = 1.0, 0.0
+        self._ctl[C_RHO], self._ctl[C_RHO2], self._ctl[C_SINCE] = 1.0, 1.0, 0.0
         self._ctl[C_DA:C_DA + 3] = 0.0       # no extrapolation across the change
 
     def _slip_mode(self) -> float:
