@@ -76,9 +76,8 @@ P_GAP_HALF, P_INIT_FLANK = 51, 52     # half the play along q, r_g b / 2 [m]; +1
 P_PE_NW, P_PE_NG = 53, 54
 P_PE_WORM = 55
 P_PE_GEAR = P_PE_WORM + 2 * MAX_ERROR_ORDERS
-# 1: the tooth compliance of the cosine mapping is tabulated over the mesh cycle at the end
-# of the vector (periodic.with_table: 1024 intervals, kept within 1e-12 of Eq. 7; its slope,
-# which enters only the Jacobian, within 1e-9)
+# 1: the cosine mapping's tooth compliance tabulated at the vector's end (periodic.with_table:
+# 1024 intervals, kept within 1e-12 of Eq. 7, its slope (Jacobian only) within 1e-9)
 P_TEETH_TABLE = P_PE_GEAR + 2 * MAX_ERROR_ORDERS
 N_PARAMS = P_TEETH_TABLE + 1
 
@@ -185,6 +184,17 @@ def pack_parameters(cfg: Parameters, derived: Derived | None = None) -> np.ndarr
     return _with_teeth_table(p)
 
 
+@njit(cache=True, error_model='numpy')
+def _teeth_exact(p, phase):
+    """Eq. 7's 1/c_w k_w + 1/c_g k_g and its slope in the phase (Eqs. 16-17) at phases."""
+    val, slope = np.empty(phase.shape[0]), np.empty(phase.shape[0])
+    for i in range(phase.shape[0]):
+        cw, cg, dcw, dcg = tooth_stiffness(p, 2.0 * (phase[i] - p[P_PHASE0]), 0.0)
+        val[i] = 1.0 / cw + 1.0 / cg
+        slope[i] = -dcw / (cw * cw) - dcg / (cg * cg)
+    return val, slope
+
+
 def _with_teeth_table(p: np.ndarray) -> np.ndarray:
     """``p`` with Eq. 7's tooth compliance 1/c_w k_w + 1/c_g k_g of the cosine mapping
     tabulated over the mesh cycle (once per parameter set: the force evaluation then
@@ -192,16 +202,10 @@ def _with_teeth_table(p: np.ndarray) -> np.ndarray:
     within its tolerances of Eqs. 16-17 (otherwise they are evaluated directly)."""
     if p[P_MESH_LINEAR] != 0.0 or p[P_MESH_COSINE] == 0.0:
         return p
-
-    def exact(phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        cw, cg, dcw, dcg = np.array([tooth_stiffness(p, 2.0 * (s - p[P_PHASE0]), 0.0)
-                                     for s in phase]).T
-        return 1.0 / cw + 1.0 / cg, -dcw / cw ** 2 - dcg / cg ** 2
-    q = with_table(p, exact, 1024, 1e-12, 1e-9)
-    if q is None:
-        return p
-    q[P_TEETH_TABLE] = 1.0
-    return q
+    q = with_table(p, lambda phase: _teeth_exact(p, phase), 1024, 1e-12, 1e-9)
+    if q is not None:
+        q[P_TEETH_TABLE] = 1.0
+    return p if q is None else q
 
 
 def worm_frequency(p: np.ndarray) -> float:
