@@ -12,7 +12,10 @@ Prints, in one run:
   * the cost of one force evaluation (the transcendental-heavy part) and of one 1 kHz tick
     through Simulator.advance_to (what the node pays per tick), old and new side by side;
   * pointwise accuracy of theta2/theta4 at the node step and the antenna ring-down;
-  * the speed-up over scipy's Radau at equal accuracy of the antenna angle theta4.
+  * the speed-up over scipy's Radau at equal accuracy of the antenna angle theta4;
+  * the floor: the same step written plainly (kernel_floor.py: the default model's
+    equations in slip, one or two force evaluations per step, no branches) on the same
+    move, and the kernel's ratio to it, measured side by side.
 
     python benchmarks/bench_core.py            # full run (~2-4 min)
     python benchmarks/bench_core.py --quick    # skip the Radau comparison
@@ -50,6 +53,7 @@ ROWS = [
     ('linear, constant mu', {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'}),
     ('linear, frictionless', {'mesh.stiffness_model': 'linear', 'friction.model': 'off'}),
 ]
+SLEW = {'input.profile': 'ramp', 'input.target_angle': 4.0, 'input.move_time': 2.0}
 MODELS = {
     'nonlinear (default)': {},
     'linear, constant mu': {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'},
@@ -57,13 +61,19 @@ MODELS = {
 }
 
 
-def kernel_ns_per_step(cfg: Config, t_end: float = 0.5, repeats: int = 7):
+def move_grid(cfg: Config, t_end: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """The command theta1 and its rate on the step grid of the configured move."""
     dt = cfg.integrator.time_step
     prof = make_profile(cfg.input)
-    n = int(round(t_end / dt))
-    grid = np.arange(1, n + 1) * dt
-    th = np.concatenate(([0.0], prof.theta1(grid)))
-    td = np.concatenate(([0.0], prof.theta1_dot(grid)))
+    grid = np.arange(1, int(round(t_end / dt)) + 1) * dt
+    return (np.concatenate(([0.0], prof.theta1(grid))),
+            np.concatenate(([0.0], prof.theta1_dot(grid))))
+
+
+def kernel_ns_per_step(cfg: Config, t_end: float = 0.5, repeats: int = 7):
+    dt = cfg.integrator.time_step
+    th, td = move_grid(cfg, t_end)
+    n = th.shape[0] - 1
     e3, ea = np.empty((0, 3)), np.empty((0, 8))
     best = np.inf
     for _ in range(repeats):
@@ -198,6 +208,31 @@ def radau_comparison(horizon: float = 0.05):
                 rows=rows, horizon=horizon, sample=sample)
 
 
+def floor_rows(rounds: int = 3) -> None:
+    """The kernel's default row and the plain floor of the same step, measured in
+    alternation (min over ``rounds``), and their ratio."""
+    from kernel_floor import floor_constants, floor_ns_per_step
+    cfg = Config()
+    dt = cfg.integrator.time_step
+    th, _ = move_grid(cfg)
+    sim = Simulator(cfg)
+    k = floor_constants(sim.model)
+    fl1 = fl2 = kern = np.inf
+    for _ in range(rounds):
+        fl1 = min(fl1, floor_ns_per_step(k, sim._u, sim._v, sim._a, th, dt, 1, 3))
+        fl2 = min(fl2, floor_ns_per_step(k, sim._u, sim._v, sim._a, th, dt, 2, 3))
+        kern = min(kern, kernel_ns_per_step(cfg, repeats=3)[0])
+    print(f'# floor: the default step written plainly (kernel_floor.py), same move, min of '
+          f'{rounds} alternating rounds')
+    print(f'  floor, 1 force evaluation/step  {fl1:7.1f} ns/step  {dt / (fl1 * 1e-9):6.1f}x '
+          'real time')
+    print(f'  floor, 2 force evaluations/step {fl2:7.1f} ns/step  {dt / (fl2 * 1e-9):6.1f}x '
+          'real time')
+    print(f'  kernel, default (4 us)          {kern:7.1f} ns/step  {dt / (kern * 1e-9):6.1f}x '
+          f'real time (target >= 40x): {kern / fl1:.2f}x the 1-evaluation floor, '
+          f'{kern / fl2:.2f}x the 2-evaluation floor')
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--quick', action='store_true', help='skip the Radau comparison')
@@ -224,10 +259,16 @@ def main(argv=None) -> int:
     ticks = {}
     for name, over in ROWS[:3]:
         ticks[name] = min(advance_to_call_us(Config().replace(over)) for _ in range(3))
-        print(f'  {name:28s} {ticks[name]:7.1f} us  (target <= 100 us)')
+        print(f'  {name:28s} {ticks[name]:7.1f} us  (target <= 30 us)')
     a, b, c = (ticks[n] for n, _ in ROWS[:3])
     print(f'  ratio to the old setting: set-valued at 10 us {b / a:.2f}, default (4 us) '
           f'{c / a:.2f}; default / set-valued at 10 us {c / b:.2f}')
+    slew = Config().replace(SLEW)
+    t_slew = min(advance_to_call_us(slew) for _ in range(3))
+    ns, solves, evals = kernel_ns_per_step(slew, t_end=0.25, repeats=3)
+    print(f'  default, worm slewing at 2 rad/s    {t_slew:7.1f} us  (kernel {ns:.1f} ns/step, '
+          f'{solves:.3f} solves, {evals:.3f} evaluations per step)')
+    floor_rows()
     print()
     print('# accuracy at the node step, pointwise at every step over 25 ms (move + 5 ms '
           'ringing) against Newmark at 0.05 us of the same model, fraction of the oscillation '

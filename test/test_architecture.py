@@ -175,9 +175,11 @@ def test_no_issue_numbers_in_the_code():
 
 #: Where the kernel's packed parameter vector is made and read by index: the model
 #: (``pack_parameters``, the ``P_*`` layout, :class:`DriveModel`), its inverse (the same
-#: equations solved for theta1) and the integrator.
+#: equations solved for theta1) and the integrator (with its step's pieces and the
+#: set-valued friction trials).
 PACKED_LAYOUT_OWNERS = {f'{ROOT}/dynamics/model.py', f'{ROOT}/dynamics/inverse.py',
-                        f'{ROOT}/dynamics/integrator.py'}
+                        f'{ROOT}/dynamics/integrator.py', f'{ROOT}/dynamics/newmark.py',
+                        f'{ROOT}/dynamics/set_valued.py'}
 #: What names the packed layout: its indices and the function that fills it.
 PACKED_LAYOUT_NAME = re.compile(r'\b(P_[A-Z][A-Z0-9_]*|N_PARAMS|pack_parameters)\b')
 

@@ -1,9 +1,10 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""The mesh clearance ``mesh.backlash``: without play the trajectories are those of the code
-before it existed, bit for bit; with play the lost motion of a slow reversal is the play,
-no contact event gains energy, halving the step converges, and the result agrees with an
-independent event-driven Radau solution of the same equations written here."""
+"""The mesh clearance ``mesh.backlash``: without play the trajectories are the golden ones
+of the kernel without play, within a rounding tolerance; with play the lost motion of a
+slow reversal is the play, no contact event gains energy, halving the step converges, and
+the result agrees with an independent event-driven Radau solution of the same equations
+written here."""
 
 from pathlib import Path
 
@@ -30,8 +31,8 @@ NO_PLAY_RTOL = 1e-6
 
 def test_zero_play_reproduces_the_trajectories_before_play():
     """mesh.backlash = 0 (the default): the paper's move and a slew with reversals under
-    load, set-valued and regularized friction, equal the golden trajectories written by
-    the code before the clearance existed (test/data/make_no_play_golden.py) within
+    load, set-valued and regularized friction, equal the golden trajectories of the kernel
+    without play (test/data/make_no_play_golden.py: when they were written) within
     NO_PLAY_RTOL of each column's largest value (the file was written on another CPU); and
     in one run the resting flank, which only matters with play, changes nothing, bit for
     bit (the play logic is inert at b = 0)."""

@@ -21,6 +21,12 @@ sliding speed stays outside 10 v_eps on one side, the mesh force keeps its sign,
 hand-over) the step is accepted without a second force evaluation.  Every 8th step, and
 every non-smooth step, is verified with a fresh residual.
 
+Predictor: the acceleration of the last whole step extrapolated linearly (its change over
+that step, carried in ``ctl``; constant after a subdivided or split step, and with play).
+The set-valued friction law's trials (stick, slip either way; their early exits) are in
+:mod:`~worm_gear_sim.dynamics.set_valued`, the step's shared pieces in
+:mod:`~worm_gear_sim.dynamics.newmark`.
+
 Robustness: when the residual grows the update is halved (damped Newton); an update that
 would carry the sliding speed across zero from outside the friction zone is shortened to
 land on zero; a step that still fails is repeated in 2, 4, ... 2^max_subdivision_level
@@ -35,13 +41,10 @@ from numba import njit
 
 from .model import (
     N_AUX,
-    P_ATOL,
-    P_BETA,
     P_COSL,
     P_COUT,
     P_FRIC_MODEL,
     P_FRIC_SET_VALUED,
-    P_GAMMA,
     P_GAP_HALF,
     P_J4,
     P_JG,
@@ -49,23 +52,29 @@ from .model import (
     P_KG,
     P_MAXIT,
     P_MAXSUB,
-    P_MESH_COSINE,
-    P_MESH_LINEAR,
-    P_MU_STATIC,
     P_OUTPUT_PER_INPUT,
-    P_PHASE0,
     P_RG,
-    P_RTOL,
     P_RW,
     P_SINL,
     P_TLOAD,
     P_VEPS,
-    P_ZG,
     mesh_approach,
     mesh_forces,
     mesh_forces_mu,
-    slip_coefficient,
 )
+from .newmark import (
+    SMOOTH_ZONE,
+    VERIFY_EVERY,
+    ZERO3,
+    _contact_region,
+    _in_play,
+    _newmark_av,
+    _newmark_start,
+    _phase_cycle,
+    _residual_jacobian,
+    _solve3,
+)
+from .set_valued import step_set_valued
 
 # stats vector layout (int64, cumulative)
 S_STEPS, S_SOLVES, S_EVALS, S_SUBDIV_EVENTS, S_SUBSTEPS, S_MAX_SOLVES, S_FAILED = range(7)
@@ -76,131 +85,17 @@ N_STATS = 9
 # controller state (float64, carried between calls): contraction estimate, steps since verify
 C_RHO, C_SINCE = 0, 1
 C_MODE, C_MU = 2, 3        # set-valued friction: +1/-1 slipping, 0 stuck; last mu_eff
-N_CTL = 4
-VERIFY_EVERY = 8
-SMOOTH_ZONE = 10.0          # |v_s| > SMOOTH_ZONE * v_eps counts as clear of the stick zone
+C_DA = 4                   # 4..6: change of the acceleration over the last whole step
+C_RHO2 = 7                 # contraction of a second Newton solve (set-valued slip)
+N_CTL = 8
 
 STATUS_OK = 0
 STATUS_FAILED = 1          # Newton did not converge even at the finest subdivision
 STATUS_NONFINITE = 2       # NaN/inf input or state
 
-_EPS = 2.220446049250313e-16
-
 
 @njit(cache=True, error_model='numpy')
-def _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, b0, b1, b2):
-    """(ok, x) with J x = b for a 3x3 system by cofactors; ok False if singular."""
-    c00 = j11 * j22 - j12 * j21
-    c01 = j12 * j20 - j10 * j22
-    c02 = j10 * j21 - j11 * j20
-    det = j00 * c00 + j01 * c01 + j02 * c02
-    if det == 0.0 or not math.isfinite(det):
-        return False, 0.0, 0.0, 0.0
-    inv = 1.0 / det
-    c10 = j02 * j21 - j01 * j22
-    c11 = j00 * j22 - j02 * j20
-    c12 = j01 * j20 - j00 * j21
-    c20 = j01 * j12 - j02 * j11
-    c21 = j02 * j10 - j00 * j12
-    c22 = j00 * j11 - j01 * j10
-    return (True, (c00 * b0 + c10 * b1 + c20 * b2) * inv, (c01 * b0 + c11 * b1 + c21 * b2) * inv,
-            (c02 * b0 + c12 * b1 + c22 * b2) * inv)
-
-
-@njit(cache=True, error_model='numpy')
-def _phase_cycle(p, th2, th3):
-    """Index of the mesh cycle (tooth hand-over count) at a position."""
-    if p[P_MESH_LINEAR] != 0.0 or p[P_MESH_COSINE] != 0.0:
-        return 0.0          # no hand-over discontinuity
-    return math.floor((0.5 * (th2 + p[P_ZG] * th3) + p[P_PHASE0]) / (2.0 * math.pi))
-
-
-@njit(cache=True, error_model='numpy')
-def _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2, c_a, gdt):
-    """Newmark relations: a = (u - u*) / (beta dt^2), v = v* + gamma dt a."""
-    a0 = c_a * (x0 - us0)
-    a1 = c_a * (x1 - us1)
-    a2 = c_a * (x2 - us2)
-    return a0, a1, a2, vs0 + gdt * a0, vs1 + gdt * a1, vs2 + gdt * a2
-
-
-@njit(cache=True, error_model='numpy', inline='always')
-def _newmark_start(p, u0, v0, a0, dt):
-    """Set-up of one Newmark step from (u0, v0, a0) (3-tuples), shared by both Newton kernels:
-    c_a = 1/(beta dt^2), c_v = gamma/(beta dt), gamma dt, the known parts u*, v* of
-    a = c_a (u - u*), v = v* + gamma dt a, and the constant-acceleration predictor of u."""
-    beta, gamma = p[P_BETA], p[P_GAMMA]
-    c_a = 1.0 / (beta * dt * dt)
-    c_v = gamma / (beta * dt)
-    h2 = dt * dt * (0.5 - beta)
-    us = (u0[0] + dt * v0[0] + h2 * a0[0], u0[1] + dt * v0[1] + h2 * a0[1],
-          u0[2] + dt * v0[2] + h2 * a0[2])
-    g1 = dt * (1.0 - gamma)
-    vs = (v0[0] + g1 * a0[0], v0[1] + g1 * a0[1], v0[2] + g1 * a0[2])
-    x = (u0[0] + dt * v0[0] + 0.5 * dt * dt * a0[0], u0[1] + dt * v0[1] + 0.5 * dt * dt * a0[1],
-         u0[2] + dt * v0[2] + 0.5 * dt * dt * a0[2])
-    return c_a, c_v, gamma * dt, us, vs, x
-
-
-@njit(cache=True, error_model='numpy', inline='always')
-def _residual_jacobian(p, C, c_a, c_v, x0, x1, x2, w0, w1, w2, a_0, a_1, a_2, th1dot, f,
-                       g20, g21, g30, g31):
-    """Newton residual R = M a + C (v - r theta1') - Q, its Jacobian
-    M c_a + (C - dQ/dv) c_v - dQ/du (dQ/dv of the mesh given as g20 = dQ2/dv2, g21 = dQ2/dv3,
-    g30 = dQ3/dv2, g31 = dQ3/dv3) and the residual's norm as an acceleration error:
-    |R_i| / M_ii against atol + rtol |a_i| with a round-off floor of a few ulps of u_i seen
-    through the Jacobian (a massless degree of freedom, J_4 = 0 without flywheel, is
-    algebraic: its residual is scaled by j22 beta dt^2, the same acceleration-error measure).
-    Returns (finite, R0, R1, R2, j00, ..., j22, r_norm); finite False (r_norm 0) if R is
-    not finite."""
-    m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
-    r3 = p[P_OUTPUT_PER_INPUT]
-    Kg, cout = p[P_KG], p[P_COUT]
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = C
-    rel0 = w0 - th1dot
-    rel1 = w1 - r3 * th1dot
-    rel2 = w2 - r3 * th1dot
-    R0 = m0 * a_0 + c00 * rel0 + c01 * rel1 + c02 * rel2 - f[0]
-    R1 = m1 * a_1 + c10 * rel0 + c11 * rel1 + c12 * rel2 - f[1]
-    R2 = m2 * a_2 + c20 * rel0 + c21 * rel1 + c22 * rel2 - f[2]
-    j00 = m0 * c_a + (c00 - g20) * c_v - f[3]
-    j01 = (c01 - g21) * c_v - f[4]
-    j02 = c02 * c_v
-    j10 = (c10 - g30) * c_v - f[5]
-    j11 = m1 * c_a + (c11 - g31) * c_v - f[6]
-    j12 = c12 * c_v - Kg
-    j20 = c20 * c_v
-    j21 = c21 * c_v - Kg
-    j22 = m2 * c_a + (c22 + cout) * c_v + Kg
-    if not (math.isfinite(R0) and math.isfinite(R1) and math.isfinite(R2)):
-        return False, R0, R1, R2, j00, j01, j02, j10, j11, j12, j20, j21, j22, 0.0
-    rtol, atol = p[P_RTOL], p[P_ATOL]
-    t0 = m0 * (atol + rtol * abs(a_0)) + 8.0 * _EPS * abs(x0) * abs(j00)
-    t1 = m1 * (atol + rtol * abs(a_1)) + 8.0 * _EPS * abs(x1) * abs(j11)
-    m2t = m2 if m2 > 0.0 else j22 / c_a
-    t2 = m2t * (atol + rtol * abs(a_2)) + 8.0 * _EPS * abs(x2) * abs(j22)
-    r_norm = max(abs(R0) / t0, abs(R1) / t1, abs(R2) / t2)
-    return True, R0, R1, R2, j00, j01, j02, j10, j11, j12, j20, j21, j22, r_norm
-
-
-@njit(cache=True, error_model='numpy')
-def _contact_region(gap, q):
-    """+1 on the drive flank (q > gap), -1 on the coast flank, 0 inside the play."""
-    if q > gap:
-        return 1
-    if q < -gap:
-        return -1
-    return 0
-
-
-@njit(cache=True, error_model='numpy')
-def _in_play(p, u):
-    """Inside the mesh clearance (no tooth force, no friction): never without play."""
-    return abs(mesh_approach(p, u[0], u[1])) < p[P_GAP_HALF]
-
-
-@njit(cache=True, error_model='numpy')
-def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
+def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since, da):
     """One Newmark step from (u0, v0, a0) (3-tuples).  Returns
     (ok, u, v, a, rho, since, n_solves, n_evals, verified)."""
     maxit = int(p[P_MAXIT])
@@ -209,7 +104,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
     friction_on = p[P_FRIC_MODEL] != 0.0
     gap = p[P_GAP_HALF]
     c_a, c_v, gdt, (us0, us1, us2), (vs0, vs1, vs2), (x0, x1, x2) = _newmark_start(
-        p, u0, v0, a0, dt)
+        p, u0, v0, a0, dt, da)
     vs_start = k_vs2 * v0[0] + k_vs3 * v0[1]
     q_start = mesh_approach(p, u0[0], u0[1])
     cycle_start = _phase_cycle(p, u0[0], u0[1])
@@ -233,7 +128,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
         if n_solves == 0:
             r0 = r_norm
         elif r_norm <= 1.0:
-            rho = (r_norm / r0 if r0 > 0.0 else 0.0) if n_solves == 1 else 1.0
+            rho = ((r_norm / r0 if r0 > 0.0 else 0.0) if n_solves == 1 else 1.0, rho[1])
             return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), rho, 0.0,
                     n_solves, n_evals, True)
         if n_solves > 0 and r_norm > r_prev and alpha > 1.0 / 64.0:
@@ -264,7 +159,7 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
         r_prev = r_norm
         alpha = 1.0
         n_solves += 1
-        if n_solves == 1 and since < VERIFY_EVERY and rho * r0 <= 0.25:
+        if n_solves == 1 and since < VERIFY_EVERY and rho[0] * r0 <= 0.25:
             # early exit without a second force evaluation if the step is smooth
             a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
                                                      c_a, gdt)
@@ -280,181 +175,20 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since):
                     and _phase_cycle(p, x0, x1) == cycle_start):
                 return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), rho, since + 1.0,
                         n_solves, n_evals, False)
-    return (False, (x0, x1, x2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 1.0, since, n_solves,
-            n_evals, False)
+    return (False, (x0, x1, x2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, rho[1]), since,
+            n_solves, n_evals, False)
 
 
 @njit(cache=True, error_model='numpy')
-def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0):
-    """One Newmark step with the set-valued friction law in a fixed mode.
-
-    mode 0, stick: the sliding speed at the end of the step is zero (a linear constraint on
-    u) and mu_eff = lambda is an unknown solved with u in the same Newton iteration.  After a
-    converged stick step the acceleration is replaced by the one consistent with the stuck
-    contact (k . a = 0, with the multiplier lambda' that holds it): the trapezoidal rule
-    would otherwise make the constrained acceleration alternate in sign from step to step,
-    and lambda' is the force the cone test needs.
-    mode +1/-1, slip in that direction: W_f = mode mu(mode v_s) |W_n| (mu_eff = sgn(q) mode
-    mu), Eq. 18 with its cusp at v = 0 rounded below friction.cusp_velocity.
-    Returns (ok, u, v, a, mu_eff, n_solves, n_evals, da/dmu of theta2, theta3 (stick));
-    ok False also when the slip hypothesis cannot hold (the speed would change sign)."""
-    m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
-    r3 = p[P_OUTPUT_PER_INPUT]
-    maxit = int(p[P_MAXIT])
-    k2, k3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
-    c00, c01, c02, c10, c11, c12, c20, c21, c22 = C
-    c_a, c_v, gdt, (us0, us1, us2), (vs0, vs1, vs2), (x0, x1, x2) = _newmark_start(
-        p, u0, v0, a0, dt)
-    stick = mode == 0
-    e = lam0 if stick else 0.0
-    n_solves = 0
-    n_evals = 0
-    alpha = 1.0
-    r_prev = 0.0
-    d0 = d1 = d2 = de = 0.0
-    p0 = p1 = p2 = pe = 0.0
-    mu = 0.0
-    while True:
-        a_0, a_1, a_2, w0, w1, w2 = _newmark_av(x0, x1, x2, us0, us1, us2, vs0, vs1, vs2,
-                                                 c_a, gdt)
-        sq = 1.0 if mesh_approach(p, x0, x1) >= 0.0 else -1.0
-        v_s = k2 * w0 + k3 * w1
-        if stick:
-            mu, dmu_dv = e, 0.0
-        else:
-            mag, dmag = slip_coefficient(p, mode * v_s)
-            mu, dmu_dv = sq * mode * mag, sq * dmag
-        f = mesh_forces_mu(p, x0, x1, x2, w2, th1, mu)
-        n_evals += 1
-        # dQ/dv through mu(v_s)
-        (finite, R0, R1, R2, j00, j01, j02, j10, j11, j12, j20, j21, j22,
-         r_norm) = _residual_jacobian(p, C, c_a, c_v, x0, x1, x2, w0, w1, w2, a_0, a_1, a_2,
-                                      th1dot, f, f[7] * dmu_dv * k2, f[7] * dmu_dv * k3,
-                                      f[8] * dmu_dv * k2, f[8] * dmu_dv * k3)
-        if not finite:
-            break
-        if n_solves > 0 and r_norm <= 1.0:
-            if stick:
-                rel0 = w0 - th1dot
-                rel1 = w1 - r3 * th1dot
-                rel2 = w2 - r3 * th1dot
-                # acceleration consistent with the stuck contact and its multiplier
-                af0 = (f[0] - c00 * rel0 - c01 * rel1 - c02 * rel2) / m0
-                af1 = (f[1] - c10 * rel0 - c11 * rel1 - c12 * rel2) / m1
-                s0, s1 = f[7] / m0, f[8] / m1
-                den = k2 * s0 + k3 * s1
-                if den == 0.0 or not math.isfinite(den):
-                    break
-                delta = -(k2 * af0 + k3 * af1) / den
-                mu = e + delta
-                a_0 = af0 + s0 * delta
-                a_1 = af1 + s1 * delta
-                if m2 > 0.0:
-                    a_2 = (f[2] - c20 * rel0 - c21 * rel1 - c22 * rel2) / m2
-                return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), mu, n_solves,
-                        n_evals, s0, s1)
-            return (True, (x0, x1, x2), (w0, w1, w2), (a_0, a_1, a_2), mu, n_solves, n_evals,
-                    0.0, 0.0)
-        if n_solves > 0 and r_norm > r_prev and alpha > 1.0 / 64.0:
-            alpha *= 0.5            # damped Newton: backtrack along the last update
-            x0 = p0 + alpha * d0
-            x1 = p1 + alpha * d1
-            x2 = p2 + alpha * d2
-            e = pe + alpha * de
-            continue
-        if n_solves >= maxit:
-            break
-        ok, d0, d1, d2 = _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, -R0, -R1, -R2)
-        if not ok:
-            break
-        de = 0.0
-        if stick:
-            # J d - q_mu de = -R,  v_s(u + d) = 0:  d = y1 + y2 de
-            ok, y0, y1, y2 = _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22,
-                                     f[7], f[8], 0.0)
-            den = k2 * y0 + k3 * y1
-            if not ok or den == 0.0:
-                break
-            de = (-v_s / c_v - k2 * d0 - k3 * d1) / den
-            d0 += y0 * de
-            d1 += y1 * de
-            d2 += y2 * de
-        p0, p1, p2, pe = x0, x1, x2, e
-        x0 += d0
-        x1 += d1
-        x2 += d2
-        e += de
-        r_prev = r_norm
-        alpha = 1.0
-        n_solves += 1
-    return (False, (x0, x1, x2), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), mu, n_solves, n_evals,
-            0.0, 0.0)
-
-
-@njit(cache=True, error_model='numpy')
-def _step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0):
-    """One step with exact stick-slip: the set-valued law W_f in mu(|v_s|) |W_n| Sgn(v_s)
-    resolved by trials (as a return mapping): a slipping contact first tries to keep
-    slipping; if its sliding speed would reverse, or the contact was stuck, it tries to
-    stick, accepted when the holding force fits inside the cone |W_f| <= mu(0) |W_n|;
-    otherwise it slips in the direction of the force the cone cannot hold (then the other
-    one).  Returns (ok, u, v, a, n_solves, n_evals, mode, mu_eff)."""
-    mu_s = p[P_MU_STATIC] * (1.0 + 1e-12)
-    k2, k3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
-    ns = 0
-    ne = 0
-    if mode0 != 0:
-        ok, u, v, a, mu, n1, e1, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode0,
-                                                  lam0)
-        ns += n1
-        ne += e1
-        if ok and (mode0 * (k2 * v[0] + k3 * v[1]) >= 0.0 or _in_play(p, u)):
-            return True, u, v, a, ns, ne, mode0, mu     # (in the play: no friction to slip)
-    ok_st, u_st, v_st, a_st, lam, n1, e1, s0, s1 = _sv_trial(p, C, u0, v0, a0, th1, th1dot,
-                                                             dt, 0, lam0)
-    ns += n1
-    ne += e1
-    if ok_st and abs(lam) <= mu_s:
-        return True, u_st, v_st, a_st, ns, ne, 0, lam
-    if ok_st:
-        sq = 1.0 if mesh_approach(p, u_st[0], u_st[1]) >= 0.0 else -1.0
-        s = 1 if lam * sq > 0.0 else -1
-    else:
-        # no stick solution (no normal force to hold it): slip the way the drive moves
-        vs_pred = k2 * (v0[0] + dt * a0[0]) + k3 * (v0[1] + dt * a0[1])
-        s = 1 if vs_pred >= 0.0 else -1
-    for s_try in (s, -s):
-        if s_try == mode0:
-            continue            # tried first
-        ok, u, v, a, mu, n1, e1, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, s_try,
-                                                  lam0)
-        ns += n1
-        ne += e1
-        if ok and (s_try * (k2 * v[0] + k3 * v[1]) >= 0.0 or _in_play(p, u)):
-            return True, u, v, a, ns, ne, s_try, mu
-    if ok_st:
-        # No mode is consistent over the whole step: the trapezoidal rule carries the old
-        # friction in a_n, so a contact that stops inside the step reverses in both slip
-        # trials while the cone cannot hold it.  The step ends stopped (v_s = 0) with the
-        # friction at the edge of the cone and the acceleration that friction leaves: the
-        # next step starts from rest and slips (or sticks) without the old memory.
-        lam_edge = mu_s if lam > 0.0 else -mu_s
-        dl = lam_edge - lam
-        a_edge = (a_st[0] + s0 * dl, a_st[1] + s1 * dl, a_st[2])
-        return True, u_st, v_st, a_edge, ns, ne, 0, lam_edge
-    return False, u0, v0, a0, ns, ne, mode0, lam0
-
-
-@njit(cache=True, error_model='numpy')
-def _step(p, Ct, u0, v0, a0, th1, th1dot, dt, rho, since, mode, mu):
+def _step(p, Ct, u0, v0, a0, th1, th1dot, dt, rho, since, mode, mu, da):
     """One step with the configured friction law: (ok, u, v, a, rho, since, n_solves,
     n_evals, verified, mode, mu_eff)."""
     if p[P_FRIC_SET_VALUED] != 0.0:
-        ok, u, v, a, ns, ne, mode, mu = _step_set_valued(p, Ct, u0, v0, a0, th1, th1dot, dt,
-                                                          mode, mu)
-        return ok, u, v, a, rho, since, ns, ne, ok, mode, mu
+        ok, u, v, a, ns, ne, mode, mu, rho, since, ver = step_set_valued(
+            p, Ct, u0, v0, a0, th1, th1dot, dt, mode, mu, rho, since, da)
+        return ok, u, v, a, rho, since, ns, ne, ver, mode, mu
     ok, u, v, a, rho, since, ns, ne, ver = _newmark_step(p, Ct, u0, v0, a0, th1, th1dot, dt,
-                                                         rho, since)
+                                                         rho, since, da)
     return ok, u, v, a, rho, since, ns, ne, ver, mode, mu
 
 
@@ -504,7 +238,7 @@ def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, si
         f = min(max(f, 1e-6), 1.0 - 1e-6)
         ok, u1, v1, a1, rho1, since1, n1, e1, _, mode1, mu1 = _step(
             p, Ct, u0, v0, a0, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a), f * dt,
-            rho, since, mode, mu)
+            rho, since, mode, mu, ZERO3)
         ns += n1
         ne += e1
         if not ok:
@@ -521,7 +255,7 @@ def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, si
     if not found:
         return False, u0, v0, a0, rho, since, mode, mu, ns, ne
     ok, u2, v2, a2, rho2, since2, n2, e2, _, mode2, mu2 = _step(
-        p, Cb, u1, v1, a1, th_b, td_b, (1.0 - f) * dt, rho1, since1, mode1, mu1)
+        p, Cb, u1, v1, a1, th_b, td_b, (1.0 - f) * dt, rho1, since1, mode1, mu1, ZERO3)
     ns += n2
     ne += e2
     if not ok:
@@ -557,8 +291,9 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
     uu = (u[0], u[1], u[2])
     vv = (v[0], v[1], v[2])
     aa = (a[0], a[1], a[2])
-    rho, since = ctl[C_RHO], ctl[C_SINCE]
+    rho, since = (ctl[C_RHO], ctl[C_RHO2]), ctl[C_SINCE]
     mode, mu = int(ctl[C_MODE]), ctl[C_MU]
+    da = (ctl[C_DA], ctl[C_DA + 1], ctl[C_DA + 2])
     for i in range(3):
         if not (math.isfinite(u[i]) and math.isfinite(v[i]) and math.isfinite(a[i])):
             return 0, STATUS_NONFINITE
@@ -584,7 +319,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
         if gap > 0.0 and abs(mesh_approach(p, uu[0], uu[1])) < gap:
             Cs = Co                              # the step starts inside the play
         ok, un, vn, an, rho, since, ns, ne, ver, mode_n, mu_n = _step(
-            p, Cs, uu, vv, aa, th_b, td_b, dt, rho, since, mode, mu)
+            p, Cs, uu, vv, aa, th_b, td_b, dt, rho, since, mode, mu, da)
         n_solves += ns
         n_evals += ne
         n_verified += ver
@@ -603,7 +338,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                     p[P_TLOAD] = ld_a + f * (ld_b - ld_a)
                 ok, us, vs, as_, rho, since, ns, ne, ver, mode_n, mu_n = _step(
                     p, Cs, us, vs, as_, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a),
-                    h, rho, since, mode_n, mu_n)
+                    h, rho, since, mode_n, mu_n, ZERO3)
                 n_solves += ns
                 n_evals += ne
                 n_verified += ver
@@ -612,6 +347,7 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 stats[S_SUBSTEPS] += 1
             un, vn, an = us, vs, as_
             level += 1
+        whole = level == 1
         if varying:
             p[P_TLOAD] = ld_b
         if not ok:
@@ -634,7 +370,12 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 if ok_e:
                     un, vn, an, rho, since, mode_n, mu_n = ue, ve, ae, rho_e, since_e, \
                         mode_e, mu_e
+                    whole = False
                     stats[S_CONTACT_EVENTS] += 1
+        # a whole step (not subdivided, not split at a contact event) extrapolates the
+        # acceleration into the next step's predictor; not with play, where the contact
+        # events make the acceleration jump
+        da = (an[0] - aa[0], an[1] - aa[1], an[2] - aa[2]) if whole and gap == 0.0 else ZERO3
         uu, vv, aa = un, vn, an
         mode, mu = mode_n, mu_n
         done += 1
@@ -649,10 +390,11 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
         u[i] = uu[i]
         v[i] = vv[i]
         a[i] = aa[i]
-    ctl[C_RHO] = rho
+    ctl[C_RHO], ctl[C_RHO2] = rho
     ctl[C_SINCE] = since
     ctl[C_MODE] = mode
     ctl[C_MU] = mu
+    ctl[C_DA], ctl[C_DA + 1], ctl[C_DA + 2] = da
     stats[S_STEPS] += done
     stats[S_SOLVES] += n_solves
     stats[S_EVALS] += n_evals

@@ -48,6 +48,7 @@ from numpy.typing import ArrayLike
 
 from ..derived import Derived, derive
 from ..schema import MAX_ERROR_ORDERS, Parameters
+from .periodic import harmonic_sum, table_lookup, with_table
 
 # ---- packed parameter vector layout (compile-time constants for numba) -------------------
 P_JW, P_JG, P_J4 = 0, 1, 2
@@ -75,7 +76,10 @@ P_GAP_HALF, P_INIT_FLANK = 51, 52     # half the play along q, r_g b / 2 [m]; +1
 P_PE_NW, P_PE_NG = 53, 54
 P_PE_WORM = 55
 P_PE_GEAR = P_PE_WORM + 2 * MAX_ERROR_ORDERS
-N_PARAMS = P_PE_GEAR + 2 * MAX_ERROR_ORDERS
+# 1: the cosine mapping's tooth compliance tabulated at the vector's end (periodic.with_table:
+# 1024 intervals, kept within 1e-12 of Eq. 7, its slope (Jacobian only) within 1e-9)
+P_TEETH_TABLE = P_PE_GEAR + 2 * MAX_ERROR_ORDERS
+N_PARAMS = P_TEETH_TABLE + 1
 
 # layout of the flat output of mesh_eval: Q (3), dQ/du (3x3 row-major), dQ/dv (3x3), aux
 O_Q, O_DQDU, O_DQDV, O_AUX = 0, 3, 12, 21
@@ -177,7 +181,31 @@ def pack_parameters(cfg: Parameters, derived: Derived | None = None) -> np.ndarr
     p[P_JW_STEP] = p[P_JW]
     if integ.worm_frequency_matching:
         p[P_JW_STEP] = p[P_JW] * worm_inertia_factor(p, integ.time_step)
-    return p
+    return _with_teeth_table(p)
+
+
+@njit(cache=True, error_model='numpy')
+def _teeth_exact(p, phase):
+    """Eq. 7's 1/c_w k_w + 1/c_g k_g and its slope in the phase (Eqs. 16-17) at phases."""
+    val, slope = np.empty(phase.shape[0]), np.empty(phase.shape[0])
+    for i in range(phase.shape[0]):
+        cw, cg, dcw, dcg = tooth_stiffness(p, 2.0 * (phase[i] - p[P_PHASE0]), 0.0)
+        val[i] = 1.0 / cw + 1.0 / cg
+        slope[i] = -dcw / (cw * cw) - dcg / (cg * cg)
+    return val, slope
+
+
+def _with_teeth_table(p: np.ndarray) -> np.ndarray:
+    """``p`` with Eq. 7's tooth compliance 1/c_w k_w + 1/c_g k_g of the cosine mapping
+    tabulated over the mesh cycle (once per parameter set: the force evaluation then
+    interpolates instead of two exponentials and a sine/cosine pair), if the table is
+    within its tolerances of Eqs. 16-17 (otherwise they are evaluated directly)."""
+    if p[P_MESH_LINEAR] != 0.0 or p[P_MESH_COSINE] == 0.0:
+        return p
+    q = with_table(p, lambda phase: _teeth_exact(p, phase), 1024, 1e-12, 1e-9)
+    if q is not None:
+        q[P_TEETH_TABLE] = 1.0
+    return p if q is None else q
 
 
 def worm_frequency(p: np.ndarray) -> float:
@@ -311,29 +339,12 @@ class DriveModel:
 
 
 # ---- the periodic transmission error and the mesh approach (Eq. 8 + r_g e) -----------------
-@njit(cache=True, error_model='numpy')
-def _harmonic_sum(p, at, n, theta):
-    """(f, f', f'') of f = sum_k s_k sin(k theta) + c_k cos(k theta), k = 1..n, the pairs
-    (s_k, c_k) from p[at]; sin/cos of k theta by the angle-addition recurrence."""
-    s1, c1 = math.sin(theta), math.cos(theta)
-    sk, ck = s1, c1
-    f = df = d2f = 0.0
-    for j in range(n):
-        k = j + 1.0
-        a, b = p[at + 2 * j], p[at + 2 * j + 1]
-        f += a * sk + b * ck
-        df += k * (a * ck - b * sk)
-        d2f -= k * k * (a * sk + b * ck)
-        sk, ck = sk * c1 + ck * s1, ck * c1 - sk * s1
-    return f, df, d2f
-
-
 def has_periodic_error(p: np.ndarray) -> bool:
     """The model has a periodic transmission error (``mesh.*_error_harmonics``)."""
     return bool(p[P_PE_NW] > 0.0 or p[P_PE_NG] > 0.0)
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def transmission_error(p, th2, th3):
     """(e, de/dth2, de/dth3, d2e/dth2^2, d2e/dth3^2) of the periodic transmission error
     e = sum_k s_k sin k th2 + c_k cos k th2 + sum_m S_m sin m th3 + C_m cos m th3 [rad at the
@@ -341,14 +352,14 @@ def transmission_error(p, th2, th3):
     e = e2 = e22 = e3 = e33 = 0.0
     nw, ng = int(p[P_PE_NW]), int(p[P_PE_NG])
     if nw > 0:
-        e, e2, e22 = _harmonic_sum(p, P_PE_WORM, nw, th2)
+        e, e2, e22 = harmonic_sum(p, P_PE_WORM, nw, th2)
     if ng > 0:
-        f, e3, e33 = _harmonic_sum(p, P_PE_GEAR, ng, th3)
+        f, e3, e33 = harmonic_sum(p, P_PE_GEAR, ng, th3)
         e += f
     return e, e2, e3, e22, e33
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def mesh_approach(p, th2, th3):
     """q = l_w th2 - r_g th3 + r_g e(th2, th3): the mesh approach along Y (Eq. 8 with the
     periodic transmission error; exactly Eq. 8 without harmonics)."""
@@ -359,7 +370,7 @@ def mesh_approach(p, th2, th3):
 
 
 # ---- Eqs. 16-17: tooth stiffness over the mesh cycle ----------------------------------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def tooth_stiffness(p, theta2, theta3):
     """Return (c_w k_w, c_g k_g, d(c_w k_w)/d(phase), d(c_g k_g)/d(phase)); phase in rad."""
     if p[P_MESH_LINEAR] != 0.0:
@@ -382,7 +393,7 @@ def tooth_stiffness(p, theta2, theta3):
 
 
 # ---- Eq. 18: friction coefficient and its direction ---------------------------------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def slip_coefficient(p, v):
     """Friction coefficient of the set-valued law while slipping at speed v = |v_s| (v < 0:
     the slip hypothesis is violated; mu(0), slope 0), and d mu / d v.  Eq. 18 with the
@@ -449,7 +460,7 @@ def friction_coefficient(p, v_s, q):
 
 
 # ---- the mesh clearance: penetration of the flank in contact --------------------------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def penetration(p, q):
     """(q_e, dq_e/dq): the approach q = l_w theta2 - r_g theta3 less half the play h =
     r_g b / 2 on the flank in contact (q - h for q > h, q + h for q < -h), 0 inside the
@@ -507,7 +518,7 @@ def play_rest_shift(p: np.ndarray) -> tuple[np.ndarray, bool]:
 
 
 # ---- Eqs. 7 and 10: compliance of the mesh along the contact normal -----------------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def mesh_compliance(p, th2, th3, mu):
     """KGWS of Eq. 10 at a mesh position and signed friction coefficient mu:
     (KGWS, dKGWS/dphase, dKGWS/dmu, c_w k_w, c_g k_g).  The friction terms are kept only
@@ -521,6 +532,9 @@ def mesh_compliance(p, th2, th3, mu):
     if p[P_MESH_LINEAR] != 0.0:
         teeth, dK_dphase = p[P_LIN_COMPLIANCE], 0.0
         cwkw, cgkg = p[P_CWKW_LIN], p[P_CGKG_LIN]
+    elif p[P_TEETH_TABLE] != 0.0:
+        teeth, dK_dphase = table_lookup(p, 0.5 * (th2 + p[P_ZG] * th3) + p[P_PHASE0])
+        cwkw, cgkg, _, _ = tooth_stiffness(p, th2, th3)     # (unused in the hot path)
     else:
         cwkw, cgkg, dcw, dcg = tooth_stiffness(p, th2, th3)
         icw, icg = 1.0 / cwkw, 1.0 / cgkg
@@ -531,7 +545,7 @@ def mesh_compliance(p, th2, th3, mu):
 
 
 # ---- Eqs. 4-15: generalized forces with their analytic Jacobians ---------------------------
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', inline='always')
 def mesh_forces_mu(p, th2, th3, th4, w4, theta1, mu):
     """Generalized forces of Eqs. 11, 13 and 6 for a given signed friction coefficient mu
     (W_f = mu W_n): the slip law's value or, in stick, the multiplier the integrator solves

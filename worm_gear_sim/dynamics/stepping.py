@@ -25,9 +25,11 @@ from numpy.typing import ArrayLike
 from ..derived import Derived
 from ..schema import ANGLE_LIMIT, LOAD_LIMIT, Parameters
 from .integrator import (
+    C_DA,
     C_MODE,
     C_MU,
     C_RHO,
+    C_RHO2,
     C_SINCE,
     N_CTL,
     N_STATS,
@@ -206,7 +208,7 @@ class Stepper:
         self._cmd_t = self._t0
         self._cmd_value = theta1
         self._ctl[:] = 0.0
-        self._ctl[C_RHO] = 1.0
+        self._ctl[C_RHO] = self._ctl[C_RHO2] = 1.0
         self._ctl[C_MODE] = self._slip_mode()
 
     def _set_model(self, model: DriveModel, C: np.ndarray | None = None) -> None:
@@ -238,7 +240,8 @@ class Stepper:
             raise ValueError('the new parameters give a non-finite acceleration')
         self._set_model(model, C)
         self._a = a
-        self._ctl[C_RHO], self._ctl[C_SINCE] = 1.0, 0.0
+        self._ctl[C_RHO], self._ctl[C_RHO2], self._ctl[C_SINCE] = 1.0, 1.0, 0.0
+        self._ctl[C_DA:C_DA + 3] = 0.0       # no extrapolation across the change
 
     def _slip_mode(self) -> float:
         """Friction mode of the set-valued law at the current state: sign of the sliding
@@ -293,15 +296,13 @@ class Stepper:
         (theta1..theta4 [rad]), velocity (theta1_dot, omega2..omega4 [rad/s]) and effort
         (:meth:`joint_torques` [N m]); one compiled force evaluation into reused buffers
         (the real-time path publishes this for every sample)."""
-        buf = self.__dict__.get('_force_buf')
-        if buf is None:
-            buf = self._force_buf = (np.zeros(3), np.zeros((3, 3)), np.zeros((3, 3)),
-                                     np.zeros(N_AUX))
+        aux = self.__dict__.get('_aux_buf')
+        if aux is None:
+            aux = self._aux_buf = np.zeros(N_AUX)
         u, v, th1 = self._u, self._v, self._theta1
-        generalized_forces(self.p, u, v, th1, buf[0], buf[1], buf[2], buf[3])
-        if self.model.friction_is_set_valued:    # the friction the integrator solved for
-            record_aux(self.p, u, v, th1, self._ctl[C_MU], buf[3])
-        aux = buf[3]
+        # the mesh quantities as the integrator records them (with the set-valued law the
+        # friction it solved for): one compiled call
+        record_aux(self.p, u, v, th1, self._ctl[C_MU], aux)
         g, d = self.config.geometry, self.derived
         u2, u3, u4 = float(u[0]), float(u[1]), float(u[2])
         return ((th1, u2, u3, u4), (self._theta1_dot, float(v[0]), float(v[1]), float(v[2])),
@@ -406,6 +407,8 @@ class Stepper:
     def _trim_load(self) -> None:
         """Drop the load samples the simulator has passed (keep the one before now)."""
         lt = self._load_t
+        if lt.size < 2:
+            return
         i = int(np.searchsorted(lt, self.t, side='right')) - 1
         if i > 0:
             self._load_t, self._load_v = lt[i:], self._load_v[i:]
