@@ -22,8 +22,9 @@ linear in them, with the model's sensitivities of theta4 at a fixed command as r
 
 The estimator works on y = r + phi^T theta_model (theta_model: the values of the model that
 made the prediction), i.e. on the parameters themselves, so switching the model does not
-disturb it.  Samples within ``FLANK_HOLD_OFF`` of a flank change or of a step applied to
-the model are skipped: while the worm crosses the play, or the prediction settles on the
+disturb it.  Samples within ``FLANK_HOLD_OFF`` of a flank change (by the estimate or by
+the model in use), where the two flanks differ, or after a step applied to the model are
+skipped: while the worm crosses the play, or the prediction settles on the
 changed model, the residual is a transient the linear picture does not hold.  An innovation
 beyond ``CLIP_SIGMAS`` times its running RMS is clipped there (a Huber update): one
 transient cannot throw the estimate, a lasting change still gets through.
@@ -74,7 +75,7 @@ __all__ = ['PRIOR_STD', 'FLANK_HOLD_OFF', 'Layout', 'output_compliance',
 LOAD_KEY, DRAG_KEY, PLAY_KEY, WORM_KEY, GEAR_KEY = ADAPTABLE_KEYS
 #: Prior standard deviation of each key's estimate about its start value (per coefficient
 #: for the harmonics): rad at the gear, N m, N m s/rad, rad.
-PRIOR_STD: dict[str, float] = {WORM_KEY: 1e-4, GEAR_KEY: 1e-4, LOAD_KEY: 5.0,
+PRIOR_STD: dict[str, float] = {WORM_KEY: 1e-4, GEAR_KEY: 3e-5, LOAD_KEY: 5.0,
                                DRAG_KEY: 50.0, PLAY_KEY: 1e-3}
 #: Samples this long after a change of the flank in contact are not used [s].
 FLANK_HOLD_OFF = 0.15
@@ -322,7 +323,7 @@ class Adapter:
         self._last_t = math.nan
         self._th4 = self._w4 = self._a4 = 0.0
         self._rates = 0                   # samples since the rates restarted
-        self._flank = 0.0
+        self._flank = self._flank_m = 0.0
         self._flank_t = -math.inf
         self._first_t = math.nan
         self._next_poll = -math.inf
@@ -360,7 +361,16 @@ class Adapter:
         flank = 1.0 if torque > 0.0 else -1.0 if torque < 0.0 else self._flank
         if flank != self._flank:
             self._flank, self._flank_t = flank, t
-        if t - self._flank_t < FLANK_HOLD_OFF or t < self._hold_until:
+        # the flank of the model in use: where it differs, one of the two is wrong and the
+        # residual holds a flank error the linear picture does not have
+        ax = self.applied_x
+        torque_m = self._inertia * a4 + (ax[lay.i_drag] if lay.i_drag >= 0 else
+                                         self._drag0) * w4 + \
+            (ax[lay.i_load] if lay.i_load >= 0 else self._load0)
+        flank_m = 1.0 if torque_m > 0.0 else -1.0 if torque_m < 0.0 else self._flank_m
+        if flank_m != self._flank_m:
+            self._flank_m, self._flank_t = flank_m, max(self._flank_t, t)
+        if flank_m != flank or t - self._flank_t < FLANK_HOLD_OFF or t < self._hold_until:
             self.samples_skipped += 1
             return False
         c_pos, c_neg = self._compliance
