@@ -407,8 +407,8 @@ class AdaptationSettings:
                                 'those of mesh.worm_error_harmonics)', '', 1, MAX_ERROR_ORDERS)
     gear_error_orders: int = _f(1, 'Orders of the per-gear-turn error estimated', '', 1,
                                 MAX_ERROR_ORDERS)
-    memory: float = _f(30.0, 'Time over which a parameter may drift by its prior spread '
-                       '(random-walk process noise)', 's', 0.1, 1e6)
+    memory: float = _f(20.0, 'Time constant over which the estimator forgets (each variance '
+                       'grows by dt / memory, capped at its prior)', 's', 0.1, 1e6)
     window: float = _f(4.0, 'Window of the residual RMS that decides a switch', 's', 0.1,
                        3600.0)
     min_improvement: float = _f(0.1, 'Share by which the adapted set must lower the windowed '
@@ -418,8 +418,10 @@ class AdaptationSettings:
                          'applied step', 'rad', 0.0, 1.0, lo_open=True)
     step_interval: float = _f(0.25, 'Time between applied steps (and switch decisions)', 's',
                               0.01, 60.0)
-    measurement_noise: float = _f(2e-6, 'Encoder noise RMS of theta4 (measurement noise of '
-                                  'the estimator)', 'rad', 0.0, 1.0, lo_open=True)
+    measurement_noise: float = _f(4e-6, 'RMS of what the theta4 residual keeps besides the '
+                                  'adapted keys: encoder noise and steps, model error '
+                                  '(measurement noise of the estimator)', 'rad', 0.0, 1.0,
+                                  lo_open=True)
 
 
 SECTIONS: dict[str, type] = {

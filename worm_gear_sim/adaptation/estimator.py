@@ -17,33 +17,42 @@ linear in them, with the model's sensitivities of theta4 at a fixed command as r
 * load torque T: -C (the static wind-up of the chain at the antenna, C [rad/(N m)] from the
   model's inverse, per sliding direction, averaged over a mesh cycle);
 * drag c: -C omega4 (the wind-up of the drag torque);
-* play b: -f / 2, f = +1 on the drive flank, -1 on the coast flank, the sign of the mesh
-  torque demand (J_g + J_4) alpha4 + c omega4 + T (the estimates' c and T).
+* play b: -f / 2, f = +1 on the drive flank, -1 on the coast flank: the sign of the mesh
+  torque demand tau = (J_g + J_4) alpha4 + c omega4 + T.  The estimate knows tau with its
+  covariance, so f is taken as its mean, erf(tau / (sqrt 2 sigma_tau)), and the unknown
+  sign's share of the play, (1 - f^2) E[b^2] / 4, is added to the measurement noise: at the
+  start (load and drag unknown) the play is a noise, not a wrong regressor; as load and drag
+  settle the flank becomes sure and the play is learnt.  (A hard flank from a wrong start
+  leads the estimate into a wrong basin: play explained as load, drag and harmonics.)
 
 The estimator works on y = r + phi^T theta_model (theta_model: the values of the model that
 made the prediction), i.e. on the parameters themselves, so switching the model does not
-disturb it.  Samples within ``FLANK_HOLD_OFF`` of a flank change (by the estimate or by
-the model in use), where the two flanks differ, or after a step applied to the model are
+disturb it.  Samples within ``FLANK_HOLD_OFF`` of a flank change (past or ahead, by the
+estimate or by the model in use), where the two flanks differ, or after a step applied to the model are
 skipped: while the worm crosses the play, or the prediction settles on the
 changed model, the residual is a transient the linear picture does not hold.  An innovation
-beyond ``CLIP_SIGMAS`` times its running RMS is clipped there (a Huber update): one
-transient cannot throw the estimate, a lasting change still gets through.
+beyond ``HUBER_SIGMAS`` times its predicted standard deviation is down-weighted (Huber's
+weight, the covariance kept consistent): one transient cannot throw the estimate, a lasting
+change still gets through.
 
 **Why a Kalman filter with random-walk parameters, not RLS with a forgetting factor.**  The
-problem is linear in the parameters, so both are the same recursion on a well-excited
+problem is linear in the parameters (but for the flank, whose change the Kalman filter
+also takes as a linear measurement of load and drag, :mod:`.flank_timing`), so both are the same recursion on a well-excited
 record.  They differ where the motion does not excite a direction: a sector scan hardly
 separates the gear's first harmonic cos theta3 (theta3 spans +-5 deg) from the load
 torque, and a load that keeps the teeth on one flank makes the play a constant like the
 load.  With exponential forgetting the covariance of such a direction grows without bound
 (wind-up), and a burst of noise then moves the estimate anywhere.  The Kalman form states
-per parameter how fast it may drift (process noise q_i = sigma_i^2 dt / ``memory``) and a
-prior (sigma_i, :data:`PRIOR_STD`); the covariance of an unexcited direction grows only
-back to the prior (capped), so the estimate stays near its start there instead of
-wandering.  The cost per sample is an n x n update (n <= 2*(8+8)+3), compiled.
+per parameter how it may drift and a prior (sigma_i, :data:`PRIOR_STD`): the process
+noise q_i = P_ii dt / ``memory`` makes each variance forget like RLS with the time constant
+``memory`` (the estimate averages over that long, whatever the size of the regressor), and
+each variance is capped at its prior, so the covariance of an unexcited direction grows
+only back to the prior and the estimate stays near its start there instead of wandering.  The cost per sample is an n x n update (n <= 2*(8+8)+3), compiled.
 
 **When an adapted set is applied** (:meth:`Adapter.poll`, every ``step_interval``): the
-windowed mean square of the linearised residual (exponential window ``window``) is computed
-for the current estimate, the model in use and the nominal (start) set; the estimate
+windowed mean square of the linearised residual (exponential window ``window``), plus the
+error a set would make by crossing the play at the wrong time at the measured flank changes,
+is computed for the current estimate, the model in use and the nominal (start) set; the estimate
 becomes the target only if it lowers the mean square by ``min_improvement`` against the
 model in use and is not worse than the nominal one, after one window of data.  A noise-only
 residual gives no such gain (the in-sample gain of fitting n parameters to N samples of
@@ -56,6 +65,7 @@ sensitivities above), one step per ``step_interval``: no jump in the command.
 
 from __future__ import annotations
 
+import collections
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -68,6 +78,7 @@ from ..dynamics.inverse import inverse_theta1
 from ..dynamics.model import DriveModel, with_load_torque
 from ..params import Config
 from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS
+from .flank_timing import WINDOW, FlankTiming
 
 __all__ = ['PRIOR_STD', 'FLANK_HOLD_OFF', 'Layout', 'output_compliance',
            'Adapter', 'Decision']
@@ -81,12 +92,16 @@ PRIOR_STD: dict[str, float] = {WORM_KEY: 1e-4, GEAR_KEY: 3e-5, LOAD_KEY: 5.0,
 FLANK_HOLD_OFF = 0.15
 #: Time constant of the low-pass on the antenna acceleration (flank decision) [s].
 ACCEL_TIME_CONSTANT = 0.02
-#: Innovations beyond this many running RMS are clipped (a robust, Huber-like update).
-CLIP_SIGMAS = 4.0
-#: Time constant of the running innovation RMS [s].
-SCALE_TIME = 0.1
+#: Innovations beyond this many predicted standard deviations are down-weighted (Huber).
+HUBER_SIGMAS = 4.0
 #: A play or drag estimate below zero by more than this many standard deviations is refused.
 BOUND_SIGMAS = 3.0
+#: Timing uncertainty of a measured flank change [s] and a torque floor [N m]: the noise
+#: of the flank-change measurement is SWITCH_TIME_SD |c alpha4| + SWITCH_TORQUE_SD.
+SWITCH_TIME_SD = 2e-3
+SWITCH_TORQUE_SD = 2e-3
+#: A play smaller than this many measurement noises is not seen in a flank change.
+MIN_PLAY_NOISES = 10.0
 #: A sample gap longer than this restarts the rate estimates [s].
 MAX_GAP = 0.05
 
@@ -205,10 +220,12 @@ def _regressor(phi, i_load, i_drag, i_play, worm0, nw, gear0, ng, th2, th3, w4, 
 
 
 @njit(cache=True)
-def _kalman_step(theta, P, q, p_max, phi, y, r_var, clip):
+def _kalman_step(theta, P, q, p_max, phi, y, r_var, huber):
     """Random walk (P += q, each variance capped at its prior) then the measurement
-    y = phi^T theta + noise(r_var), its innovation clipped to +-clip (Huber); returns the
-    innovation (unclipped)."""
+    y = phi^T theta + noise(r_var).  An innovation beyond ``huber`` times its predicted
+    standard deviation sqrt(phi^T P phi + r_var) is down-weighted (its noise variance
+    inflated by |nu| / huber, Huber's weight): mean and covariance stay consistent.  Returns
+    the normalised innovation nu."""
     n = theta.size
     for i in range(n):
         P[i, i] += q[i]
@@ -219,20 +236,26 @@ def _kalman_step(theta, P, q, p_max, phi, y, r_var, clip):
                 P[i, j] *= s
                 P[j, i] *= s
     Pphi = P @ phi
-    s = r_var
+    pp = 0.0
     innov = y
     for i in range(n):
-        s += phi[i] * Pphi[i]
+        pp += phi[i] * Pphi[i]
         innov -= phi[i] * theta[i]
-    used = min(max(innov, -clip), clip)
+    nu = innov / math.sqrt(pp + r_var)
+    r_eff = r_var
+    if abs(nu) > huber:
+        r_eff = (pp + r_var) * abs(nu) / huber - pp
+        if r_eff < r_var:
+            r_eff = r_var
+    s = pp + r_eff
     for i in range(n):
-        theta[i] += Pphi[i] / s * used
+        theta[i] += Pphi[i] / s * innov
     for i in range(n):
         for j in range(i, n):
             v = P[i, j] - Pphi[i] * Pphi[j] / s
             P[i, j] = v
             P[j, i] = v
-    return innov
+    return nu
 
 
 @njit(cache=True)
@@ -292,6 +315,7 @@ class Adapter:
         self._sc = np.zeros(2)
         self.samples_used = 0
         self.samples_skipped = 0
+        self.flank_times = 0
         self.switches = 0
         self.refusals = 0
         self.last_refusal = ''
@@ -329,7 +353,10 @@ class Adapter:
         self._next_poll = -math.inf
         self._w_max = 0.0
         self._hold_until = -math.inf
-        self._innov_var = 0.0
+        self._timing = FlankTiming()
+        self._switches: collections.deque = collections.deque(maxlen=16)
+        self._rate = 0.0
+        self._play0 = float(model.config.mesh.backlash)
 
     # ---- per sample ------------------------------------------------------------------------
     def update(self, t: float, theta4_meas: float, theta2: float, theta3: float,
@@ -349,6 +376,8 @@ class Adapter:
             g = dt / (ACCEL_TIME_CONSTANT + dt)
             a4 = self._a4 + g * (a_raw - self._a4)
         self._th4, self._w4, self._a4 = theta4_pred, w4, a4
+        if self._rates > 0:
+            self._rate = 1.0 / dt
         self._rates += 1
         if self._rates < 3:
             self.samples_skipped += 1
@@ -368,27 +397,48 @@ class Adapter:
                                          self._drag0) * w4 + \
             (ax[lay.i_load] if lay.i_load >= 0 else self._load0)
         flank_m = 1.0 if torque_m > 0.0 else -1.0 if torque_m < 0.0 else self._flank_m
+        timing = self._timing
+        timing.push(t, theta4_meas - theta4_pred, w4, a4)
         if flank_m != self._flank_m:
+            timing.model_flank_changed(t, self._flank_m, flank_m)
             self._flank_m, self._flank_t = flank_m, max(self._flank_t, t)
-        if flank_m != flank or t - self._flank_t < FLANK_HOLD_OFF or t < self._hold_until:
+        self._flank_time_update(t, drag)
+        # a flank change within the hold-off ahead (the torques' rates: c alpha4)
+        ahead = FLANK_HOLD_OFF * a4
+        soon = torque * (torque + drag * ahead) < 0.0 or \
+            torque_m * (torque_m + (ax[lay.i_drag] if lay.i_drag >= 0 else self._drag0)
+                        * ahead) < 0.0
+        if soon or t - self._flank_t < FLANK_HOLD_OFF or t < self._hold_until:
             self.samples_skipped += 1
             return False
         c_pos, c_neg = self._compliance
         compliance = c_pos if w4 > 0.0 else c_neg if w4 < 0.0 else 0.5 * (c_pos + c_neg)
+        s = self.settings
+        r_var = s.measurement_noise ** 2
+        soft = flank
+        if lay.i_play >= 0:
+            # the flank as the estimate knows it: the mean sign of its torque demand, the
+            # unknown sign's share of the play added to the noise
+            P = self.P
+            var = 0.0
+            if lay.i_load >= 0:
+                var += P[lay.i_load, lay.i_load]
+            if lay.i_drag >= 0:
+                var += w4 * (w4 * P[lay.i_drag, lay.i_drag] + (
+                    2.0 * P[lay.i_load, lay.i_drag] if lay.i_load >= 0 else 0.0))
+            if var > 0.0:
+                soft = math.erf(torque / math.sqrt(2.0 * var))
+                b = th[lay.i_play]
+                r_var += 0.25 * (1.0 - soft * soft) * (b * b + P[lay.i_play, lay.i_play])
         phi = self._phi
         _regressor(phi, lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
-                   lay.gear0, lay.gear_orders, theta2, theta3, w4, flank, compliance)
+                   lay.gear0, lay.gear_orders, theta2, theta3, w4, soft, compliance)
+        # y = r + the model in use's own sensitivities (its play on its own flank)
         y = theta4_meas - theta4_pred + float(phi @ self.applied_x)
-        s = self.settings
-        q = self._std ** 2 * (dt / s.memory)
-        scale = math.sqrt(self._innov_var) if self._innov_var > 0.0 else math.inf
-        clip = CLIP_SIGMAS * max(scale, s.measurement_noise)
-        innov = _kalman_step(th, self.P, q, self._std ** 2, phi, y, s.measurement_noise ** 2,
-                             clip)
-        v = min(innov * innov, clip * clip)
-        g = 1.0 - math.exp(-dt / SCALE_TIME)
-        self._innov_var = v if self._innov_var == 0.0 else self._innov_var + g * (
-            v - self._innov_var)
+        if lay.i_play >= 0:
+            y += (0.5 * soft - 0.5 * flank_m) * self.applied_x[lay.i_play]
+        q = np.diag(self.P) * (dt / s.memory)     # forgetting per variance (see the doc)
+        _kalman_step(th, self.P, q, self._std ** 2, phi, y, r_var, HUBER_SIGMAS)
         _window_step(self._S, self._b, self._sc, phi, y, math.exp(-dt / s.window))
         self._w_max = max(abs(w4), self._w_max * math.exp(-dt / s.window))
         if math.isnan(self._first_t):
@@ -396,14 +446,67 @@ class Adapter:
         self.samples_used += 1
         return True
 
+    def _flank_time_update(self, t: float, drag: float) -> None:
+        """The real drive's flank change as a measurement of (T, c) (:mod:`.flank_timing`):
+        T + c omega4(t_p) = -J alpha4(t_p), its noise a timing error of SWITCH_TIME_SD."""
+        lay = self.layout
+        if lay.i_load < 0 and lay.i_drag < 0:
+            return
+        play = self.theta[lay.i_play] if lay.i_play >= 0 else self._play0
+        got = self._timing.ready(t, play, MIN_PLAY_NOISES * self.settings.measurement_noise)
+        if got is None:
+            return
+        t_p, w_p, a_p = got
+        self._switches.append((t_p, w_p, a_p))
+        phi = np.zeros(lay.n)
+        if lay.i_load >= 0:
+            phi[lay.i_load] = 1.0
+        if lay.i_drag >= 0:
+            phi[lay.i_drag] = w_p
+        y = -self._inertia * a_p
+        if lay.i_load < 0:
+            y -= self._load0
+        if lay.i_drag < 0:
+            y -= self._drag0 * w_p
+        sd = SWITCH_TIME_SD * abs(drag * a_p) + SWITCH_TORQUE_SD
+        _kalman_step(self.theta, self.P, np.zeros(lay.n), self._std ** 2, phi, y, sd * sd,
+                     HUBER_SIGMAS)
+        self.flank_times += 1
+
     # ---- switching -------------------------------------------------------------------------
     def window_rms(self) -> dict[str, float]:
-        """Windowed RMS of the linearised residual [rad] for the estimate, the model in use
-        and the nominal set."""
+        """Windowed RMS of the residual [rad] for the estimate, the model in use and the
+        nominal set: the linearised residual of the samples used, plus the error of a
+        mistimed crossing of the play at each measured flank change in the window."""
         S, b, sc = self._S, self._b, self._sc
-        return {name: math.sqrt(_window_ms(S, b, sc, x)) if sc[1] > 0 else math.nan
-                for name, x in (('estimate', self.theta), ('applied', self.applied_x),
-                                ('nominal', self.nominal_x))}
+        out = {}
+        for name, x in (('estimate', self.theta), ('applied', self.applied_x),
+                        ('nominal', self.nominal_x)):
+            if sc[1] <= 0:
+                out[name] = math.nan
+                continue
+            ms = _window_ms(S, b, sc, x)
+            out[name] = math.sqrt(ms + self._crossing_ms(x) / sc[1])
+        return out
+
+    def _crossing_ms(self, x: np.ndarray) -> float:
+        """Sum of the squared error over the window's flank changes if the model ``x``
+        decided them: the play b (the estimate's) for the time |tau_x(t_p)| / |c alpha4|
+        its torque demand takes to reach zero after the drive's, per sample."""
+        lay = self.layout
+        if not self._switches or self._rate <= 0.0:
+            return 0.0
+        play = max(self.theta[lay.i_play] if lay.i_play >= 0 else self._play0, 0.0)
+        load = x[lay.i_load] if lay.i_load >= 0 else self._load0
+        drag = x[lay.i_drag] if lay.i_drag >= 0 else self._drag0
+        total = 0.0
+        for t_p, w_p, a_p in self._switches:
+            weight = math.exp(-(self._last_t - t_p) / self.settings.window)
+            tau = load + drag * w_p + self._inertia * a_p
+            rate = abs(drag * a_p)
+            late = min(abs(tau) / rate, WINDOW) if rate > 0.0 else WINDOW * (tau != 0.0)
+            total += weight * play * play * late * self._rate
+        return total
 
     def poll(self, t: float) -> Decision:
         """Every ``step_interval``: maybe take the estimate as the target (module

@@ -1,0 +1,101 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""When did the drive change flank?  A measurement of the instant the mesh torque of the
+real drive crossed zero, from the residual around the model's own flank change.
+
+Why: with play, the feed-forward crosses the play when the model's mesh torque demand
+(J_g + J_4) alpha4 + c omega4 + T changes sign.  On a sector scan with drag the sign changes
+at omega4 = -T / c, and the instant moves by dT / (c alpha4) per N m of load error: 0.25 s per
+N m at c = 20 N m s/rad and the scan's 0.2 rad/s^2.  A load error of 0.1 N m shifts the
+crossing by 25 ms, and for those 25 ms the antenna is off by the whole play.  The wind-up
+alone (C dT = 4 urad per N m) cannot pin T that finely; the residual's step can.
+
+How: the residual r = theta4_meas - theta4_pred steps by s b (plant, play b, at its crossing
+t_p) and by -s b_m (the prediction, play b_m in the model, at t_m), s = +1 from the drive to
+the coast flank, -1 back.  Over [t_m - W, t_m + W], with the level r_pre before and the
+step dr = r_post - r_pre = s (b - b_m):
+
+    I = integral (r - r_pre) dt,   t_p - t_m = -(I - dr (t_m + W - t_m)) / (s b).
+
+At t_p the real drive's torque is zero: T + c omega4(t_p) = -J alpha4(t_p), a measurement
+linear in (T, c) that :class:`~.estimator.Adapter` adds to its Kalman filter.  An event
+with another flank change inside its window, or a play too small to see, gives nothing.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+
+import numpy as np
+
+__all__ = ['FlankTiming', 'WINDOW', 'LEVEL_WINDOW']
+
+#: Half-width of the window over which the steps are integrated [s].
+WINDOW = 0.3
+#: Length of the windows giving the residual's level before and after [s].
+LEVEL_WINDOW = 0.05
+
+
+class FlankTiming:
+    """Collects (t, r, omega4, alpha4) per sample; :meth:`model_flank_changed` opens an
+    event at t_m; :meth:`ready` returns (t_p, omega4(t_p), alpha4(t_p)) once the window
+    after it has passed, or None."""
+
+    def __init__(self) -> None:
+        self._buf: collections.deque = collections.deque()
+        self._event: tuple[float, float] | None = None      # (t_m, s)
+        self.events = 0
+        self.measured = 0
+
+    def push(self, t: float, r: float, w4: float, a4: float) -> None:
+        buf = self._buf
+        buf.append((t, r, w4, a4))
+        keep = 2.0 * (WINDOW + LEVEL_WINDOW)
+        while buf and buf[0][0] < t - keep:
+            buf.popleft()
+
+    def clear(self) -> None:
+        self._buf.clear()
+        self._event = None
+
+    def model_flank_changed(self, t: float, old: float, new: float) -> None:
+        """The model's flank changed at ``t`` from ``old`` to ``new`` (+1 / -1; 0 unknown)."""
+        if self._event is not None:          # another change inside the window: no event
+            self._event = None
+            return
+        if old == 0.0 or new == 0.0 or old == new:
+            return
+        self.events += 1
+        self._event = (t, -0.5 * (new - old))
+
+    def ready(self, t: float, play: float, min_play: float
+              ) -> tuple[float, float, float] | None:
+        """The event's measurement once ``t`` is past its window; ``play``: the drive's
+        play (the estimate) [rad], at least ``min_play`` to be seen."""
+        ev = self._event
+        if ev is None or t < ev[0] + WINDOW + LEVEL_WINDOW:
+            return None
+        self._event = None
+        t_m, s = ev
+        if not play >= min_play:
+            return None
+        a = np.array(self._buf)
+        if a.size == 0 or a[0, 0] > t_m - WINDOW - LEVEL_WINDOW + 1e-9:
+            return None                       # the record does not reach back far enough
+        ts, r = a[:, 0], a[:, 1]
+        pre = (ts >= t_m - WINDOW - LEVEL_WINDOW) & (ts < t_m - WINDOW)
+        post = (ts >= t_m + WINDOW) & (ts < t_m + WINDOW + LEVEL_WINDOW)
+        mid = (ts >= t_m - WINDOW) & (ts < t_m + WINDOW)
+        if not (np.any(pre) and np.any(post) and np.count_nonzero(mid) > 2):
+            return None
+        r_pre, r_post = float(np.mean(r[pre])), float(np.mean(r[post]))
+        tm, rm = ts[mid], r[mid] - r_pre
+        integral = float(np.sum(0.5 * (rm[1:] + rm[:-1]) * np.diff(tm)))
+        integral += float(rm[-1]) * (t_m + WINDOW - float(tm[-1]))
+        shift = -(integral - (r_post - r_pre) * WINDOW) / (s * play)
+        if not (math.isfinite(shift) and abs(shift) < WINDOW):
+            return None
+        t_p = t_m + shift
+        self.measured += 1
+        return (t_p, float(np.interp(t_p, ts, a[:, 2])), float(np.interp(t_p, ts, a[:, 3])))
