@@ -316,6 +316,7 @@ class Adapter:
         self.samples_used = 0
         self.samples_skipped = 0
         self.flank_times = 0
+        self.steps_seen = 0
         self.switches = 0
         self.refusals = 0
         self.last_refusal = ''
@@ -354,6 +355,7 @@ class Adapter:
         self._w_max = 0.0
         self._hold_until = -math.inf
         self._timing = FlankTiming()
+        self._model_flank_t = -math.inf
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
         self._play0 = float(model.config.mesh.backlash)
@@ -400,9 +402,13 @@ class Adapter:
         timing = self._timing
         timing.push(t, theta4_meas - theta4_pred, w4, a4)
         if flank_m != self._flank_m:
-            timing.model_flank_changed(t, self._flank_m, flank_m)
+            if lay.i_play < 0 and self._play0 > 0.0 or lay.i_play >= 0 and \
+                    self.applied_x[lay.i_play] > 0.0:   # the model crosses its play here
+                timing.model_flank_changed(t, self._flank_m, flank_m)
+                self._model_flank_t = t
             self._flank_m, self._flank_t = flank_m, max(self._flank_t, t)
         self._flank_time_update(t, drag)
+        self._step_update(t, drag)
         # a flank change within the hold-off ahead (the torques' rates: c alpha4)
         ahead = FLANK_HOLD_OFF * a4
         soon = torque * (torque + drag * ahead) < 0.0 or \
@@ -446,17 +452,39 @@ class Adapter:
         self.samples_used += 1
         return True
 
-    def _flank_time_update(self, t: float, drag: float) -> None:
-        """The real drive's flank change as a measurement of (T, c) (:mod:`.flank_timing`):
-        T + c omega4(t_p) = -J alpha4(t_p), its noise a timing error of SWITCH_TIME_SD."""
+    def _step_update(self, t: float, drag: float) -> None:
+        """A crossing of the drive's own, seen as a step of the residual while the model
+        did not cross (:meth:`.flank_timing.FlankTiming.detect`): the torque measurement of
+        :meth:`_flank_time_update` at its middle and, with play adapted, the step's size as
+        a measurement of the play (10 % uncertain)."""
+        lay = self.layout
+        least = 0.0
+        if lay.i_play >= 0:
+            b, var = self.theta[lay.i_play], self.P[lay.i_play, lay.i_play]
+            if b * b > 9.0 * var:                  # the play is known: half of it at least
+                least = 0.5 * b
+        elif self._play0 > 0.0:
+            least = 0.5 * self._play0
+        got = self._timing.detect(t, self.settings.measurement_noise, self._model_flank_t,
+                                  least)
+        if got is None:
+            return
+        t_p, w_p, a_p, step = got
+        self.steps_seen += 1
+        self._torque_zero(t_p, w_p, a_p, drag)
+        if lay.i_play >= 0:
+            phi = np.zeros(lay.n)
+            phi[lay.i_play] = 1.0
+            sd = 0.1 * abs(step)
+            _kalman_step(self.theta, self.P, np.zeros(lay.n), self._std ** 2, phi, abs(step),
+                         sd * sd, HUBER_SIGMAS)
+        self._hold_until = max(self._hold_until, t_p + FLANK_HOLD_OFF)
+
+    def _torque_zero(self, t_p: float, w_p: float, a_p: float, drag: float) -> None:
+        """The drive's mesh torque was zero at t_p: T + c omega4 = -J alpha4 there."""
         lay = self.layout
         if lay.i_load < 0 and lay.i_drag < 0:
             return
-        play = self.theta[lay.i_play] if lay.i_play >= 0 else self._play0
-        got = self._timing.ready(t, play, MIN_PLAY_NOISES * self.settings.measurement_noise)
-        if got is None:
-            return
-        t_p, w_p, a_p = got
         self._switches.append((t_p, w_p, a_p))
         phi = np.zeros(lay.n)
         if lay.i_load >= 0:
@@ -472,6 +500,20 @@ class Adapter:
         _kalman_step(self.theta, self.P, np.zeros(lay.n), self._std ** 2, phi, y, sd * sd,
                      HUBER_SIGMAS)
         self.flank_times += 1
+
+    def _flank_time_update(self, t: float, drag: float) -> None:
+        """The real drive's flank change as a measurement of (T, c) (:mod:`.flank_timing`):
+        T + c omega4(t_p) = -J alpha4(t_p), its noise a timing error of SWITCH_TIME_SD."""
+        lay = self.layout
+        if lay.i_load < 0 and lay.i_drag < 0:
+            return
+        play = self.theta[lay.i_play] if lay.i_play >= 0 else self._play0
+        model_play = self.applied_x[lay.i_play] if lay.i_play >= 0 else self._play0
+        got = self._timing.ready(t, play, MIN_PLAY_NOISES * self.settings.measurement_noise,
+                                 model_play)
+        if got is None:
+            return
+        self._torque_zero(*got, drag)
 
     # ---- switching -------------------------------------------------------------------------
     def window_rms(self) -> dict[str, float]:

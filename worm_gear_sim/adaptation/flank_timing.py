@@ -20,6 +20,11 @@ step dr = r_post - r_pre = s (b - b_m):
 At t_p the real drive's torque is zero: T + c omega4(t_p) = -J alpha4(t_p), a measurement
 linear in (T, c) that :class:`~.estimator.Adapter` adds to its Kalman filter.  An event
 with another flank change inside its window, or a play too small to see, gives nothing.
+
+While the model does not cross (at the start its play is zero, or its load keeps it on one
+flank) the drive's own crossings are steps of the residual: :meth:`FlankTiming.detect` finds
+them (lines fitted each side of a gap), giving the same torque measurement at the step's
+middle and the step's size, the play.
 """
 
 from __future__ import annotations
@@ -29,12 +34,21 @@ import math
 
 import numpy as np
 
-__all__ = ['FlankTiming', 'WINDOW', 'LEVEL_WINDOW']
+__all__ = ['FlankTiming', 'WINDOW', 'LEVEL_WINDOW', 'STEP_SIDE', 'STEP_GAP', 'STEP_STRIDE',
+           'STEP_NOISES']
 
 #: Half-width of the window over which the steps are integrated [s].
 WINDOW = 0.3
 #: Length of the windows giving the residual's level before and after [s].
 LEVEL_WINDOW = 0.05
+
+
+#: Step detector: fitted line length each side [s], the gap left for the transit [s], how
+#: often it looks [s], and the smallest step in measurement noises.
+STEP_SIDE = 0.04
+STEP_GAP = 0.06
+STEP_STRIDE = 0.01
+STEP_NOISES = 15.0
 
 
 class FlankTiming:
@@ -47,17 +61,68 @@ class FlankTiming:
         self._event: tuple[float, float] | None = None      # (t_m, s)
         self.events = 0
         self.measured = 0
+        self._next_look = -math.inf
+        self._last_step = -math.inf
 
     def push(self, t: float, r: float, w4: float, a4: float) -> None:
         buf = self._buf
         buf.append((t, r, w4, a4))
-        keep = 2.0 * (WINDOW + LEVEL_WINDOW)
+        keep = max(2.0 * (WINDOW + LEVEL_WINDOW), 2 * STEP_SIDE + STEP_GAP) + 0.05
         while buf and buf[0][0] < t - keep:
             buf.popleft()
 
     def clear(self) -> None:
         self._buf.clear()
         self._event = None
+
+    def detect(self, t: float, noise: float, t_model: float, least: float = 0.0
+               ) -> tuple[float, float, float, float] | None:
+        """A step of the drive's own in the residual (its crossing of the play while the
+        model did not cross: no model flank change after ``t_model`` - the window): lines
+        fitted to STEP_SIDE s of the residual each side of a STEP_GAP s gap, their values at
+        the centre differ by more than STEP_NOISES ``noise`` and more than the lines' own
+        change over the gap, and at least ``least`` (half the play once it is known).  Returns (t_p, omega4, alpha4, step [rad]) with t_p where the
+        residual crosses the middle of the step, or None.  Looks every STEP_STRIDE s."""
+        if t < self._next_look:
+            return None
+        self._next_look = t + STEP_STRIDE
+        span = 2 * STEP_SIDE + STEP_GAP
+        centre = t - 0.5 * span
+        if t_model > centre - span or centre - self._last_step < span or not self._buf:
+            return None
+        buf = self._buf
+        if buf[0][0] > t - span:
+            return None
+        recent = []
+        for row in reversed(buf):
+            if row[0] < t - span:
+                break
+            recent.append(row)
+        a = np.array(recent[::-1])
+        ts, r = a[:, 0], a[:, 1]
+        left = ts < centre - 0.5 * STEP_GAP
+        right = ts > centre + 0.5 * STEP_GAP
+        if np.count_nonzero(left) < 4 or np.count_nonzero(right) < 4:
+            return None
+        pl = np.polyfit(ts[left] - centre, r[left], 1)
+        pr = np.polyfit(ts[right] - centre, r[right], 1)
+        step = float(pr[1] - pl[1])
+        drift = max(abs(pl[0]), abs(pr[0])) * STEP_GAP
+        if not (abs(step) > max(STEP_NOISES * noise, least) and abs(step) > 2.0 * drift):
+            return None
+        mid = (ts >= centre - 0.5 * STEP_GAP) & (ts <= centre + 0.5 * STEP_GAP)
+        tm = ts[mid]
+        level = r[mid] - (np.polyval(pl, tm - centre) + 0.5 * step)   # 0 at the middle
+        cross = np.nonzero(np.sign(level[1:]) != np.sign(level[:-1]))[0] if tm.size > 1 \
+            else np.zeros(0, int)
+        if cross.size:
+            k = int(cross[0])
+            t_p = float(tm[k] - level[k] * (tm[k + 1] - tm[k]) / (level[k + 1] - level[k]))
+        else:
+            t_p = centre
+        self._last_step = t_p
+        return (t_p, float(np.interp(t_p, ts, a[:, 2])), float(np.interp(t_p, ts, a[:, 3])),
+                step)
 
     def model_flank_changed(self, t: float, old: float, new: float) -> None:
         """The model's flank changed at ``t`` from ``old`` to ``new`` (+1 / -1; 0 unknown)."""
@@ -69,10 +134,13 @@ class FlankTiming:
         self.events += 1
         self._event = (t, -0.5 * (new - old))
 
-    def ready(self, t: float, play: float, min_play: float
+    def ready(self, t: float, play: float, min_play: float, model_play: float
               ) -> tuple[float, float, float] | None:
         """The event's measurement once ``t`` is past its window; ``play``: the drive's
-        play (the estimate) [rad], at least ``min_play`` to be seen."""
+        play (the estimate) [rad], at least ``min_play`` to be seen; ``model_play``: the
+        model's.  The residual's net step must be the drive's crossing less the model's,
+        s (play - model_play), within a third of the play (else the drive did not cross
+        in the window: no measurement)."""
         ev = self._event
         if ev is None or t < ev[0] + WINDOW + LEVEL_WINDOW:
             return None
@@ -90,6 +158,8 @@ class FlankTiming:
         if not (np.any(pre) and np.any(post) and np.count_nonzero(mid) > 2):
             return None
         r_pre, r_post = float(np.mean(r[pre])), float(np.mean(r[post]))
+        if abs(r_post - r_pre - s * (play - model_play)) > play / 3.0:
+            return None
         tm, rm = ts[mid], r[mid] - r_pre
         integral = float(np.sum(0.5 * (rm[1:] + rm[:-1]) * np.diff(tm)))
         integral += float(rm[-1]) * (t_m + WINDOW - float(tm[-1]))
