@@ -259,6 +259,40 @@ def _kalman_step(theta, P, q, p_max, phi, y, r_var, huber):
 
 
 @njit(cache=True)
+def _sample_step(th, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play, worm0, nw,
+                 gear0, ng, th2, th3, w4, flank, flank_m, torque, compliance, resid, forget,
+                 lam, r_var, huber):
+    """One encoder sample into the estimate and the window (module docstring): the soft
+    flank from the estimate's covariance, the regressors, y = r + phi^T theta_model (the
+    model's play on its own flank), forgetting, the Kalman step, the windowed sums."""
+    soft = flank
+    if i_play >= 0:
+        var = 0.0
+        if i_load >= 0:
+            var += P[i_load, i_load]
+        if i_drag >= 0:
+            var += w4 * w4 * P[i_drag, i_drag]
+            if i_load >= 0:
+                var += 2.0 * w4 * P[i_load, i_drag]
+        if var > 0.0:
+            soft = math.erf(torque / math.sqrt(2.0 * var))
+            bp = th[i_play]
+            r_var += 0.25 * (1.0 - soft * soft) * (bp * bp + P[i_play, i_play])
+    _regressor(phi, i_load, i_drag, i_play, worm0, nw, gear0, ng, th2, th3, w4, soft,
+               compliance)
+    y = resid
+    for i in range(phi.size):
+        y += phi[i] * applied[i]
+    if i_play >= 0:
+        y += (0.5 * soft - 0.5 * flank_m) * applied[i_play]
+    q = np.empty(phi.size)
+    for i in range(phi.size):
+        q[i] = P[i, i] * forget
+    _kalman_step(th, P, q, std2, phi, y, r_var, huber)
+    _window_step(S, b, sc, phi, y, lam)
+
+
+@njit(cache=True)
 def _window_step(S, b, sc, phi, y, lam):
     """Exponentially weighted sums: S = sum w phi phi^T, b = sum w phi y, sc = [sum w y^2,
     sum w]."""
@@ -307,6 +341,7 @@ class Adapter:
                                 min(gear, MAX_ERROR_ORDERS))
         n = self.layout.n
         self._std = self.layout.prior_std()
+        self._std2 = self._std ** 2
         self.theta = np.zeros(n)
         self.P = np.zeros((n, n))
         self._phi = np.zeros(n)
@@ -420,32 +455,11 @@ class Adapter:
         c_pos, c_neg = self._compliance
         compliance = c_pos if w4 > 0.0 else c_neg if w4 < 0.0 else 0.5 * (c_pos + c_neg)
         s = self.settings
-        r_var = s.measurement_noise ** 2
-        soft = flank
-        if lay.i_play >= 0:
-            # the flank as the estimate knows it: the mean sign of its torque demand, the
-            # unknown sign's share of the play added to the noise
-            P = self.P
-            var = 0.0
-            if lay.i_load >= 0:
-                var += P[lay.i_load, lay.i_load]
-            if lay.i_drag >= 0:
-                var += w4 * (w4 * P[lay.i_drag, lay.i_drag] + (
-                    2.0 * P[lay.i_load, lay.i_drag] if lay.i_load >= 0 else 0.0))
-            if var > 0.0:
-                soft = math.erf(torque / math.sqrt(2.0 * var))
-                b = th[lay.i_play]
-                r_var += 0.25 * (1.0 - soft * soft) * (b * b + P[lay.i_play, lay.i_play])
-        phi = self._phi
-        _regressor(phi, lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
-                   lay.gear0, lay.gear_orders, theta2, theta3, w4, soft, compliance)
-        # y = r + the model in use's own sensitivities (its play on its own flank)
-        y = theta4_meas - theta4_pred + float(phi @ self.applied_x)
-        if lay.i_play >= 0:
-            y += (0.5 * soft - 0.5 * flank_m) * self.applied_x[lay.i_play]
-        q = np.diag(self.P) * (dt / s.memory)     # forgetting per variance (see the doc)
-        _kalman_step(th, self.P, q, self._std ** 2, phi, y, r_var, HUBER_SIGMAS)
-        _window_step(self._S, self._b, self._sc, phi, y, math.exp(-dt / s.window))
+        _sample_step(th, self.P, self._std2, self._phi, self.applied_x, self._S, self._b,
+                     self._sc, lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
+                     lay.gear0, lay.gear_orders, theta2, theta3, w4, flank, flank_m, torque,
+                     compliance, theta4_meas - theta4_pred, dt / s.memory,
+                     math.exp(-dt / s.window), s.measurement_noise ** 2, HUBER_SIGMAS)
         self._w_max = max(abs(w4), self._w_max * math.exp(-dt / s.window))
         if math.isnan(self._first_t):
             self._first_t = t

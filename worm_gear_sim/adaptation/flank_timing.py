@@ -29,7 +29,6 @@ middle and the step's size, the play.
 
 from __future__ import annotations
 
-import collections
 import math
 
 import numpy as np
@@ -51,13 +50,23 @@ STEP_STRIDE = 0.01
 STEP_NOISES = 15.0
 
 
+def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Least-squares line y = k x + d: (k, d)."""
+    xm, ym = float(x.mean()), float(y.mean())
+    dx = x - xm
+    sxx = float(dx @ dx)
+    k = float(dx @ (y - ym)) / sxx if sxx > 0.0 else 0.0
+    return k, ym - k * xm
+
+
 class FlankTiming:
     """Collects (t, r, omega4, alpha4) per sample; :meth:`model_flank_changed` opens an
     event at t_m; :meth:`ready` returns (t_p, omega4(t_p), alpha4(t_p)) once the window
-    after it has passed, or None."""
+    after it has passed, or None; :meth:`detect` finds the drive's own crossings."""
 
     def __init__(self) -> None:
-        self._buf: collections.deque = collections.deque()
+        self._a = np.zeros((4096, 4))          # rows (t, r, omega4, alpha4); [0, n) in use
+        self._n = 0
         self._event: tuple[float, float] | None = None      # (t_m, s)
         self.events = 0
         self.measured = 0
@@ -65,64 +74,71 @@ class FlankTiming:
         self._last_step = -math.inf
 
     def push(self, t: float, r: float, w4: float, a4: float) -> None:
-        buf = self._buf
-        buf.append((t, r, w4, a4))
-        keep = max(2.0 * (WINDOW + LEVEL_WINDOW), 2 * STEP_SIDE + STEP_GAP) + 0.05
-        while buf and buf[0][0] < t - keep:
-            buf.popleft()
+        a, n = self._a, self._n
+        if n == a.shape[0]:                    # full: drop what is older than needed
+            keep = max(2.0 * (WINDOW + LEVEL_WINDOW), 2 * STEP_SIDE + STEP_GAP) + 0.05
+            k = int(np.searchsorted(a[:n, 0], t - keep))
+            if k == 0:
+                self._a = a = np.concatenate([a, np.zeros_like(a)])
+            else:
+                a[:n - k] = a[k:n]
+                n -= k
+        row = a[n]
+        row[0], row[1], row[2], row[3] = t, r, w4, a4
+        self._n = n + 1
+
+    def _since(self, t0: float) -> np.ndarray | None:
+        """The rows from ``t0`` on (None if the record does not reach back that far)."""
+        a = self._a[:self._n]
+        if not self._n or a[0, 0] > t0 + 1e-9:
+            return None
+        return a[int(np.searchsorted(a[:, 0], t0)):]
 
     def clear(self) -> None:
-        self._buf.clear()
+        self._n = 0
         self._event = None
 
     def detect(self, t: float, noise: float, t_model: float, least: float = 0.0
                ) -> tuple[float, float, float, float] | None:
         """A step of the drive's own in the residual (its crossing of the play while the
-        model did not cross: no model flank change after ``t_model`` - the window): lines
+        model did not cross: no model crossing at ``t_model`` within the window): lines
         fitted to STEP_SIDE s of the residual each side of a STEP_GAP s gap, their values at
-        the centre differ by more than STEP_NOISES ``noise`` and more than the lines' own
-        change over the gap, and at least ``least`` (half the play once it is known).  Returns (t_p, omega4, alpha4, step [rad]) with t_p where the
-        residual crosses the middle of the step, or None.  Looks every STEP_STRIDE s."""
+        the centre differ by more than STEP_NOISES ``noise``, than ``least`` (half the play
+        once it is known) and than twice the lines' own change over the gap.  Returns
+        (t_p, omega4, alpha4, step [rad]), t_p where the residual crosses the middle of the
+        step, or None.  Looks every STEP_STRIDE s."""
         if t < self._next_look:
             return None
         self._next_look = t + STEP_STRIDE
         span = 2 * STEP_SIDE + STEP_GAP
         centre = t - 0.5 * span
-        if t_model > centre - span or centre - self._last_step < span or not self._buf:
+        if t_model > centre - span or centre - self._last_step < span:
             return None
-        buf = self._buf
-        if buf[0][0] > t - span:
+        a = self._since(t - span)
+        if a is None:
             return None
-        recent = []
-        for row in reversed(buf):
-            if row[0] < t - span:
-                break
-            recent.append(row)
-        a = np.array(recent[::-1])
-        ts, r = a[:, 0], a[:, 1]
-        left = ts < centre - 0.5 * STEP_GAP
-        right = ts > centre + 0.5 * STEP_GAP
+        ts, r = a[:, 0] - centre, a[:, 1]
+        left = ts < -0.5 * STEP_GAP
+        right = ts > 0.5 * STEP_GAP
         if np.count_nonzero(left) < 4 or np.count_nonzero(right) < 4:
             return None
-        pl = np.polyfit(ts[left] - centre, r[left], 1)
-        pr = np.polyfit(ts[right] - centre, r[right], 1)
-        step = float(pr[1] - pl[1])
+        pl, pr = _line(ts[left], r[left]), _line(ts[right], r[right])
+        step = pr[1] - pl[1]
         drift = max(abs(pl[0]), abs(pr[0])) * STEP_GAP
         if not (abs(step) > max(STEP_NOISES * noise, least) and abs(step) > 2.0 * drift):
             return None
-        mid = (ts >= centre - 0.5 * STEP_GAP) & (ts <= centre + 0.5 * STEP_GAP)
+        mid = ~(left | right)
         tm = ts[mid]
-        level = r[mid] - (np.polyval(pl, tm - centre) + 0.5 * step)   # 0 at the middle
-        cross = np.nonzero(np.sign(level[1:]) != np.sign(level[:-1]))[0] if tm.size > 1 \
-            else np.zeros(0, int)
-        if cross.size:
-            k = int(cross[0])
-            t_p = float(tm[k] - level[k] * (tm[k + 1] - tm[k]) / (level[k + 1] - level[k]))
-        else:
-            t_p = centre
-        self._last_step = t_p
-        return (t_p, float(np.interp(t_p, ts, a[:, 2])), float(np.interp(t_p, ts, a[:, 3])),
-                step)
+        level = r[mid] - (pl[1] + pl[0] * tm + 0.5 * step)     # 0 at the middle
+        t_c = 0.0
+        if tm.size > 1:
+            cross = np.nonzero(np.sign(level[1:]) != np.sign(level[:-1]))[0]
+            if cross.size:
+                k = int(cross[0])
+                t_c = float(tm[k] - level[k] * (tm[k + 1] - tm[k]) / (level[k + 1] - level[k]))
+        self._last_step = t_p = centre + t_c
+        return (t_p, float(np.interp(t_c, ts, a[:, 2])), float(np.interp(t_c, ts, a[:, 3])),
+                float(step))
 
     def model_flank_changed(self, t: float, old: float, new: float) -> None:
         """The model's flank changed at ``t`` from ``old`` to ``new`` (+1 / -1; 0 unknown)."""
@@ -148,11 +164,11 @@ class FlankTiming:
         t_m, s = ev
         if not play >= min_play:
             return None
-        a = np.array(self._buf)
-        if a.size == 0 or a[0, 0] > t_m - WINDOW - LEVEL_WINDOW + 1e-9:
+        a = self._since(t_m - WINDOW - LEVEL_WINDOW)
+        if a is None:
             return None                       # the record does not reach back far enough
         ts, r = a[:, 0], a[:, 1]
-        pre = (ts >= t_m - WINDOW - LEVEL_WINDOW) & (ts < t_m - WINDOW)
+        pre = ts < t_m - WINDOW
         post = (ts >= t_m + WINDOW) & (ts < t_m + WINDOW + LEVEL_WINDOW)
         mid = (ts >= t_m - WINDOW) & (ts < t_m + WINDOW)
         if not (np.any(pre) and np.any(post) and np.count_nonzero(mid) > 2):

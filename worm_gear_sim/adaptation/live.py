@@ -27,9 +27,10 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from ..dynamics.model import DriveModel
 from ..params import Config
-from ..realtime.model_check import PredictionHistory
 from ..realtime.predictor import RealtimePredictor
 from .estimator import Adapter
 
@@ -52,7 +53,7 @@ class LiveAdaptation:
             raise ValueError('joint_names: the names of theta2, theta3 and theta4')
         self.predictor = predictor
         self.joint_names = tuple(joint_names)
-        self.history = PredictionHistory(history)
+        self.history = _Predictions(history)
         self.adapter = Adapter(predictor.model, predictor.config.adaptation)
         self.counters: dict[str, int] = {'samples': 0, 'used': 0, 'rejected': 0,
                                          'switches': 0, 'refusals': 0}
@@ -179,6 +180,44 @@ class LiveAdaptation:
     def params_config(self) -> Config:
         """The model in use (with the adapted values) as a Config to start from."""
         return self.predictor.config
+
+
+class _Predictions:
+    """The last ``capacity`` predictions (t, theta2..theta4) in time order, contiguous
+    (compacted when full), interpolated linearly at a time inside their span."""
+
+    def __init__(self, capacity: int) -> None:
+        self._t = np.zeros(2 * capacity)
+        self._x = np.zeros((2 * capacity, 3))
+        self._n = 0
+        self._cap = capacity
+
+    def push(self, t: float, theta: Sequence[float]) -> None:
+        n = self._n
+        if n and t <= self._t[n - 1]:
+            if t == self._t[n - 1]:
+                self._x[n - 1] = theta
+                return
+            n = 0                              # the clock went back: start over
+        if n == self._t.size:
+            keep = self._cap
+            self._t[:keep] = self._t[n - keep:n]
+            self._x[:keep] = self._x[n - keep:n]
+            n = keep
+        self._t[n] = t
+        self._x[n] = theta
+        self._n = n + 1
+
+    def at(self, t: float) -> np.ndarray | None:
+        n = self._n
+        ts = self._t
+        if not n or t > ts[n - 1] or t < ts[max(n - self._cap, 0)]:
+            return None
+        k = int(np.searchsorted(ts[:n], t))
+        if ts[k] == t:
+            return self._x[k]
+        w = (t - ts[k - 1]) / (ts[k] - ts[k - 1])
+        return (1.0 - w) * self._x[k - 1] + w * self._x[k]
 
 
 def _fmt(v: Any) -> str:
