@@ -115,10 +115,11 @@ def run_drives(args: argparse.Namespace, base: Config) -> None:
         print(f"   in use: play {fit.get('mesh.backlash', math.nan) / ARCMIN:.3f}' load "
               f"{fit.get('load.output_torque', math.nan):.3f} drag "
               f"{fit.get('load.output_viscous_coefficient', math.nan):.2f}; worm "
-              f"{np.round(np.array(fit.get('mesh.worm_error_harmonics', [])) * 1e6, 1)} "
-              f"(true {np.round(np.array(v['mesh.worm_error_harmonics']) * 1e6, 1)}) urad",
+              f"{np.round(np.array(fit.get('mesh.worm_error_harmonics', [])) * 1e6, 1)} (true "
+              f"{np.round(np.array(v['mesh.worm_error_harmonics']) * 1e6, 1)}) urad",
               flush=True)
-    for key, target in (() if not rows else (("x_10_20", 10.0), ("x_50_60", 30.0), ("worst_1s", 1.0))):
+    targets = (('x_10_20', 10.0), ('x_50_60', 30.0), ('worst_1s', 1.0)) if rows else ()
+    for key, target in targets:
         vals = np.array([r[key] for r in rows])
         print(f'{key}: min {vals.min():.2f} median {np.median(vals):.2f} max {vals.max():.2f};'
               f' target >= {target:g}: met on {int(np.sum(vals >= target))}/{vals.size}')

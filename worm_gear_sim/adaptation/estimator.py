@@ -26,41 +26,51 @@ linear in them, with the model's sensitivities of theta4 at a fixed command as r
   leads the estimate into a wrong basin: play explained as load, drag and harmonics.)
 
 The estimator works on y = r + phi^T theta_model (theta_model: the values of the model that
-made the prediction), i.e. on the parameters themselves, so switching the model does not
-disturb it.  Samples within ``FLANK_HOLD_OFF`` of a flank change (past or ahead, by the
-estimate or by the model in use), where the two flanks differ, or after a step applied to the model are
-skipped: while the worm crosses the play, or the prediction settles on the
-changed model, the residual is a transient the linear picture does not hold.  An innovation
-beyond ``HUBER_SIGMAS`` times its predicted standard deviation is down-weighted (Huber's
-weight, the covariance kept consistent): one transient cannot throw the estimate, a lasting
-change still gets through.
+made the prediction; its play on its own flank), i.e. on the parameters themselves, so
+switching the model does not disturb it.  Samples within ``FLANK_HOLD_OFF`` of a flank
+change (past or ahead, by the estimate or by the model in use) or of a step applied to the
+model are skipped: while the worm crosses the play, or the prediction settles on the
+changed model, the residual is a transient the linear picture does not hold.  An
+innovation beyond ``HUBER_SIGMAS`` times its predicted standard deviation is down-weighted
+(Huber's weight, the covariance kept consistent): one transient cannot throw the estimate,
+a lasting change still gets through.
+
+**The instant of a flank change** is what the crossing of the play needs most (a load
+error of 0.1 N m moves it by tens of ms on a scan with drag, and for that long the antenna
+is off by the whole play), and the wind-up alone cannot pin the load that finely.
+:mod:`.flank_timing` measures it from the residual (around the model's own crossing, or
+as a step of the residual while the model does not cross) and the filter takes "the
+drive's torque demand was zero then" as one more linear measurement of load and drag (and
+a step's size as one of the play).
 
 **Why a Kalman filter with random-walk parameters, not RLS with a forgetting factor.**  The
-problem is linear in the parameters (but for the flank, whose change the Kalman filter
-also takes as a linear measurement of load and drag, :mod:`.flank_timing`), so both are the same recursion on a well-excited
-record.  They differ where the motion does not excite a direction: a sector scan hardly
-separates the gear's first harmonic cos theta3 (theta3 spans +-5 deg) from the load
-torque, and a load that keeps the teeth on one flank makes the play a constant like the
-load.  With exponential forgetting the covariance of such a direction grows without bound
-(wind-up), and a burst of noise then moves the estimate anywhere.  The Kalman form states
-per parameter how it may drift and a prior (sigma_i, :data:`PRIOR_STD`): the process
-noise q_i = P_ii dt / ``memory`` makes each variance forget like RLS with the time constant
-``memory`` (the estimate averages over that long, whatever the size of the regressor), and
-each variance is capped at its prior, so the covariance of an unexcited direction grows
-only back to the prior and the estimate stays near its start there instead of wandering.  The cost per sample is an n x n update (n <= 2*(8+8)+3), compiled.
+problem is linear in the parameters (the flank aside, above), so both are the same
+recursion on a well-excited record.  They differ where the motion does not excite a
+direction: a sector scan hardly separates the gear's first harmonic cos theta3 (theta3 spans
++-5 deg) from the load torque, and a load that keeps the teeth on one flank makes the play a
+constant like the load.  With exponential forgetting the covariance of such a direction
+grows without bound (wind-up), and a burst of noise then moves the estimate anywhere.  The
+Kalman form states per parameter a prior (sigma_i, :data:`PRIOR_STD`) and how it may
+drift: the process noise q_i = P_ii dt / ``memory`` makes each variance forget like RLS
+with the time constant ``memory`` (the estimate averages over that long, whatever the size
+of the regressor), and each variance is capped at its prior, so the covariance of an
+unexcited direction grows only back to the prior and the estimate stays near its start
+there instead of wandering.  The prior also gives the soft flank its sigma_tau.  The cost
+per sample is an n x n update (n <= 2 (8 + 8) + 3), compiled.
 
 **When an adapted set is applied** (:meth:`Adapter.poll`, every ``step_interval``): the
 windowed mean square of the linearised residual (exponential window ``window``), plus the
-error a set would make by crossing the play at the wrong time at the measured flank changes,
-is computed for the current estimate, the model in use and the nominal (start) set; the estimate
-becomes the target only if it lowers the mean square by ``min_improvement`` against the
-model in use and is not worse than the nominal one, after one window of data.  A noise-only
-residual gives no such gain (the in-sample gain of fitting n parameters to N samples of
-noise is n/N), so it changes nothing.  A play or drag estimate below zero within
-``BOUND_SIGMAS`` standard deviations is taken as zero; further below, the target is refused
-(the reason is kept).  The model then moves to the target in steps: each step changes the static
-correction of the command by at most ``max_step`` [rad at the worm] (bounded with the
-sensitivities above), one step per ``step_interval``: no jump in the command.
+error a set would make by crossing the play at the wrong time at the measured flank
+changes, is computed for the current estimate, the model in use and the nominal (start)
+set; the estimate becomes the target only if it lowers the mean square by
+``min_improvement`` against the model in use and is not worse than the nominal one, after
+one window of data.  A noise-only residual gives no such gain (the in-sample gain of
+fitting n parameters to N samples of noise is n/N), so it changes nothing.  A play or drag
+estimate below zero within ``BOUND_SIGMAS`` standard deviations is taken as zero; further
+below, the target is refused (the reason is kept).  The model then moves to the target in
+steps: each step changes the static correction of the command by at most ``max_step`` [rad
+at the worm] (bounded with the sensitivities above), one step per ``step_interval``: no
+jump in the command.
 """
 
 from __future__ import annotations
@@ -77,7 +87,7 @@ from numba import njit
 from ..dynamics.inverse import inverse_theta1
 from ..dynamics.model import DriveModel, with_load_torque
 from ..params import Config
-from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS
+from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS, Parameters
 from .flank_timing import WINDOW, FlankTiming
 
 __all__ = ['PRIOR_STD', 'FLANK_HOLD_OFF', 'Layout', 'output_compliance',
@@ -139,7 +149,7 @@ class Layout:
                    idx.get(DRAG_KEY, -1), idx.get(PLAY_KEY, -1), idx.get(WORM_KEY, -1),
                    idx.get(GEAR_KEY, -1), n)
 
-    def pack(self, cfg: Config) -> np.ndarray:
+    def pack(self, cfg: Parameters) -> np.ndarray:
         """The state vector of ``cfg``'s values (harmonics padded with zeros)."""
         x = np.zeros(self.n)
         for i, key in ((self.i_load, LOAD_KEY), (self.i_drag, DRAG_KEY),

@@ -30,8 +30,9 @@ from typing import Any
 import numpy as np
 
 from ..dynamics.model import DriveModel
-from ..params import Config
+from ..params import Config, config_from_mapping
 from ..realtime.predictor import RealtimePredictor
+from ..schema import Parameters
 from .estimator import Adapter
 
 __all__ = ['LiveAdaptation', 'REJECT_REASONS']
@@ -128,7 +129,7 @@ class LiveAdaptation:
             return msgs
         pred = self.predictor
         try:
-            cfg = pred.config.replace(d.overrides)
+            cfg = _as_config(pred.config).replace(d.overrides)
             prepared = pred.prepare(DriveModel(cfg))
             pred.reconfigure(prepared)
         except (ValueError, ArithmeticError) as exc:   # ConfigError is a ValueError
@@ -179,7 +180,11 @@ class LiveAdaptation:
 
     def params_config(self) -> Config:
         """The model in use (with the adapted values) as a Config to start from."""
-        return self.predictor.config
+        return _as_config(self.predictor.config)
+
+
+def _as_config(p: Parameters) -> Config:
+    return p if isinstance(p, Config) else config_from_mapping(p.to_nested_dict())
 
 
 class _Predictions:

@@ -58,8 +58,9 @@ def scenario(cfg: Config, name: str, duration: float) -> tuple[np.ndarray, np.nd
     if name == 'slew':
         mv = slew_reversals(cfg)
         x = mv.theta1 - mv.theta1[0]
-        parts, sign, end = [], 1.0, 0.0
-        while sum(len(p) for p in parts) < n:
+        parts: list[np.ndarray] = []
+        sign, end = 1.0, 0.0
+        while sum(p.size for p in parts) < n:
             parts.append(end + sign * x[1:] if parts else x)
             end, sign = parts[-1][-1], -sign
         th = np.concatenate(parts)[:n]
