@@ -418,6 +418,9 @@ class AdaptationSettings:
                          'applied step', 'rad', 0.0, 1.0, lo_open=True)
     step_interval: float = _f(0.25, 'Time between applied steps (and switch decisions)', 's',
                               0.01, 60.0)
+    params_file: str = _f('worm_gear_sim_adapted.yaml', 'Where the node\'s '
+                          '~/write_adapted_parameters service writes the params file of the '
+                          'model in use (relative: to the working directory)')
     measurement_noise: float = _f(4e-6, 'RMS of what the theta4 residual keeps besides the '
                                   'adapted keys: encoder noise and steps, model error '
                                   '(measurement noise of the estimator)', 'rad', 0.0, 1.0,

@@ -86,6 +86,8 @@ class TwinRun:
     in_use: dict[str, Any] = field(default_factory=dict)
     counters: dict[str, int] = field(default_factory=dict)
     messages: list[str] = field(default_factory=list)
+    record: list[tuple[int, float, list[tuple[int, float, float]]]] = field(
+        default_factory=list)
 
 
 def prepare_start(start: Config, preview: float | None = None) -> Config:
@@ -100,17 +102,20 @@ def prepare_start(start: Config, preview: float | None = None) -> Config:
 
 def run_twin(plant: Config, start: Config, name: str, duration: float, *,
              noise: float = 1e-6, encoder_bits: int = 20, seed: int = 0, adapt: bool = True,
-             preview: float | None = None,
+             preview: float | None = None, base_ns: int = BASE_NS, record: bool = False,
              on_sample: Callable[[float], None] | None = None) -> TwinRun:
     """Stream scenario ``name`` for ``duration`` s (module docstring): the plant driven by
     the adapting feed-forward (``adapt`` False: the feed-forward of the start set, never
     adapted), and by the raw reference for the uncompensated error.  ``noise``: encoder
-    noise RMS [rad]; ``encoder_bits``: resolution 2 pi / 2^bits (0: none)."""
+    noise RMS [rad]; ``encoder_bits``: resolution 2 pi / 2^bits (0: none); ``base_ns``: the
+    stamp of t = 0; ``record``: keep per pushed sample (stamp, theta1_ref, [(stamp, encoder
+    theta4, delta) of each correction released]) in ``TwinRun.record`` (what a node would
+    receive, in its order)."""
     cfg = prepare_start(start, preview)
     ahead = cfg.compensation.preview_time
     t, x = scenario(cfg, name, duration + ahead + 5.0 / cfg.node.publish_rate_hz)
     keep = t <= duration + 1e-12
-    pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=BASE_NS)
+    pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=base_ns)
     out_per_in = pred.model.output_per_input
     names = cfg.node.joint_names[1:]
     live = LiveAdaptation(pred, names)
@@ -119,15 +124,22 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
     res = 2.0 * math.pi / 2 ** encoder_bits if encoder_bits > 0 else 0.0
     n_keep = int(np.count_nonzero(keep))
     err = np.full(n_keep, np.nan)
-    index = {BASE_NS + int(round(tk * 1e9)): k for k, tk in enumerate(t[:n_keep])}
+    index = {base_ns + int(round(tk * 1e9)): k for k, tk in enumerate(t[:n_keep])}
     run = TwinRun(t[keep], x[keep], np.zeros(0), err)
     for k in range(t.size):
-        ns = BASE_NS + int(round(t[k] * 1e9))
+        ns = base_ns + int(round(t[k] * 1e9))
         out = pred.push(ns, float(x[k]))
-        for p in out.predictions:
-            live.predicted(p.stamp_ns, p.theta)
+        if adapt:                   # as the node: predictions, the decision, then encoders
+            for p in out.predictions:
+                live.predicted(p.stamp_ns, p.theta)
+            if out.predictions:
+                before = live.counters['switches']
+                run.messages += live.step(out.predictions[-1].stamp_ns)
+                if live.counters['switches'] != before:
+                    run.steps.append((t[k], live.adapter.applied_values()))
+        got = []
         for c in out.corrections:
-            tc = (c.stamp_ns - BASE_NS) * 1e-9
+            tc = (c.stamp_ns - base_ns) * 1e-9
             if tc > plant_sim.t:
                 plant_sim.advance_to(tc, c.theta1_ref + c.delta)
             th4 = plant_sim.joint_state()[0][3]
@@ -137,13 +149,11 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
             meas = th4 + (noise * rng.standard_normal() if noise > 0 else 0.0)
             if res > 0:
                 meas = round(meas / res) * res
+            got.append((c.stamp_ns, meas, c.delta))
             if adapt:
                 live.measured(c.stamp_ns, names[2:], [meas])
-        if adapt:
-            before = live.counters['switches']
-            run.messages += live.step(ns)
-            if live.counters['switches'] != before:
-                run.steps.append((t[k], live.adapter.applied_values()))
+        if record:
+            run.record.append((ns, float(x[k]), got))
         if on_sample is not None:
             on_sample(t[k])
     run.error_uncompensated = antenna_error(plant, run.t, run.theta1_ref, run.theta1_ref)
