@@ -332,6 +332,10 @@ class Decision:
     note: str = ''
 
 
+#: "Nothing to do" (shared; never modified).
+_NOTHING = Decision()
+
+
 class Adapter:
     """The online estimator and the switching rule (module docstring).
 
@@ -481,6 +485,8 @@ class Adapter:
         did not cross (:meth:`.flank_timing.FlankTiming.detect`): the torque measurement of
         :meth:`_flank_time_update` at its middle and, with play adapted, the step's size as
         a measurement of the play (10 % uncertain)."""
+        if not self._timing.due(t):
+            return
         lay = self.layout
         least = 0.0
         if lay.i_play >= 0:
@@ -579,7 +585,7 @@ class Adapter:
         docstring), then the next bounded step towards the target."""
         s = self.settings
         if t < self._next_poll:
-            return Decision()
+            return _NOTHING
         self._next_poll = t + s.step_interval
         note = ''
         if not math.isnan(self._first_t) and t - self._first_t >= s.window:

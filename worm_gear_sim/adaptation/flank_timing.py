@@ -98,6 +98,10 @@ class FlankTiming:
         self._n = 0
         self._event = None
 
+    def due(self, t: float) -> bool:
+        """Whether :meth:`detect` would look at ``t`` (every STEP_STRIDE s)."""
+        return t >= self._next_look
+
     def detect(self, t: float, noise: float, t_model: float, least: float = 0.0
                ) -> tuple[float, float, float, float] | None:
         """A step of the drive's own in the residual (its crossing of the play while the

@@ -24,7 +24,7 @@ and returned once per new reason (the node logs it, throttled).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -86,12 +86,12 @@ class LiveAdaptation:
         self.counters['samples'] += 1
         if len(names) != len(positions):
             return self._reject('malformed')
-        values: Mapping[str, Any] = dict(zip(names, positions))
-        antenna = self.joint_names[2]
-        if antenna not in values:
+        try:
+            k = list(names).index(self.joint_names[2])
+        except ValueError:
             return self._reject('other_joint')
         try:
-            meas = float(values[antenna])
+            meas = float(positions[k])
             stamp_ns = int(stamp_ns)
         except (TypeError, ValueError, OverflowError):
             return self._reject('non_finite')
