@@ -110,7 +110,7 @@ def run_drives(args: argparse.Namespace, base: Config) -> None:
         print(f"drive {i}: play {r['play_arcmin']:.2f}' load {r['load']:.2f} N m drag "
               f"{r['drag']:.1f} | raw {r['raw_rms_urad']:.0f} urad | 10-20 s "
               f"{r['x_10_20']:.1f}x | last 10 s {r['x_50_60']:.1f}x | all {r['x_all']:.1f}x | "
-              f"worst 1 s after {t2:.1f} s {worst:.2f}x | {r['steps']} steps | {wall:.0f} s",
+              f"worst 1 s after {t2:.1f} s {worst:.4f}x | {r['steps']} steps | {wall:.0f} s",
               flush=True)
         print(f"   in use: play {fit.get('mesh.backlash', math.nan) / ARCMIN:.3f}' load "
               f"{fit.get('load.output_torque', math.nan):.3f} drag "
@@ -121,7 +121,7 @@ def run_drives(args: argparse.Namespace, base: Config) -> None:
     targets = (('x_10_20', 10.0), ('x_50_60', 30.0), ('worst_1s', 1.0)) if rows else ()
     for key, target in targets:
         vals = np.array([r[key] for r in rows])
-        print(f'{key}: min {vals.min():.2f} median {np.median(vals):.2f} max {vals.max():.2f};'
+        print(f'{key}: min {vals.min():.4g} median {np.median(vals):.4g} max {vals.max():.4g};'
               f' target >= {target:g}: met on {int(np.sum(vals >= target))}/{vals.size}')
 
 

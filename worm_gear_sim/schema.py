@@ -409,8 +409,8 @@ class AdaptationSettings:
                                 MAX_ERROR_ORDERS)
     memory: float = _f(20.0, 'Time constant over which the estimator forgets (each variance '
                        'grows by dt / memory, capped at its prior)', 's', 0.1, 1e6)
-    window: float = _f(4.0, 'Window of the residual RMS that decides a switch', 's', 0.1,
-                       3600.0)
+    window: float = _f(2.0, 'Window of the residual RMS that decides a switch (and the data '
+                       'needed before the first)', 's', 0.1, 3600.0)
     min_improvement: float = _f(0.1, 'Share by which the adapted set must lower the windowed '
                                 'mean-square residual of the model in use', '', 0.0, 0.99,
                                 lo_open=True)
