@@ -414,9 +414,9 @@ class AdaptationSettings:
     min_improvement: float = _f(0.1, 'Share by which the adapted set must lower the windowed '
                                 'mean-square residual of the model in use', '', 0.0, 0.99,
                                 lo_open=True)
-    max_step: float = _f(1e-3, 'Largest change of the static correction of the command per '
+    max_step: float = _f(5e-3, 'Largest change of the static correction of the command per '
                          'applied step', 'rad', 0.0, 1.0, lo_open=True)
-    step_interval: float = _f(0.05, 'Time between applied steps (and switch decisions)', 's',
+    step_interval: float = _f(0.25, 'Time between applied steps (and switch decisions)', 's',
                               0.01, 60.0)
     params_file: str = _f('worm_gear_sim_adapted.yaml', 'Where the node\'s '
                           '~/write_adapted_parameters service writes the params file of the '
