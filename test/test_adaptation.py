@@ -238,3 +238,15 @@ def test_twin_learns_a_load_and_does_not_get_worse(base):
     early = run.t < 0.5                       # before the first window nothing changed
     assert np.allclose(run.error_compensated[early], run.error_uncompensated[early],
                        atol=2e-6)
+
+
+def test_twin_on_its_own_model_changes_nothing(base):
+    """End to end, the plant equal to the start set (play, load, drag, a periodic error): the
+    residual is the encoder's noise and steps only, no step is ever applied."""
+    plant = base.replace({'mesh.backlash': 5.8e-4, 'load.output_torque': 1.0,
+                          'load.output_viscous_coefficient': 20.0,
+                          'mesh.worm_error_harmonics': [2e-5, -1e-5]})
+    start = plant.replace({'adaptation.window': 0.5, 'adaptation.step_interval': 0.1})
+    run = run_twin(plant, start, 'sector', 2.5, seed=5)
+    assert run.steps == [] and run.counters['used'] > 500
+    assert run.counters['refusals'] == 0

@@ -274,7 +274,9 @@ def _sample_step(th, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play, wo
                  lam, r_var, huber):
     """One encoder sample into the estimate and the window (module docstring): the soft
     flank from the estimate's covariance, the regressors, y = r + phi^T theta_model (the
-    model's play on its own flank), forgetting, the Kalman step, the windowed sums."""
+    model's play on its own flank), forgetting, the Kalman step; the windowed sums with the
+    estimate's hard flank (where it agrees with the model's, the model in use's linearised
+    residual is the residual itself)."""
     soft = flank
     if i_play >= 0:
         var = 0.0
@@ -299,7 +301,9 @@ def _sample_step(th, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play, wo
     for i in range(phi.size):
         q[i] = P[i, i] * forget
     _kalman_step(th, P, q, std2, phi, y, r_var, huber)
-    _window_step(S, b, sc, phi, y, lam)
+    if i_play >= 0:
+        phi[i_play] = -0.5 * flank     # the window judges sets by the hard flank: for the
+    _window_step(S, b, sc, phi, y, lam)  # model in use (same flank) y - phi x is r itself
 
 
 @njit(cache=True)
