@@ -25,7 +25,7 @@ if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ "$ROS_REQUIREMENT
     touch "$stamp"
 fi
 # The PyPI ROS wheels re-exec Python once to set LD_LIBRARY_PATH; check that rclpy works.
-if ! "$VENV/bin/python" -c "import rclpy, std_msgs.msg, sensor_msgs.msg, diagnostic_msgs.msg, trajectory_msgs.msg" \
+if ! "$VENV/bin/python" -c "import rclpy, std_msgs.msg, std_srvs.srv, sensor_msgs.msg, diagnostic_msgs.msg, trajectory_msgs.msg" \
         >/dev/null 2>&1; then
     echo "[setup] ERROR: rclpy or the ROS message packages do not import in $VENV" >&2
     "$VENV/bin/python" -c "import rclpy" >&2 || true

@@ -117,7 +117,8 @@ class RosHarness:
     """
 
     def __init__(self, ctx: Any, overrides: dict[str, Any] | None = None,
-                 sim_time: bool = True, cli_args: list[str] | None = None):
+                 sim_time: bool = True, cli_args: list[str] | None = None,
+                 node_class: Any = None):
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.parameter import Parameter
@@ -133,8 +134,8 @@ class RosHarness:
         if sim_time:
             params.append(Parameter('use_sim_time', value=True))
         self.ctx = ctx
-        self.node = WormGearSimNode(context=ctx, parameter_overrides=params,
-                                    cli_args=cli_args)
+        self.node = (node_class or WormGearSimNode)(context=ctx, parameter_overrides=params,
+                                                    cli_args=cli_args)
         self.probe = rclpy.create_node('probe', context=ctx)
         self.executor = SingleThreadedExecutor(context=ctx)
         self.executor.add_node(self.node)
@@ -273,8 +274,8 @@ def ros_harness(ros_context):
     made: list[RosHarness] = []
 
     def make(overrides: dict[str, Any] | None = None, sim_time: bool = True,
-             cli_args: list[str] | None = None) -> RosHarness:
-        h = RosHarness(ros_context, overrides, sim_time, cli_args)
+             cli_args: list[str] | None = None, node_class: Any = None) -> RosHarness:
+        h = RosHarness(ros_context, overrides, sim_time, cli_args, node_class)
         made.append(h)
         return h
 

@@ -21,6 +21,7 @@ WING = f'{ROOT}.ros'
 DYNAMICS = f'{ROOT}.dynamics'
 #: Top-level packages of ROS 2 (client library, messages, launch); only the wing uses them.
 ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'rosgraph_msgs', 'builtin_interfaces', 'std_msgs',
+                'std_srvs',
                 'sensor_msgs', 'diagnostic_msgs', 'geometry_msgs', 'launch', 'launch_ros',
                 'ament_index_python', 'rosidl_runtime_py', 'rmw', 'unique_identifier_msgs'}
 #: The physics: equations (model), their integration (integrator) and compilation (numba).

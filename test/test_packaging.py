@@ -179,8 +179,8 @@ ROSDEP_KEYS = {
     'rosbags': 'python3-rosbags-pip', 'pytest': 'python3-pytest',
     'hypothesis': 'python3-hypothesis',
 }
-ROS_PACKAGES = {'rclpy', 'builtin_interfaces', 'std_msgs', 'sensor_msgs', 'diagnostic_msgs',
-                'trajectory_msgs',
+ROS_PACKAGES = {'rclpy', 'builtin_interfaces', 'std_msgs', 'std_srvs', 'sensor_msgs',
+                'diagnostic_msgs', 'trajectory_msgs',
                 'rcl_interfaces', 'rosgraph_msgs', 'ament_index_python', 'launch',
                 'launch_ros'}
 LOCAL_KEYS = {'python3-dask', 'python3-distributed'}

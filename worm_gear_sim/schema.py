@@ -46,6 +46,7 @@ __all__ = [
     'DEG', 'PHASE_AT_MEAN_STIFFNESS', 'MAX_ERROR_ORDERS', 'ERROR_HARMONIC_LIMIT',
     'ERROR_SLOPE_LIMIT', 'Geometry', 'Materials', 'Shafts', 'Mesh', 'Friction',
     'Damping', 'Load', 'Integrator', 'InputProfile', 'NodeSettings', 'CompensationSettings',
+    'AdaptationSettings', 'ADAPTABLE_KEYS',
 ]
 
 NODE_NAME = 'worm_gear_sim'
@@ -387,6 +388,45 @@ class CompensationSettings:
                                 'the mesh torque demand changes sign (docs/compensation.md)')
 
 
+#: The keys live adaptation may estimate (``adaptation.keys``), in the order of its state.
+ADAPTABLE_KEYS: tuple[str, ...] = ('load.output_torque', 'load.output_viscous_coefficient',
+                                   'mesh.backlash', 'mesh.worm_error_harmonics',
+                                   'mesh.gear_error_harmonics')
+
+
+@dataclass(frozen=True)
+class AdaptationSettings:
+    """Live adaptation of the model from measured_joint_states (worm_gear_sim.adaptation;
+    docs/adaptation.md)."""
+
+    enabled: bool = _f(False, 'Estimate adaptation.keys online from the encoders and update '
+                       'the model used for prediction and correction')
+    keys: tuple = _f(list(ADAPTABLE_KEYS), 'Which parameters may be adapted: any of '
+                     + ', '.join(ADAPTABLE_KEYS))
+    worm_error_orders: int = _f(3, 'Orders of the per-worm-turn error estimated (at least '
+                                'those of mesh.worm_error_harmonics)', '', 1, MAX_ERROR_ORDERS)
+    gear_error_orders: int = _f(1, 'Orders of the per-gear-turn error estimated', '', 1,
+                                MAX_ERROR_ORDERS)
+    memory: float = _f(20.0, 'Time constant over which the estimator forgets (each variance '
+                       'grows by dt / memory, capped at its prior)', 's', 0.1, 1e6)
+    window: float = _f(2.0, 'Window of the residual RMS that decides a switch (and the data '
+                       'needed before the first)', 's', 0.1, 3600.0)
+    min_improvement: float = _f(0.1, 'Share by which the adapted set must lower the windowed '
+                                'mean-square residual of the model in use', '', 0.0, 0.99,
+                                lo_open=True)
+    max_step: float = _f(5e-3, 'Largest change of the static correction of the command per '
+                         'applied step', 'rad', 0.0, 1.0, lo_open=True)
+    step_interval: float = _f(0.25, 'Time between applied steps (and switch decisions)', 's',
+                              0.01, 60.0)
+    params_file: str = _f('worm_gear_sim_adapted.yaml', 'Where the node\'s '
+                          '~/write_adapted_parameters service writes the params file of the '
+                          'model in use (relative: to the working directory)')
+    measurement_noise: float = _f(4e-6, 'RMS of what the theta4 residual keeps besides the '
+                                  'adapted keys: encoder noise and steps, model error '
+                                  '(measurement noise of the estimator)', 'rad', 0.0, 1.0,
+                                  lo_open=True)
+
+
 SECTIONS: dict[str, type] = {
     'geometry': Geometry,
     'materials': Materials,
@@ -399,6 +439,7 @@ SECTIONS: dict[str, type] = {
     'input': InputProfile,
     'node': NodeSettings,
     'compensation': CompensationSettings,
+    'adaptation': AdaptationSettings,
 }
 
 
@@ -418,6 +459,7 @@ class Parameters:
     input: InputProfile = field(default_factory=InputProfile)
     node: NodeSettings = field(default_factory=NodeSettings)
     compensation: CompensationSettings = field(default_factory=CompensationSettings)
+    adaptation: AdaptationSettings = field(default_factory=AdaptationSettings)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -539,6 +581,13 @@ def validate(cfg: Parameters) -> None:
                               f'{"r_g / l_w " if key[0] == "w" else ""}is {slope:.3g}, at most '
                               f'{ERROR_SLOPE_LIMIT:g} (the error must stay a small '
                               'correction of the ratio)')
+    bad = [k for k in cfg.adaptation.keys if k not in ADAPTABLE_KEYS]
+    if bad:
+        raise ConfigError('adaptation.keys', f'{", ".join(bad)} cannot be adapted: choose from '
+                          f'{", ".join(ADAPTABLE_KEYS)}')
+    if cfg.adaptation.enabled and not cfg.adaptation.keys:
+        raise ConfigError('adaptation.keys', 'is empty while adaptation.enabled is true: '
+                          f'name at least one of {", ".join(ADAPTABLE_KEYS)}')
     if cfg.integrator.time_step * cfg.node.publish_rate_hz > 1.0 + 1e-9:
         raise ConfigError('integrator.time_step', 'must not exceed the node tick period '
                           f'1/publish_rate_hz = {1.0 / cfg.node.publish_rate_hz:g} s')

@@ -39,6 +39,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     'identify',      # identify
     'calibrate',     # calibrate
     'tracking_pass',  # pass
+    'adapt',         # adapt
 )
 
 

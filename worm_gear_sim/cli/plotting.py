@@ -14,8 +14,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-__all__ = ['plot_trajectory', 'plot_experiment', 'plot_sweep', 'plot_modes', 'plot_traces',
-           'plot_pass']
+__all__ = ['plot_adaptation', 'plot_trajectory', 'plot_experiment', 'plot_sweep', 'plot_modes',
+           'plot_traces', 'plot_pass']
 
 _DPI = 100
 _STYLES = ('-o', '-s', '-^', '-D', '-v', '-x', '-*', '-P')
@@ -248,4 +248,31 @@ def plot_pass(result: Any, path: str | Path, title: str = '') -> Path:
         a.set_ylabel('compensated error [urad]')
         a.set_xlabel('t [s]')
     fig.suptitle(title or 'worm_gear_sim: tracking pass', fontsize=10)
+    return _save(fig, path)
+
+
+def plot_adaptation(run: Any, path: str | Path, title: str = '') -> Path:
+    """The offline adaptation twin (:mod:`worm_gear_sim.adaptation.twin`): the reference,
+    the antenna error without and with the adapting feed-forward, and the latter on its own
+    (log) scale with the times the model was stepped."""
+    fig, ax = _new(3, 1, (9.0, 8.5))
+    t = run.t
+    ax[0, 0].plot(t, run.theta1_ref, lw=1, color='k')
+    ax[0, 0].set_ylabel('theta1_ref [rad]')
+    a = ax[1, 0]
+    a.plot(t, run.error_uncompensated * 1e6, lw=0.6, label='uncompensated')
+    a.plot(t, run.error_compensated * 1e6, lw=0.6, label='adapting feed-forward')
+    a.set_ylabel('antenna error [urad]')
+    a.legend(loc='best', fontsize=8)
+    a = ax[2, 0]
+    a.semilogy(t, np.abs(run.error_uncompensated) * 1e6 + 1e-3, lw=0.4, alpha=0.6,
+               label='|uncompensated|')
+    a.semilogy(t, np.abs(run.error_compensated) * 1e6 + 1e-3, lw=0.4,
+               label='|adapting feed-forward|')
+    for ts, _ in run.steps:
+        a.axvline(ts, color='0.7', lw=0.5)
+    a.set_ylabel('|error| [urad] (grey: model steps)')
+    a.set_xlabel('t [s]')
+    a.legend(loc='best', fontsize=8)
+    fig.suptitle(title or 'worm_gear_sim: live adaptation (offline twin)', fontsize=10)
     return _save(fig, path)

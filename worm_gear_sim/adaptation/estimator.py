@@ -1,0 +1,669 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Online estimation of the drive's slowly changing parameters from the encoders, and the
+rule that lets an adapted set replace the model in use.
+
+**What is estimated** (``adaptation.keys``): the periodic transmission error's harmonics
+(``mesh.worm_error_harmonics``, ``mesh.gear_error_harmonics``; ``adaptation.*_orders``
+orders), the load torque ``load.output_torque``, the antenna drag
+``load.output_viscous_coefficient`` and the play ``mesh.backlash``.
+
+**Measurement.**  The residual r = theta4_meas - theta4_pred between the encoder and the
+model's prediction of the same instant (same command).  For small parameter errors it is
+linear in them, with the model's sensitivities of theta4 at a fixed command as regressors:
+
+* harmonics: sin k theta2, cos k theta2, sin m theta3, cos m theta3 (the error enters the
+  approach q = l_w theta2 - r_g theta3 + r_g e, Eq. 8, so theta3 moves by +e);
+* load torque T: -C (the static wind-up of the chain at the antenna, C [rad/(N m)] from the
+  model's inverse, per sliding direction, averaged over a mesh cycle);
+* drag c: -C omega4 (the wind-up of the drag torque);
+* play b: -f / 2, f = +1 on the drive flank, -1 on the coast flank: the sign of the mesh
+  torque demand tau = (J_g + J_4) alpha4 + c omega4 + T.  The estimate knows tau with its
+  covariance, so f is taken as its mean, erf(tau / (sqrt 2 sigma_tau)), and the unknown
+  sign's share of the play, (1 - f^2) E[b^2] / 4, is added to the measurement noise: at the
+  start (load and drag unknown) the play is a noise, not a wrong regressor; as load and drag
+  settle the flank becomes sure and the play is learnt.  (A hard flank from a wrong start
+  leads the estimate into a wrong basin: play explained as load, drag and harmonics.)
+
+The estimator works on y = r + phi^T theta_model (theta_model: the values of the model that
+made the prediction; its play on its own flank), i.e. on the parameters themselves, so
+switching the model does not disturb it.  Samples within ``FLANK_HOLD_OFF`` of a flank
+change (past or ahead, by the estimate or by the model in use) or of a step applied to the
+model are skipped: while the worm crosses the play, or the prediction settles on the
+changed model, the residual is a transient the linear picture does not hold.  An
+innovation beyond ``HUBER_SIGMAS`` times its predicted standard deviation is down-weighted
+(Huber's weight, the covariance kept consistent): one transient cannot throw the estimate,
+a lasting change still gets through.
+
+**The instant of a flank change** is what the crossing of the play needs most (a load
+error of 0.1 N m moves it by tens of ms on a scan with drag, and for that long the antenna
+is off by the whole play), and the wind-up alone cannot pin the load that finely.
+:mod:`.flank_timing` measures it from the residual (around the model's own crossing, or
+as a step of the residual while the model does not cross) and the filter takes "the
+drive's torque demand was zero then" as one more linear measurement of load and drag (and
+a step's size as one of the play).
+
+**Why a Kalman filter with random-walk parameters, not RLS with a forgetting factor.**  The
+problem is linear in the parameters (the flank aside, above), so both are the same
+recursion on a well-excited record.  They differ where the motion does not excite a
+direction: a sector scan hardly separates the gear's first harmonic cos theta3 (theta3 spans
++-5 deg) from the load torque, and a load that keeps the teeth on one flank makes the play a
+constant like the load.  With exponential forgetting the covariance of such a direction
+grows without bound (wind-up), and a burst of noise then moves the estimate anywhere.  The
+Kalman form states per parameter a prior (sigma_i, :data:`PRIOR_STD`) and how it may
+drift: the process noise q_i = P_ii dt / ``memory`` makes each variance forget like RLS
+with the time constant ``memory`` (the estimate averages over that long, whatever the size
+of the regressor), and each variance is capped at its prior, so the covariance of an
+unexcited direction grows only back to the prior and the estimate stays near its start
+there instead of wandering.  The prior also gives the soft flank its sigma_tau.  The cost
+per sample is an n x n update (n <= 2 (8 + 8) + 3), compiled.
+
+**When an adapted set is applied** (:meth:`Adapter.poll`, every ``step_interval``): the
+windowed mean square of the linearised residual (exponential window ``window``), plus the
+error a set would make by crossing the play at the wrong time at the measured flank
+changes, is computed for the current estimate, the model in use and the nominal (start)
+set; the estimate becomes the target only if it lowers the mean square by
+``min_improvement`` against the model in use and is not worse than the nominal one, after
+one window of data.  A noise-only residual gives no such gain (the in-sample gain of
+fitting n parameters to N samples of noise is n/N), so it changes nothing.  A play or drag
+estimate below zero within ``BOUND_SIGMAS`` standard deviations is taken as zero; further
+below, the target is refused (the reason is kept).  The model then moves to the target in
+steps: each step changes the static correction of the command by at most ``max_step`` [rad
+at the worm] (bounded with the sensitivities above), one step per ``step_interval``: no
+jump in the command.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from ..dynamics.inverse import inverse_theta1
+from ..dynamics.model import DriveModel, with_load_torque
+from ..params import Config
+from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS, Parameters
+from .flank_timing import WINDOW, FlankTiming
+
+__all__ = ['PRIOR_STD', 'FLANK_HOLD_OFF', 'Layout', 'output_compliance',
+           'Adapter', 'Decision']
+
+LOAD_KEY, DRAG_KEY, PLAY_KEY, WORM_KEY, GEAR_KEY = ADAPTABLE_KEYS
+#: Prior standard deviation of each key's estimate about its start value (per coefficient
+#: for the harmonics): rad at the gear, N m, N m s/rad, rad.
+PRIOR_STD: dict[str, float] = {WORM_KEY: 1e-4, GEAR_KEY: 3e-5, LOAD_KEY: 5.0,
+                               DRAG_KEY: 50.0, PLAY_KEY: 1e-3}
+#: Samples this long after a change of the flank in contact are not used [s].
+FLANK_HOLD_OFF = 0.15
+#: Time constant of the low-pass on the antenna acceleration (flank decision) [s].
+ACCEL_TIME_CONSTANT = 0.02
+#: Innovations beyond this many predicted standard deviations are down-weighted (Huber).
+HUBER_SIGMAS = 4.0
+#: A play or drag estimate below zero by more than this many standard deviations is refused.
+BOUND_SIGMAS = 3.0
+#: Timing uncertainty of a measured flank change [s] and a torque floor [N m]: the noise
+#: of the flank-change measurement is SWITCH_TIME_SD |c alpha4| + SWITCH_TORQUE_SD.
+SWITCH_TIME_SD = 2e-3
+SWITCH_TORQUE_SD = 2e-3
+#: A play smaller than this many measurement noises is not seen in a flank change.
+MIN_PLAY_NOISES = 10.0
+#: A sample gap longer than this restarts the rate estimates [s].
+MAX_GAP = 0.05
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where each adapted key sits in the state vector (-1: not adapted)."""
+
+    keys: tuple[str, ...]
+    worm_orders: int
+    gear_orders: int
+    i_load: int
+    i_drag: int
+    i_play: int
+    worm0: int
+    gear0: int
+    n: int
+
+    @classmethod
+    def of(cls, keys: Sequence[str], worm_orders: int, gear_orders: int) -> Layout:
+        bad = [k for k in keys if k not in ADAPTABLE_KEYS]
+        if bad:
+            raise ValueError(f'adaptation.keys: {", ".join(bad)} cannot be adapted (choose '
+                             f'from {", ".join(ADAPTABLE_KEYS)})')
+        chosen = tuple(k for k in ADAPTABLE_KEYS if k in keys)
+        if not chosen:
+            raise ValueError('adaptation.keys: empty (nothing to adapt)')
+        idx: dict[str, int] = {}
+        n = 0
+        for k in chosen:
+            idx[k] = n
+            n += {WORM_KEY: 2 * worm_orders, GEAR_KEY: 2 * gear_orders}.get(k, 1)
+        return cls(chosen, int(worm_orders) if WORM_KEY in idx else 0,
+                   int(gear_orders) if GEAR_KEY in idx else 0, idx.get(LOAD_KEY, -1),
+                   idx.get(DRAG_KEY, -1), idx.get(PLAY_KEY, -1), idx.get(WORM_KEY, -1),
+                   idx.get(GEAR_KEY, -1), n)
+
+    def pack(self, cfg: Parameters) -> np.ndarray:
+        """The state vector of ``cfg``'s values (harmonics padded with zeros)."""
+        x = np.zeros(self.n)
+        for i, key in ((self.i_load, LOAD_KEY), (self.i_drag, DRAG_KEY),
+                       (self.i_play, PLAY_KEY)):
+            if i >= 0:
+                x[i] = float(cfg.to_flat_dict()[key])
+        for i0, orders, key in ((self.worm0, self.worm_orders, WORM_KEY),
+                                (self.gear0, self.gear_orders, GEAR_KEY)):
+            if i0 >= 0:
+                v = list(getattr(cfg.mesh, key.split('.')[1]))[:2 * orders]
+                x[i0:i0 + len(v)] = v
+        return x
+
+    def overrides(self, x: np.ndarray) -> dict[str, Any]:
+        """The parameter overrides (dotted keys) of a state vector."""
+        out: dict[str, Any] = {}
+        for i, key in ((self.i_load, LOAD_KEY), (self.i_drag, DRAG_KEY),
+                       (self.i_play, PLAY_KEY)):
+            if i >= 0:
+                out[key] = float(x[i])
+        for i0, orders, key in ((self.worm0, self.worm_orders, WORM_KEY),
+                                (self.gear0, self.gear_orders, GEAR_KEY)):
+            if i0 >= 0:
+                out[key] = [float(v) for v in x[i0:i0 + 2 * orders]]
+        return out
+
+    def prior_std(self) -> np.ndarray:
+        s = np.zeros(self.n)
+        for i, key in ((self.i_load, LOAD_KEY), (self.i_drag, DRAG_KEY),
+                       (self.i_play, PLAY_KEY)):
+            if i >= 0:
+                s[i] = PRIOR_STD[key]
+        for i0, orders, key in ((self.worm0, self.worm_orders, WORM_KEY),
+                                (self.gear0, self.gear_orders, GEAR_KEY)):
+            if i0 >= 0:
+                s[i0:i0 + 2 * orders] = PRIOR_STD[key]
+        return s
+
+
+def output_compliance(model: DriveModel, phases: int = 8) -> tuple[float, float]:
+    """Static wind-up of the chain at the antenna per N m of antenna torque, theta1 held
+    [rad/(N m)], (sliding forwards, backwards): from the model's inverse (Eqs. 6-13), the
+    mean over ``phases`` positions of one mesh cycle."""
+    p = model.p
+    ratio = model.output_per_input
+    cycle = 2.0 * math.pi * ratio            # one worm turn at the antenna
+    out = []
+    for direction in (1.0, -1.0):
+        vals = []
+        for k in range(phases):
+            y0 = cycle * k / phases
+            a = inverse_theta1(with_load_torque(p, 0.0), y0, 1e-3 * direction, 0.0, 0.0,
+                               0.0, False, 1.0)
+            b = inverse_theta1(with_load_torque(p, 1.0), y0, 1e-3 * direction, 0.0, 0.0,
+                               0.0, False, 1.0)
+            vals.append((b - a) * ratio)
+        out.append(float(np.mean(vals)))
+    return out[0], out[1]
+
+
+# ---- compiled per-sample work ----------------------------------------------------------------
+@njit(cache=True)
+def _regressor(phi, i_load, i_drag, i_play, worm0, nw, gear0, ng, th2, th3, w4, flank,
+               compliance):
+    phi[:] = 0.0
+    if i_load >= 0:
+        phi[i_load] = -compliance
+    if i_drag >= 0:
+        phi[i_drag] = -compliance * w4
+    if i_play >= 0:
+        phi[i_play] = -0.5 * flank
+    for k in range(nw):
+        phi[worm0 + 2 * k] = math.sin((k + 1) * th2)
+        phi[worm0 + 2 * k + 1] = math.cos((k + 1) * th2)
+    for m in range(ng):
+        phi[gear0 + 2 * m] = math.sin((m + 1) * th3)
+        phi[gear0 + 2 * m + 1] = math.cos((m + 1) * th3)
+
+
+@njit(cache=True)
+def _kalman_step(theta, P, q, p_max, phi, y, r_var, huber):
+    """Random walk (P += q, each variance capped at its prior) then the measurement
+    y = phi^T theta + noise(r_var).  An innovation beyond ``huber`` times its predicted
+    standard deviation sqrt(phi^T P phi + r_var) is down-weighted (its noise variance
+    inflated by |nu| / huber, Huber's weight): mean and covariance stay consistent.  Returns
+    the normalised innovation nu."""
+    n = theta.size
+    for i in range(n):
+        P[i, i] += q[i]
+    for i in range(n):
+        if P[i, i] > p_max[i]:
+            s = math.sqrt(p_max[i] / P[i, i])
+            for j in range(n):
+                P[i, j] *= s
+                P[j, i] *= s
+    Pphi = P @ phi
+    pp = 0.0
+    innov = y
+    for i in range(n):
+        pp += phi[i] * Pphi[i]
+        innov -= phi[i] * theta[i]
+    nu = innov / math.sqrt(pp + r_var)
+    r_eff = r_var
+    if abs(nu) > huber:
+        r_eff = (pp + r_var) * abs(nu) / huber - pp
+        if r_eff < r_var:
+            r_eff = r_var
+    s = pp + r_eff
+    for i in range(n):
+        theta[i] += Pphi[i] / s * innov
+    for i in range(n):
+        for j in range(i, n):
+            v = P[i, j] - Pphi[i] * Pphi[j] / s
+            P[i, j] = v
+            P[j, i] = v
+    return nu
+
+
+@njit(cache=True)
+def _sample_step(th, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play, worm0, nw,
+                 gear0, ng, th2, th3, w4, flank, flank_m, torque, compliance, resid, forget,
+                 lam, r_var, huber):
+    """One encoder sample into the estimate and the window (module docstring): the soft
+    flank from the estimate's covariance, the regressors, y = r + phi^T theta_model (the
+    model's play on its own flank), forgetting, the Kalman step; the windowed sums with the
+    estimate's hard flank (where it agrees with the model's, the model in use's linearised
+    residual is the residual itself)."""
+    soft = flank
+    if i_play >= 0:
+        var = 0.0
+        if i_load >= 0:
+            var += P[i_load, i_load]
+        if i_drag >= 0:
+            var += w4 * w4 * P[i_drag, i_drag]
+            if i_load >= 0:
+                var += 2.0 * w4 * P[i_load, i_drag]
+        if var > 0.0:
+            soft = math.erf(torque / math.sqrt(2.0 * var))
+            bp = th[i_play]
+            r_var += 0.25 * (1.0 - soft * soft) * (bp * bp + P[i_play, i_play])
+    _regressor(phi, i_load, i_drag, i_play, worm0, nw, gear0, ng, th2, th3, w4, soft,
+               compliance)
+    y = resid
+    for i in range(phi.size):
+        y += phi[i] * applied[i]
+    if i_play >= 0:
+        y += (0.5 * soft - 0.5 * flank_m) * applied[i_play]
+    q = np.empty(phi.size)
+    for i in range(phi.size):
+        q[i] = P[i, i] * forget
+    _kalman_step(th, P, q, std2, phi, y, r_var, huber)
+    if i_play >= 0:
+        phi[i_play] = -0.5 * flank     # the window judges sets by the hard flank: for the
+    _window_step(S, b, sc, phi, y, lam)  # model in use (same flank) y - phi x is r itself
+
+
+@njit(cache=True)
+def _window_step(S, b, sc, phi, y, lam):
+    """Exponentially weighted sums: S = sum w phi phi^T, b = sum w phi y, sc = [sum w y^2,
+    sum w]."""
+    n = phi.size
+    for i in range(n):
+        b[i] = lam * b[i] + phi[i] * y
+        for j in range(n):
+            S[i, j] = lam * S[i, j] + phi[i] * phi[j]
+    sc[0] = lam * sc[0] + y * y
+    sc[1] = lam * sc[1] + 1.0
+
+
+def _window_ms(S: np.ndarray, b: np.ndarray, sc: np.ndarray, x: np.ndarray) -> float:
+    """Windowed mean square of y - phi^T x."""
+    if sc[1] <= 0.0:
+        return math.nan
+    return float(max(sc[0] - 2.0 * x @ b + x @ S @ x, 0.0) / sc[1])
+
+
+@dataclass
+class Decision:
+    """What :meth:`Adapter.poll` asks the caller to do: apply ``overrides`` (the next step,
+    state vector ``step``) or nothing; ``note``: why (for the log, once per change)."""
+
+    step: np.ndarray | None = None
+    overrides: dict[str, Any] | None = None
+    note: str = ''
+
+
+#: "Nothing to do" (shared; never modified).
+_NOTHING = Decision()
+
+
+class Adapter:
+    """The online estimator and the switching rule (module docstring).
+
+    ``model``: the model in use at the start (nominal); ``settings``: the ``adaptation``
+    section of a Config (keys, orders, memory, window, min_improvement, max_step,
+    step_interval, measurement_noise).  Feed :meth:`update` in time order (the caller
+    rejects bad samples); call :meth:`poll` now and then; tell it :meth:`applied` or
+    :meth:`refused`; :meth:`rebase` after an outside change of the model."""
+
+    def __init__(self, model: DriveModel | Config, settings: Any) -> None:
+        model = DriveModel.of(model)
+        self.settings = settings
+        cfg = model.config
+        worm = max(int(settings.worm_error_orders), len(cfg.mesh.worm_error_harmonics) // 2)
+        gear = max(int(settings.gear_error_orders), len(cfg.mesh.gear_error_harmonics) // 2)
+        self.layout = Layout.of(settings.keys, min(worm, MAX_ERROR_ORDERS),
+                                min(gear, MAX_ERROR_ORDERS))
+        n = self.layout.n
+        self._std = self.layout.prior_std()
+        self._std2 = self._std ** 2
+        self.theta = np.zeros(n)
+        self.P = np.zeros((n, n))
+        self._phi = np.zeros(n)
+        self._S = np.zeros((n, n))
+        self._b = np.zeros(n)
+        self._sc = np.zeros(2)
+        self.samples_used = 0
+        self.samples_skipped = 0
+        self.flank_times = 0
+        self.steps_seen = 0
+        self.switches = 0
+        self.refusals = 0
+        self.last_refusal = ''
+        self.target: np.ndarray | None = None
+        self.rebase(model, nominal=True)
+
+    # ---- the model in use ------------------------------------------------------------------
+    def rebase(self, model: DriveModel | Config, nominal: bool = False) -> None:
+        """The model in use changed from outside (or at the start, ``nominal``): its values
+        become the applied set (and, ``nominal``, the prior mean and the nominal set); the
+        estimate restarts there with the prior covariance, the window is emptied."""
+        model = DriveModel.of(model)
+        self.model = model
+        self.applied_x = self.layout.pack(model.config)
+        if nominal:
+            self.nominal_x = self.applied_x.copy()
+        self.theta[:] = self.applied_x
+        self.P[:] = np.diag(self._std ** 2)
+        self._S[:] = 0.0
+        self._b[:] = 0.0
+        self._sc[:] = 0.0
+        self.target = None
+        self._compliance = output_compliance(model)
+        d = model.derived
+        self._inertia = d.J_g + d.J_4
+        self._ratio = model.output_per_input
+        flat = model.config.to_flat_dict()
+        self._load0, self._drag0 = float(flat[LOAD_KEY]), float(flat[DRAG_KEY])
+        self._last_t = math.nan
+        self._th4 = self._w4 = self._a4 = 0.0
+        self._rates = 0                   # samples since the rates restarted
+        self._flank = self._flank_m = 0.0
+        self._flank_t = -math.inf
+        self._first_t = math.nan
+        self._next_poll = -math.inf
+        self._w_max = 0.0
+        self._hold_until = -math.inf
+        self._timing = FlankTiming()
+        self._model_flank_t = -math.inf
+        self._switches: collections.deque = collections.deque(maxlen=16)
+        self._rate = 0.0
+        self._play0 = float(model.config.mesh.backlash)
+
+    # ---- per sample ------------------------------------------------------------------------
+    def update(self, t: float, theta4_meas: float, theta2: float, theta3: float,
+               theta4_pred: float) -> bool:
+        """One encoder sample at ``t`` [s] (measured theta4) with the prediction of that
+        instant (theta2, theta3, theta4); True when it entered the estimate."""
+        dt = t - self._last_t
+        self._last_t = t
+        if not dt <= MAX_GAP:                       # first sample, or after a pause
+            self._rates = 0
+        if self._rates == 0:
+            w4 = 0.0
+            a4 = 0.0
+        else:
+            w4 = (theta4_pred - self._th4) / dt
+            a_raw = (w4 - self._w4) / dt if self._rates > 1 else 0.0
+            g = dt / (ACCEL_TIME_CONSTANT + dt)
+            a4 = self._a4 + g * (a_raw - self._a4)
+        self._th4, self._w4, self._a4 = theta4_pred, w4, a4
+        if self._rates > 0:
+            self._rate = 1.0 / dt
+        self._rates += 1
+        if self._rates < 3:
+            self.samples_skipped += 1
+            return False
+        lay = self.layout
+        th = self.theta
+        load = th[lay.i_load] if lay.i_load >= 0 else self._load0
+        drag = th[lay.i_drag] if lay.i_drag >= 0 else self._drag0
+        torque = self._inertia * a4 + drag * w4 + load
+        flank = 1.0 if torque > 0.0 else -1.0 if torque < 0.0 else self._flank
+        if flank != self._flank:
+            self._flank, self._flank_t = flank, t
+        # the flank of the model in use: where it differs, one of the two is wrong and the
+        # residual holds a flank error the linear picture does not have
+        ax = self.applied_x
+        torque_m = self._inertia * a4 + (ax[lay.i_drag] if lay.i_drag >= 0 else
+                                         self._drag0) * w4 + \
+            (ax[lay.i_load] if lay.i_load >= 0 else self._load0)
+        flank_m = 1.0 if torque_m > 0.0 else -1.0 if torque_m < 0.0 else self._flank_m
+        timing = self._timing
+        timing.push(t, theta4_meas - theta4_pred, w4, a4)
+        if flank_m != self._flank_m:
+            if lay.i_play < 0 and self._play0 > 0.0 or lay.i_play >= 0 and \
+                    self.applied_x[lay.i_play] > 0.0:   # the model crosses its play here
+                timing.model_flank_changed(t, self._flank_m, flank_m)
+                self._model_flank_t = t
+            self._flank_m, self._flank_t = flank_m, max(self._flank_t, t)
+        self._flank_time_update(t, drag)
+        self._step_update(t, drag)
+        # a flank change within the hold-off ahead (the torques' rates: c alpha4)
+        ahead = FLANK_HOLD_OFF * a4
+        soon = torque * (torque + drag * ahead) < 0.0 or \
+            torque_m * (torque_m + (ax[lay.i_drag] if lay.i_drag >= 0 else self._drag0)
+                        * ahead) < 0.0
+        if soon or t - self._flank_t < FLANK_HOLD_OFF or t < self._hold_until:
+            self.samples_skipped += 1
+            return False
+        c_pos, c_neg = self._compliance
+        compliance = c_pos if w4 > 0.0 else c_neg if w4 < 0.0 else 0.5 * (c_pos + c_neg)
+        s = self.settings
+        _sample_step(th, self.P, self._std2, self._phi, self.applied_x, self._S, self._b,
+                     self._sc, lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
+                     lay.gear0, lay.gear_orders, theta2, theta3, w4, flank, flank_m, torque,
+                     compliance, theta4_meas - theta4_pred, dt / s.memory,
+                     math.exp(-dt / s.window), s.measurement_noise ** 2, HUBER_SIGMAS)
+        self._w_max = max(abs(w4), self._w_max * math.exp(-dt / s.window))
+        if math.isnan(self._first_t):
+            self._first_t = t
+        self.samples_used += 1
+        return True
+
+    def _step_update(self, t: float, drag: float) -> None:
+        """A crossing of the drive's own, seen as a step of the residual while the model
+        did not cross (:meth:`.flank_timing.FlankTiming.detect`): the torque measurement of
+        :meth:`_flank_time_update` at its middle and, with play adapted, the step's size as
+        a measurement of the play (10 % uncertain)."""
+        if not self._timing.due(t):
+            return
+        lay = self.layout
+        least = 0.0
+        if lay.i_play >= 0:
+            b, var = self.theta[lay.i_play], self.P[lay.i_play, lay.i_play]
+            if b * b > 9.0 * var:                  # the play is known: half of it at least
+                least = 0.5 * b
+        elif self._play0 > 0.0:
+            least = 0.5 * self._play0
+        got = self._timing.detect(t, self.settings.measurement_noise, self._model_flank_t,
+                                  least)
+        if got is None:
+            return
+        t_p, w_p, a_p, step = got
+        self.steps_seen += 1
+        self._torque_zero(t_p, w_p, a_p, drag)
+        if lay.i_play >= 0:
+            phi = np.zeros(lay.n)
+            phi[lay.i_play] = 1.0
+            sd = 0.1 * abs(step)
+            _kalman_step(self.theta, self.P, np.zeros(lay.n), self._std ** 2, phi, abs(step),
+                         sd * sd, HUBER_SIGMAS)
+        self._hold_until = max(self._hold_until, t_p + FLANK_HOLD_OFF)
+
+    def _torque_zero(self, t_p: float, w_p: float, a_p: float, drag: float) -> None:
+        """The drive's mesh torque was zero at t_p: T + c omega4 = -J alpha4 there."""
+        lay = self.layout
+        if lay.i_load < 0 and lay.i_drag < 0:
+            return
+        self._switches.append((t_p, w_p, a_p))
+        phi = np.zeros(lay.n)
+        if lay.i_load >= 0:
+            phi[lay.i_load] = 1.0
+        if lay.i_drag >= 0:
+            phi[lay.i_drag] = w_p
+        y = -self._inertia * a_p
+        if lay.i_load < 0:
+            y -= self._load0
+        if lay.i_drag < 0:
+            y -= self._drag0 * w_p
+        sd = SWITCH_TIME_SD * abs(drag * a_p) + SWITCH_TORQUE_SD
+        _kalman_step(self.theta, self.P, np.zeros(lay.n), self._std ** 2, phi, y, sd * sd,
+                     HUBER_SIGMAS)
+        self.flank_times += 1
+
+    def _flank_time_update(self, t: float, drag: float) -> None:
+        """The real drive's flank change as a measurement of (T, c) (:mod:`.flank_timing`):
+        T + c omega4(t_p) = -J alpha4(t_p), its noise a timing error of SWITCH_TIME_SD."""
+        lay = self.layout
+        if lay.i_load < 0 and lay.i_drag < 0:
+            return
+        play = self.theta[lay.i_play] if lay.i_play >= 0 else self._play0
+        model_play = self.applied_x[lay.i_play] if lay.i_play >= 0 else self._play0
+        got = self._timing.ready(t, play, MIN_PLAY_NOISES * self.settings.measurement_noise,
+                                 model_play)
+        if got is None:
+            return
+        self._torque_zero(*got, drag)
+
+    # ---- switching -------------------------------------------------------------------------
+    def window_rms(self) -> dict[str, float]:
+        """Windowed RMS of the residual [rad] for the estimate, the model in use and the
+        nominal set: the linearised residual of the samples used, plus the error of a
+        mistimed crossing of the play at each measured flank change in the window."""
+        S, b, sc = self._S, self._b, self._sc
+        out = {}
+        for name, x in (('estimate', self.theta), ('applied', self.applied_x),
+                        ('nominal', self.nominal_x)):
+            if sc[1] <= 0:
+                out[name] = math.nan
+                continue
+            ms = _window_ms(S, b, sc, x)
+            out[name] = math.sqrt(ms + self._crossing_ms(x) / sc[1])
+        return out
+
+    def _crossing_ms(self, x: np.ndarray) -> float:
+        """Sum of the squared error over the window's flank changes if the model ``x``
+        decided them: the play b (the estimate's) for the time |tau_x(t_p)| / |c alpha4|
+        its torque demand takes to reach zero after the drive's, per sample."""
+        lay = self.layout
+        if not self._switches or self._rate <= 0.0:
+            return 0.0
+        play = max(self.theta[lay.i_play] if lay.i_play >= 0 else self._play0, 0.0)
+        load = x[lay.i_load] if lay.i_load >= 0 else self._load0
+        drag = x[lay.i_drag] if lay.i_drag >= 0 else self._drag0
+        total = 0.0
+        for t_p, w_p, a_p in self._switches:
+            weight = math.exp(-(self._last_t - t_p) / self.settings.window)
+            tau = load + drag * w_p + self._inertia * a_p
+            rate = abs(drag * a_p)
+            late = min(abs(tau) / rate, WINDOW) if rate > 0.0 else WINDOW * (tau != 0.0)
+            total += weight * play * play * late * self._rate
+        return total
+
+    def poll(self, t: float) -> Decision:
+        """Every ``step_interval``: maybe take the estimate as the target (module
+        docstring), then the next bounded step towards the target."""
+        s = self.settings
+        if t < self._next_poll:
+            return _NOTHING
+        self._next_poll = t + s.step_interval
+        note = ''
+        if not math.isnan(self._first_t) and t - self._first_t >= s.window:
+            rms = self.window_rms()
+            est, cur, nom = rms['estimate'], rms['applied'], rms['nominal']
+            if est * est < (1.0 - s.min_improvement) * cur * cur and est <= nom:
+                cand, why = self._bounded(self.theta)
+                if why:
+                    self.refused(why)
+                else:
+                    self.target = cand
+                    note = (f'adapted set accepted: windowed residual RMS {est:.3g} rad '
+                            f'against {cur:.3g} rad (model in use), {nom:.3g} rad (nominal)')
+        if self.target is None or np.array_equal(self.target, self.applied_x):
+            return Decision(note=note)
+        delta = self.target - self.applied_x
+        bound = self._correction_bound(delta)
+        limit = s.max_step * self._ratio          # max_step at the worm -> antenna
+        share = 1.0 if bound <= limit else limit / bound
+        step = self.target.copy() if share >= 1.0 else self.applied_x + share * delta
+        return Decision(step, self.layout.overrides(step), note)
+
+    def _bounded(self, x: np.ndarray) -> tuple[np.ndarray, str]:
+        """The candidate of estimate ``x``: a play or drag below zero by less than
+        ``BOUND_SIGMAS`` standard deviations is set to zero (zero is within its
+        uncertainty); one further below is refused (the reason)."""
+        cand = x.copy()
+        for i, key in ((self.layout.i_play, PLAY_KEY), (self.layout.i_drag, DRAG_KEY)):
+            if i >= 0 and cand[i] < 0.0:
+                sd = math.sqrt(max(self.P[i, i], 0.0))
+                if cand[i] < -BOUND_SIGMAS * sd:
+                    return cand, (f'{key} estimate {cand[i]:.3g} is negative (beyond '
+                                  f'{BOUND_SIGMAS:g} standard deviations, {sd:.2g}): not '
+                                  'applied')
+                cand[i] = 0.0
+        return cand, ''
+
+    def _correction_bound(self, delta: np.ndarray) -> float:
+        """Bound of the change of the static antenna correction a parameter change makes
+        (the sensitivities of the module docstring) [rad]."""
+        lay = self.layout
+        c = max(abs(self._compliance[0]), abs(self._compliance[1]))
+        out = 0.0
+        if lay.i_load >= 0:
+            out += c * abs(delta[lay.i_load])
+        if lay.i_drag >= 0:
+            out += c * self._w_max * abs(delta[lay.i_drag])
+        if lay.i_play >= 0:
+            out += 0.5 * abs(delta[lay.i_play])
+        for i0, k in ((lay.worm0, lay.worm_orders), (lay.gear0, lay.gear_orders)):
+            if i0 >= 0:
+                out += float(np.sum(np.abs(delta[i0:i0 + 2 * k])))
+        return out
+
+    def applied(self, step: np.ndarray, model: DriveModel) -> None:
+        """The caller applied ``step`` (a Decision's) to the model in use."""
+        self.applied_x = np.array(step, float)
+        self.model = model
+        self._hold_until = self._last_t + FLANK_HOLD_OFF   # the prediction's transient
+        self.switches += 1
+        if self.target is not None and np.array_equal(self.target, self.applied_x):
+            self.target = None
+
+    def refused(self, reason: str) -> None:
+        """The target cannot be applied (``reason``): the model in use stays."""
+        self.target = None
+        self.refusals += 1
+        self.last_refusal = reason
+
+    # ---- read-out --------------------------------------------------------------------------
+    def estimates(self) -> dict[str, Any]:
+        """The current estimate as parameter values (dotted keys)."""
+        return self.layout.overrides(self.theta)
+
+    def applied_values(self) -> dict[str, Any]:
+        """The values of the model in use (dotted keys)."""
+        return self.layout.overrides(self.applied_x)

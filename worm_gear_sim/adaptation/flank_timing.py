@@ -1,0 +1,191 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""When did the drive change flank?  A measurement of the instant the mesh torque of the
+real drive crossed zero, from the residual around the model's own flank change.
+
+Why: with play, the feed-forward crosses the play when the model's mesh torque demand
+(J_g + J_4) alpha4 + c omega4 + T changes sign.  On a sector scan with drag the sign changes
+at omega4 = -T / c, and the instant moves by dT / (c alpha4) per N m of load error: 0.25 s per
+N m at c = 20 N m s/rad and the scan's 0.2 rad/s^2.  A load error of 0.1 N m shifts the
+crossing by 25 ms, and for those 25 ms the antenna is off by the whole play.  The wind-up
+alone (C dT = 4 urad per N m) cannot pin T that finely; the residual's step can.
+
+How: the residual r = theta4_meas - theta4_pred steps by s b (plant, play b, at its crossing
+t_p) and by -s b_m (the prediction, play b_m in the model, at t_m), s = +1 from the drive to
+the coast flank, -1 back.  Over [t_m - W, t_m + W], with the level r_pre before and the
+step dr = r_post - r_pre = s (b - b_m):
+
+    I = integral (r - r_pre) dt,   t_p - t_m = -(I - dr (t_m + W - t_m)) / (s b).
+
+At t_p the real drive's torque is zero: T + c omega4(t_p) = -J alpha4(t_p), a measurement
+linear in (T, c) that :class:`~.estimator.Adapter` adds to its Kalman filter.  An event
+with another flank change inside its window, or a play too small to see, gives nothing.
+
+While the model does not cross (at the start its play is zero, or its load keeps it on one
+flank) the drive's own crossings are steps of the residual: :meth:`FlankTiming.detect` finds
+them (lines fitted each side of a gap), giving the same torque measurement at the step's
+middle and the step's size, the play.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ['FlankTiming', 'WINDOW', 'LEVEL_WINDOW', 'STEP_SIDE', 'STEP_GAP', 'STEP_STRIDE',
+           'STEP_NOISES']
+
+#: Half-width of the window over which the steps are integrated [s].
+WINDOW = 0.3
+#: Length of the windows giving the residual's level before and after [s].
+LEVEL_WINDOW = 0.05
+
+
+#: Step detector: fitted line length each side [s], the gap left for the transit [s], how
+#: often it looks [s], and the smallest step in measurement noises.
+STEP_SIDE = 0.04
+STEP_GAP = 0.06
+STEP_STRIDE = 0.01
+STEP_NOISES = 15.0
+
+
+def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Least-squares line y = k x + d: (k, d)."""
+    xm, ym = float(x.mean()), float(y.mean())
+    dx = x - xm
+    sxx = float(dx @ dx)
+    k = float(dx @ (y - ym)) / sxx if sxx > 0.0 else 0.0
+    return k, ym - k * xm
+
+
+class FlankTiming:
+    """Collects (t, r, omega4, alpha4) per sample; :meth:`model_flank_changed` opens an
+    event at t_m; :meth:`ready` returns (t_p, omega4(t_p), alpha4(t_p)) once the window
+    after it has passed, or None; :meth:`detect` finds the drive's own crossings."""
+
+    def __init__(self) -> None:
+        self._a = np.zeros((4096, 4))          # rows (t, r, omega4, alpha4); [0, n) in use
+        self._n = 0
+        self._event: tuple[float, float] | None = None      # (t_m, s)
+        self.events = 0
+        self.measured = 0
+        self._next_look = -math.inf
+        self._last_step = -math.inf
+
+    def push(self, t: float, r: float, w4: float, a4: float) -> None:
+        a, n = self._a, self._n
+        if n == a.shape[0]:                    # full: drop what is older than needed
+            keep = max(2.0 * (WINDOW + LEVEL_WINDOW), 2 * STEP_SIDE + STEP_GAP) + 0.05
+            k = int(np.searchsorted(a[:n, 0], t - keep))
+            if k == 0:
+                self._a = a = np.concatenate([a, np.zeros_like(a)])
+            else:
+                a[:n - k] = a[k:n]
+                n -= k
+        row = a[n]
+        row[0], row[1], row[2], row[3] = t, r, w4, a4
+        self._n = n + 1
+
+    def _since(self, t0: float) -> np.ndarray | None:
+        """The rows from ``t0`` on (None if the record does not reach back that far)."""
+        a = self._a[:self._n]
+        if not self._n or a[0, 0] > t0 + 1e-9:
+            return None
+        return a[int(np.searchsorted(a[:, 0], t0)):]
+
+    def clear(self) -> None:
+        self._n = 0
+        self._event = None
+
+    def due(self, t: float) -> bool:
+        """Whether :meth:`detect` would look at ``t`` (every STEP_STRIDE s)."""
+        return t >= self._next_look
+
+    def detect(self, t: float, noise: float, t_model: float, least: float = 0.0
+               ) -> tuple[float, float, float, float] | None:
+        """A step of the drive's own in the residual (its crossing of the play while the
+        model did not cross: no model crossing at ``t_model`` within the window): lines
+        fitted to STEP_SIDE s of the residual each side of a STEP_GAP s gap, their values at
+        the centre differ by more than STEP_NOISES ``noise``, than ``least`` (half the play
+        once it is known) and than twice the lines' own change over the gap.  Returns
+        (t_p, omega4, alpha4, step [rad]), t_p where the residual crosses the middle of the
+        step, or None.  Looks every STEP_STRIDE s."""
+        if t < self._next_look:
+            return None
+        self._next_look = t + STEP_STRIDE
+        span = 2 * STEP_SIDE + STEP_GAP
+        centre = t - 0.5 * span
+        if t_model > centre - span or centre - self._last_step < span:
+            return None
+        a = self._since(t - span)
+        if a is None:
+            return None
+        ts, r = a[:, 0] - centre, a[:, 1]
+        left = ts < -0.5 * STEP_GAP
+        right = ts > 0.5 * STEP_GAP
+        if np.count_nonzero(left) < 4 or np.count_nonzero(right) < 4:
+            return None
+        pl, pr = _line(ts[left], r[left]), _line(ts[right], r[right])
+        step = pr[1] - pl[1]
+        drift = max(abs(pl[0]), abs(pr[0])) * STEP_GAP
+        if not (abs(step) > max(STEP_NOISES * noise, least) and abs(step) > 2.0 * drift):
+            return None
+        mid = ~(left | right)
+        tm = ts[mid]
+        level = r[mid] - (pl[1] + pl[0] * tm + 0.5 * step)     # 0 at the middle
+        t_c = 0.0
+        if tm.size > 1:
+            cross = np.nonzero(np.sign(level[1:]) != np.sign(level[:-1]))[0]
+            if cross.size:
+                k = int(cross[0])
+                t_c = float(tm[k] - level[k] * (tm[k + 1] - tm[k]) / (level[k + 1] - level[k]))
+        self._last_step = t_p = centre + t_c
+        return (t_p, float(np.interp(t_c, ts, a[:, 2])), float(np.interp(t_c, ts, a[:, 3])),
+                float(step))
+
+    def model_flank_changed(self, t: float, old: float, new: float) -> None:
+        """The model's flank changed at ``t`` from ``old`` to ``new`` (+1 / -1; 0 unknown)."""
+        if self._event is not None:          # another change inside the window: no event
+            self._event = None
+            return
+        if old == 0.0 or new == 0.0 or old == new:
+            return
+        self.events += 1
+        self._event = (t, -0.5 * (new - old))
+
+    def ready(self, t: float, play: float, min_play: float, model_play: float
+              ) -> tuple[float, float, float] | None:
+        """The event's measurement once ``t`` is past its window; ``play``: the drive's
+        play (the estimate) [rad], at least ``min_play`` to be seen; ``model_play``: the
+        model's.  The residual's net step must be the drive's crossing less the model's,
+        s (play - model_play), within a third of the play (else the drive did not cross
+        in the window: no measurement)."""
+        ev = self._event
+        if ev is None or t < ev[0] + WINDOW + LEVEL_WINDOW:
+            return None
+        self._event = None
+        t_m, s = ev
+        if not play >= min_play:
+            return None
+        a = self._since(t_m - WINDOW - LEVEL_WINDOW)
+        if a is None:
+            return None                       # the record does not reach back far enough
+        ts, r = a[:, 0], a[:, 1]
+        pre = ts < t_m - WINDOW
+        post = (ts >= t_m + WINDOW) & (ts < t_m + WINDOW + LEVEL_WINDOW)
+        mid = (ts >= t_m - WINDOW) & (ts < t_m + WINDOW)
+        if not (np.any(pre) and np.any(post) and np.count_nonzero(mid) > 2):
+            return None
+        r_pre, r_post = float(np.mean(r[pre])), float(np.mean(r[post]))
+        if abs(r_post - r_pre - s * (play - model_play)) > play / 3.0:
+            return None
+        tm, rm = ts[mid], r[mid] - r_pre
+        integral = float(np.sum(0.5 * (rm[1:] + rm[:-1]) * np.diff(tm)))
+        integral += float(rm[-1]) * (t_m + WINDOW - float(tm[-1]))
+        shift = -(integral - (r_post - r_pre) * WINDOW) / (s * play)
+        if not (math.isfinite(shift) and abs(shift) < WINDOW):
+            return None
+        t_p = t_m + shift
+        self.measured += 1
+        return (t_p, float(np.interp(t_p, ts, a[:, 2])), float(np.interp(t_p, ts, a[:, 3])))

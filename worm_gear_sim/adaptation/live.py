@@ -1,0 +1,231 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The adaptation loop the node and the offline twin share (pure core, no rclpy).
+
+:class:`LiveAdaptation` sits beside a :class:`~worm_gear_sim.realtime.predictor.RealtimePredictor`
+(compensation applied to its simulated drive).  The caller hands it
+
+* every prediction (stamp, theta2..theta4) -> :meth:`predicted`;
+* every encoder message (stamp, joint names, positions) -> :meth:`measured`: checked
+  (non-finite values or stamp, a stamp not after the previous one, no antenna joint, outside
+  the stored predictions, names and positions of unequal length: rejected and counted by
+  reason, the estimate untouched), then the residual measured - predicted theta4 at the
+  stamp goes to the :class:`~.estimator.Adapter`;
+
+and now and then the adapter's decision is applied: the step's overrides make a Config
+(validated: :meth:`~worm_gear_sim.params.Config.replace`), the predictor designs for it off
+the sample path (:meth:`~worm_gear_sim.realtime.predictor.RealtimePredictor.prepare`: the
+simulator's usable check) and swaps it in keeping time, state and the reference history.
+A set refused on the way (a ConfigError, an unusable set, a negative play) is never
+applied: the model in use stays, the reason is kept in :attr:`LiveAdaptation.last_refusal`
+and returned once per new reason (the node logs it, throttled).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..dynamics.model import DriveModel
+from ..params import Config, config_from_mapping
+from ..realtime.predictor import RealtimePredictor
+from ..schema import Parameters
+from .estimator import Adapter
+
+__all__ = ['LiveAdaptation', 'REJECT_REASONS']
+
+#: Reasons an encoder sample is rejected (counted under ``rejected_<reason>``).
+REJECT_REASONS = ('non_finite', 'out_of_order', 'other_joint', 'outside_prediction',
+                  'malformed')
+
+
+class LiveAdaptation:
+    """Adapt ``predictor``'s model from encoder samples (module docstring).
+
+    ``joint_names``: the names of theta2, theta3, theta4 in the encoder messages
+    (``node.joint_names[1:]``); ``history``: predictions kept for interpolation."""
+
+    def __init__(self, predictor: RealtimePredictor, joint_names: Sequence[str],
+                 history: int = 512) -> None:
+        if len(joint_names) != 3:
+            raise ValueError('joint_names: the names of theta2, theta3 and theta4')
+        self.predictor = predictor
+        self.joint_names = tuple(joint_names)
+        self.history = _Predictions(history)
+        self.adapter = Adapter(predictor.model, predictor.config.adaptation)
+        self.counters: dict[str, int] = {'samples': 0, 'used': 0, 'rejected': 0,
+                                         'switches': 0, 'refusals': 0}
+        self.counters.update({f'rejected_{r}': 0 for r in REJECT_REASONS})
+        self.last_refusal = ''
+        self.last_note = ''
+        self._base_ns: int | None = None
+        self._last_ns: int | None = None
+
+    # ---- inputs ------------------------------------------------------------------------
+    def predicted(self, stamp_ns: int, theta: Sequence[float]) -> None:
+        """A prediction of the drive (theta2, theta3, theta4) at ``stamp_ns``."""
+        if self._base_ns is None:
+            self._base_ns = int(stamp_ns)
+        self.history.push(self._seconds(stamp_ns), theta)
+
+    def _seconds(self, stamp_ns: int) -> float:
+        assert self._base_ns is not None
+        return (int(stamp_ns) - self._base_ns) * 1e-9
+
+    def _reject(self, reason: str) -> str:
+        self.counters['rejected'] += 1
+        self.counters[f'rejected_{reason}'] += 1
+        return reason
+
+    def measured(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]
+                 ) -> str | None:
+        """An encoder message; returns None (used or waiting) or the rejection reason."""
+        self.counters['samples'] += 1
+        if len(names) != len(positions):
+            return self._reject('malformed')
+        try:
+            k = list(names).index(self.joint_names[2])
+        except ValueError:
+            return self._reject('other_joint')
+        try:
+            meas = float(positions[k])
+            stamp_ns = int(stamp_ns)
+        except (TypeError, ValueError, OverflowError):
+            return self._reject('non_finite')
+        if not math.isfinite(meas) or stamp_ns <= 0:
+            return self._reject('non_finite')
+        if self._last_ns is not None and stamp_ns <= self._last_ns:
+            return self._reject('out_of_order')
+        if self._base_ns is None:
+            return self._reject('outside_prediction')
+        t = self._seconds(stamp_ns)
+        pred = self.history.at(t)
+        if pred is None:
+            return self._reject('outside_prediction')
+        self._last_ns = stamp_ns
+        if self.adapter.update(t, meas, float(pred[0]), float(pred[1]), float(pred[2])):
+            self.counters['used'] += 1
+        return None
+
+    # ---- switching ---------------------------------------------------------------------
+    def step(self, stamp_ns: int) -> list[str]:
+        """Apply the adapter's decision at ``stamp_ns`` (if any); the new messages to log
+        (a note of an accepted set, a refusal's reason the first time it comes)."""
+        if self._base_ns is None:
+            return []
+        ad = self.adapter
+        refusals = ad.refusals
+        d = ad.poll(self._seconds(stamp_ns))
+        msgs: list[str] = []
+        if d.note and d.note != self.last_note:
+            self.last_note = d.note
+            msgs.append(d.note)
+        if ad.refusals != refusals:
+            msgs += self._refused(ad.last_refusal, counted=True)
+        if d.step is None or d.overrides is None:
+            return msgs
+        pred = self.predictor
+        try:
+            cfg = _as_config(pred.config).replace(d.overrides)
+            prepared = pred.prepare(DriveModel(cfg))
+            pred.reconfigure(prepared)
+        except (ValueError, ArithmeticError) as exc:   # ConfigError is a ValueError
+            ad.refused(f'{type(exc).__name__}: {exc}')
+            return msgs + self._refused(ad.last_refusal, counted=True)
+        ad.applied(d.step, pred.model)
+        self.counters['switches'] += 1
+        return msgs
+
+    def _refused(self, reason: str, counted: bool) -> list[str]:
+        self.counters['refusals'] += 1
+        new = reason != self.last_refusal
+        self.last_refusal = reason
+        return [f'adapted set not applied, keeping the last good model: {reason}'] if new \
+            else []
+
+    def rebase(self) -> None:
+        """The predictor's model was changed from outside (a parameter update): the adapter
+        restarts from it."""
+        self.adapter.rebase(self.predictor.model)
+
+    # ---- read-out ----------------------------------------------------------------------
+    def estimates(self) -> dict[str, Any]:
+        return self.adapter.estimates()
+
+    def status(self) -> tuple[str, str, dict[str, str]]:
+        """(level OK/WARN, message, key values) for /diagnostics."""
+        ad = self.adapter
+        rms = ad.window_rms()
+        values = {k: ('n/a' if not math.isfinite(v) else f'{v:.3e}')
+                  for k, v in (('residual_rms_estimate [rad]', rms['estimate']),
+                               ('residual_rms_in_use [rad]', rms['applied']),
+                               ('residual_rms_nominal [rad]', rms['nominal']))}
+        values.update({k: str(v) for k, v in self.counters.items()})
+        for k, v in ad.estimates().items():
+            values[f'estimate {k}'] = _fmt(v)
+        for k, v in ad.applied_values().items():
+            values[f'in use {k}'] = _fmt(v)
+        if self.last_refusal:
+            values['last_refusal'] = self.last_refusal
+        if ad.samples_used == 0:
+            return 'OK', 'adaptation on: waiting for measured joint states', values
+        level = 'WARN' if self.last_refusal and ad.target is None and \
+            self.counters['refusals'] and not self.counters['switches'] else 'OK'
+        msg = (f'adaptation on: {self.counters["switches"]} steps applied, '
+               f'{self.counters["refusals"]} refused')
+        return level, msg, values
+
+    def params_config(self) -> Config:
+        """The model in use (with the adapted values) as a Config to start from."""
+        return _as_config(self.predictor.config)
+
+
+def _as_config(p: Parameters) -> Config:
+    return p if isinstance(p, Config) else config_from_mapping(p.to_nested_dict())
+
+
+class _Predictions:
+    """The last ``capacity`` predictions (t, theta2..theta4) in time order, contiguous
+    (compacted when full), interpolated linearly at a time inside their span."""
+
+    def __init__(self, capacity: int) -> None:
+        self._t = np.zeros(2 * capacity)
+        self._x = np.zeros((2 * capacity, 3))
+        self._n = 0
+        self._cap = capacity
+
+    def push(self, t: float, theta: Sequence[float]) -> None:
+        n = self._n
+        if n and t <= self._t[n - 1]:
+            if t == self._t[n - 1]:
+                self._x[n - 1] = theta
+                return
+            n = 0                              # the clock went back: start over
+        if n == self._t.size:
+            keep = self._cap
+            self._t[:keep] = self._t[n - keep:n]
+            self._x[:keep] = self._x[n - keep:n]
+            n = keep
+        self._t[n] = t
+        self._x[n] = theta
+        self._n = n + 1
+
+    def at(self, t: float) -> np.ndarray | None:
+        n = self._n
+        ts = self._t
+        if not n or t > ts[n - 1] or t < ts[max(n - self._cap, 0)]:
+            return None
+        k = int(np.searchsorted(ts[:n], t))
+        if ts[k] == t:
+            return self._x[k]
+        w = (t - ts[k - 1]) / (ts[k] - ts[k - 1])
+        return (1.0 - w) * self._x[k - 1] + w * self._x[k]
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, list):
+        return '[' + ', '.join(f'{x:.4g}' for x in v) + ']'
+    return f'{v:.6g}'

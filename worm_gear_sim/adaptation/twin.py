@@ -1,0 +1,164 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The offline twin of live adaptation (``worm-gear-sim adapt``).
+
+A scenario's reference samples theta1_ref (at ``node.publish_rate_hz``) stream through the
+node's real-time pipeline (:class:`~worm_gear_sim.realtime.predictor.RealtimePredictor`,
+compensation applied to its simulated drive) and the node's adaptation loop
+(:class:`~.live.LiveAdaptation`); each released compensated command theta1_ref + delta
+drives a simulated plant (another parameter set: the real drive's stand-in, started at rest
+under its load), whose antenna angle, quantised and noisy like an encoder, comes back as
+the measured joint state stamped with the command's stamp.  The node does the same with a
+real encoder, so the node's adaptation equals this for the same samples.
+
+Scenarios (:func:`scenario`): ``sector`` (the antenna sweeps +-5 deg sinusoidally with a
+4 s period, from rest at one edge), ``slew`` (worm slews at +-2 rad/s with reversals,
+repeated back and forth), ``pass`` (the azimuth of an 85 deg satellite pass, the window
+centred on culmination).  The reference is streamed ``compensation.preview_time`` ahead
+(the centring preview when the start set has none: a planned scan is known a few ms ahead,
+and the play is crossed well only with it, docs/compensation.md).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..compensation import centring_preview
+from ..dynamics.model import DriveModel
+from ..dynamics.simulation import Simulator
+from ..params import Config
+from ..realtime.predictor import RealtimePredictor
+from ..studies.mismatch import sector_scan, slew_reversals
+from ..studies.tracking_pass import pass_window
+from ..trajectory_compensation import antenna_error
+from .live import LiveAdaptation
+
+__all__ = ['SCENARIOS', 'scenario', 'TwinRun', 'run_twin', 'BASE_NS', 'prepare_start']
+
+SCENARIOS = ('sector', 'slew', 'pass')
+#: Stamp of t = 0 [ns] (stamps must be > 0).
+BASE_NS = 1_000_000_000
+
+
+def scenario(cfg: Config, name: str, duration: float) -> tuple[np.ndarray, np.ndarray]:
+    """(t, theta1_ref) of scenario ``name`` over ``duration`` s at ``node.publish_rate_hz``
+    (module docstring)."""
+    if not (math.isfinite(duration) and duration > 0):
+        raise ValueError(f'duration {duration!r}: must be > 0 s')
+    dt = 1.0 / cfg.node.publish_rate_hz
+    n = int(round(duration / dt)) + 1
+    if name == 'sector':
+        mv = sector_scan(cfg, periods=duration / 4.0 + 2 * dt)
+        return mv.t[:n], mv.theta1[:n]
+    if name == 'slew':
+        mv = slew_reversals(cfg)
+        x = mv.theta1 - mv.theta1[0]
+        parts: list[np.ndarray] = []
+        sign, end = 1.0, 0.0
+        while sum(p.size for p in parts) < n:
+            parts.append(end + sign * x[1:] if parts else x)
+            end, sign = parts[-1][-1], -sign
+        th = np.concatenate(parts)[:n]
+        return np.arange(n) * dt, th
+    if name == 'pass':
+        t, az, _ = pass_window(duration, step=dt)
+        return t[:n], (az[:n] - az[0]) / DriveModel(cfg).output_per_input
+    raise ValueError(f'scenario {name!r}: one of {", ".join(SCENARIOS)}')
+
+
+@dataclass
+class TwinRun:
+    """The twin's record: per sample t, theta1_ref, antenna error uncompensated and with the
+    adapting feed-forward [rad]; the steps applied (time, values), the final estimate and
+    the counters."""
+
+    t: np.ndarray
+    theta1_ref: np.ndarray
+    error_uncompensated: np.ndarray
+    error_compensated: np.ndarray
+    steps: list[tuple[float, dict[str, Any]]] = field(default_factory=list)
+    estimates: dict[str, Any] = field(default_factory=dict)
+    in_use: dict[str, Any] = field(default_factory=dict)
+    counters: dict[str, int] = field(default_factory=dict)
+    messages: list[str] = field(default_factory=list)
+    record: list[tuple[int, float, list[tuple[int, float, float]]]] = field(
+        default_factory=list)
+
+
+def prepare_start(start: Config, preview: float | None = None) -> Config:
+    """The start set as the twin runs it: adaptation on, the compensation applied to the
+    prediction, ``preview`` (None: the start's, or the centring preview when it has none)."""
+    p = start.compensation.preview_time if preview is None else float(preview)
+    if preview is None and p == 0.0:
+        p = centring_preview(start)
+    return start.replace({'adaptation.enabled': True, 'node.compensation_applied': True,
+                          'compensation.preview_time': p})
+
+
+def run_twin(plant: Config, start: Config, name: str, duration: float, *,
+             noise: float = 1e-6, encoder_bits: int = 20, seed: int = 0, adapt: bool = True,
+             preview: float | None = None, base_ns: int = BASE_NS, record: bool = False,
+             on_sample: Callable[[float], None] | None = None) -> TwinRun:
+    """Stream scenario ``name`` for ``duration`` s (module docstring): the plant driven by
+    the adapting feed-forward (``adapt`` False: the feed-forward of the start set, never
+    adapted), and by the raw reference for the uncompensated error.  ``noise``: encoder
+    noise RMS [rad]; ``encoder_bits``: resolution 2 pi / 2^bits (0: none); ``base_ns``: the
+    stamp of t = 0; ``record``: keep per pushed sample (stamp, theta1_ref, [(stamp, encoder
+    theta4, delta) of each correction released]) in ``TwinRun.record`` (what a node would
+    receive, in its order)."""
+    cfg = prepare_start(start, preview)
+    ahead = cfg.compensation.preview_time
+    t, x = scenario(cfg, name, duration + ahead + 5.0 / cfg.node.publish_rate_hz)
+    keep = t <= duration + 1e-12
+    pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=base_ns)
+    out_per_in = pred.model.output_per_input
+    names = cfg.node.joint_names[1:]
+    live = LiveAdaptation(pred, names)
+    plant_sim = Simulator(plant, theta1=float(x[0]))
+    rng = np.random.default_rng(seed)
+    res = 2.0 * math.pi / 2 ** encoder_bits if encoder_bits > 0 else 0.0
+    n_keep = int(np.count_nonzero(keep))
+    err = np.full(n_keep, np.nan)
+    index = {base_ns + int(round(tk * 1e9)): k for k, tk in enumerate(t[:n_keep])}
+    run = TwinRun(t[keep], x[keep], np.zeros(0), err)
+    for k in range(t.size):
+        ns = base_ns + int(round(t[k] * 1e9))
+        out = pred.push(ns, float(x[k]))
+        if adapt:                   # as the node: predictions, the decision, then encoders
+            for p in out.predictions:
+                live.predicted(p.stamp_ns, p.theta)
+            if out.predictions:
+                before = live.counters['switches']
+                run.messages += live.step(out.predictions[-1].stamp_ns)
+                if live.counters['switches'] != before:
+                    run.steps.append((t[k], live.adapter.applied_values()))
+        got = []
+        for c in out.corrections:
+            tc = (c.stamp_ns - base_ns) * 1e-9
+            if tc > plant_sim.t:
+                plant_sim.advance_to(tc, c.theta1_ref + c.delta)
+            th4 = plant_sim.joint_state()[0][3]
+            j = index.get(c.stamp_ns)
+            if j is not None:
+                err[j] = th4 - c.theta1_ref * out_per_in
+            meas = th4 + (noise * rng.standard_normal() if noise > 0 else 0.0)
+            if res > 0:
+                meas = round(meas / res) * res
+            got.append((c.stamp_ns, meas, c.delta))
+            if adapt:
+                live.measured(c.stamp_ns, names[2:], [meas])
+        if record:
+            run.record.append((ns, float(x[k]), got))
+        if on_sample is not None:
+            on_sample(t[k])
+    run.error_uncompensated = antenna_error(plant, run.t, run.theta1_ref, run.theta1_ref)
+    run.estimates = live.estimates()
+    run.in_use = live.adapter.applied_values()
+    run.counters = {**live.counters, **{f'predictor_{k}': v for k, v in
+                                         pred.counters.items() if v}}
+    return run
