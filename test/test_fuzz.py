@@ -125,6 +125,8 @@ def value_strategy(key: str) -> st.SearchStrategy:
         return st.booleans()
     if m['choices']:
         return st.sampled_from(m['choices'])
+    if isinstance(d, str):          # a file name (adaptation.params_file): no range to draw
+        return st.just(d)
     if isinstance(d, int):
         return st.integers(int(m['lo']), int(m['hi']))
     if isinstance(d, list):

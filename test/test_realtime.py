@@ -743,6 +743,7 @@ def test_a_transport_stall_is_retracted_not_a_pause(preview):
                 held += o.predictions
                 live.update({c.stamp_ns: c.delta for c in o.corrections})
             assert p.stale and held and p.counters['stale_events'] == 1
+            assert p.counters['overruns'] > 0 and p.counters['rest_samples'] > 0
             now = s + 400 * MS
             spike = p.push(s, v + 3.0, now_ns=now)     # a rejected sample retracts nothing
             assert spike.rejected is not None and p.stale
@@ -762,6 +763,8 @@ def test_a_transport_stall_is_retracted_not_a_pause(preview):
     c = p.counters
     assert c['stale_retractions'] == 1
     assert c['samples_accepted'] == 400 and c['rejected_samples'] == 1     # the spike
+    for k in ('overruns', 'dropped_time_ns', 'rest_samples'):     # the hold's, taken back
+        assert c[k] == ref.counters[k], k
     want = feedforward_series(cfg, st, x)
     got = [live[s] for s in st.tolist() if s in live]
     assert len(got) >= 395 and max(abs(g - w) for g, w in zip(got, want)) <= 1e-12

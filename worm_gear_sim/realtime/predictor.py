@@ -30,6 +30,7 @@ CONFIRM_SAMPLES = 3          # agreeing candidates that confirm a jump or a new 
 RESTART_MIN_BACK_NS = 100_000_000  # a stamp this much older may start a new timeline
 CLOCK_TOLERANCE_NS = 1_000_000  # now_ns may step back this much without a restart
 INFO_EVENTS = ('started', 'stream_resumed')
+RETRACTED_COUNTS = ('overruns', 'dropped_time_ns', 'rest_samples')   # a stale hold's
 
 
 #: Load torque samples kept from before the first reference (the newest; 10 s at 100 Hz).
@@ -252,9 +253,9 @@ class RealtimePredictor:
                 self._last_real_ns < stamp_ns <= self._last_ns
             reason = adm.jump_reason(theta1_ref, self._last_real_ref)
             if reason is None and late:
-                # a late sample (a stalled transport, not a paused servo): the stale hold
-                # is retracted, the state before it restored (module doc)
-                vars(self).update(self._before_stale or {})
+                # a late sample (a stalled transport, not a paused servo): module doc
+                vars(self).update(self._before_stale or {})     # and the counts of
+                self.counters.update(self._before_stale_counts)  # what it retracts
                 self.counters['stale_retractions'] += 1
                 self._event(out, 'stale_retracted', 'a late sample: stale hold retracted')
             reason = adm.order_reason(stamp_ns, self._last_ns) or reason
@@ -347,8 +348,11 @@ class RealtimePredictor:
         lag = self._last_arrival_ns - self._last_real_ns
         stream_ns = now_ns - lag if lag > 0 else now_ns
         if stream_ns - self._last_real_ns > self._gap_ns + self.stale_margin_ns:
-            if not self._stale:
-                self._before_stale = self._state_copy()
+            if not self._stale:     # a late sample may retract it: the state copied
+                self._before_stale_counts = {k: self.counters[k] for k in RETRACTED_COUNTS}
+                keep = {id(x): x for x in (self, self.counters, self.model, self.config)}
+                self._before_stale = copy.deepcopy(
+                    {k: v for k, v in vars(self).items() if k != 'counters'}, keep)
             self._go_stale(stream_ns, out)
             self._hold_to(stream_ns, out)
         out.stale = self._stale
@@ -676,11 +680,6 @@ class RealtimePredictor:
         if self.apply_compensation and self._pending:
             ns = min(ns, self._pending[0][0])
         self._drive.hold_to(ns, self._time(ns), self._stale, out)
-
-    def _state_copy(self) -> dict:
-        """The stream's state copied (counters, model and configuration shared)."""
-        keep = {id(x): x for x in (self, self.counters, self.model, self.config)}
-        return copy.deepcopy({k: v for k, v in vars(self).items() if k != 'counters'}, keep)
 
     def _go_stale(self, now_ns: int, out: Output) -> None:
         if not self._stale:
