@@ -14,6 +14,7 @@ wall time) and a summary against the targets:
     python benchmarks/bench_calibration.py --drives 20 --seed 1 --jobs 2
     python benchmarks/bench_calibration.py --drives 20 --max-rate 20 --max-accel 5000 \
         --max-angle 1.5
+    python benchmarks/bench_calibration.py --drives 20 --seed 2 --drive 6 --jobs 1
 
 Each calibration runs in one process (``--jobs`` drives at a time): its wall time is
 measured under that load.
@@ -83,12 +84,15 @@ def main() -> None:
     ap.add_argument('--max-rate', type=float, default=6.0)
     ap.add_argument('--max-accel', type=float, default=1500.0)
     ap.add_argument('--duration', type=float, default=2.0)
+    ap.add_argument('--drive', type=int, action='append', metavar='I',
+                    help='only drive I of the draw (repeatable): one drive alone')
     a = ap.parse_args()
     limits = Limits(a.max_angle, a.max_rate, a.max_accel, a.duration)
     drives = draw(a.drives, a.seed)
     print(f'load before: {os.getloadavg()}')
     t0 = time.perf_counter()
-    jobs = [(i, d, limits, a.seed) for i, d in enumerate(drives)]
+    jobs = [(i, d, limits, a.seed) for i, d in enumerate(drives)
+            if not a.drive or i in a.drive]
     if a.jobs > 1:
         with ProcessPoolExecutor(a.jobs) as ex:
             rows = list(ex.map(one, jobs))

@@ -40,7 +40,8 @@ from ..validation import ConfigError
 from .data import predict
 
 __all__ = ['PLAY', 'LOAD', 'DRAG', 'DIRECT_KEYS', 'Segment', 'steady_segments', 'compliance',
-           'DirectEstimate', 'direct_estimates', 'best_on_family', 'scan_play', 'SCAN_FACTORS']
+           'DirectEstimate', 'direct_estimates', 'best_on_family', 'best_of',
+           'simulated_rms', 'MISFIT_OK', 'scan_play', 'SCAN_FACTORS']
 
 PLAY = 'mesh.backlash'
 LOAD = 'load.output_torque'
@@ -59,6 +60,9 @@ TORQUE_TOL = 0.02
 SCAN_FACTORS = (0.8, 0.88, 0.94, 1.0, 1.06, 1.13, 1.25)
 #: Shares of the lag jump between the flanks tried as the play when one rate each way
 #: cannot separate the play from the drag (:attr:`DirectEstimate.family`).
+#: Static misfit [rad] below which the flank equations hold on every segment (noise, encoder
+#: steps and the linear model's error are ~1 urad); above it a segment may float in the play.
+MISFIT_OK = 5e-6
 FAMILY_SHARES = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 0.97)
 
 
@@ -137,6 +141,10 @@ class DirectEstimate:
     #: only b + 2 C c w is determined), the candidate value sets along that line, the
     #: play from small to the whole lag jump; :func:`best_on_family` picks one by simulation.
     family: list[dict[str, float]] = field(default_factory=list)
+    #: A segment left out as floating in the play (torque near zero), and other consistent
+    #: value sets the simulation should compare.
+    floating: Segment | None = None
+    alternatives: list[dict[str, float]] = field(default_factory=list)
 
     def describe(self) -> str:
         vals = ', '.join(f'{k} = {v:.4g}' for k, v in self.values.items())
@@ -180,6 +188,104 @@ def _misfit(vals: dict[str, float], s: np.ndarray, wg: np.ndarray, e: np.ndarray
     return float(np.sqrt(np.mean((pred - e) ** 2)))
 
 
+@dataclass
+class _Candidate:
+    values: dict[str, float]
+    misfit: float
+    flanks: list[int]
+    switch: bool
+    family: list[dict[str, float]] = field(default_factory=list)
+    floating: int | None = None
+
+
+def _candidate(fitted: Sequence[str], fixed: dict[str, float], s_all: np.ndarray,
+               keep: np.ndarray, wg_all: np.ndarray, e_all: np.ndarray, C: float
+               ) -> _Candidate | None:
+    """The flank equations on the kept segments for one flank pattern (None: the torques
+    contradict the pattern)."""
+    s, wg, e = s_all[keep], wg_all[keep], e_all[keep]
+    m = s.size
+    switch = bool(np.any(s > 0) and np.any(s < 0))
+    cols = {PLAY: -0.5 * s, LOAD: -C * np.ones(m), DRAG: -C * wg}
+    use = [k for k in fitted if not (k == PLAY and not switch)]
+    flanks = [int(v) for v in s_all]
+    if switch and PLAY in use and _separates_poorly([cols[k] for k in use]):
+        # one rate each way: only b + 2 C c w is seen; the play along that line
+        jump = float(np.mean(e[s < 0]) - np.mean(e[s > 0]))
+        family = []
+        for share in FAMILY_SHARES:
+            vals = _solve(dict(fixed, **{PLAY: share * jump}),
+                          [k for k in use if k != PLAY], cols, e, C)
+            if _consistent(vals, wg, s):
+                family.append(vals)
+        if not family:
+            return None
+        mid = family[len(family) // 2]
+        return _Candidate(mid, _misfit(mid, s, wg, e, C), flanks, switch, family)
+    vals = _solve(fixed, use, cols, e, C)
+    if not _consistent(vals, wg, s):
+        return None
+    return _Candidate(vals, _misfit(vals, s, wg, e, C), flanks, switch)
+
+
+def _floating(c: _Candidate, fitted: Sequence[str], fixed: dict[str, float], drop: int,
+              wg: np.ndarray, e: np.ndarray, C: float, wg_kept: np.ndarray
+              ) -> _Candidate | None:
+    """Segment ``drop`` floats in the play: its torque T + c w is near zero (within the
+    consistency tolerance) and its lag lies between the flanks' wind-up lines.  When the kept
+    segments hold one flank (only b / 2 + C T seen) the floating segment gives the load,
+    T = -c w, and the play from that line.  None when the segment cannot float."""
+    vals = dict(c.values)
+    switch = c.switch
+    if not switch and PLAY in fitted and LOAD in fitted:
+        t_new = -vals[DRAG] * wg[drop]
+        b = fixed[PLAY] + 2.0 * C * (vals[LOAD] - t_new)
+        if not b > 0:
+            return None
+        vals.update({LOAD: float(t_new), PLAY: float(b)})
+        switch = True
+    torque = vals[LOAD] + vals[DRAG] * wg[drop]
+    tol = 0.05 * float(np.max(np.abs(vals[LOAD] + vals[DRAG] * wg_kept))) + TORQUE_TOL
+    if abs(torque) > tol or abs(e[drop] + C * torque) > 0.5 * vals[PLAY] + MISFIT_OK:
+        return None
+    return _Candidate(vals, c.misfit, c.flanks, switch, c.family, drop)
+
+
+def _select(cands: Sequence[_Candidate]) -> _Candidate | None:
+    """All segments on their flanks when that fits (misfit <= MISFIT_OK), else the smallest
+    misfit, a floating segment allowed."""
+    whole = [c for c in cands if c.floating is None]
+    if whole:
+        w = min(whole, key=lambda c: c.misfit)
+        if w.misfit <= MISFIT_OK:
+            return w
+    return min(cands, key=lambda c: c.misfit) if cands else None
+
+
+def simulated_rms(base: Config, records: Sequence[Record], vals: dict[str, float]) -> float:
+    """RMS [rad] over all samples of the records' theta4 minus the simulation of ``base``
+    with ``vals`` (inf when that set cannot be simulated)."""
+    try:
+        m = DriveModel(base.replace(vals))
+        sq, n = 0.0, 0
+        for r in records:
+            if 'theta4' not in r.measured:
+                continue
+            d = predict(m, r)['theta4'] - r.measured['theta4']
+            sq, n = sq + float(np.sum(d * d)), n + d.size
+        return math.sqrt(sq / n) if n else math.inf
+    except (ConfigError, SimulationError, ValueError):
+        return math.inf
+
+
+def best_of(base: Config, records: Sequence[Record], sets: Sequence[dict[str, float]]
+            ) -> tuple[dict[str, float], list[dict[str, float]]]:
+    """The value set whose simulation fits the records' theta4 best, and the table."""
+    rows = [{**v, 'rms_rad': simulated_rms(base, records, v)} for v in sets]
+    i = int(np.argmin([r['rms_rad'] for r in rows]))
+    return dict(sets[i]), rows
+
+
 def best_on_family(base: Config, records: Sequence[Record], family: Sequence[dict[str, float]]
                    ) -> tuple[dict[str, float], list[dict[str, float]]]:
     """The member of a direct estimate's family whose simulation fits the records' theta4
@@ -187,17 +293,7 @@ def best_on_family(base: Config, records: Sequence[Record], family: Sequence[dic
     rows: list[dict[str, float]] = []
 
     def cost(vals: dict[str, float]) -> float:
-        try:
-            m = DriveModel(base.replace(vals))
-            sq, n = 0.0, 0
-            for r in records:
-                if 'theta4' not in r.measured:
-                    continue
-                d = predict(m, r)['theta4'] - r.measured['theta4']
-                sq, n = sq + float(np.sum(d * d)), n + d.size
-            c = math.sqrt(sq / n) if n else math.inf
-        except (ConfigError, SimulationError, ValueError):
-            c = math.inf
+        c = simulated_rms(base, records, vals)
         rows.append({**vals, 'rms_rad': c})
         return c
 
@@ -233,43 +329,37 @@ def direct_estimates(base: Config, records: Sequence[Record], keys: Sequence[str
     fixed = {PLAY: base.mesh.backlash, LOAD: base.load.output_torque,
              DRAG: base.load.output_viscous_coefficient}
     order = np.argsort(wg)
-    best: tuple[float, dict[str, float], list[int], bool] | None = None
-    best_family: list[dict[str, float]] = []
+    cands: list[_Candidate] = []
     n = len(segs)
+    # a segment may float in the play (its torque near zero: the gear between the flanks) and
+    # is then left out of the flank equations, when >= 3 others remain
+    drops: list[int | None] = [None] + (list(range(n)) if n >= 4 else [])
     for j in range(n + 1):           # segments below the j-th slowest: the coasting flank
-        s = np.ones(n)
-        s[order[:j]] = -1.0
-        switch = 0 < j < n
-        cols = {PLAY: -0.5 * s, LOAD: -C * np.ones(n), DRAG: -C * wg}
-        use = [k for k in fitted if not (k == PLAY and not switch)]
-        if switch and PLAY in use and _separates_poorly([cols[k] for k in use]):
-            # one rate each way: only b + 2 C c w is seen; the play along that line
-            jump = float(np.mean(e[s < 0]) - np.mean(e[s > 0]))
-            family = []
-            for share in FAMILY_SHARES:
-                vals = _solve(dict(fixed, **{PLAY: share * jump}),
-                              [k for k in use if k != PLAY], cols, e, C)
-                if _consistent(vals, wg, s):
-                    family.append(vals)
-            if family:
-                mid = family[len(family) // 2]
-                mis = _misfit(mid, s, wg, e, C)
-                if best is None or mis <= best[0] + 1e-15:
-                    best = (mis, mid, [int(v) for v in s], switch)
-                    best_family = family
-            continue
-        vals = _solve(fixed, use, cols, e, C)
-        if not _consistent(vals, wg, s):
-            continue
-        mis = _misfit(vals, s, wg, e, C)
-        if best is None or mis < best[0]:
-            best = (mis, vals, [int(v) for v in s], switch)
-            best_family = []
+        s_all = np.ones(n)
+        s_all[order[:j]] = -1.0
+        for drop in drops:
+            keep = np.array([i != drop for i in range(n)])
+            c = _candidate(fitted, fixed, s_all, keep, wg, e, C)
+            if c is not None and drop is not None:
+                c = _floating(c, fitted, fixed, drop, wg, e, C, wg[keep])
+            if c is not None:
+                cands.append(c)
+    best = _select(cands)
     if best is None:
         return None
-    mis, vals, flanks, switch = best
+    mis, vals, flanks, switch = best.misfit, best.values, best.flanks, best.switch
+    best_family = best.family
+    alternatives = [c for c in cands if c is not best and c.floating is not None
+                    and c.misfit <= max(MISFIT_OK, 1.5 * best.misfit)] \
+        if best.floating is not None else []
     est = DirectEstimate({k: vals[k] for k in fitted}, switch, segs, C, mis, flanks,
                          family=[{k: v[k] for k in fitted} for v in best_family])
+    if best.floating is not None:
+        est.floating = segs[best.floating]
+        est.alternatives = [{k: c.values[k] for k in fitted} for c in alternatives]
+        est.notes.append(f'the {segs[best.floating].record} segment at '
+                         f'{segs[best.floating].rate:+.3g} rad/s floats in the play (its '
+                         'torque near zero): left out of the flank equations')
     if est.family:
         est.notes.append('one rate each way: the play and the drag are told apart by the '
                          'reversals\' transients only (a second rate would separate them)')

@@ -34,7 +34,15 @@ from ..params import Config
 from ..records import Record
 from ..validation import ConfigError
 from .data import IdentificationError, measured_frequencies, normalised
-from .direct import DIRECT_KEYS, PLAY, best_on_family, direct_estimates, lag_table, scan_play
+from .direct import (
+    DIRECT_KEYS,
+    PLAY,
+    best_of,
+    best_on_family,
+    direct_estimates,
+    lag_table,
+    scan_play,
+)
 from .parameters import fit_parameters
 from .problem import DIFF_STEP, Problem
 from .report import FitResult, assess, residual_rms
@@ -246,6 +254,8 @@ def _global_stage(base: Config, records: Sequence[Record], keys: Sequence[str]
     family_rows: list[dict[str, float]] = []
     if est.family:                      # play and drag along a line: simulate to choose
         est.values, family_rows = best_on_family(base, recs, est.family)
+    elif est.alternatives:              # a floating segment: several flank patterns fit
+        est.values, family_rows = best_of(base, recs, [est.values] + est.alternatives)
     vals = dict(est.values)
     if PLAY in vals and not est.play_seen:
         vals.pop(PLAY)                      # not seen: keep the base's play
