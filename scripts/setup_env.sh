@@ -31,3 +31,12 @@ if ! "$VENV/bin/python" -c "import rclpy, std_msgs.msg, std_srvs.srv, sensor_msg
     "$VENV/bin/python" -c "import rclpy" >&2 || true
     exit 1
 fi
+# numba's on-disk cache (cache=True) is checked against the file of each compiled function
+# only: a kernel whose callee changed in another module would load stale machine code.  Any
+# change to the package's sources clears the package's numba cache.
+src_hash=$(find worm_gear_sim -name '*.py' -print0 | sort -z | xargs -0 cat | sha1sum | cut -c1-40)
+hash_file="$VENV/.worm_gear_sim_numba_sources"
+if [ "$(cat "$hash_file" 2>/dev/null || true)" != "$src_hash" ]; then
+    find worm_gear_sim \( -name '*.nbi' -o -name '*.nbc' \) -delete
+    echo "$src_hash" > "$hash_file"
+fi
