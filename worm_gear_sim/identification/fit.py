@@ -177,8 +177,9 @@ STALL_COST = 0.1
 #: to move C trades it against the load torque T and the drag c (measured: teeth x0.19 and
 #: load -15 % from direct estimates within 1 %, docs/identification.md).  The direct
 #: estimates use the base compliance, so the teeth stay near their base value unless the
-#: records demand otherwise: a prior residual (x - x_start) / sigma * sqrt(2 cost_start),
-#: i.e. a move of one sigma costs as much as the whole misfit at the start of the local fit.
+#: records demand otherwise: a prior residual (x - x_base) / sigma * sqrt(max(2 cost_start,
+#: m)), i.e. a move of one sigma costs as much as the whole misfit at the start of the local
+#: fit, and at least as much as the noise of the m weighted residuals (m / 2).
 PRIORS: dict[str, float] = {'mesh.gear_tooth_stiffness_multiplier': 0.05}
 
 
@@ -194,10 +195,10 @@ def _local_fit(problem: Problem, x0: np.ndarray, windows: Sequence[float | None]
     x_prior = np.zeros(problem.n)     # the start values of the local fit: x = 0
     idx = [i for i, _ in settings.priors]
     weight = np.zeros(len(idx))
-    if idx:     # a move of one sigma costs the whole misfit at the start (see PRIORS)
+    if idx:     # a move of one sigma costs the misfit at the start, at least the noise's
         r0 = problem.residuals(x, windows[0])
-        weight = math.sqrt(max(float(r0 @ r0), 1.0)) / np.array([s for _, s in
-                                                                 settings.priors])
+        weight = math.sqrt(max(float(r0 @ r0), float(r0.size))) / np.array(
+            [s for _, s in settings.priors])
 
     def fun(xf: np.ndarray, window: float | None) -> np.ndarray:
         r = problem.residuals(xf, window)
