@@ -171,12 +171,12 @@ class FitOptions:
 STALL_EVALS = 10
 STALL_COST = 0.1
 
-#: Keys held near their base value when the global stage estimated the load (key -> sigma in
-#: the fitted coordinate, here log(value / base)).  The records show the gear teeth only
-#: through the compliance C of the wind-up, which they show as T C and c C: a local fit free
-#: to move C trades it against the load torque T and the drag c (measured: teeth x0.19 and
-#: load -15 % from direct estimates within 1 %, docs/identification.md).  The direct
-#: estimates use the base compliance, so the teeth stay near their base value unless the
+#: Keys held near their base value when the global stage estimated the load and saw the play
+#: (key -> sigma in the fitted coordinate, here log(value / base)).  The records show the
+#: gear teeth only through the compliance C of the wind-up, which they show as T C and c C:
+#: a local fit free to move C trades it against the load torque T and the drag c (measured:
+#: teeth x0.17 and load -17 % from direct estimates within 1 %, docs/identification.md).  The
+#: direct estimates use the base compliance, so the teeth stay near their base value unless the
 #: records demand otherwise: a prior residual (x - x_base) / sigma * sqrt(max(2 cost_start,
 #: m)), i.e. a move of one sigma costs as much as the whole misfit at the start of the local
 #: fit, and at least as much as the noise of the m weighted residuals (m / 2).
@@ -310,10 +310,14 @@ def _global_stage(base: Config, records: Sequence[Record], keys: Sequence[str]
 def _priors(opt: FitOptions, keys: Sequence[str], direct_info: Mapping[str, Any]
             ) -> dict[str, float]:
     """key -> sigma of the priors of the local fit: ``opt.priors``, or :data:`PRIORS` of the
-    fitted keys when the global stage estimated the load torque."""
+    fitted keys when the global stage estimated the load torque (and saw the play, if it is
+    fitted: a play hidden by the load leaves only b / 2 + T C to the direct stage, and the
+    local fit then needs every fitted key free; measured: seed 1 drive 2 of
+    bench_calibration lost its play, 0 against 1.98 arcmin, with the teeth held)."""
     if opt.priors is not None:
         chosen = dict(opt.priors)
-    elif LOAD in direct_info.get('values', {}):
+    elif LOAD in direct_info.get('values', {}) and (direct_info.get('play_seen')
+                                                     or PLAY not in keys):
         chosen = dict(PRIORS)
     else:
         chosen = {}
