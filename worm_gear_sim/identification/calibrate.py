@@ -150,6 +150,28 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
     res = identify(base, train, keys, options=opt, outputs=outputs)
     before = prediction_errors(base, held)
     after = prediction_errors(res.config, held)
+    reasons = _reasons(res, after, accept_rel)
+    if reasons and res.strategy.get('priors') and opt.priors is None:
+        # the default prior (fit.PRIORS) is an assumption about the drive: refused with it,
+        # the fit runs again with every key free, and the held-out moves judge that one
+        free = identify(base, train, keys, options=dataclasses.replace(opt, priors={}),
+                        outputs=outputs)
+        after_free = prediction_errors(free.config, held)
+        reasons_free = _reasons(free, after_free, accept_rel)
+        if not reasons_free:
+            res, after, reasons = free, after_free, reasons_free
+            res.warnings.append('refused with the teeth prior; refitted with every key free '
+                                '(the held-out moves chose between the two fits)')
+    bounds = []
+    if 'theta4' in res.output_verdicts and res.output_verdicts['theta4'] == 'matched':
+        from .uncertainty import prediction_bound
+        bounds = [prediction_bound(res, train, h) for h in held]
+    return CalibrationResult(moves, train, held, res, before, after, not reasons, reasons,
+                             bounds)
+
+
+def _reasons(res: FitResult, after: list[dict[str, Any]], accept_rel: float) -> list[str]:
+    """Why a fit is not accepted: its problems and the held-out errors above accept_rel."""
     reasons = list(res.problems)
     for row in after:
         for o, e in row.items():
@@ -159,12 +181,7 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
             if not e['rel'] <= accept_rel:
                 reasons.append(f'held-out {row["name"]}: {o} RMS {100 * e["rel"]:.2f} % of '
                                f'its amplitude (> {100 * accept_rel:g} %)')
-    bounds = []
-    if 'theta4' in res.output_verdicts and res.output_verdicts['theta4'] == 'matched':
-        from .uncertainty import prediction_bound
-        bounds = [prediction_bound(res, train, h) for h in held]
-    return CalibrationResult(moves, train, held, res, before, after, not reasons, reasons,
-                             bounds)
+    return reasons
 
 
 def _check_followed(rec: Record, move: Move) -> None:
