@@ -35,7 +35,8 @@ fi
 # only: a kernel whose callee changed in another module would load stale machine code.  Any
 # change to the package's sources clears the package's numba cache.
 src_hash=$(find worm_gear_sim -name '*.py' -print0 | sort -z | xargs -0 cat | sha1sum | cut -c1-40)
-hash_file="$VENV/.worm_gear_sim_numba_sources"
+mkdir -p worm_gear_sim/__pycache__             # one stamp for every venv: they share the cache
+hash_file=worm_gear_sim/__pycache__/.numba_sources
 if [ "$(cat "$hash_file" 2>/dev/null || true)" != "$src_hash" ]; then
     find worm_gear_sim \( -name '*.nbi' -o -name '*.nbc' \) -delete
     echo "$src_hash" > "$hash_file"

@@ -109,6 +109,12 @@ def ros_subprocess_env() -> dict[str, str]:
     return env
 
 
+#: the bound of the harness's waits [s]: they return as soon as their condition holds (never a
+#: timing assertion); the first sample of a fresh install compiles the kernels (~10 s on a
+#: loaded 2-core machine)
+WAIT = 30.0
+
+
 class RosHarness:
     """The node under test plus a probe node in one context, spun by one executor.
 
@@ -170,7 +176,7 @@ class RosHarness:
             'probe and node did not match'
 
     # ---- waiting ----------------------------------------------------------------------
-    def spin_until(self, pred: Callable[[], bool], timeout: float = 5.0) -> bool:
+    def spin_until(self, pred: Callable[[], bool], timeout: float = WAIT) -> bool:
         deadline = time.monotonic() + timeout
         while not pred():
             if time.monotonic() > deadline:
@@ -184,7 +190,7 @@ class RosHarness:
             self.executor.spin_once(timeout_sec=0.005)
 
     # ---- driving ------------------------------------------------------------------------
-    def command(self, value: float, timeout: float = 5.0) -> bool:
+    def command(self, value: float, timeout: float = WAIT) -> bool:
         """Publish one command and wait until the node has processed it."""
         c = self.node.rt.counters
         n = c['commands_received']
@@ -209,7 +215,7 @@ class RosHarness:
             if k in ('rejected_empty_position', 'rejected_wrong_joint'))
 
     def reference(self, stamp_ns: int, value: float | None,
-                  name: str | None = 'worm_input_joint', timeout: float = 5.0) -> bool:
+                  name: str | None = 'worm_input_joint', timeout: float = WAIT) -> bool:
         """Publish one stamped reference sample and wait until the node has processed it."""
         n = self.references_seen()
         self.ref_pub.publish(self.reference_msg(stamp_ns, value, name))
@@ -241,7 +247,7 @@ class RosHarness:
         self.clock_pub.publish(self.Clock(clock=Time(sec=int(ns // 10**9),
                                                      nanosec=int(ns % 10**9))))
 
-    def tick_to(self, ns: int, timeout: float = 5.0) -> bool:
+    def tick_to(self, ns: int, timeout: float = WAIT) -> bool:
         """Advance /clock to ``ns`` and wait for the JointState stamped with it."""
         self.set_clock(ns)
 
@@ -256,7 +262,7 @@ class RosHarness:
                  len(self.feedforward) >= n)
         return self.spin_until(stamped, timeout)
 
-    def wait_clock(self, ns: int, timeout: float = 5.0) -> bool:
+    def wait_clock(self, ns: int, timeout: float = WAIT) -> bool:
         """Publish /clock ``ns`` and wait until the node's clock reads it (no tick needed)."""
         self.set_clock(ns)
         return self.spin_until(
