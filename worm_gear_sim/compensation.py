@@ -299,7 +299,7 @@ def compensation_kernel(te, tau, W, ht, hx, lo, hi, p, out_per_in, quasi_static,
     if nd == 5:
         th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, r[3] * c, r[4] * c, dynamic, f)
     else:
-        th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, 0.0, 0.0, False, f)
+        th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, 0.0, 0.0, np.bool_(False), f)
     return th1 - ref, ref
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from .model import (
@@ -249,7 +250,7 @@ def step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since, 
             # (in the play: no friction to slip)
             return True, u, v, a, ns, ne, mode0, mu, rho, since, ver
     ok_st, u_st, v_st, a_st, lam, n1, e1, s0, s1, rho, ver = _sv_trial(
-        p, C, u0, v0, a0, th1, th1dot, dt, 0, lam0, rho,
+        p, C, u0, v0, a0, th1, th1dot, dt, np.int64(0), lam0, rho,
         0 if mode0 != 0 else 2 if since < VERIFY_EVERY else 1, da)
     ns += n1
     ne += e1
@@ -268,7 +269,7 @@ def step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since, 
         if s_try == mode0:
             continue            # tried first
         ok, u, v, a, mu, n1, e1, _, _, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt,
-                                                        s_try, lam0, rho, 0, da)
+                                                        s_try, lam0, rho, np.int64(0), da)
         ns += n1
         ne += e1
         if ok and (s_try * (k2 * v[0] + k3 * v[1]) >= 0.0 or _in_play(p, u)):

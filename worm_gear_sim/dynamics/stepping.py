@@ -94,7 +94,9 @@ def advance_segment(p, C, u, v, a, theta1_now, theta1_dot_now, t0, k0, dt, n, cm
             th[j] = cmd_value + slope * (grid - cmd_t)
         td[j] = slope
     empty3 = np.empty((0, 3))
-    return advance(p, C, u, v, a, th, td, dt, 0, empty3, empty3, empty3,
+    # np.int64(0), not 0: a literal argument would make numba compile a second copy of
+    # the whole kernel (the Python callers pass an int64 stride)
+    return advance(p, C, u, v, a, th, td, dt, np.int64(0), empty3, empty3, empty3,
                    np.empty((0, N_AUX)), stats, ctl, load)
 
 
