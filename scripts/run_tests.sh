@@ -16,6 +16,8 @@ export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42}
 export MPLBACKEND=Agg
 echo "[tests] ROS 2 $ROS_DISTRO ($RCLPY_DIST $("$VENV/bin/python" -c \
     "from importlib.metadata import version; print(version('$RCLPY_DIST'))"), $VENV)"
+echo "[tests] numba kernels into the cache (scripts/warm_kernels.py: compiled once, not per worker)"
+"$VENV/bin/python" scripts/warm_kernels.py
 echo "[tests] ruff check ."
 "$VENV/bin/ruff" check .
 echo "[tests] mypy (the core; configured in pyproject.toml)"

@@ -128,6 +128,23 @@ def test_launch_file_installed_with_what_it_names(colcon_install):
         assert (share / rel).is_file(), rel
 
 
+def _share_kernel_cache(installed: Path) -> int:
+    """Copy the source tree's numba cache (``__pycache__/*.nbi, *.nbc``) next to the installed
+    copy of the same modules, so the installed node loads the kernels instead of compiling
+    them again (30-70 s of CPU under the suite; what this test checks is the layout and the
+    executable, not the compiler).  numba validates each entry against its source file's
+    mtime and size (colcon's install keeps both) and the CPU: an entry that does not match is
+    simply compiled again.  Returns the number of files copied."""
+    n = 0
+    for f in (ROOT / PKG).rglob('__pycache__/*.nb[ic]'):
+        dest = installed / f.relative_to(ROOT / PKG)
+        if dest.parent.parent.is_dir():
+            dest.parent.mkdir(exist_ok=True)
+            shutil.copy2(f, dest)
+            n += 1
+    return n
+
+
 @pytest.mark.ros
 def test_installed_executable_publishes_joint_states(colcon_install, ros_dds_context,
                                                      ros_subprocess_env, tmp_path):
@@ -139,6 +156,7 @@ def test_installed_executable_publishes_joint_states(colcon_install, ros_dds_con
     exe = prefix / 'lib' / PKG / EXE
     cfg = prefix / 'share' / PKG / 'config' / 'worm_gear_sim.yaml'
     env = _ros_env(colcon_install, ros_subprocess_env)
+    _share_kernel_cache(prefix / 'lib' / PY / 'site-packages' / PKG)
     proc, log = start_logged([str(exe), '--ros-args', '--params-file', str(cfg)], env,
                              tmp_path / 'node.log', cwd=tmp_path)
     node = rclpy.create_node('packaging_probe', context=ros_dds_context)

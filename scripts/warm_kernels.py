@@ -1,0 +1,60 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Compile the package's numba kernels into its on-disk cache before the test suite starts.
+
+Without it every pytest worker (and every node process a test starts before a worker has
+written the cache) compiles the same kernels at the same time: on a cold cache (a fresh
+clone, or ``scripts/setup_env.sh`` clearing a stale one) that is the suite's largest single
+cost.  Two processes compile disjoint paths side by side:
+
+    python scripts/warm_kernels.py          # both paths, in two processes
+    python scripts/warm_kernels.py sim      # one path in this process (sim | comp)
+
+``sim``: the Newmark kernel called from Python (``simulate``) and through the stepping
+simulator (``RealtimePredictor``); ``comp``: the compensator's kernel and the model inverse.
+Each process compiles only what its path calls; what one compiled the other loads from the
+cache.  Nothing here is checked: the tests check the results.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+
+def _sim() -> None:
+    from worm_gear_sim import Config
+    from worm_gear_sim.dynamics.simulation import simulate
+    from worm_gear_sim.realtime import RealtimePredictor
+    cfg = Config()
+    simulate(cfg, t_end=0.002)
+    p = RealtimePredictor(cfg)
+    for k in range(1, 4):
+        p.push(k * 1_000_000, 0.01 * k)
+
+
+def _comp() -> None:
+    from worm_gear_sim import Config
+    from worm_gear_sim.compensation import Compensator
+    c = Compensator(Config())
+    c.reset(0.0, 0.0)
+    for k in range(1, 4):
+        c.update(1e-3 * k, 0.01 * k)
+
+
+PATHS = {'sim': _sim, 'comp': _comp}
+
+
+def main(argv: list[str]) -> int:
+    if argv:
+        t0 = time.perf_counter()
+        PATHS[argv[0]]()
+        print(f'[warm] {argv[0]}: {time.perf_counter() - t0:.1f} s', flush=True)
+        return 0
+    procs = [subprocess.Popen([sys.executable, __file__, name]) for name in PATHS]
+    return max(p.wait() for p in procs)
+
+
+if __name__ == '__main__':
+    sys.exit(main(sys.argv[1:]))
