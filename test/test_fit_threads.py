@@ -1,7 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """The fit's finite-difference Jacobian on threads: the same numbers as in the calling
-thread, bit for bit (each column is the serial call), and a whole local fit unchanged."""
+thread, bit for bit (each column is the serial call), and a whole multi-start fit unchanged."""
 
 from __future__ import annotations
 
@@ -53,12 +53,15 @@ def test_jacobian_on_threads_equals_the_serial_one(case):
     assert np.array_equal(forward, problem.jacobian(x, 0.03))
 
 
-def test_a_local_fit_is_the_same_on_one_or_two_threads(case):
+def test_a_multistart_fit_is_the_same_on_one_or_two_threads(case):
+    """The starts and the columns on two threads: every start as in the serial loop."""
     base, rec = case
-    kw = dict(strategy='local', serial=True, max_nfev=6)
+    kw = dict(strategy='multistart', n_starts=2, serial=True, max_nfev=5)
     one = identify(base, [rec], [KG], options=FitOptions(threads=1, **kw))
     two = identify(base, [rec], [KG], options=FitOptions(threads=2, **kw))
     assert one.values == two.values and one.ci95 == two.ci95
     assert [s['cost'] for s in one.starts] == [s['cost'] for s in two.starts]
+    assert [s['x'] for s in one.starts] == [s['x'] for s in two.starts]
+    assert len(two.starts) == 2
     with pytest.raises(IdentificationError, match='threads'):
         identify(base, [rec], [KG], options=FitOptions(threads=0, **kw))

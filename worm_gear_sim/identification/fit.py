@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..dynamics.batch import default_workers
+from ..dynamics.batch import default_workers, map_like_serial
 from ..dynamics.modal import modes
 from ..dynamics.stepping import SimulationError
 from ..params import Config
@@ -411,8 +411,10 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
                 windows: Sequence[float | None], opt: FitOptions,
                 priors: tuple[tuple[int, float], ...],
                 on_done: Callable[[dict], None] | None) -> list[dict[str, Any]]:
-    """Local fits from every start: in this process (``serial`` or a single start) or on Dask
-    (the sweeps' engine: a LocalCluster by default, ``scheduler`` for a cluster)."""
+    """Local fits from every start: in this process (``serial`` or a single start; the starts
+    and each Jacobian's columns on ``FitOptions.threads`` threads, every start computed as in
+    a serial loop, so the same numbers) or on Dask (the sweeps' engine: a LocalCluster by
+    default, ``scheduler`` for a cluster)."""
     out: list[dict[str, Any]] = []
     bar = None
 
@@ -436,9 +438,12 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
     try:
         if opt.serial or (len(starts) == 1 and opt.client is None and opt.scheduler is None):
             start_bar()
-            local = opt.local(priors, opt.in_process_threads())
-            for i, x0 in enumerate(starts):
-                done(_start_task(problem, list(x0), list(windows), local, i))
+            threads = opt.in_process_threads()
+            local = opt.local(priors, threads)
+            # the starts on threads too: one start's columns use the cores another left idle
+            map_like_serial(lambda i: _start_task(problem, list(starts[i]), list(windows),
+                                                  local, i),
+                            range(len(starts)), workers=threads, on_result=lambda _, r: done(r))
         else:
             from ..studies.engine import _dask_client, warm_up
             with _dask_client(opt.client, opt.scheduler, opt.workers) as cl:
