@@ -65,3 +65,18 @@ def test_a_multistart_fit_is_the_same_on_one_or_two_threads(case):
     assert len(two.starts) == 2
     with pytest.raises(IdentificationError, match='threads'):
         identify(base, [rec], [KG], options=FitOptions(threads=0, **kw))
+
+
+def test_a_candidate_set_is_built_once_and_simulates_the_same(case):
+    """The fit simulates the model its usability check built (no second build), with the
+    same residuals as a freshly built model."""
+    from worm_gear_sim.dynamics.model import DriveModel
+    from worm_gear_sim.dynamics.usability import usable_model
+    from worm_gear_sim.identification import predict
+    base, rec = case
+    cfg = base.replace({KG: base.materials.gear_shaft_shear_modulus * 1.0123})
+    model = usable_model(cfg)
+    assert usable_model(cfg) is model                   # the check's own, kept
+    assert model.config == cfg
+    fresh, shared = predict(DriveModel(cfg), rec), predict(model, rec)
+    assert np.array_equal(fresh['theta4'], shared['theta4'])

@@ -36,6 +36,7 @@ from ..dynamics.batch import map_like_serial
 from ..dynamics.modal import modes
 from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
+from ..dynamics.usability import usable_model
 from ..params import Config
 from ..records import Record
 from ..validation import ConfigError
@@ -173,8 +174,8 @@ class Problem:
         with _COUNT_LOCK:
             self.n_evals += 1
         parts = []
-        try:
-            model: DriveModel | None = DriveModel(self.config(x))
+        try:   # the model the usability check of the new set built (built once)
+            model: DriveModel | None = usable_model(self.config(x))
         except ConfigError:
             model = None
         for r in self.records:
