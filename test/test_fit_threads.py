@@ -80,3 +80,10 @@ def test_a_candidate_set_is_built_once_and_simulates_the_same(case):
     assert model.config == cfg
     fresh, shared = predict(DriveModel(cfg), rec), predict(model, rec)
     assert np.array_equal(fresh['theta4'], shared['theta4'])
+    # the integrator's damping, computed once per model and the same as a fresh model's
+    from worm_gear_sim.dynamics.modal import stepping_damping
+    played = DriveModel(base.replace({'mesh.backlash': 1e-3,
+                                      'damping.modal_damping_ratios': [0.01, 0.0, 0.0]}))
+    C = stepping_damping(played)
+    assert C.shape == (6, 3) and stepping_damping(played) is C     # stacked: play
+    assert np.array_equal(C, stepping_damping(DriveModel(played.config)))

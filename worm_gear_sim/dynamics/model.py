@@ -276,12 +276,15 @@ class DriveModel:
     by everyone holding the model (it stays a writeable array because the compiled kernels
     are specialised on that array type)."""
 
-    __slots__ = ('config', 'derived', 'p')
+    __slots__ = ('config', 'derived', 'p', 'stepping_C')
 
     def __init__(self, config: Parameters) -> None:
         self.config = config
         self.derived = derive(config)
         self.p = pack_parameters(config, self.derived)
+        #: the integrator's damping matrix, kept by ``modal.stepping_damping`` on first use
+        #: (every simulator of this model takes the same; shared like ``p``)
+        self.stepping_C: np.ndarray | None = None
 
     @classmethod
     def of(cls, model: DriveModel | Parameters) -> DriveModel:
