@@ -282,9 +282,7 @@ class DriveModel:
         self.config = config
         self.derived = derive(config)
         self.p = pack_parameters(config, self.derived)
-        #: the integrator's damping matrix, kept by ``modal.stepping_damping`` on first use
-        #: (every simulator of this model takes the same; shared like ``p``)
-        self.stepping_C: np.ndarray | None = None
+        self.stepping_C: np.ndarray | None = None    # modal.stepping_damping's, kept
 
     @classmethod
     def of(cls, model: DriveModel | Parameters) -> DriveModel:
