@@ -19,6 +19,12 @@ Prints, in one run:
 
     python benchmarks/bench_core.py            # full run (~2-4 min)
     python benchmarks/bench_core.py --quick    # skip the Radau comparison
+    python benchmarks/bench_core.py --step-limit   # only: what sets the step (below)
+
+``--step-limit`` prints the pointwise theta2 / theta4 accuracy of the default move at 4-10 us
+with each ingredient of the model switched off in turn (the friction law, its Stribeck
+curve, the nonlinear mesh, the worm's frequency matching), and the Python and call cost of
+a tick apart from its steps: what would have to change for the step to grow.
 
 Timings are the minimum over repeats (other load on the machine only makes them slower).
 """
@@ -233,12 +239,65 @@ def floor_rows(rounds: int = 3) -> None:
           f'{kern / fl2:.2f}x the 2-evaluation floor')
 
 
+#: (name, overrides) of --step-limit: the default and each ingredient switched off in turn
+STEP_CASES = [
+    ('default (nonlinear mesh, set-valued Stribeck)', {}),
+    ('set-valued Stribeck, linear mesh', {'mesh.stiffness_model': 'linear'}),
+    ('tanh Stribeck, nonlinear mesh', {'friction.direction': 'regularized'}),
+    ('constant mu, nonlinear mesh', {'friction.model': 'constant'}),
+    ('frictionless, nonlinear mesh', {'friction.model': 'off'}),
+    ('constant mu, linear mesh', {'mesh.stiffness_model': 'linear',
+                                  'friction.model': 'constant'}),
+    ('default, worm not frequency-matched', {'integrator.worm_frequency_matching': False}),
+]
+LIMIT_STEPS = (4e-6, 5e-6, 6e-6, 8e-6, 1e-5)
+
+
+def tick_overhead_us(n: int = 20_000) -> tuple[float, float]:
+    """(advance_to of one step, advance_segment of one step) in us: the per-tick cost that
+    is not the steps (the Python of advance_to, and numba's dispatch of the compiled call)."""
+    from worm_gear_sim.dynamics.stepping import advance_segment
+    sim = Simulator(Config())
+    dt = sim.dt
+    t0 = time.perf_counter()
+    for _ in range(n):
+        sim.advance_to(sim.t + dt * 1.0000001, 0.0)
+    whole = (time.perf_counter() - t0) / n * 1e6
+    args = (sim.p, sim.C, sim._u.copy(), sim._v.copy(), sim._a.copy(), sim._theta1,
+            sim._theta1_dot, sim._t0, sim._k, dt, 1, sim._cmd_t, 0.0, 0.0, sim.t + dt, 0.0,
+            sim._stats.copy(), sim._ctl.copy(), sim._load_on_grid(1))
+    t0 = time.perf_counter()
+    for _ in range(n):
+        advance_segment(*args)
+    return whole, (time.perf_counter() - t0) / n * 1e6
+
+
+def step_limit() -> None:
+    from bench_step import errors
+    print(f'# what sets the step (load {os.getloadavg()[0]:.2f}): pointwise error / oscillation '
+          'amplitude, theta2 / theta4, 18-step move + 5 ms ringing, against Newmark at '
+          '0.05 us of the same model (targets 0.05 / 0.001)')
+    print(f'{"case":46s} ' + ' '.join(f'{dt * 1e6:>14.0f}us' for dt in LIMIT_STEPS))
+    for name, over in STEP_CASES:
+        out, _, _ = errors(over, steps=LIMIT_STEPS)
+        print(f'{name:46s} ' + ' '.join(f'{e2:7.4f}/{e4:7.1e}' for e2, e4 in out.values()),
+              flush=True)
+    for _ in range(3):
+        whole, call = tick_overhead_us()
+        print(f'one tick of ONE step: advance_to {whole:.2f} us, of which the compiled call '
+              f'advance_segment {call:.2f} us (load {os.getloadavg()[0]:.2f})')
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--quick', action='store_true', help='skip the Radau comparison')
+    ap.add_argument('--step-limit', action='store_true', help='only what sets the step')
     args = ap.parse_args(argv)
     # the coarse rows are deliberate: the tables report each step's resolution themselves
     warnings.simplefilter('ignore', StepResolutionWarning)
+    if args.step_limit:
+        step_limit()
+        return 0
     print(f'# worm_gear_sim kernel benchmark  ({platform.processor() or platform.machine()}, '
           f'{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}, python '
           f'{platform.python_version()})')

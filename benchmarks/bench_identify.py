@@ -9,7 +9,8 @@ curve; linear tooth stiffness and soft bearings) so that no fit can be exact.  E
 recorded as the paper's 18-step move (training) and a held-out S-curve move the other way,
 0.15 s at 10 kHz, theta4 measured by a 20-bit encoder (6 urad steps) plus 1 urad RMS noise.
 
-    python benchmarks/bench_identify.py                 # timing: 4-parameter robust fit
+    python benchmarks/bench_identify.py [--threads 2 --repeats 2 --dask]
+                                                        # timing: 4-parameter robust fit
     python benchmarks/bench_identify.py --compare       # strategies x drives table
     python benchmarks/bench_identify.py --coverage      # calibration of the 95 % intervals
     python benchmarks/bench_identify.py --compare --strategies frequency+windows \
@@ -204,18 +205,50 @@ def coverage(args) -> None:
 
 
 def timing(args) -> None:
+    """The 4-parameter robust fit in this process on 1 thread and on ``--threads`` threads
+    (the Jacobian's columns, ``FitOptions.threads``), alternating ``--repeats`` times, each
+    pair between two measurements of the ceiling (what the machine gives this process's
+    threads right now, bench_batch.py); then (``--dask``) on a Dask LocalCluster."""
+    from bench_batch import QUIET, _load, ceiling
     base = load_config(args.config) if args.config else load_config()
     truth, _ = drives(base)['variant: lead angle, const mu, mapping']
     train, hold, clean = records(truth, seed=7)
+    n = args.threads
     print(f'4-parameter fit, {train.t.size} samples ({DURATION} s at {RATE:g} Hz), '
-          f'strategy robust; load average before {os.getloadavg()}')
-    rows = []
+          f'strategy robust; {_load()}')
+    first = None
+    walls: dict[int, list[float]] = {1: [], n: []}
+    for rep in range(args.repeats):
+        c_before = ceiling(n)
+        for th in (1, n):
+            t0, c0 = time.perf_counter(), time.process_time()
+            res = identify(base, [train], KEYS, options=FitOptions(serial=True, threads=th))
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+            walls[th].append(wall)
+            h, c = held_out(res.config, hold, clean)
+            nfev = sum(s['nfev'] for s in res.starts)
+            same = first is None or (res.values == first.values and res.ci95 == first.ci95)
+            first = first or res
+            print(f'  [{rep + 1}] in this process, {th} thread(s) {wall:6.2f} s (CPU/wall '
+                  f'{cpu / wall:4.2f})  nfev {nfev}  values '
+                  + ' '.join(f'{v:.6g}' for v in res.values)
+                  + f'  held-out theta4 {h:.2f} % (vs truth {c:.2f} %)  '
+                  f'{"trustworthy" if res.trustworthy else "NOT trustworthy"}'
+                  f'{"" if same else "  DIFFERENT from the first run"}', flush=True)
+        c_after = ceiling(n)
+        quiet = min(c_before, c_after) >= QUIET * n
+        print(f'  [{rep + 1}] ratio 1 / {n} threads {walls[1][-1] / walls[n][-1]:.2f}; ceiling '
+              f'before {c_before:.2f}x after {c_after:.2f}x'
+              f'{" (free cores)" if quiet else " (the cores were busy: not conclusive)"}; '
+              f'{_load()}', flush=True)
+    print(f'  best: 1 thread {min(walls[1]):.2f} s, {n} threads {min(walls[n]):.2f} s; '
+          'target <= 5 s')
+    if not args.dask:
+        return
     from worm_gear_sim.studies import local_cluster_client
-    n = args.workers or os.cpu_count()
-    for label, opt in (('serial (this process)', FitOptions(serial=True)),
-                       (f'Dask LocalCluster, {n} workers, incl. start-up',
-                        FitOptions(workers=args.workers)),
-                       (f'Dask LocalCluster, {n} workers, running', None)):
+    for label, opt in ((f'Dask LocalCluster, {args.workers or os.cpu_count()} workers, '
+                        'incl. start-up', FitOptions(workers=args.workers)),
+                       ('Dask LocalCluster, running', None)):
         t0 = time.perf_counter()
         if opt is None:
             with local_cluster_client(args.workers) as client:
@@ -226,14 +259,9 @@ def timing(args) -> None:
         else:
             res = identify(base, [train], KEYS, options=opt)
             wall = time.perf_counter() - t0
-        h, c = held_out(res.config, hold, clean)
-        nfev = sum(s['nfev'] for s in res.starts)
-        rows.append((label, wall))
-        print(f'  {label:<44} {wall:6.1f} s  starts {res.strategy["n_starts"]}  '
-              f'nfev {nfev}  held-out theta4 {h:.2f} % (vs truth {c:.2f} %)  '
-              f'{"trustworthy" if res.trustworthy else "NOT trustworthy"}')
-    print(f'  ratio serial / running Dask: {rows[0][1] / rows[2][1]:.2f}; target <= 60 s; '
-          f'load average after {os.getloadavg()}')
+        print(f'  {label:<44} {wall:6.1f} s  values '
+              + ' '.join(f'{v:.6g}' for v in res.values))
+    print(f'  {_load()}')
 
 
 def main() -> None:
@@ -244,6 +272,9 @@ def main() -> None:
     ap.add_argument('--strategies', nargs='*', help=f'subset of {", ".join(STRATEGIES)}')
     ap.add_argument('--serial', action='store_true', help='no Dask in --compare')
     ap.add_argument('--workers', type=int, default=None)
+    ap.add_argument('--threads', type=int, default=2, help='threads of the timing run')
+    ap.add_argument('--repeats', type=int, default=2, help='pairs of the timing run')
+    ap.add_argument('--dask', action='store_true', help='also time the fit on Dask')
     ap.add_argument('--durations', type=float, nargs='*', default=[0.15, 0.5],
                     help='record lengths [s] in --compare')
     ap.add_argument('--method', default='dogbox', help='least_squares method (--compare)')

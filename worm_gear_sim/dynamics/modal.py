@@ -236,12 +236,16 @@ def open_mesh_damping_matrix(model: DriveModel | Parameters) -> np.ndarray:
 def stepping_damping(model: DriveModel | Parameters) -> np.ndarray:
     """The damping the integrator takes: :func:`damping_matrix` (3 x 3), stacked over
     :func:`open_mesh_damping_matrix` (6 x 3: rows 3..5 for the steps that start inside the
-    play) when the drive has play and some structural damping."""
+    play) when the drive has play and some structural damping.  Computed once per model
+    (``DriveModel.stepping_C``): treat it as read-only, like the model's ``p``."""
     model = DriveModel.of(model)
+    if model.stepping_C is not None:        # computed for this model already
+        return model.stepping_C
     C = damping_matrix(model)
     if has_play(model.p) and np.any(C != 0.0):
         C = np.vstack((C, open_mesh_damping_matrix(model)))
-    return np.ascontiguousarray(C)
+    model.stepping_C = np.ascontiguousarray(C)
+    return model.stepping_C
 
 
 #: Steps per period of the highest linearised mode (the worm on its shaft) that a step must

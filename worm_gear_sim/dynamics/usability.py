@@ -45,8 +45,10 @@ from ..validation import ConfigError
 
 if TYPE_CHECKING:
     from .modal import ModalResult
+    from .model import DriveModel
 
-__all__ = ['check_usable', 'diagnose', 'SPRING_RATIO_MIN', 'OMEGA_DT_MAX', 'TRIAL_TIME']
+__all__ = ['check_usable', 'usable_model', 'diagnose', 'SPRING_RATIO_MIN', 'OMEGA_DT_MAX',
+           'TRIAL_TIME']
 
 #: Two springs on one body: the smaller must be at least this share of the larger (it keeps
 #: 7 significant digits in their sum).
@@ -92,7 +94,7 @@ def check_usable(cfg: Parameters, changed: Iterable[str] | None = None) -> None:
     keys = tuple(changed) if changed is not None else _differs_from_defaults(cfg)
     try:
         with np.errstate(all='ignore'):     # thread-local: a bad set fails below, silently
-            _check(cfg, keys)
+            model = _check(cfg, keys)
     except ConfigError:
         raise
     except (ArithmeticError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
@@ -102,10 +104,31 @@ def check_usable(cfg: Parameters, changed: Iterable[str] | None = None) -> None:
         if len(_USABLE) >= _CACHE_SIZE:
             _USABLE.pop(next(iter(_USABLE)), None)
         _USABLE[cfg] = True
+        if len(_MODELS) >= _MODEL_CACHE_SIZE:
+            _MODELS.pop(next(iter(_MODELS)), None)
+        _MODELS[cfg] = model
+
+
+def usable_model(cfg: Parameters) -> DriveModel:
+    """The :class:`DriveModel` of ``cfg``, proven usable (:func:`check_usable`): the model the
+    check itself built when it checked ``cfg`` recently (a fit's every candidate is a new
+    set, checked by ``Config.replace`` and then simulated: built once instead of twice),
+    else a new one.  Models are immutable, so sharing one changes no number."""
+    model = _MODELS.get(cfg)
+    if model is None:
+        check_usable(cfg)
+        model = _MODELS.get(cfg)
+    if model is None:                       # checked long ago, or evicted since
+        from .model import DriveModel
+        model = DriveModel(cfg)
+    return model
 
 
 _CACHE_SIZE = 512
 _USABLE: dict[Parameters, bool] = {}
+#: the models of the last sets checked (a fit's Jacobian columns and starts run at once)
+_MODEL_CACHE_SIZE = 16
+_MODELS: dict[Parameters, DriveModel] = {}
 _LOCK = threading.Lock()
 
 
@@ -127,7 +150,8 @@ def _blame(cfg: Parameters, changed: Sequence[str], suspects: Sequence[str],
     return err
 
 
-def _check(cfg: Parameters, changed: Sequence[str]) -> None:
+def _check(cfg: Parameters, changed: Sequence[str]) -> DriveModel:
+    """The rules (module doc); returns the model it built and ran."""
     from .model import DriveModel, mesh_stiffness_y, tooth_stiffness
     try:
         model = DriveModel(cfg)
@@ -232,6 +256,7 @@ def _check(cfg: Parameters, changed: Sequence[str]) -> None:
             raise SimulationError('non-finite state')
     except SimulationError as exc:
         raise _trial_failure(cfg, changed, m, str(exc)) from None
+    return model
 
 
 def _unresolved_mode(cfg: Parameters, m: ModalResult) -> tuple[str, tuple[str, ...]] | None:

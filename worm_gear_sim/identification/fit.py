@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..dynamics.batch import default_workers, map_like_serial
 from ..dynamics.modal import modes
 from ..dynamics.stepping import SimulationError
 from ..params import Config
@@ -118,6 +119,8 @@ class LocalSettings:
     xtol: float
     #: (index, sigma in the fitted coordinate) of each key held near its start (:data:`PRIORS`)
     priors: tuple[tuple[int, float], ...] = ()
+    #: threads of the finite-difference Jacobian's columns (:attr:`Problem.threads`)
+    threads: int = 1
 
 
 @dataclass
@@ -147,10 +150,21 @@ class FitOptions:
     serial: bool = False
     client: Any = None
     progress: bool = False
+    #: threads of the finite-difference Jacobian's columns when the local fits run in this
+    #: process, and of the report's Jacobian (None: the cores, ``default_workers()``; the
+    #: same numbers for any count); a local fit on a Dask worker process uses 1
+    threads: int | None = None
 
-    def local(self, priors: tuple[tuple[int, float], ...] = ()) -> LocalSettings:
+    def local(self, priors: tuple[tuple[int, float], ...] = (), threads: int = 1
+              ) -> LocalSettings:
         return LocalSettings(self.max_nfev, self.diff_step, self.method, self.ftol, self.xtol,
-                             priors)
+                             priors, threads)
+
+    def in_process_threads(self) -> int:
+        n = default_workers() if self.threads is None else int(self.threads)
+        if n < 1:
+            raise IdentificationError(f'threads = {self.threads!r}: must be >= 1')
+        return n
 
     def resolved(self) -> tuple[bool, bool, int]:
         if self.strategy not in STRATEGIES:
@@ -187,6 +201,7 @@ def _local_fit(problem: Problem, x0: np.ndarray, windows: Sequence[float | None]
                settings: LocalSettings) -> dict[str, Any]:
     lo, hi = problem.x_bounds
     x = _interior(problem, x0)
+    problem.threads = settings.threads
     t0 = time.perf_counter()
     res = None
     stages: list[dict[str, Any]] = []
@@ -364,6 +379,7 @@ def identify(base: Config, records: Sequence[Record], keys: Sequence[str], *,
     priors = tuple((keys.index(k), float(sg)) for k, sg in prior_sigma.items())
     results = _run_starts(problem, starts, windows, opt, priors, on_start_done)
     results.sort(key=lambda r: r['index'])
+    problem.threads = opt.in_process_threads()
     best, stats = assess(problem, results, opt.max_nfev)
     if fit_base is not base:   # 'before' and the base values: the caller's base
         rms_before, per_before = residual_rms(problem, base)
@@ -395,8 +411,10 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
                 windows: Sequence[float | None], opt: FitOptions,
                 priors: tuple[tuple[int, float], ...],
                 on_done: Callable[[dict], None] | None) -> list[dict[str, Any]]:
-    """Local fits from every start: in this process (``serial`` or a single start) or on Dask
-    (the sweeps' engine: a LocalCluster by default, ``scheduler`` for a cluster)."""
+    """Local fits from every start: in this process (``serial`` or a single start; the starts
+    and each Jacobian's columns on ``FitOptions.threads`` threads, every start computed as in
+    a serial loop, so the same numbers) or on Dask (the sweeps' engine: a LocalCluster by
+    default, ``scheduler`` for a cluster)."""
     out: list[dict[str, Any]] = []
     bar = None
 
@@ -420,8 +438,12 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
     try:
         if opt.serial or (len(starts) == 1 and opt.client is None and opt.scheduler is None):
             start_bar()
-            for i, x0 in enumerate(starts):
-                done(_start_task(problem, list(x0), list(windows), opt.local(priors), i))
+            threads = opt.in_process_threads()
+            local = opt.local(priors, threads)
+            # the starts on threads too: one start's columns use the cores another left idle
+            map_like_serial(lambda i: _start_task(problem, list(starts[i]), list(windows),
+                                                  local, i),
+                            range(len(starts)), workers=threads, on_result=lambda _, r: done(r))
         else:
             from ..studies.engine import _dask_client, warm_up
             with _dask_client(opt.client, opt.scheduler, opt.workers) as cl:

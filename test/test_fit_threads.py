@@ -1,0 +1,89 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The fit's finite-difference Jacobian on threads: the same numbers as in the calling
+thread, bit for bit (each column is the serial call), and a whole multi-start fit unchanged."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from worm_gear_sim import load_config
+from worm_gear_sim.dynamics.profiles import TrapezoidalProfile
+from worm_gear_sim.identification import (
+    FitOptions,
+    IdentificationError,
+    Problem,
+    fit_parameters,
+    identify,
+    jacobian,
+    record_from_model,
+)
+
+KG = 'materials.gear_shaft_shear_modulus'
+ZETA = 'damping.modal_damping_ratios[0]'
+MOVE = TrapezoidalProfile(0.11309733552923255, 0.020, 0.004, 0.005)
+
+
+@pytest.fixture(scope='module')
+def case():
+    base = load_config()
+    truth = base.replace({KG: base.materials.gear_shaft_shear_modulus * 1.1,
+                          'damping.modal_damping_ratios': [0.01, 0.0, 0.0]})
+    rec = record_from_model(truth, MOVE, 0.04, 1e4, ('theta4',), noise_rad=1e-6,
+                            resolution_rad=2 * math.pi / 2 ** 20, seed=3)
+    return base, rec
+
+
+def test_jacobian_on_threads_equals_the_serial_one(case):
+    base, rec = case
+    problem = Problem(base, fit_parameters(base, [KG, ZETA]), [rec])
+    x = np.array([0.05, 0.02])
+    serial = jacobian(problem, x)
+    forward = problem.jacobian(x, 0.03)
+    problem.residuals(x)                              # r0 cached: the count is the columns'
+    n_before = problem.n_evals
+    problem.threads = 2
+    threaded = jacobian(problem, x)
+    assert problem.n_evals - n_before == 4           # every column point counted once
+    assert np.isfinite(serial).all()
+    assert np.array_equal(serial, threaded)
+    assert np.array_equal(forward, problem.jacobian(x, 0.03))
+
+
+def test_a_multistart_fit_is_the_same_on_one_or_two_threads(case):
+    """The starts and the columns on two threads: every start as in the serial loop."""
+    base, rec = case
+    kw = dict(strategy='multistart', n_starts=2, serial=True, max_nfev=5)
+    one = identify(base, [rec], [KG], options=FitOptions(threads=1, **kw))
+    two = identify(base, [rec], [KG], options=FitOptions(threads=2, **kw))
+    assert one.values == two.values and one.ci95 == two.ci95
+    assert [s['cost'] for s in one.starts] == [s['cost'] for s in two.starts]
+    assert [s['x'] for s in one.starts] == [s['x'] for s in two.starts]
+    assert len(two.starts) == 2
+    with pytest.raises(IdentificationError, match='threads'):
+        identify(base, [rec], [KG], options=FitOptions(threads=0, **kw))
+
+
+def test_a_candidate_set_is_built_once_and_simulates_the_same(case):
+    """The fit simulates the model its usability check built (no second build), with the
+    same residuals as a freshly built model."""
+    from worm_gear_sim.dynamics.model import DriveModel
+    from worm_gear_sim.dynamics.usability import usable_model
+    from worm_gear_sim.identification import predict
+    base, rec = case
+    cfg = base.replace({KG: base.materials.gear_shaft_shear_modulus * 1.0123})
+    model = usable_model(cfg)
+    assert usable_model(cfg) is model                   # the check's own, kept
+    assert model.config == cfg
+    fresh, shared = predict(DriveModel(cfg), rec), predict(model, rec)
+    assert np.array_equal(fresh['theta4'], shared['theta4'])
+    # the integrator's damping, computed once per model and the same as a fresh model's
+    from worm_gear_sim.dynamics.modal import stepping_damping
+    played = DriveModel(base.replace({'mesh.backlash': 1e-3,
+                                      'damping.modal_damping_ratios': [0.01, 0.0, 0.0]}))
+    C = stepping_damping(played)
+    assert C.shape == (6, 3) and stepping_damping(played) is C     # stacked: play
+    assert np.array_equal(C, stepping_damping(DriveModel(played.config)))
