@@ -17,6 +17,8 @@ Two designs, chosen by the fitted keys (:func:`design_excitation`):
   acceleration limit (the drag's wind-up is 4 x larger; the stops ring the antenna mode:
   stiffness; a deceleration can cross the play against a load).  Held out:
   ``validate_sweep``, out and back at half the rate limit on the other side of the start.
+  In reserve, when both the play and the load torque are fitted and the time allows:
+  ``unload_dither``, the worm rate swinging at the base's antenna mode (:mod:`.unload`).
 
 The rate-dependent part of the lag theta4 - u theta1 over a constant-rate segment is the
 drag's wind-up; its part common to both ways is the load's; the jump between the ways is
@@ -87,7 +89,7 @@ class Move:
     """One move of the excitation: a record of its own, starting at rest."""
 
     name: str
-    role: str                 # 'train' | 'validate'
+    role: str                 # 'train' | 'validate' | 'reserve' (.unload)
     profile: Profile
     t_end: float
 
@@ -255,10 +257,15 @@ def _sweeps(limits: Limits, keys: Sequence[str], base: Config | None) -> list[Mo
             f'calibration limit max_angle = {a:g} rad leaves no room for a slow reversal: '
             f'crossing {play * 180 * 60 / math.pi:.3g} arcmin of play needs >= '
             f'{need + w_slow * ramp_slow:.3g} rad of worm travel each way')
-    moves = []
+    moves: list[Move] = []
     for name, role, travel, rate in (('slow_sweep', 'train', a, w_slow),
                                      ('fast_sweep', 'train', a, w_fast),
                                      ('validate_sweep', 'validate', -0.6 * a, 0.5 * w_fast)):
         prof = sweep_profile(limits.start, travel, rate, acc, name)
         moves.append(Move(name, role, prof, prof.duration + RING_TIME))
+    if {'mesh.backlash', 'load.output_torque'} <= {str(k).strip() for k in keys}:
+        from .unload import dither_profile
+        prof = dither_profile(cfg, limits)
+        if sum(m.t_end for m in moves) + prof.duration + RING_TIME <= limits.duration:
+            moves.append(Move('unload_dither', 'reserve', prof, prof.duration + RING_TIME))
     return moves

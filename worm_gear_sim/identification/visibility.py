@@ -7,7 +7,9 @@ the key and the move to record.
   records, has the relative mesh displacement q = l_w theta2 - r_g theta3 beyond both edges
   of the play (|q| >= r_g b / 2 on either side).  A load torque larger than the drag torque
   at every rate, and than the antenna's inertia torque at every deceleration, holds one
-  flank: the play is then not crossed (and only b / 2 + T C of play and load is seen).
+  flank: the play is then not crossed (and only b / 2 + T C of play and load is seen),
+  unless a record lifts the gear off its flank (the unloading dither, :mod:`.unload`): the
+  torque at which it lifts gives T, and b follows from b / 2 + T C.
 * ``load.output_torque`` and ``load.output_viscous_coefficient`` need constant-rate
   segments (:func:`.direct.steady_segments`): the drag at two rates or both ways, the load
   both ways (or at a known play).
@@ -30,6 +32,7 @@ from ..dynamics.stepping import SimulationError
 from ..records import Record
 from .data import predict
 from .direct import DRAG, LOAD, PLAY, Segment, steady_segments
+from .unload import mesh_lifts
 
 __all__ = ['flank_changes', 'key_visibility']
 
@@ -66,7 +69,8 @@ def key_visibility(cfg: Any, records: Sequence[Record], keys: Sequence[str],
     T, c = cfg.load.output_torque, cfg.load.output_viscous_coefficient
     w_max = max((abs(r) for r in rates), default=0.0)
     play_hidden = False
-    if PLAY in keys and not flank_changes(cfg, records):
+    if PLAY in keys and not flank_changes(cfg, records) and not (
+            LOAD in keys and abs(T) > 0 and mesh_lifts(cfg, records)):
         play_hidden = True
         if c > 0 and abs(T) > 0:
             need = abs(T) / (c * u)

@@ -1,0 +1,115 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""Play and load told apart when a load holds the gear on one flank in every sweep.
+
+With one flank throughout, the sweeps show only b / 2 + T C of play b and load torque T (C:
+the compliance from the antenna to the worm, :func:`.direct.compliance`).  No constant rate
+within the limits separates them when the drag torque c u omega stays below T, and no single
+stop does when the antenna's inertia torque (J_4 + J_g) u alpha stays below T (with 0.5 rad,
+6 rad/s and 1 500 rad/s^2 of worm: 2.1 N m of inertia torque, rigid).  A move that swings the
+worm rate at the antenna mode does: at resonance the shaft torque swing grows each cycle by
+about pi times the rigid inertia torque until the mesh unloads; the gear then leaves its
+flank (into the play: it need not reach the other one) at a torque that depends on T, not on
+b / 2 + T C.  Measured on the drive with 2.80 arcmin, 4.75 N m and 14.4 N m s/rad (benchmark
+bench_calibration seed 1 drive 0): 8 cycles at 94.6 Hz with 1 500 rad/s^2 (+-2.5 rad/s of
+worm) lift the gear 12 % of the play off its flank; the model with the sweeps' one-flank fit
+(0.46 arcmin, 14.0 N m) differs from the truth by 31 urad RMS of theta4 on that move (noise 1
+urad), by 0.55 urad on the fast sweep.
+
+:func:`dither_profile` is that move (``unload_dither``, kept in reserve by the excitation);
+:func:`split_refit` runs when the sweeps' fit says the play is hidden: a scan along the line
+b / 2 + T C = const on the time-domain cost of the sweeps and the dither, then the local fit
+from the best point with every key free.  :func:`mesh_lifts` says whether a model lifts the
+gear off its flank in a record (what makes the split seen, :mod:`.visibility`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..params import Config
+from ..records import Record
+from .direct import LOAD, PLAY, best_on_family, compliance
+from .excitation import LEAD_TIME, Limits, RateSchedule
+
+if TYPE_CHECKING:
+    from .fit import FitOptions
+    from .report import FitResult
+
+__all__ = ['DITHER_CYCLES', 'LIFT_SHARE', 'SPLIT_POINTS', 'dither_profile', 'split_refit']
+
+#: Cycles of the dither at the antenna mode (the swing grows by ~pi rigid torques a cycle).
+DITHER_CYCLES = 8
+#: The gear counts as lifted off its flank when it leaves it by this share of the play.
+LIFT_SHARE = 0.05
+#: Points of the scan along b / 2 + T C = const (between T = 0 and b = 0, ends excluded).
+SPLIT_POINTS = 12
+
+
+def dither_profile(cfg: Config, limits: Limits) -> RateSchedule:
+    """The worm rate swinging DITHER_CYCLES times at the antenna mode of ``cfg`` (its lowest
+    linearised mode) with the acceleration limit as peak (the rate limit if lower), raised-
+    cosine half periods, from rest to rest; LEAD_TIME of rest before."""
+    from ..dynamics.modal import modes
+    f = float(np.asarray(modes(cfg).undamped_hz, float)[0])
+    period = 1.0 / f
+    v = min(limits.max_rate, limits.max_accel / (2.0 * math.pi * f))
+    pieces = [(LEAD_TIME, 0.0, 0.0), (0.25 * period, 0.0, v)]
+    for k in range(2 * DITHER_CYCLES - 1):
+        s = 1.0 if k % 2 == 0 else -1.0
+        pieces.append((0.5 * period, s * v, -s * v))
+    pieces.append((0.25 * period, pieces[-1][2], 0.0))
+    return RateSchedule(pieces, limits.start,
+                        f'unload_dither: worm rate +-{v:.3g} rad/s at {f:.4g} Hz (the antenna '
+                        f'mode), {DITHER_CYCLES} cycles, from {limits.start:.6g} rad')
+
+
+def split_refit(base: Config, records: Sequence[Record], keys: Sequence[str],
+                fitted: FitResult, options: FitOptions,
+                outputs: Sequence[str] | None = None) -> FitResult:
+    """Fit ``keys`` again on ``records`` (the sweeps and the dither) from the best point of
+    the line b / 2 + |T| C = const through ``fitted``'s play and load (module docstring)."""
+    from .fit import identify
+    cfg = fitted.config
+    b0, t0 = cfg.mesh.backlash, cfg.load.output_torque
+    c = compliance(cfg)
+    s = 1.0 if t0 >= 0 else -1.0
+    total = 0.5 * b0 + abs(t0) * c           # b / 2 + |T| C
+    family = []
+    for k in range(1, SPLIT_POINTS + 1):
+        t = total / c * k / (SPLIT_POINTS + 1)
+        family.append({PLAY: 2.0 * (total - t * c), LOAD: s * t})
+    best, rows = best_on_family(cfg, records, family)
+    opt = dataclasses.replace(options, global_stage=False, priors={}, n_starts=1)
+    res = identify(cfg.replace(best), records, keys, options=opt, outputs=outputs)
+    res.frequency_info['split_scan'] = rows
+    return res
+
+
+def mesh_lifts(cfg: Config, records: Sequence[Record]) -> bool:
+    """Whether the model ``cfg`` (play > 0) lifts the gear off the flank it rests on by
+    LIFT_SHARE of the play in some record (without it reaching the other flank)."""
+    from ..dynamics.model import DriveModel
+    from ..dynamics.stepping import SimulationError
+    from .data import predict
+    b = cfg.mesh.backlash
+    if not b > 0:
+        return False
+    m = DriveModel(cfg)
+    lw, rg = m.derived.l_w, cfg.geometry.gear_pitch_radius
+    edge = 0.5 * rg * b
+    for r in records:
+        try:
+            p = predict(m, r)
+            q = lw * p['theta2'] - rg * p['theta3']
+        except (SimulationError, ValueError):
+            continue
+        side = 1.0 if float(np.median(q)) >= 0 else -1.0
+        if float(np.max(edge - side * q)) >= LIFT_SHARE * 2.0 * edge:
+            return True
+    return False
