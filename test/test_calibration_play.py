@@ -48,7 +48,7 @@ def _train(plant: Config, moves, seed: int = 0):
 
 
 def test_the_sweeps_stay_within_the_limits_and_reverse_at_two_rates(sweeps):
-    assert [m.role for m in sweeps] == ['train', 'train', 'validate']
+    assert [m.role for m in sweeps] == ['train', 'train', 'validate', 'reserve']
     dt = 1e-5
     for m in sweeps:
         t = np.arange(0.0, m.t_end, dt)

@@ -16,57 +16,28 @@ worm) lift the gear 12 % of the play off its flank; the model with the sweeps' o
 (0.46 arcmin, 14.0 N m) differs from the truth by 31 urad RMS of theta4 on that move (noise 1
 urad), by 0.55 urad on the fast sweep.
 
-:func:`dither_profile` is that move (``unload_dither``, kept in reserve by the excitation);
-:func:`split_refit` runs when the sweeps' fit says the play is hidden: a scan along the line
-b / 2 + T C = const on the time-domain cost of the sweeps and the dither, then the local fit
-from the best point with every key free.  :func:`mesh_lifts` says whether a model lifts the
-gear off its flank in a record (what makes the split seen, :mod:`.visibility`).
+:func:`.excitation.dither_profile` is that move (``unload_dither``, kept in reserve by the
+excitation); :func:`split_refit` runs when the sweeps' fit says the play is hidden: a scan
+along the line b / 2 + T C = const on the time-domain cost of the sweeps and the dither, then
+the local fit from the best point with every key free.  :func:`.visibility.mesh_lifts` says
+whether a model lifts the gear off its flank in a record (what makes the split seen).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
-
-import numpy as np
 
 from ..params import Config
 from ..records import Record
 from .direct import LOAD, PLAY, best_on_family, compliance
-from .excitation import LEAD_TIME, Limits, RateSchedule
+from .fit import FitOptions, identify
+from .report import FitResult
 
-if TYPE_CHECKING:
-    from .fit import FitOptions
-    from .report import FitResult
+__all__ = ['SPLIT_POINTS', 'split_refit']
 
-__all__ = ['DITHER_CYCLES', 'LIFT_SHARE', 'SPLIT_POINTS', 'dither_profile', 'split_refit']
-
-#: Cycles of the dither at the antenna mode (the swing grows by ~pi rigid torques a cycle).
-DITHER_CYCLES = 8
-#: The gear counts as lifted off its flank when it leaves it by this share of the play.
-LIFT_SHARE = 0.05
 #: Points of the scan along b / 2 + T C = const (between T = 0 and b = 0, ends excluded).
 SPLIT_POINTS = 12
-
-
-def dither_profile(cfg: Config, limits: Limits) -> RateSchedule:
-    """The worm rate swinging DITHER_CYCLES times at the antenna mode of ``cfg`` (its lowest
-    linearised mode) with the acceleration limit as peak (the rate limit if lower), raised-
-    cosine half periods, from rest to rest; LEAD_TIME of rest before."""
-    from ..dynamics.modal import modes
-    f = float(np.asarray(modes(cfg).undamped_hz, float)[0])
-    period = 1.0 / f
-    v = min(limits.max_rate, limits.max_accel / (2.0 * math.pi * f))
-    pieces = [(LEAD_TIME, 0.0, 0.0), (0.25 * period, 0.0, v)]
-    for k in range(2 * DITHER_CYCLES - 1):
-        s = 1.0 if k % 2 == 0 else -1.0
-        pieces.append((0.5 * period, s * v, -s * v))
-    pieces.append((0.25 * period, pieces[-1][2], 0.0))
-    return RateSchedule(pieces, limits.start,
-                        f'unload_dither: worm rate +-{v:.3g} rad/s at {f:.4g} Hz (the antenna '
-                        f'mode), {DITHER_CYCLES} cycles, from {limits.start:.6g} rad')
 
 
 def split_refit(base: Config, records: Sequence[Record], keys: Sequence[str],
@@ -74,7 +45,6 @@ def split_refit(base: Config, records: Sequence[Record], keys: Sequence[str],
                 outputs: Sequence[str] | None = None) -> FitResult:
     """Fit ``keys`` again on ``records`` (the sweeps and the dither) from the best point of
     the line b / 2 + |T| C = const through ``fitted``'s play and load (module docstring)."""
-    from .fit import identify
     cfg = fitted.config
     b0, t0 = cfg.mesh.backlash, cfg.load.output_torque
     c = compliance(cfg)
@@ -89,27 +59,3 @@ def split_refit(base: Config, records: Sequence[Record], keys: Sequence[str],
     res = identify(cfg.replace(best), records, keys, options=opt, outputs=outputs)
     res.frequency_info['split_scan'] = rows
     return res
-
-
-def mesh_lifts(cfg: Config, records: Sequence[Record]) -> bool:
-    """Whether the model ``cfg`` (play > 0) lifts the gear off the flank it rests on by
-    LIFT_SHARE of the play in some record (without it reaching the other flank)."""
-    from ..dynamics.model import DriveModel
-    from ..dynamics.stepping import SimulationError
-    from .data import predict
-    b = cfg.mesh.backlash
-    if not b > 0:
-        return False
-    m = DriveModel(cfg)
-    lw, rg = m.derived.l_w, cfg.geometry.gear_pitch_radius
-    edge = 0.5 * rg * b
-    for r in records:
-        try:
-            p = predict(m, r)
-            q = lw * p['theta2'] - rg * p['theta3']
-        except (SimulationError, ValueError):
-            continue
-        side = 1.0 if float(np.median(q)) >= 0 else -1.0
-        if float(np.max(edge - side * q)) >= LIFT_SHARE * 2.0 * edge:
-            return True
-    return False

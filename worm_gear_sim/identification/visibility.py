@@ -32,9 +32,11 @@ from ..dynamics.stepping import SimulationError
 from ..records import Record
 from .data import predict
 from .direct import DRAG, LOAD, PLAY, Segment, steady_segments
-from .unload import mesh_lifts
 
-__all__ = ['flank_changes', 'key_visibility']
+__all__ = ['flank_changes', 'key_visibility', 'mesh_lifts', 'LIFT_SHARE']
+
+#: The gear counts as lifted off its flank when it leaves it by this share of the play.
+LIFT_SHARE = 0.05
 
 
 def flank_changes(cfg: Any, records: Sequence[Record]) -> bool:
@@ -52,6 +54,27 @@ def flank_changes(cfg: Any, records: Sequence[Record]) -> bool:
             continue
         q = lw * p['theta2'] - rg * p['theta3']
         if float(np.max(q)) >= edge * (1 - 1e-6) and float(np.min(q)) <= -edge * (1 - 1e-6):
+            return True
+    return False
+
+
+def mesh_lifts(cfg: Any, records: Sequence[Record]) -> bool:
+    """Whether the model ``cfg`` (play > 0) lifts the gear off the flank it rests on by
+    LIFT_SHARE of the play in some record (without it reaching the other flank)."""
+    b = cfg.mesh.backlash
+    if not b > 0:
+        return False
+    m = DriveModel(cfg)
+    lw, rg = m.derived.l_w, cfg.geometry.gear_pitch_radius
+    edge = 0.5 * rg * b
+    for r in records:
+        try:
+            p = predict(m, r)
+            q = lw * p['theta2'] - rg * p['theta3']
+        except (SimulationError, ValueError):
+            continue
+        side = 1.0 if float(np.median(q)) >= 0 else -1.0
+        if float(np.max(edge - side * q)) >= LIFT_SHARE * 2.0 * edge:
             return True
     return False
 
