@@ -31,7 +31,7 @@ from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
 from ..records import Record
 from .data import predict
-from .direct import DRAG, LOAD, PLAY, Segment, steady_segments
+from .direct import DRAG, LOAD, PLAY, Segment, compliance, steady_segments
 
 __all__ = ['flank_changes', 'key_visibility', 'mesh_lifts', 'LIFT_SHARE']
 
@@ -95,16 +95,21 @@ def key_visibility(cfg: Any, records: Sequence[Record], keys: Sequence[str],
     if PLAY in keys and not flank_changes(cfg, records) and not (
             LOAD in keys and abs(T) > 0 and mesh_lifts(cfg, records)):
         play_hidden = True
+        # with the load fitted too, one flank fixes only b / 2 + T C: the load may be as
+        # large as that sum over C (play 0), and the move named must cross the play then
+        top = abs(T) + (0.5 * cfg.mesh.backlash / compliance(cfg) if LOAD in keys else 0.0)
+        which = ('the largest load torque these records allow' if LOAD in keys
+                 else 'the load torque')
         if c > 0 and abs(T) > 0:
-            need = abs(T) / (c * u)
+            need = top / (c * u)
             how = (f'record a reversal at a constant worm rate above {need:.3g} rad/s (the '
-                   f'drag torque then exceeds the load torque of {abs(T):.3g} N m; the '
+                   f'drag torque then exceeds {which}, {top:.3g} N m; the '
                    f'records reach {w_max:.3g} rad/s), or unload the axis')
         elif abs(T) > 0:
             J4 = m.derived.J_4 + m.derived.J_g
             how = (f'record a stop with a worm deceleration above '
-                   f'{abs(T) / (J4 * u):.3g} rad/s^2 (the inertia torque then exceeds the '
-                   f'load torque of {abs(T):.3g} N m), or unload the axis')
+                   f'{top / (J4 * u):.3g} rad/s^2 (the inertia torque then exceeds '
+                   f'{which}, {top:.3g} N m), or unload the axis')
         else:
             how = ('record a slow reversal (constant worm rate both ways, travel beyond the '
                    'play at the worm)')
