@@ -2,7 +2,8 @@
 # Licensed under the Apache License, Version 2.0
 """The fallback of :func:`~worm_gear_sim.identification.calibrate.calibrate`: a fit made with
 the default teeth prior that is refused is followed by a fit with every key free, kept only
-when the held-out move accepts it.
+when the held-out move accepts it; and the split of play and load by the unloading dither,
+kept only when its fit lifts the gear off its flank and the held-out move accepts it.
 
 The fits are stand-ins (the local fit is tested elsewhere; here only the choice between two
 fits is): each call of ``identify`` returns a prepared result, and the judge is real: the
@@ -111,3 +112,65 @@ def test_priors_given_by_the_caller_are_not_overridden(monkeypatch, plant_run):
     monkeypatch.setattr(calibrate_module, 'identify', fake_identify)
     res = calibrate(Config(), KEYS, LIMITS, plant_run, options=opt)
     assert len(calls) == 1 and not res.accepted
+
+
+# ---- the split of play and load by the unloading dither (the same stand-in machinery) ----
+PLAY, LOAD = 'mesh.backlash', 'load.output_torque'
+SPLIT_KEYS = [PLAY, LOAD]
+SWEEP_LIMITS = Limits(0.2, 6.0, 1500.0, 2.0)
+
+
+def _split_plant() -> Config:
+    return Config().replace({PLAY: 2.0 * math.pi / 180 / 60, LOAD: 2.0})
+
+
+@pytest.fixture(scope='module')
+def sweep_run():
+    """The sweeps' drive, each move simulated once (calibrate is called several times)."""
+    run = plant_runner(_split_plant(), 1e4, ('theta4',), 1e-6, 2 * math.pi / 2 ** 20)
+    cache: dict = {}
+    return lambda move: cache.setdefault(move.name, run(move))
+
+
+def _split_result(cfg: Config, not_seen: dict) -> FitResult:
+    res = _result(cfg, {}, [])
+    flat = cfg.to_flat_dict()
+    res.keys, res.values = list(SPLIT_KEYS), [float(flat[k]) for k in SPLIT_KEYS]
+    res.not_seen = dict(not_seen)
+    return res
+
+
+@pytest.mark.parametrize('split_config, split_not_seen, kept', [
+    ('plant', {}, True),                    # lifts the gear, held-out accepts: kept
+    ('base', {}, False),                    # the held-out move refutes it
+    ('plant', {PLAY: 'still hidden'}, False),   # the dither did not lift the gear
+])
+def test_the_split_refit_is_kept_only_if_it_lifts_the_gear_and_the_held_out_accepts(
+        monkeypatch, sweep_run, split_config, split_not_seen, kept):
+    hidden = {PLAY: f'{PLAY}: not seen: the gear stays on one flank', LOAD: 'not separable'}
+    calls = []
+
+    def fake_identify(base, train, keys, *, options=None, outputs=None):
+        assert [r.name for r in train] == ['slow_sweep', 'fast_sweep']
+        return _split_result(_split_plant(), hidden)     # accepted, play hidden
+
+    def fake_split(base, records, keys, fitted, options, outputs=None):
+        calls.append([r.name for r in records])
+        cfg = _split_plant() if split_config == 'plant' else Config()
+        return _split_result(cfg, split_not_seen)
+
+    monkeypatch.setattr(calibrate_module, 'identify', fake_identify)
+    monkeypatch.setattr(calibrate_module, 'split_refit', fake_split)
+    monkeypatch.setattr('worm_gear_sim.identification.uncertainty.prediction_bound',
+                        lambda res, train, held: ('bound', [r.name for r in train]))
+    res = calibrate(Config(), SPLIT_KEYS, SWEEP_LIMITS, sweep_run)
+    assert calls == [['slow_sweep', 'fast_sweep', 'unload_dither']]
+    assert res.accepted          # the sweeps' fit was accepted: it stays so either way
+    if kept:
+        assert PLAY not in res.not_seen and LOAD not in res.not_seen
+        assert any('told apart by the unload_dither' in w for w in res.fit.warnings)
+        assert [r.name for r in res.train][-1] == 'unload_dither'
+    else:
+        assert res.not_seen == hidden
+        assert any('did not tell the play from the load' in w for w in res.fit.warnings)
+        assert [r.name for r in res.train] == ['slow_sweep', 'fast_sweep']

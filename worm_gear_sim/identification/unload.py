@@ -32,7 +32,9 @@ from ..params import Config
 from ..records import Record
 from .direct import LOAD, PLAY, best_on_family, compliance
 from .fit import FitOptions, identify
-from .report import FitResult
+from .parameters import fit_parameters
+from .problem import Problem
+from .report import FitResult, residual_rms
 
 __all__ = ['SPLIT_POINTS', 'split_refit']
 
@@ -44,7 +46,8 @@ def split_refit(base: Config, records: Sequence[Record], keys: Sequence[str],
                 fitted: FitResult, options: FitOptions,
                 outputs: Sequence[str] | None = None) -> FitResult:
     """Fit ``keys`` again on ``records`` (the sweeps and the dither) from the best point of
-    the line b / 2 + |T| C = const through ``fitted``'s play and load (module docstring)."""
+    the line b / 2 + |T| C = const through ``fitted``'s play and load (module docstring).
+    The result's base values and 'before' figures are those of ``base`` (the caller's)."""
     cfg = fitted.config
     b0, t0 = cfg.mesh.backlash, cfg.load.output_torque
     c = compliance(cfg)
@@ -58,4 +61,8 @@ def split_refit(base: Config, records: Sequence[Record], keys: Sequence[str],
     opt = dataclasses.replace(options, global_stage=False, priors={}, n_starts=1)
     res = identify(cfg.replace(best), records, keys, options=opt, outputs=outputs)
     res.frequency_info['split_scan'] = rows
+    res.base_config = base
+    res.base_values = [p.base for p in fit_parameters(base, keys)]
+    res.rms_before = residual_rms(Problem(base, fit_parameters(base, keys), records, outputs),
+                                  base)[0]
     return res
