@@ -7,7 +7,9 @@ The excitation (:func:`~.excitation.design_excitation`, within ``max_angle`` of 
 around the start, ``max_rate`` and ``max_accel``): steps out and back, a small step and a
 held-out S-curve for the elastic keys; slow and fast sweeps out and back at constant rates
 and a held-out sweep when the play, the load torque or the drag is fitted (those keys then
-get direct estimates before the local fit, :mod:`.direct`).  Each move is a record starting
+get direct estimates before the local fit, :mod:`.direct`); with play and load both fitted,
+the ``unload_dither`` move in reserve, fitted only when the sweeps hold one flank
+(:mod:`.unload`).  Each move is a record starting
 at rest and ending with ``RING_TIME`` of rest; the held-out move is never seen by the fit:
 the prediction error there is the acceptance test.  The result names every fitted key the
 excitation could not show (:mod:`.visibility`).
