@@ -21,6 +21,7 @@ from worm_gear_sim.identification.direct import (
     DRAG,
     LOAD,
     PLAY,
+    compliance,
     direct_estimates,
     steady_segments,
 )
@@ -48,7 +49,7 @@ def _train(plant: Config, moves, seed: int = 0):
 
 
 def test_the_sweeps_stay_within_the_limits_and_reverse_at_two_rates(sweeps):
-    assert [m.role for m in sweeps] == ['train', 'train', 'validate']
+    assert [m.role for m in sweeps] == ['train', 'train', 'validate', 'reserve']
     dt = 1e-5
     for m in sweeps:
         t = np.arange(0.0, m.t_end, dt)
@@ -143,9 +144,16 @@ def test_a_load_that_holds_one_flank_hides_the_play_and_says_which_move(sweeps):
     assert lines[PLAY].startswith('mesh.backlash: not seen') and 'unload' in lines[PLAY]
     assert 'deceleration' in lines[PLAY]
     # with drag, the line gives the worm rate above which the drag crosses the play
-    lines = key_visibility(_drive(3.0, 5.0, 10.0), recs, KEYS)
-    need = 5.0 / (10.0 * (1 / 56))
-    assert f'{need:.3g} rad/s' in lines[PLAY]
+    # the largest load one flank allows (play 0: 5 N m + b / 2 C), the drag to exceed it
+    drive = _drive(3.0, 5.0, 10.0)
+    lines = key_visibility(drive, recs, KEYS)
+    top = 5.0 + 0.5 * drive.mesh.backlash / compliance(drive)
+    assert top > 5.5
+    need = top / (10.0 * (1 / 56))
+    assert f'{need:.3g} rad/s' in lines[PLAY] and f'{top:.3g} N m' in lines[PLAY]
+    # the play alone fitted (the load known): the known load sets the rate
+    lines = key_visibility(drive, recs, [PLAY, DRAG])
+    assert f'{5.0 / (10.0 * (1 / 56)):.3g} rad/s' in lines[PLAY]
 
 
 def test_a_record_without_constant_rate_segments_names_the_keys():

@@ -7,7 +7,9 @@ The excitation (:func:`~.excitation.design_excitation`, within ``max_angle`` of 
 around the start, ``max_rate`` and ``max_accel``): steps out and back, a small step and a
 held-out S-curve for the elastic keys; slow and fast sweeps out and back at constant rates
 and a held-out sweep when the play, the load torque or the drag is fitted (those keys then
-get direct estimates before the local fit, :mod:`.direct`).  Each move is a record starting
+get direct estimates before the local fit, :mod:`.direct`); with play and load both fitted,
+the ``unload_dither`` move in reserve, fitted only when the sweeps hold one flank
+(:mod:`.unload`).  Each move is a record starting
 at rest and ending with ``RING_TIME`` of rest; the held-out move is never seen by the fit:
 the prediction error there is the acceptance test.  The result names every fitted key the
 excitation could not show (:mod:`.visibility`).
@@ -39,9 +41,11 @@ import numpy as np
 from ..params import Config
 from ..records import Record
 from .data import IdentificationError, record_from_model
+from .direct import LOAD, PLAY
 from .excitation import Limits, Move, design_excitation, uses_sweeps
 from .fit import FitOptions, identify
 from .report import FitResult, prediction_errors
+from .unload import split_refit
 
 __all__ = ['plant_runner', 'calibrate', 'CalibrationResult', 'excitation_series', 'ACCEPT_REL']
 
@@ -162,6 +166,22 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
             res, after, reasons = free, after_free, reasons_free
             res.warnings.append('refused with the teeth prior; refitted with every key free '
                                 '(the held-out moves chose between the two fits)')
+    reserve = [r for r, m in zip(records, moves) if m.role == 'reserve']
+    if reserve and PLAY in res.not_seen and LOAD in res.keys:
+        # one flank in every sweep: the dither (.unload) tells the play from the load; its
+        # fit is kept when it lifts the gear and the held-out moves accept it
+        split = split_refit(base, train + reserve, keys, res, opt, outputs)
+        after_split = prediction_errors(split.config, held)
+        reasons_split = _reasons(split, after_split, accept_rel)
+        if not reasons_split and PLAY not in split.not_seen:
+            res, after, reasons = split, after_split, reasons_split
+            train = train + reserve
+            res.warnings.append('the sweeps held one flank: play and load told apart by the '
+                                'unload_dither move (the gear lifts off its flank)')
+        else:
+            res.warnings.append('the unload_dither move did not tell the play from the load ('
+                                + ('; '.join(reasons_split) or 'the gear does not lift off '
+                                   'its flank in the fitted model') + ')')
     bounds = []
     if 'theta4' in res.output_verdicts and res.output_verdicts['theta4'] == 'matched':
         from .uncertainty import prediction_bound
@@ -197,6 +217,8 @@ def _check_followed(rec: Record, move: Move) -> None:
         if not float(np.ptp(y)) > 0:
             raise IdentificationError(f'{move.name}: {o} did not move (the drive did not '
                                       'follow the excitation)')
+        if move.role == 'reserve':     # the dither: the antenna swings a quarter period
+            continue                   # behind at its mode, uncorrelated by design
         c = np.corrcoef(rec.theta1, y)[0, 1] if np.ptp(rec.theta1) > 0 else math.nan
         if not c > 0.5:
             raise IdentificationError(f'{move.name}: {o} is unrelated to the command '

@@ -17,6 +17,9 @@ Two designs, chosen by the fitted keys (:func:`design_excitation`):
   acceleration limit (the drag's wind-up is 4 x larger; the stops ring the antenna mode:
   stiffness; a deceleration can cross the play against a load).  Held out:
   ``validate_sweep``, out and back at half the rate limit on the other side of the start.
+  In reserve, when both the play and the load torque are fitted and the time allows:
+  ``unload_dither``, the worm rate swinging at the base's antenna mode
+  (:func:`dither_profile`, :mod:`.unload`).
 
 The rate-dependent part of the lag theta4 - u theta1 over a constant-rate segment is the
 drag's wind-up; its part common to both ways is the load's; the jump between the ways is
@@ -39,7 +42,7 @@ from .data import IdentificationError
 
 __all__ = ['Limits', 'Move', 'RateSchedule', 'design_excitation', 'SWEEP_KEYS', 'RING_TIME',
            'LEAD_TIME', 'DWELL_TIME', 'CRUISE_MIN', 'SLOW_SHARE', 'PLAY_DESIGN',
-           'uses_sweeps']
+           'uses_sweeps', 'DITHER_CYCLES', 'dither_profile']
 
 #: Rest after each move [s]: the antenna mode (~95 Hz) rings ~14 periods.
 RING_TIME = 0.15
@@ -55,6 +58,9 @@ SLOW_SHARE = 0.25
 #: base has less; the slow sweep's constant-rate travel must be twice the play seen at the
 #: worm so that the flank has changed before the second half of the segment.
 PLAY_DESIGN = 5.0 * math.pi / 180.0 / 60.0
+#: Cycles of the unloading dither at the antenna mode (:func:`dither_profile`; the shaft
+#: torque swing grows by about pi rigid inertia torques a cycle, :mod:`.unload`).
+DITHER_CYCLES = 8
 #: Keys for which the sweeps are designed (the drag alone is seen by the steps' stops too:
 #: fitted with the elastic keys, it keeps the steps).
 SWEEP_KEYS = ('mesh.backlash', 'load.output_torque')
@@ -87,7 +93,7 @@ class Move:
     """One move of the excitation: a record of its own, starting at rest."""
 
     name: str
-    role: str                 # 'train' | 'validate'
+    role: str                 # 'train' | 'validate' | 'reserve' (.unload)
     profile: Profile
     t_end: float
 
@@ -255,10 +261,32 @@ def _sweeps(limits: Limits, keys: Sequence[str], base: Config | None) -> list[Mo
             f'calibration limit max_angle = {a:g} rad leaves no room for a slow reversal: '
             f'crossing {play * 180 * 60 / math.pi:.3g} arcmin of play needs >= '
             f'{need + w_slow * ramp_slow:.3g} rad of worm travel each way')
-    moves = []
+    moves: list[Move] = []
     for name, role, travel, rate in (('slow_sweep', 'train', a, w_slow),
                                      ('fast_sweep', 'train', a, w_fast),
                                      ('validate_sweep', 'validate', -0.6 * a, 0.5 * w_fast)):
         prof = sweep_profile(limits.start, travel, rate, acc, name)
         moves.append(Move(name, role, prof, prof.duration + RING_TIME))
+    if {'mesh.backlash', 'load.output_torque'} <= {str(k).strip() for k in keys}:
+        prof = dither_profile(cfg, limits)
+        if sum(m.t_end for m in moves) + prof.duration + RING_TIME <= limits.duration:
+            moves.append(Move('unload_dither', 'reserve', prof, prof.duration + RING_TIME))
     return moves
+
+
+def dither_profile(cfg: Config, limits: Limits) -> RateSchedule:
+    """The worm rate swinging DITHER_CYCLES times at the antenna mode of ``cfg`` (its lowest
+    linearised mode) with the acceleration limit as peak (the rate limit if lower), raised-
+    cosine half periods, from rest to rest; LEAD_TIME of rest before."""
+    from ..dynamics.modal import modes
+    f = float(np.asarray(modes(cfg).undamped_hz, float)[0])
+    period = 1.0 / f
+    v = min(limits.max_rate, limits.max_accel / (2.0 * math.pi * f))
+    pieces = [(LEAD_TIME, 0.0, 0.0), (0.25 * period, 0.0, v)]
+    for k in range(2 * DITHER_CYCLES - 1):
+        s = 1.0 if k % 2 == 0 else -1.0
+        pieces.append((0.5 * period, s * v, -s * v))
+    pieces.append((0.25 * period, pieces[-1][2], 0.0))
+    return RateSchedule(pieces, limits.start,
+                        f'unload_dither: worm rate +-{v:.3g} rad/s at {f:.4g} Hz (the antenna '
+                        f'mode), {DITHER_CYCLES} cycles, from {limits.start:.6g} rad')

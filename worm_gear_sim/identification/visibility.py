@@ -7,7 +7,9 @@ the key and the move to record.
   records, has the relative mesh displacement q = l_w theta2 - r_g theta3 beyond both edges
   of the play (|q| >= r_g b / 2 on either side).  A load torque larger than the drag torque
   at every rate, and than the antenna's inertia torque at every deceleration, holds one
-  flank: the play is then not crossed (and only b / 2 + T C of play and load is seen).
+  flank: the play is then not crossed (and only b / 2 + T C of play and load is seen),
+  unless a record lifts the gear off its flank (the unloading dither, :mod:`.unload`): the
+  torque at which it lifts gives T, and b follows from b / 2 + T C.
 * ``load.output_torque`` and ``load.output_viscous_coefficient`` need constant-rate
   segments (:func:`.direct.steady_segments`): the drag at two rates or both ways, the load
   both ways (or at a known play).
@@ -29,9 +31,12 @@ from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
 from ..records import Record
 from .data import predict
-from .direct import DRAG, LOAD, PLAY, Segment, steady_segments
+from .direct import DRAG, LOAD, PLAY, Segment, compliance, steady_segments
 
-__all__ = ['flank_changes', 'key_visibility']
+__all__ = ['flank_changes', 'key_visibility', 'mesh_lifts', 'LIFT_SHARE']
+
+#: The gear counts as lifted off its flank when it leaves it by this share of the play.
+LIFT_SHARE = 0.05
 
 
 def flank_changes(cfg: Any, records: Sequence[Record]) -> bool:
@@ -53,6 +58,27 @@ def flank_changes(cfg: Any, records: Sequence[Record]) -> bool:
     return False
 
 
+def mesh_lifts(cfg: Any, records: Sequence[Record]) -> bool:
+    """Whether the model ``cfg`` (play > 0) lifts the gear off the flank it rests on by
+    LIFT_SHARE of the play in some record (without it reaching the other flank)."""
+    b = cfg.mesh.backlash
+    if not b > 0:
+        return False
+    m = DriveModel(cfg)
+    lw, rg = m.derived.l_w, cfg.geometry.gear_pitch_radius
+    edge = 0.5 * rg * b
+    for r in records:
+        try:
+            p = predict(m, r)
+            q = lw * p['theta2'] - rg * p['theta3']
+        except (SimulationError, ValueError):
+            continue
+        side = 1.0 if float(np.median(q)) >= 0 else -1.0
+        if float(np.max(edge - side * q)) >= LIFT_SHARE * 2.0 * edge:
+            return True
+    return False
+
+
 def key_visibility(cfg: Any, records: Sequence[Record], keys: Sequence[str],
                    segments: Sequence[Segment] | None = None) -> dict[str, str]:
     """{key: one line naming the key and the move to record} for each fitted key of play,
@@ -66,18 +92,24 @@ def key_visibility(cfg: Any, records: Sequence[Record], keys: Sequence[str],
     T, c = cfg.load.output_torque, cfg.load.output_viscous_coefficient
     w_max = max((abs(r) for r in rates), default=0.0)
     play_hidden = False
-    if PLAY in keys and not flank_changes(cfg, records):
+    if PLAY in keys and not flank_changes(cfg, records) and not (
+            LOAD in keys and abs(T) > 0 and mesh_lifts(cfg, records)):
         play_hidden = True
+        # with the load fitted too, one flank fixes only b / 2 + T C: the load may be as
+        # large as that sum over C (play 0), and the move named must cross the play then
+        top = abs(T) + (0.5 * cfg.mesh.backlash / compliance(cfg) if LOAD in keys else 0.0)
+        which = ('the largest load torque these records allow' if LOAD in keys
+                 else 'the load torque')
         if c > 0 and abs(T) > 0:
-            need = abs(T) / (c * u)
+            need = top / (c * u)
             how = (f'record a reversal at a constant worm rate above {need:.3g} rad/s (the '
-                   f'drag torque then exceeds the load torque of {abs(T):.3g} N m; the '
+                   f'drag torque then exceeds {which}, {top:.3g} N m; the '
                    f'records reach {w_max:.3g} rad/s), or unload the axis')
         elif abs(T) > 0:
             J4 = m.derived.J_4 + m.derived.J_g
             how = (f'record a stop with a worm deceleration above '
-                   f'{abs(T) / (J4 * u):.3g} rad/s^2 (the inertia torque then exceeds the '
-                   f'load torque of {abs(T):.3g} N m), or unload the axis')
+                   f'{top / (J4 * u):.3g} rad/s^2 (the inertia torque then exceeds '
+                   f'{which}, {top:.3g} N m), or unload the axis')
         else:
             how = ('record a slow reversal (constant worm rate both ways, travel beyond the '
                    'play at the worm)')
