@@ -4,6 +4,7 @@
 
     python benchmarks/bench_adaptation.py [--drives 4] [--seed 1] [--duration 60]
         [--scenario sector] [--stiffness-spread 0.0] [--cost-samples 3000] [--no-drives]
+        [--latency-seconds 8]
 
 Each drive: the default set with a random play (0.5-5 arcmin), load torque (0.5-5 N m),
 antenna drag (0-60 N m s/rad), worm error orders 1-3 and gear order 1 (each coefficient
@@ -25,22 +26,36 @@ model the adaptation arrives at (a model with play and load costs more in the si
 that is the model's cost, not the adaptation's) and on from that model; the ratio of the
 medians on / off on the same model (target <= 1.2x) and the absolute figures, with the
 machine's load (shared cores: under load).
+
+Latency (``--latency-seconds``): the same per-sample work paced at 1 kHz in real time (each
+sample's work starts at its deadline, after a sleep that releases the GIL as the node's
+executor does while it waits), from the start model so that steps are decided and applied
+(an adapted step every ``adaptation.step_interval`` after the first window); once with each
+step prepared inside the sample callback (``submit`` = run at once: how the node did it
+before) and once in a worker thread with the swap at the step's fixed stamp (the node now).
+Printed: per sample, the time from its deadline (or the previous sample's end, if later) to
+the end of its work (the wait for the GIL and preemption by other processes included) and
+the work itself; the worst and the 99.9th percentile over all samples, the worst over the
+samples where a step was decided or swapped in, the samples over 1 ms.  A third run
+prepares in a worker thread at Python's default switch interval (5 ms), for comparison.
 """
 
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import math
 import os
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from worm_gear_sim.adaptation.live import LiveAdaptation  # noqa: E402
+from worm_gear_sim.adaptation.live import LiveAdaptation, in_worker  # noqa: E402
 from worm_gear_sim.adaptation.twin import (  # noqa: E402
     BASE_NS,
     prepare_start,
@@ -127,12 +142,14 @@ def run_drives(args: argparse.Namespace, base: Config) -> None:
               f' target >= {target:g}: met on {int(np.sum(vals >= target))}/{vals.size}')
 
 
-def cost(args: argparse.Namespace, base: Config) -> None:
-    """Per-sample cost of the node's work with adaptation off and on (module docstring)."""
+def encoder_record(args: argparse.Namespace, base: Config, samples: int
+                   ) -> tuple[Config, np.ndarray, np.ndarray, dict[int, float]]:
+    """(start set, t, theta1_ref, encoder theta4 by stamp) of the first drive driven by the
+    nominal feed-forward over ``samples`` samples."""
     rng = np.random.default_rng(args.seed)
     _, plant = drive(base, rng, 0.0)
     cfg = prepare_start(base)
-    t, x = scenario(cfg, args.scenario, args.cost_samples / cfg.node.publish_rate_hz)
+    t, x = scenario(cfg, args.scenario, samples / cfg.node.publish_rate_hz)
     # the encoder record: the plant driven by the nominal feed-forward
     pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=BASE_NS)
     sim = Simulator(plant, theta1=float(x[0]))
@@ -143,6 +160,12 @@ def cost(args: argparse.Namespace, base: Config) -> None:
             if tc > sim.t:
                 sim.advance_to(tc, c.compensated)
             meas[c.stamp_ns] = sim.joint_state()[0][3]
+    return cfg, t, x, meas
+
+
+def cost(args: argparse.Namespace, base: Config) -> None:
+    """Per-sample cost of the node's work with adaptation off and on (module docstring)."""
+    cfg, t, x, meas = encoder_record(args, base, args.cost_samples)
     names = cfg.node.joint_names[1:]
 
     def one(adapt: bool, model: Config, keep: list | None = None) -> float:
@@ -183,6 +206,73 @@ def cost(args: argparse.Namespace, base: Config) -> None:
           f'{off / med["off, start model"]:.3f}x the start model in the simulator')
 
 
+def latency(args: argparse.Namespace, base: Config) -> None:
+    """Worst per-sample latency paced at 1 kHz, steps prepared in the callback or in a
+    worker thread (module docstring)."""
+    cfg, t, x, meas = encoder_record(args, base, int(args.latency_seconds * 1000))
+    names = cfg.node.joint_names[1:]
+    dt = 1.0 / cfg.node.publish_rate_hz
+
+    def one(worker: str, paced: bool) -> dict[str, Any]:
+        pool = concurrent.futures.ThreadPoolExecutor(1) if worker else None
+        p = RealtimePredictor(cfg, apply_compensation=True, base_ns=BASE_NS)
+        submit = None if pool is None else pool.submit if worker == 'plain' else \
+            in_worker(pool)
+        live = LiveAdaptation(p, names, submit=submit)
+        lat, work = np.zeros(t.size), np.zeros(t.size)
+        marked = np.zeros(t.size, bool)
+        start = time.perf_counter() + 0.02
+        end = start
+        for k in range(t.size):
+            deadline = start + k * dt
+            if paced:
+                now = time.perf_counter()
+                if deadline > now:
+                    time.sleep(deadline - now)
+            t0 = time.perf_counter()
+            ns = BASE_NS + int(round(t[k] * 1e9))
+            pending, switches = live.pending, live.counters['switches']
+            out = p.push(ns, float(x[k]))
+            for q in out.predictions:
+                live.predicted(q.stamp_ns, q.theta)
+            if out.predictions:
+                live.step(out.predictions[-1].stamp_ns)
+            for c in out.corrections:
+                live.measured(c.stamp_ns, names[2:], [meas[c.stamp_ns]])
+            t1 = time.perf_counter()
+            lat[k], work[k] = t1 - max(deadline, end) if paced else t1 - t0, t1 - t0
+            end = t1
+            marked[k] = live.pending is not pending or live.counters['switches'] != switches
+        if pool is not None:
+            pool.shutdown()
+        ok = t >= 0.1                               # the first samples start the pipeline
+        worst = np.argsort(np.where(ok, lat, 0.0))[-5:][::-1]
+        return {'top': ', '.join(f'{lat[i] * 1e3:.1f}{"*" if marked[i] else ""}'
+                                 for i in worst),
+                'over_1ms': int(np.sum(lat[ok] > 1e-3)), 'steps': live.counters['switches'],
+                'late': live.counters['late_steps'],
+                'max': lat[ok].max(), 'p999': float(np.quantile(lat[ok], 0.999)),
+                'max_step': lat[ok & marked].max() if np.any(ok & marked) else math.nan,
+                'max_other': lat[ok & ~marked].max(), 'work_max': work[ok].max(),
+                'work_step': work[ok & marked].max() if np.any(ok & marked) else math.nan,
+                'median': float(np.median(work[ok]))}
+
+    one('lowered', False)                           # compile, warm up
+    print(f'latency per 1 kHz sample, paced in real time, {t.size} samples '
+          f'(load {os.getloadavg()[0]:.2f}):', flush=True)
+    for label, worker in (('prepared in the sample callback (before)', ''),
+                          ('in a worker thread, default switch interval', 'plain'),
+                          ('in a worker thread, swapped at its stamp (now)', 'lowered')):
+        r = one(worker, True)
+        print(f"  {label}: {r['steps']} steps ({r['late']} late); deadline to end: "
+              f"worst {r['max'] * 1e3:.2f} ms, 99.9 % {r['p999'] * 1e3:.2f} ms, worst on the "
+              f"step samples {r['max_step'] * 1e3:.2f} ms, on the others "
+              f"{r['max_other'] * 1e3:.2f} ms; work alone: median {r['median'] * 1e6:.0f} us,"
+              f" worst {r['work_max'] * 1e3:.2f} ms, worst on the step samples "
+              f"{r['work_step'] * 1e3:.2f} ms; samples over 1 ms {r['over_1ms']}, the worst 5 "
+              f"[ms, * a step's sample] {r['top']}", flush=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--drives', type=int, default=4)
@@ -192,11 +282,14 @@ def main() -> int:
     ap.add_argument('--stiffness-spread', type=float, default=0.0)
     ap.add_argument('--cost-samples', type=int, default=3000)
     ap.add_argument('--no-drives', action='store_true')
+    ap.add_argument('--latency-seconds', type=float, default=8.0)
     args = ap.parse_args()
     base = Config()
     print(f'load average at start: {os.getloadavg()}', flush=True)
     if args.cost_samples > 0:
         cost(args, base)
+    if args.latency_seconds > 0:
+        latency(args, base)
     if not args.no_drives:
         run_drives(args, base)
     print(f'load average at end: {os.getloadavg()}')

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from worm_gear_sim.adaptation.estimator import Adapter, Layout, output_compliance
-from worm_gear_sim.adaptation.live import REJECT_REASONS, LiveAdaptation
+from worm_gear_sim.adaptation.live import APPLY_LEAD, REJECT_REASONS, LiveAdaptation
 from worm_gear_sim.adaptation.twin import BASE_NS, run_twin, scenario
 from worm_gear_sim.dynamics.model import DriveModel
 from worm_gear_sim.params import Config
@@ -199,13 +199,77 @@ def test_an_unusable_step_keeps_the_model_and_says_why_once(base):
     live.predicted(BASE_NS, (0.0, 0.0, 0.0))
     ad = live.adapter
     msgs = []
+    lead = int(APPLY_LEAD * 1e9)
     for k in range(3):
         ad.target = np.array([-0.01])        # a negative play: the validation refuses it
         ad._next_poll = -math.inf
-        msgs += live.step(BASE_NS + k * 1_000_000)
+        ns = BASE_NS + k * 4 * lead
+        msgs += live.step(ns)                # decided, prepared (refused on the way) ...
+        assert live.counters['refusals'] == k
+        msgs += live.step(ns + lead)         # ... and not applied at its stamp
     assert pred.config is cfg or pred.config == cfg
     assert live.counters['switches'] == 0 and live.counters['refusals'] == 3
     assert len(msgs) == 1 and 'mesh.backlash' in msgs[0] and 'keeping' in msgs[0]
+
+
+def test_a_step_is_applied_at_its_fixed_stamp_and_a_late_one_at_the_next(base):
+    """A decided step is swapped in at the first prediction stamped >= its decision +
+    APPLY_LEAD, never earlier; prepared late (the worker still busy), it moves to the next
+    multiple of the lead and is counted; its values are the decided ones either way."""
+    from concurrent.futures import Future
+    cfg = base.replace({'adaptation.enabled': True, 'adaptation.keys': ['load.output_torque'],
+                        'adaptation.max_step': 1.0, 'node.compensation_applied': True})
+    lead = int(APPLY_LEAD * 1e9)
+    for late in (False, True):
+        jobs: list = []
+
+        def submit(job, late=late, jobs=jobs):
+            fut: Future = Future()
+            if not late:
+                fut.set_result(job())
+            jobs.append((job, fut))
+            return fut
+
+        pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=BASE_NS)
+        live = LiveAdaptation(pred, cfg.node.joint_names[1:], submit=submit)
+        live.predicted(BASE_NS, (0.0, 0.0, 0.0))
+        live.adapter.target = np.array([2.5])
+        live.step(BASE_NS)
+        assert len(jobs) == 1 and live.pending is not None
+        live.step(BASE_NS + lead - 1)
+        assert pred.config is cfg
+        live.step(BASE_NS + lead)
+        if late:
+            assert pred.config is cfg and live.counters['late_steps'] == 1
+            live.step(BASE_NS + 2 * lead - 1)          # prepared now, but not due
+            job, fut = jobs[0]
+            fut.set_result(job())
+            live.step(BASE_NS + 2 * lead - 1)
+            assert pred.config is cfg
+            live.step(BASE_NS + 2 * lead)
+        assert pred.config.load.output_torque == 2.5 and live.pending is None
+        assert live.counters['switches'] == 1 and len(jobs) == 1
+        assert live.counters['late_steps'] == int(late)
+        assert live.adapter.applied_x[0] == 2.5
+
+
+def test_preparing_a_step_leaves_the_running_pipeline_untouched(base):
+    """The preparation (a worker thread in the node, at once in the twin) only reads the
+    pipeline: the running simulator's state and step control are bit for bit the same
+    after it, so the result never depends on when the worker ran."""
+    cfg = base.replace({'mesh.backlash': 3e-4, 'load.output_torque': 1.0})
+    pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=BASE_NS)
+    t, x = scenario(cfg, 'sector', 0.2)
+    for k in range(t.size):
+        pred.push(BASE_NS + int(round(t[k] * 1e9)), float(x[k]))
+    sim = pred.sim
+    before = [a.copy() for a in (sim._u, sim._v, sim._a, sim._ctl)]
+    trial = sim.trial_copy()
+    pred.prepare(cfg.replace({'load.output_torque': 2.0}), trial)
+    pred.prepare(cfg.replace({'load.output_torque': 3.0}))
+    for a, b in zip(before, (sim._u, sim._v, sim._a, sim._ctl)):
+        assert np.array_equal(a, b)
+    assert pred.config is cfg
 
 
 def test_scenarios(base):

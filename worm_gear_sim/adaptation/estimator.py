@@ -543,8 +543,9 @@ class Adapter:
             return
         play = self.theta[lay.i_play] if lay.i_play >= 0 else self._play0
         model_play = self.applied_x[lay.i_play] if lay.i_play >= 0 else self._play0
-        got = self._timing.ready(t, play, MIN_PLAY_NOISES * self.settings.measurement_noise,
-                                 model_play)
+        noise = self.settings.measurement_noise
+        got = self._timing.ready(t, play, MIN_PLAY_NOISES * noise, model_play, noise,
+                                 self._inertia / drag if drag > 0.0 else 0.0)
         if got is None:
             return
         self._torque_zero(*got, drag)

@@ -17,6 +17,23 @@ step dr = r_post - r_pre = s (b - b_m):
 
     I = integral (r - r_pre) dt,   t_p - t_m = -(I - dr (t_m + W - t_m)) / (s b).
 
+That holds when the model crosses first (the worm leaves the drive and the gear falls
+behind by the play until the drive's torque changes sign).  When the drive crosses first
+(the model's load or drag too large on the side where its crossing is late) the gear
+leaves its flank at t_p and floats: with drag it runs at its terminal speed -T/c while the
+trajectory accelerates on, so it moves off the prediction as a parabola,
+|r - r_pre| = |alpha4| (t - t_p - J/c)^2 / 2 (J/c the gear's own time constant), until the
+worm crosses at t_m.  The area of that parabola is |alpha4| dt^3 / 6, not b dt: the area
+formula put t_p near t_m whatever the load (measured: the crossings where the model was
+late confirmed the model).  So when the residual leaves its level before t_m towards the
+coming step (s), t_p is the zero of the line fitted to sqrt|r - r_pre| over that rise
+(:func:`float_onset`), less J/c.  When the model crosses first by dt, the worm leaves the
+gear early and the gear, free, floats at -T/c while the trajectory's rate passes that value
+at t_p: relative to the prediction it draws an arch, |alpha4| (dt^2 - (t - t_p)^2) / 2,
+from t_m to t_p + dt, back onto the new flank; the arch's top (opposite to the step, -s) is
+t_p (:func:`arch_top`).  Neither seen (a shift too small for its rise to stand out of the
+noise): the area formula.
+
 At t_p the real drive's torque is zero: T + c omega4(t_p) = -J alpha4(t_p), a measurement
 linear in (T, c) that :class:`~.estimator.Adapter` adds to its Kalman filter.  An event
 with another flank change inside its window, or a play too small to see, gives nothing.
@@ -34,7 +51,7 @@ import math
 import numpy as np
 
 __all__ = ['FlankTiming', 'WINDOW', 'LEVEL_WINDOW', 'STEP_SIDE', 'STEP_GAP', 'STEP_STRIDE',
-           'STEP_NOISES']
+           'STEP_NOISES', 'ONSET_NOISES', 'ONSET_SAMPLES', 'float_onset', 'arch_top']
 
 #: Half-width of the window over which the steps are integrated [s].
 WINDOW = 0.3
@@ -48,6 +65,63 @@ STEP_SIDE = 0.04
 STEP_GAP = 0.06
 STEP_STRIDE = 0.01
 STEP_NOISES = 15.0
+
+
+#: Float onset: the rise before the model's crossing counts from this many measurement
+#: noises, over at least this many samples.
+ONSET_NOISES = 5.0
+ONSET_SAMPLES = 5
+
+
+def float_onset(ts: np.ndarray, dev: np.ndarray, threshold: float) -> float | None:
+    """Where a parabolic rise dev = k (t - t0)^2 (dev >= 0 towards the step) starts: the
+    zero of the least-squares line through sqrt(dev) over the run of samples above
+    ``threshold`` that ends at the rise's peak (the last sample before the worm moves), or
+    None (too few samples, no rise, a line that does not fit a parabola's root)."""
+    if ts.size < ONSET_SAMPLES:
+        return None
+    k = int(np.argmax(dev))
+    if dev[k] < 2.0 * threshold:
+        return None
+    j = k
+    while j > 0 and dev[j - 1] > threshold:
+        j -= 1
+    if k - j + 1 < ONSET_SAMPLES:
+        return None
+    x, y = ts[j:k + 1], np.sqrt(dev[j:k + 1])
+    slope, icpt = _line(x, y)
+    if not slope > 0.0:
+        return None
+    fit = slope * x + icpt
+    if float(np.sum((y - fit) ** 2)) > 0.05 * float(np.sum((y - y.mean()) ** 2)):
+        return None                       # not a parabola's root: no onset
+    return -icpt / slope
+
+
+def arch_top(ts: np.ndarray, dev: np.ndarray, threshold: float) -> float | None:
+    """The top of an arch dev (>= 0 inside it): the vertex of the parabola fitted to the
+    samples above half its peak, provided the peak exceeds twice ``threshold`` and the arch
+    falls below half its peak on both sides inside the samples; else None."""
+    if ts.size < 2 * ONSET_SAMPLES:
+        return None
+    k = int(np.argmax(dev))
+    top = float(dev[k])
+    if top < 2.0 * threshold:
+        return None
+    i = k
+    while i > 0 and dev[i - 1] > 0.5 * top:
+        i -= 1
+    j = k
+    while j < dev.size - 1 and dev[j + 1] > 0.5 * top:
+        j += 1
+    if i == 0 or j == dev.size - 1 or j - i + 1 < ONSET_SAMPLES:
+        return None
+    x = ts[i:j + 1] - ts[k]
+    c2, c1, _ = np.polyfit(x, dev[i:j + 1], 2)
+    if not c2 < 0.0:
+        return None
+    vertex = -c1 / (2.0 * c2)
+    return float(ts[k] + vertex) if abs(vertex) <= x[-1] - x[0] else None
 
 
 def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -70,6 +144,8 @@ class FlankTiming:
         self._event: tuple[float, float] | None = None      # (t_m, s)
         self.events = 0
         self.measured = 0
+        self.onsets = 0
+        self.arches = 0
         self._next_look = -math.inf
         self._last_step = -math.inf
 
@@ -154,13 +230,16 @@ class FlankTiming:
         self.events += 1
         self._event = (t, -0.5 * (new - old))
 
-    def ready(self, t: float, play: float, min_play: float, model_play: float
+    def ready(self, t: float, play: float, min_play: float, model_play: float,
+              noise: float = 0.0, float_lag: float = 0.0
               ) -> tuple[float, float, float] | None:
         """The event's measurement once ``t`` is past its window; ``play``: the drive's
         play (the estimate) [rad], at least ``min_play`` to be seen; ``model_play``: the
         model's.  The residual's net step must be the drive's crossing less the model's,
         s (play - model_play), within a third of the play (else the drive did not cross
-        in the window: no measurement)."""
+        in the window: no measurement).  ``noise``: the measurement noise [rad];
+        ``float_lag``: the gear's time constant J/c [s] (the float's parabola starts that
+        much after the drive's crossing, module docstring)."""
         ev = self._event
         if ev is None or t < ev[0] + WINDOW + LEVEL_WINDOW:
             return None
@@ -180,6 +259,22 @@ class FlankTiming:
         r_pre, r_post = float(np.mean(r[pre])), float(np.mean(r[post]))
         if abs(r_post - r_pre - s * (play - model_play)) > play / 3.0:
             return None
+        before = (ts >= t_m - WINDOW) & (ts < t_m)
+        onset = float_onset(ts[before], s * (r[before] - r_pre),
+                            ONSET_NOISES * noise)
+        if onset is not None:                 # the drive crossed first: the gear floated
+            t_p = onset - float_lag
+            if not t_m - WINDOW < t_p < t_m:
+                return None
+            self.measured += 1
+            self.onsets += 1
+            return (t_p, float(np.interp(t_p, ts, a[:, 2])), float(np.interp(t_p, ts, a[:, 3])))
+        after = (ts >= t_m - 0.5 * LEVEL_WINDOW) & (ts < t_m + WINDOW)
+        top = arch_top(ts[after], -s * (r[after] - r_pre), ONSET_NOISES * noise)
+        if top is not None and t_m - 0.5 * LEVEL_WINDOW < top < t_m + WINDOW:
+            self.measured += 1                # the model crossed first: the gear's arch
+            self.arches += 1
+            return (top, float(np.interp(top, ts, a[:, 2])), float(np.interp(top, ts, a[:, 3])))
         tm, rm = ts[mid], r[mid] - r_pre
         integral = float(np.sum(0.5 * (rm[1:] + rm[:-1]) * np.diff(tm)))
         integral += float(rm[-1]) * (t_m + WINDOW - float(tm[-1]))

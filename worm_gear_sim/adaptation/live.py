@@ -12,10 +12,25 @@
   reason, the estimate untouched), then the residual measured - predicted theta4 at the
   stamp goes to the :class:`~.estimator.Adapter`;
 
-and now and then the adapter's decision is applied: the step's overrides make a Config
-(validated: :meth:`~worm_gear_sim.params.Config.replace`), the predictor designs for it off
-the sample path (:meth:`~worm_gear_sim.realtime.predictor.RealtimePredictor.prepare`: the
-simulator's usable check) and swaps it in keeping time, state and the reference history.
+and now and then the adapter's decision is applied, off the sample path and at a stamp
+fixed when it is taken:
+
+* at the prediction stamped t the adapter decides a step; its preparation (the overrides
+  made a Config, validated by :meth:`~worm_gear_sim.params.Config.replace`; the model and
+  the compensator designed by
+  :meth:`~worm_gear_sim.realtime.predictor.RealtimePredictor.prepare`, with the simulator's
+  usable check: 5-15 ms under load) is handed to ``submit`` (the node: a worker thread;
+  the twin: done at once) and nothing else is decided while it is pending;
+* it is swapped in (:meth:`~worm_gear_sim.realtime.predictor.RealtimePredictor.reconfigure`,
+  keeping time, state and the reference history: ~0.1 ms) at the first prediction stamped
+  at or after t + :data:`APPLY_LEAD`.  The stamp depends on the samples only, so the node
+  and the twin apply the same step at the same sample;
+* if the preparation is not done by then (a starved worker thread), the swap moves to the
+  next fixed stamp t + 2 APPLY_LEAD, t + 3 APPLY_LEAD, ... and each such miss is counted
+  (``late_steps``).  The sample path never waits for it.  The twin's preparation is always
+  done, so the node equals the twin exactly while ``late_steps`` is 0; a late step only
+  moves the step's instant (by whole leads), never its values.
+
 A set refused on the way (a ConfigError, an unusable set, a negative play) is never
 applied: the model in use stays, the reason is kept in :attr:`LiveAdaptation.last_refusal`
 and returned once per new reason (the node logs it, throttled).
@@ -24,18 +39,34 @@ and returned once per new reason (the node logs it, throttled).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor, Future
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..dynamics.model import DriveModel
 from ..params import Config, config_from_mapping
-from ..realtime.predictor import RealtimePredictor
+from ..realtime.predictor import Prepared, RealtimePredictor
 from ..schema import Parameters
 from .estimator import Adapter
 
-__all__ = ['LiveAdaptation', 'REJECT_REASONS']
+__all__ = ['LiveAdaptation', 'REJECT_REASONS', 'APPLY_LEAD', 'Submit', 'run_now',
+           'in_worker', 'WORKER_SWITCH_INTERVAL']
+
+#: A step decided at the prediction stamped t is applied at the first prediction stamped
+#: >= t + APPLY_LEAD [s] (module docstring): time for the worker to prepare it (5-15 ms
+#: measured under load) with margin; small against the hold-offs of the estimate (0.15 s).
+APPLY_LEAD = 0.05
+#: Runs a preparation: returns a future-like object (``done()``, ``result()``).
+Submit = Callable[[Callable[[], Prepared]], Any]
+#: The interpreter's switch interval while a preparation runs in a worker thread [s]: the
+#: sample thread waits at most about this long for the GIL (Python's default, 5 ms, made a
+#: sample wait up to 5-7 ms while the worker prepared: measured, bench_adaptation.py).
+WORKER_SWITCH_INTERVAL = 0.0005
 
 #: Reasons an encoder sample is rejected (counted under ``rejected_<reason>``).
 REJECT_REASONS = ('non_finite', 'out_of_order', 'other_joint', 'outside_prediction',
@@ -46,10 +77,12 @@ class LiveAdaptation:
     """Adapt ``predictor``'s model from encoder samples (module docstring).
 
     ``joint_names``: the names of theta2, theta3, theta4 in the encoder messages
-    (``node.joint_names[1:]``); ``history``: predictions kept for interpolation."""
+    (``node.joint_names[1:]``); ``history``: predictions kept for interpolation;
+    ``submit``: runs a step's preparation (default :func:`run_now`, at once: the twin; the
+    node passes a worker thread's ``submit``)."""
 
     def __init__(self, predictor: RealtimePredictor, joint_names: Sequence[str],
-                 history: int = 512) -> None:
+                 history: int = 512, submit: Submit | None = None) -> None:
         if len(joint_names) != 3:
             raise ValueError('joint_names: the names of theta2, theta3 and theta4')
         self.predictor = predictor
@@ -57,12 +90,15 @@ class LiveAdaptation:
         self.history = _Predictions(history)
         self.adapter = Adapter(predictor.model, predictor.config.adaptation)
         self.counters: dict[str, int] = {'samples': 0, 'used': 0, 'rejected': 0,
-                                         'switches': 0, 'refusals': 0}
+                                         'switches': 0, 'refusals': 0, 'late_steps': 0}
         self.counters.update({f'rejected_{r}': 0 for r in REJECT_REASONS})
         self.last_refusal = ''
         self.last_note = ''
         self._base_ns: int | None = None
         self._last_ns: int | None = None
+        self._submit = submit or run_now
+        self._lead_ns = int(round(APPLY_LEAD * 1e9))
+        self.pending: _Pending | None = None
 
     # ---- inputs ------------------------------------------------------------------------
     def predicted(self, stamp_ns: int, theta: Sequence[float]) -> None:
@@ -112,10 +148,14 @@ class LiveAdaptation:
 
     # ---- switching ---------------------------------------------------------------------
     def step(self, stamp_ns: int) -> list[str]:
-        """Apply the adapter's decision at ``stamp_ns`` (if any); the new messages to log
-        (a note of an accepted set, a refusal's reason the first time it comes)."""
+        """At the prediction stamped ``stamp_ns``: swap in a prepared step whose stamp has
+        come, or take the adapter's next decision and start preparing it (module
+        docstring); the new messages to log (a note of an accepted set, a refusal's reason
+        the first time it comes)."""
         if self._base_ns is None:
             return []
+        if self.pending is not None:
+            return self._apply_due(int(stamp_ns))
         ad = self.adapter
         refusals = ad.refusals
         d = ad.poll(self._seconds(stamp_ns))
@@ -127,17 +167,42 @@ class LiveAdaptation:
             msgs += self._refused(ad.last_refusal, counted=True)
         if d.step is None or d.overrides is None:
             return msgs
-        pred = self.predictor
+        pred, overrides = self.predictor, d.overrides
+        base = pred.config
+        # the simulator's state now, whenever the worker runs: the same result as the twin
+        trial = None if pred.sim is None else pred.sim.trial_copy()
+
+        def prepare() -> Prepared:
+            return pred.prepare(DriveModel(_as_config(base).replace(overrides)), trial)
+
+        self.pending = _Pending(d.step, int(stamp_ns) + self._lead_ns, self._submit(prepare),
+                                base)
+        return msgs
+
+    def _apply_due(self, stamp_ns: int) -> list[str]:
+        """The pending step, swapped in if its stamp has come and it is prepared; not
+        prepared: moved to the next fixed stamp and counted."""
+        p = self.pending
+        assert p is not None
+        if stamp_ns < p.apply_ns:
+            return []
+        if not p.future.done():
+            self.counters['late_steps'] += 1
+            while p.apply_ns <= stamp_ns:
+                p.apply_ns += self._lead_ns
+            return []
+        self.pending = None
+        ad, pred = self.adapter, self.predictor
+        if pred.config is not p.base:   # replaced from outside meanwhile: not this step
+            return []
         try:
-            cfg = _as_config(pred.config).replace(d.overrides)
-            prepared = pred.prepare(DriveModel(cfg))
-            pred.reconfigure(prepared)
+            pred.reconfigure(p.future.result())
         except (ValueError, ArithmeticError) as exc:   # ConfigError is a ValueError
             ad.refused(f'{type(exc).__name__}: {exc}')
-            return msgs + self._refused(ad.last_refusal, counted=True)
-        ad.applied(d.step, pred.model)
+            return self._refused(ad.last_refusal, counted=True)
+        ad.applied(p.step, pred.model)
         self.counters['switches'] += 1
-        return msgs
+        return []
 
     def _refused(self, reason: str, counted: bool) -> list[str]:
         self.counters['refusals'] += 1
@@ -148,7 +213,8 @@ class LiveAdaptation:
 
     def rebase(self) -> None:
         """The predictor's model was changed from outside (a parameter update): the adapter
-        restarts from it."""
+        restarts from it (a step being prepared is dropped)."""
+        self.pending = None
         self.adapter.rebase(self.predictor.model)
 
     # ---- read-out ----------------------------------------------------------------------
@@ -181,6 +247,53 @@ class LiveAdaptation:
     def params_config(self) -> Config:
         """The model in use (with the adapted values) as a Config to start from."""
         return _as_config(self.predictor.config)
+
+
+@dataclass
+class _Pending:
+    """A step being prepared: its state vector, the stamp it is due [ns], the preparation
+    (future-like) and the config it was designed from."""
+
+    step: np.ndarray
+    apply_ns: int
+    future: Any
+    base: Parameters
+
+
+def run_now(prepare: Callable[[], Prepared]) -> Future:
+    """A :data:`Submit` that prepares at once (the twin): a done future (its result, or the
+    exception the preparation raised)."""
+    fut: Future = Future()
+    try:
+        fut.set_result(prepare())
+    except Exception as exc:  # noqa: BLE001 - re-raised by result() where it is applied
+        fut.set_exception(exc)
+    return fut
+
+
+_switch_lock = threading.Lock()
+_switch_users = [0, 0.0]                 # preparations running, the interval before them
+
+
+def in_worker(pool: Executor) -> Submit:
+    """A :data:`Submit` that runs each preparation in ``pool`` (a worker thread) with the
+    switch interval lowered to :data:`WORKER_SWITCH_INTERVAL` while it runs (restored when
+    the last running preparation ends)."""
+    def run(prepare: Callable[[], Prepared]) -> Prepared:
+        with _switch_lock:
+            if _switch_users[0] == 0:
+                _switch_users[1] = sys.getswitchinterval()
+                sys.setswitchinterval(min(_switch_users[1], WORKER_SWITCH_INTERVAL))
+            _switch_users[0] += 1
+        try:
+            return prepare()
+        finally:
+            with _switch_lock:
+                _switch_users[0] -= 1
+                if _switch_users[0] == 0:
+                    sys.setswitchinterval(_switch_users[1])
+
+    return lambda prepare: pool.submit(run, prepare)
 
 
 def _as_config(p: Parameters) -> Config:

@@ -15,8 +15,10 @@ yields (:class:`Trajectory`, :class:`SimState`, the CSV writer) is in
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable, Iterator
+from typing import Self
 
 import numpy as np
 from numba import njit
@@ -212,6 +214,15 @@ class Stepper:
         self._ctl[:] = 0.0
         self._ctl[C_RHO] = self._ctl[C_RHO2] = 1.0
         self._ctl[C_MODE] = self._slip_mode()
+
+    def trial_copy(self) -> Self:
+        """A copy for a trial of :meth:`reconfigure` (a set's check off the sample path):
+        its state and step-control arrays are its own, so the trial never writes into this
+        simulator (a shallow copy shared the step control, which the trial resets)."""
+        trial = copy.copy(self)
+        trial._u, trial._v, trial._a = self._u.copy(), self._v.copy(), self._a.copy()
+        trial._ctl = self._ctl.copy()
+        return trial
 
     def _set_model(self, model: DriveModel, C: np.ndarray | None = None) -> None:
         self.model = model

@@ -127,16 +127,17 @@ class RealtimePredictor:
         if self.sim is not None:
             self.sim.interpolation = node.command_interpolation
 
-    def prepare(self, config: DriveModel | Config) -> Prepared:
+    def prepare(self, config: DriveModel | Config, trial: Simulator | None = None
+                ) -> Prepared:
         """Design for ``config`` off the real-time path (its model, the compensator design,
-        a trial of the simulator's parameters; it only reads the pipeline, so another thread
-        may run it while samples flow).  Raises ValueError (ConfigError) if the simulator
-        cannot take it (``integrator.time_step`` changed, non-finite acceleration).  Every
-        other method belongs to one thread (the node's executor)."""
+        a trial of the simulator's parameters on ``trial``, default a
+        :meth:`~worm_gear_sim.dynamics.stepping.Stepper.trial_copy` of the simulator taken
+        now; it only reads the pipeline, so another thread may run it while samples flow).
+        Raises ValueError (ConfigError) if the simulator cannot take it (time step changed,
+        non-finite acceleration).  Every other method belongs to the executor's thread."""
         model = DriveModel.of(config)
         if self.sim is not None:
-            trial = copy.copy(self.sim)   # shallow: reconfigure only reads the state
-            trial.reconfigure(model)
+            (self.sim.trial_copy() if trial is None else trial).reconfigure(model)
         return self._design(model)
 
     def reconfigure(self, new: DriveModel | Config | Prepared) -> None:

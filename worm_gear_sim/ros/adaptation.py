@@ -7,7 +7,11 @@
 same object the offline twin (``worm-gear-sim adapt``) drives:
 
 * every prediction the pipeline makes goes to it (after the node has published it), then
-  its decision is applied to the pipeline's model (bounded steps, no jump in the command);
+  its decision is taken (bounded steps, no jump in the command): a step is prepared in a
+  worker thread (the model, the compensator design) and swapped in at a stamp fixed when it
+  was decided (:data:`~worm_gear_sim.adaptation.live.APPLY_LEAD` later, as in the twin);
+  the sample callback only swaps (a step prepared late moves to the next fixed stamp and is
+  counted, ``late_steps``);
 * every ``measured_joint_states`` message goes to it after the model check; a rejected
   sample (non-finite, out of order, no antenna joint, outside the predictions) is counted
   and logged once per LOG_THROTTLE_S;
@@ -28,6 +32,7 @@ parameters keep their declared values; the adapted ones are on the topic and in 
 
 from __future__ import annotations
 
+import concurrent.futures
 import json
 import os
 import tempfile
@@ -39,7 +44,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from ..adaptation.live import LiveAdaptation
+from ..adaptation.live import LiveAdaptation, in_worker
 from ..config_io import params_document, params_yaml_text
 from ..topics import MEASURED_TOPIC
 from . import diagnostics as diag
@@ -60,6 +65,8 @@ class AdaptiveNode(WormGearSimNode):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self.adaptation: LiveAdaptation | None = None
         self._adapt_config: Any = None
+        self._adapt_builder = concurrent.futures.ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix='worm_gear_sim_adapt')
         super().__init__(*args, **kwargs)
         qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._pub_adapted = self.create_publisher(String, ADAPTED_TOPIC, qos)
@@ -76,7 +83,8 @@ class AdaptiveNode(WormGearSimNode):
         cfg = rt.config
         if cfg is not self._adapt_config:
             self._adapt_config = cfg
-            self.adaptation = LiveAdaptation(rt, cfg.node.joint_names[1:]) \
+            self.adaptation = LiveAdaptation(rt, cfg.node.joint_names[1:],
+                                             submit=in_worker(self._adapt_builder)) \
                 if cfg.adaptation.enabled else None
         return self.adaptation
 
@@ -139,6 +147,10 @@ class AdaptiveNode(WormGearSimNode):
                              msg, values, HARDWARE_ID)
         st.hardware_id = hardware_id
         return statuses + [st]
+
+    def destroy_node(self) -> None:
+        self._adapt_builder.shutdown(wait=False, cancel_futures=True)
+        super().destroy_node()
 
     def _on_write(self, request: Any, response: Any) -> Any:
         """Write the model in use as a params file (atomic: a temporary file renamed)."""
