@@ -11,7 +11,8 @@ cost.  Two processes compile disjoint paths side by side:
     python scripts/warm_kernels.py sim      # one path in this process (sim | comp)
 
 ``sim``: the Newmark kernel called from Python (``simulate``) and through the stepping
-simulator (``RealtimePredictor``); ``comp``: the compensator's kernel and the model inverse.
+simulator (``RealtimePredictor``); ``comp``: the compensator's kernel and the model inverse,
+and a known trajectory's correction (the node's trajectory worker) without and with play.
 Each process compiles only what its path calls; what one compiled the other loads from the
 cache.  Nothing here is checked: the tests check the results.
 """
@@ -41,6 +42,13 @@ def _comp() -> None:
     c.reset(0.0, 0.0)
     for k in range(1, 4):
         c.update(1e-3 * k, 0.01 * k)
+    # a known trajectory (the node's trajectory worker), without and with play
+    import numpy as np
+
+    from worm_gear_sim.play_crossing import trajectory_feedforward
+    t = np.arange(20) * 1e-3
+    for cfg in (Config(), Config().replace({'mesh.backlash': 2e-4})):
+        trajectory_feedforward(cfg, t, 0.5 * t)
 
 
 PATHS = {'sim': _sim, 'comp': _comp}

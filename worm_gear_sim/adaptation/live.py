@@ -39,8 +39,6 @@ and returned once per new reason (the node logs it, throttled).
 from __future__ import annotations
 
 import math
-import sys
-import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass
@@ -51,11 +49,12 @@ import numpy as np
 from ..dynamics.model import DriveModel
 from ..params import Config, config_from_mapping
 from ..realtime.predictor import Prepared, RealtimePredictor
+from ..realtime.switch_interval import short_switch_interval
 from ..schema import Parameters
 from .estimator import Adapter
 
 __all__ = ['LiveAdaptation', 'REJECT_REASONS', 'APPLY_LEAD', 'Submit', 'run_now',
-           'in_worker', 'WORKER_SWITCH_INTERVAL']
+           'in_worker']
 
 #: A step decided at the prediction stamped t is applied at the first prediction stamped
 #: >= t + APPLY_LEAD [s] (module docstring): time for the worker to prepare it (5-15 ms
@@ -66,7 +65,6 @@ Submit = Callable[[Callable[[], Prepared]], Any]
 #: The interpreter's switch interval while a preparation runs in a worker thread [s]: the
 #: sample thread waits at most about this long for the GIL (Python's default, 5 ms, made a
 #: sample wait up to 5-7 ms while the worker prepared: measured, bench_adaptation.py).
-WORKER_SWITCH_INTERVAL = 0.0005
 
 #: Reasons an encoder sample is rejected (counted under ``rejected_<reason>``).
 REJECT_REASONS = ('non_finite', 'out_of_order', 'other_joint', 'outside_prediction',
@@ -271,27 +269,13 @@ def run_now(prepare: Callable[[], Prepared]) -> Future:
     return fut
 
 
-_switch_lock = threading.Lock()
-_switch_users = [0, 0.0]                 # preparations running, the interval before them
-
-
 def in_worker(pool: Executor) -> Submit:
     """A :data:`Submit` that runs each preparation in ``pool`` (a worker thread) with the
-    switch interval lowered to :data:`WORKER_SWITCH_INTERVAL` while it runs (restored when
-    the last running preparation ends)."""
+    switch interval lowered while it runs (:func:`~worm_gear_sim.realtime.switch_interval.
+    short_switch_interval`, shared with the trajectory worker)."""
     def run(prepare: Callable[[], Prepared]) -> Prepared:
-        with _switch_lock:
-            if _switch_users[0] == 0:
-                _switch_users[1] = sys.getswitchinterval()
-                sys.setswitchinterval(min(_switch_users[1], WORKER_SWITCH_INTERVAL))
-            _switch_users[0] += 1
-        try:
+        with short_switch_interval():
             return prepare()
-        finally:
-            with _switch_lock:
-                _switch_users[0] -= 1
-                if _switch_users[0] == 0:
-                    sys.setswitchinterval(_switch_users[1])
 
     return lambda prepare: pool.submit(run, prepare)
 

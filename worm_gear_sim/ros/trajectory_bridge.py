@@ -21,14 +21,14 @@ started by the first such trajectory (not with the node: most nodes never need i
 same core function, so the same numbers.  The per-sample correction loop of a 100 s
 trajectory takes the interpreter ~1.5 s, and sharing the lock with the executor for that
 long left samples too_old.  While the thread works the interpreter's switch interval is
-lowered (:data:`WORKER_SWITCH_INTERVAL`), so the executor waits less for the lock.
+lowered (``realtime.switch_interval``, shared with the adaptation's worker), so the executor
+waits less for the lock.
 :func:`trajectory_status` is its /diagnostics status.
 """
 
 from __future__ import annotations
 
 import multiprocessing
-import sys
 import threading
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -43,6 +43,7 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from ..realtime.switch_interval import short_switch_interval
 from ..topics import COMPENSATED_TRAJECTORY_TOPIC, TRAJECTORY_TOPIC
 from ..trajectory_compensation import (
     TRAJECTORY_REJECT_REASONS,
@@ -69,9 +70,6 @@ TRAJECTORY_COUNTERS = ('trajectories_received', 'trajectories_compensated',
 QUEUE_DEPTH = 1000
 QOS_IN = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
 QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)   # as the controller's
-#: The interpreter's switch interval while the worker computes [s] (Python's default,
-#: 5 ms, is how long the executor thread may wait for the lock each time it needs it).
-WORKER_SWITCH_INTERVAL = 0.0005
 #: Compensated points from which a trajectory is compensated in the worker process (20 s
 #: at 1 kHz; shorter ones take the interpreter less than ~0.3 s and stay in the thread).
 PROCESS_POINTS = 20_000
@@ -290,12 +288,10 @@ class TrajectoryBridge:
                     self._cond.notify_all()
                     continue
                 self._busy = True
-            interval = sys.getswitchinterval()
-            sys.setswitchinterval(min(interval, WORKER_SWITCH_INTERVAL))
             try:
-                self._compensate_and_publish(item.traj, item.header, item.now_ns)
+                with short_switch_interval():
+                    self._compensate_and_publish(item.traj, item.header, item.now_ns)
             finally:
-                sys.setswitchinterval(interval)
                 with self._cond:
                     self._busy = False
                     self._pending -= item.points
