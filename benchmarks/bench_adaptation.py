@@ -174,14 +174,10 @@ def cost(args: argparse.Namespace, base: Config) -> None:
         t0 = time.perf_counter()
         for k in range(t.size):
             ns = BASE_NS + int(round(t[k] * 1e9))
-            out = p.push(ns, float(x[k]))
-            if live is not None:
-                for q in out.predictions:
-                    live.predicted(q.stamp_ns, q.theta)
-                if out.predictions:
-                    live.step(out.predictions[-1].stamp_ns)
-                for c in out.corrections:
-                    live.measured(c.stamp_ns, names[2:], [meas[c.stamp_ns]])
+            if live is None:
+                p.push(ns, float(x[k]))
+            else:
+                _sample(p, live, ns, float(x[k]), names, meas)
         wall = (time.perf_counter() - t0) / t.size
         if keep is not None:
             keep.append(p.config)
@@ -204,6 +200,19 @@ def cost(args: argparse.Namespace, base: Config) -> None:
           f'{min(runs["on, from the adapted model"]) / min(runs["off, adapted model"]):.3f}); '
           f'the adapted model (play, load) itself costs '
           f'{off / med["off, start model"]:.3f}x the start model in the simulator')
+
+
+def _sample(p: RealtimePredictor, live: LiveAdaptation, ns: int, x: float, names: Any,
+            meas: dict) -> None:
+    """One 1 kHz sample through the pipeline and the adaptation, as the node's callbacks
+    hand them on: the predictions, a step decision at the last, the encoder samples."""
+    out = p.push(ns, x)
+    for q in out.predictions:
+        live.predicted(q.stamp_ns, q.theta)
+    if out.predictions:
+        live.step(out.predictions[-1].stamp_ns)
+    for c in out.corrections:
+        live.measured(c.stamp_ns, names[2:], [meas[c.stamp_ns]])
 
 
 def latency(args: argparse.Namespace, base: Config) -> None:
@@ -232,13 +241,7 @@ def latency(args: argparse.Namespace, base: Config) -> None:
             t0 = time.perf_counter()
             ns = BASE_NS + int(round(t[k] * 1e9))
             pending, switches = live.pending, live.counters['switches']
-            out = p.push(ns, float(x[k]))
-            for q in out.predictions:
-                live.predicted(q.stamp_ns, q.theta)
-            if out.predictions:
-                live.step(out.predictions[-1].stamp_ns)
-            for c in out.corrections:
-                live.measured(c.stamp_ns, names[2:], [meas[c.stamp_ns]])
+            _sample(p, live, ns, float(x[k]), names, meas)
             t1 = time.perf_counter()
             lat[k], work[k] = t1 - max(deadline, end) if paced else t1 - t0, t1 - t0
             end = t1

@@ -22,7 +22,7 @@ Computed from the *fitted* values (the play, load and drag the records gave), no
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -39,40 +39,33 @@ __all__ = ['flank_changes', 'key_visibility', 'mesh_lifts', 'LIFT_SHARE']
 LIFT_SHARE = 0.05
 
 
-def flank_changes(cfg: Any, records: Sequence[Record]) -> bool:
-    """Whether the model ``cfg`` (with play > 0) touches both flanks in some record."""
+def _approaches(cfg: Any, records: Sequence[Record]) -> Iterator[tuple[np.ndarray, float]]:
+    """The model ``cfg``'s mesh approach q = l_w theta2 - r_g theta3 (Eq. 8 without the
+    periodic error) over each record it can run, with the flank's place in q, r_g b / 2
+    (nothing when the model has no play)."""
     b = cfg.mesh.backlash
     if not b > 0:
-        return False
+        return
     m = DriveModel(cfg)
     lw, rg = m.derived.l_w, cfg.geometry.gear_pitch_radius
-    edge = 0.5 * rg * b
     for r in records:
         try:
             p = predict(m, r)
         except (SimulationError, ValueError):
             continue
-        q = lw * p['theta2'] - rg * p['theta3']
-        if float(np.max(q)) >= edge * (1 - 1e-6) and float(np.min(q)) <= -edge * (1 - 1e-6):
-            return True
-    return False
+        yield lw * p['theta2'] - rg * p['theta3'], 0.5 * rg * b
+
+
+def flank_changes(cfg: Any, records: Sequence[Record]) -> bool:
+    """Whether the model ``cfg`` (with play > 0) touches both flanks in some record."""
+    return any(float(np.max(q)) >= edge * (1 - 1e-6) and float(np.min(q)) <= -edge * (1 - 1e-6)
+               for q, edge in _approaches(cfg, records))
 
 
 def mesh_lifts(cfg: Any, records: Sequence[Record]) -> bool:
     """Whether the model ``cfg`` (play > 0) lifts the gear off the flank it rests on by
     LIFT_SHARE of the play in some record (without it reaching the other flank)."""
-    b = cfg.mesh.backlash
-    if not b > 0:
-        return False
-    m = DriveModel(cfg)
-    lw, rg = m.derived.l_w, cfg.geometry.gear_pitch_radius
-    edge = 0.5 * rg * b
-    for r in records:
-        try:
-            p = predict(m, r)
-            q = lw * p['theta2'] - rg * p['theta3']
-        except (SimulationError, ValueError):
-            continue
+    for q, edge in _approaches(cfg, records):
         side = 1.0 if float(np.median(q)) >= 0 else -1.0
         if float(np.max(edge - side * q)) >= LIFT_SHARE * 2.0 * edge:
             return True
