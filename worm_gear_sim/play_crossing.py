@@ -47,7 +47,7 @@ from .params import Config
 __all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step',
            'flank_series', 'plan_crossings', 'coast_error', 'flank_offset',
            'soft_feedforward_series', 'crossing_time', 'CROSSING_PERIODS', 'SHORTEST_PERIODS',
-           'CROSSING_TOLERANCE']
+           'CROSSING_TOLERANCE', 'free_vibration', 'start_ringing_cancel', 'START_WINDOW_PERIODS']
 
 #: The longest crossing in antenna-mode periods (:func:`crossing_time`).
 CROSSING_PERIODS = 1.0
@@ -55,6 +55,9 @@ CROSSING_PERIODS = 1.0
 SHORTEST_PERIODS = 3.0
 #: The antenna's stray while the mesh is free, as a share of half the play.
 CROSSING_TOLERANCE = 1e-2
+#: The start transient whose free vibration :func:`start_ringing_cancel` cancels, in
+#: antenna-mode periods (the cancelling pulse lasts one period within it).
+START_WINDOW_PERIODS = 3.0
 
 
 def smooth_step(u: ArrayLike) -> np.ndarray:
@@ -137,6 +140,14 @@ def flank_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
     step = 0.5 * m.config.mesh.backlash / m.output_per_input if comp.backlash_inverse \
         else 0.0
     return FlankSeries(t_out, delta, flank, demand, step, rest)
+
+
+def _seconds(t: ArrayLike) -> np.ndarray:
+    """Sample times as float seconds (integer times: nanoseconds from the first sample)."""
+    a = np.asarray(t).reshape(-1)
+    if np.issubdtype(a.dtype, np.integer):
+        return (a.astype(np.int64) - np.int64(a[0])) * 1e-9
+    return a.astype(float)
 
 
 def crossing_time(model: DriveModel | Config) -> float:
@@ -268,6 +279,49 @@ def soft_feedforward_series(model: DriveModel | Config, t: ArrayLike, theta1_ref
     return delta, plans
 
 
+def free_vibration(t: np.ndarray, u: np.ndarray, omega: float, window: float) -> complex:
+    """The free vibration a command u (samples at ``t``, joined by straight lines, at rest
+    before ``t[0]``) leaves in an undamped mode of ``omega`` [rad/s] driven by its
+    acceleration, q'' + omega^2 q ~ u'': sum of u'' = the slope changes m_k at t_k, weighted
+    by exp(-i omega (t_k - t[0])), over ``window`` [s] from the start; past it the
+    acceleration is taken as slowly varying, and its (geometric, Abel-summed) tail is the
+    forced, quasi-static response, not free vibration.  The free part of q is then
+    Im(exp(i omega t) F) / omega (scaled by the mode's participation)."""
+    slope = np.diff(u) / np.diff(t)
+    m = np.diff(np.concatenate(([0.0], slope)))       # u'' = sum m_k delta(t - t_k)
+    k = min(int(np.searchsorted(t, t[0] + window)), m.size - 1)
+    z = np.exp(-1j * omega * (t[:k] - t[0]))
+    f = complex(np.sum(m[:k] * z))
+    dt = float(t[k + 1] - t[k])
+    f += complex(m[k] * np.exp(-1j * omega * (t[k] - t[0])) / (1.0 - np.exp(-1j * omega * dt)))
+    return f
+
+
+def start_ringing_cancel(t: ArrayLike, command: ArrayLike, omega: float,
+                         window: float) -> np.ndarray:
+    """A correction (added to ``command``, samples at ``t`` from rest) that leaves the mode
+    of ``omega`` [rad/s] at rest after the start transient: the start of a move (a step in
+    its acceleration that the drive cannot follow) rings an undamped mode for ever.  The
+    correction is a one-period Hann-windowed oscillation at ``omega`` from ``t[0]`` (zero
+    value and slope at both ends; of the order of the acceleration step / omega^2), its
+    phase and amplitude chosen so the two free vibrations (:func:`free_vibration` over
+    ``window`` s) cancel; zero when the samples span less than ``window`` + 2 samples."""
+    tq = np.asarray(t, float)
+    u = np.asarray(command, float)
+    tau = 2.0 * math.pi / omega
+    out = np.zeros_like(u)
+    if tq.size < 3 or tq[-1] - tq[0] < max(window, tau) + 2.0 * (tq[1] - tq[0]):
+        return out
+    s = tq - tq[0]
+    hann = np.where(s < tau, np.sin(math.pi * s / tau) ** 2, 0.0)
+    basis = (hann * np.cos(omega * s), hann * np.sin(omega * s))
+    fb = [free_vibration(tq, b, omega, window) for b in basis]
+    f = free_vibration(tq, u, omega, window)
+    a = np.linalg.solve([[fb[0].real, fb[1].real], [fb[0].imag, fb[1].imag]],
+                        [-f.real, -f.imag])
+    return np.asarray(a[0] * basis[0] + a[1] * basis[1])
+
+
 def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
                            ) -> np.ndarray:
     """The correction of a known trajectory (``compensate_trajectory``, the trajectory
@@ -276,6 +330,15 @@ def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref:
     m = DriveModel.of(model)
     cs = m.config.compensation
     if has_play(m.p) and cs.backlash_inverse and cs.quasi_static and cs.enabled:
-        return soft_feedforward_series(m, t, theta1_ref)[0]
+        delta, plans = soft_feedforward_series(m, t, theta1_ref)
+        # the antenna mode left at rest after the start (docs/compensation.md): unless the
+        # play is crossed during the start transient (the mode is then not linear)
+        fs_t = _seconds(t)
+        omega = 2.0 * math.pi * Compensator(m).mode_frequency_hz
+        window = START_WINDOW_PERIODS * 2.0 * math.pi / omega
+        if not any(p.start < fs_t[0] + window for p in plans):
+            x = np.asarray(theta1_ref, float).reshape(-1)
+            delta = delta + start_ringing_cancel(fs_t, x + delta, omega, window)
+        return delta
     from .realtime import feedforward_series
     return feedforward_series(m, t, theta1_ref)
