@@ -34,6 +34,7 @@ is unchanged: it cannot know a reversal before it happens.  Measured in docs/com
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +42,7 @@ from numpy.typing import ArrayLike
 
 from .compensation import Compensator
 from .dynamics.inverse import gear_torque_demand
+from .dynamics.modal import modes
 from .dynamics.model import DriveModel, has_play
 from .params import Config
 
@@ -297,29 +299,43 @@ def free_vibration(t: np.ndarray, u: np.ndarray, omega: float, window: float) ->
     return f
 
 
-def start_ringing_cancel(t: ArrayLike, command: ArrayLike, omega: float,
+def start_ringing_cancel(t: ArrayLike, command: ArrayLike, omegas: Sequence[float],
                          window: float) -> np.ndarray:
-    """A correction (added to ``command``, samples at ``t`` from rest) that leaves the mode
-    of ``omega`` [rad/s] at rest after the start transient: the start of a move (a step in
-    its acceleration that the drive cannot follow) rings an undamped mode for ever.  The
-    correction is a one-period Hann-windowed oscillation at ``omega`` from ``t[0]`` (zero
-    value and slope at both ends; of the order of the acceleration step / omega^2), its
-    phase and amplitude chosen so the two free vibrations (:func:`free_vibration` over
-    ``window`` s) cancel; zero when the samples span less than ``window`` + 2 samples."""
+    """A correction (added to ``command``, samples at ``t`` from rest) that leaves the modes
+    of ``omegas`` [rad/s] (the first the slowest) at rest after the start transient: the
+    start of a move (a step in its acceleration that the drive cannot follow) rings an
+    undamped mode for ever.  The correction is a one-period Hann-windowed oscillation at
+    ``omegas[0]`` from ``t[0]`` (zero value and slope at both ends; of the order of the
+    acceleration step / omega^2) plus, for each faster mode, two samples moved (the 2nd and
+    3rd, 4th and 5th, ...: a mode faster than the command rate is reached only through the
+    kinks of the command), chosen together so every free vibration (:func:`free_vibration`
+    over ``window`` s) cancels; zero when the samples span less than ``window`` + 2
+    samples."""
     tq = np.asarray(t, float)
     u = np.asarray(command, float)
-    tau = 2.0 * math.pi / omega
     out = np.zeros_like(u)
-    if tq.size < 3 or tq[-1] - tq[0] < max(window, tau) + 2.0 * (tq[1] - tq[0]):
+    if not len(omegas):
+        return out
+    tau = 2.0 * math.pi / float(omegas[0])
+    n_fast = 2 * (len(omegas) - 1)
+    if tq.size < 3 + n_fast or tq[-1] - tq[0] < max(window, tau) + 2.0 * (tq[1] - tq[0]):
         return out
     s = tq - tq[0]
     hann = np.where(s < tau, np.sin(math.pi * s / tau) ** 2, 0.0)
-    basis = (hann * np.cos(omega * s), hann * np.sin(omega * s))
-    fb = [free_vibration(tq, b, omega, window) for b in basis]
-    f = free_vibration(tq, u, omega, window)
-    a = np.linalg.solve([[fb[0].real, fb[1].real], [fb[0].imag, fb[1].imag]],
-                        [-f.real, -f.imag])
-    return np.asarray(a[0] * basis[0] + a[1] * basis[1])
+    basis = [hann * np.cos(omegas[0] * s), hann * np.sin(omegas[0] * s)]
+    for k in range(n_fast):
+        hat = np.zeros_like(u)
+        hat[1 + k] = 1.0
+        basis.append(hat)
+    rows = []
+    rhs = []
+    for w in omegas:
+        fb = [free_vibration(tq, b, float(w), window) for b in basis]
+        f = free_vibration(tq, u, float(w), window)
+        rows += [[z.real for z in fb], [z.imag for z in fb]]
+        rhs += [-f.real, -f.imag]
+    a = np.linalg.solve(np.array(rows), np.array(rhs))
+    return np.asarray(sum(ak * bk for ak, bk in zip(a, basis)))
 
 
 def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
@@ -334,11 +350,15 @@ def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref:
         # the antenna mode left at rest after the start (docs/compensation.md): unless the
         # play is crossed during the start transient (the mode is then not linear)
         fs_t = _seconds(t)
-        omega = 2.0 * math.pi * Compensator(m).mode_frequency_hz
-        window = START_WINDOW_PERIODS * 2.0 * math.pi / omega
+        # the antenna mode (the compensator's), then the faster ones, teeth in contact
+        f_mode = Compensator(m).mode_frequency_hz
+        engaged = DriveModel(m.config.replace({'mesh.backlash': 0.0}))
+        faster = [f for f in np.sort(modes(engaged).undamped_hz) if f > 1.5 * f_mode]
+        omegas = 2.0 * math.pi * np.array([f_mode, *faster])
+        window = START_WINDOW_PERIODS * 2.0 * math.pi / omegas[0]
         if not any(p.start < fs_t[0] + window for p in plans):
             x = np.asarray(theta1_ref, float).reshape(-1)
-            delta = delta + start_ringing_cancel(fs_t, x + delta, omega, window)
+            delta = delta + start_ringing_cancel(fs_t, x + delta, omegas, window)
         return delta
     from .realtime import feedforward_series
     return feedforward_series(m, t, theta1_ref)
