@@ -281,14 +281,15 @@ def soft_feedforward_series(model: DriveModel | Config, t: ArrayLike, theta1_ref
     return delta, plans
 
 
-def free_vibration(t: np.ndarray, u: np.ndarray, omega: float, window: float) -> complex:
+def free_vibration(t: np.ndarray, u: np.ndarray, omega: complex, window: float) -> complex:
     """The free vibration a command u (samples at ``t``, joined by straight lines, at rest
-    before ``t[0]``) leaves in an undamped mode of ``omega`` [rad/s] driven by its
-    acceleration, q'' + omega^2 q ~ u'': sum of u'' = the slope changes m_k at t_k, weighted
-    by exp(-i omega (t_k - t[0])), over ``window`` [s] from the start; past it the
+    before ``t[0]``) leaves in a mode driven by its acceleration (q ~ u''), the mode's
+    free motion being exp(i omega t) (``omega`` = w_d + i zeta w_n [rad/s]: undamped when
+    real): sum of u'' = the slope changes m_k at t_k, weighted by
+    exp(-i omega (t_k - t[0])), over ``window`` [s] from the start; past it the
     acceleration is taken as slowly varying, and its (geometric, Abel-summed) tail is the
     forced, quasi-static response, not free vibration.  The free part of q is then
-    Im(exp(i omega t) F) / omega (scaled by the mode's participation)."""
+    Im(exp(i omega t) F) / |omega| (scaled by the mode's participation)."""
     slope = np.diff(u) / np.diff(t)
     m = np.diff(np.concatenate(([0.0], slope)))       # u'' = sum m_k delta(t - t_k)
     k = min(int(np.searchsorted(t, t[0] + window)), m.size - 1)
@@ -299,30 +300,31 @@ def free_vibration(t: np.ndarray, u: np.ndarray, omega: float, window: float) ->
     return f
 
 
-def start_ringing_cancel(t: ArrayLike, command: ArrayLike, omegas: Sequence[float],
+def start_ringing_cancel(t: ArrayLike, command: ArrayLike, omegas: Sequence[complex],
                          window: float) -> np.ndarray:
     """A correction (added to ``command``, samples at ``t`` from rest) that leaves the modes
-    of ``omegas`` [rad/s] (the first the slowest) at rest after the start transient: the
-    start of a move (a step in its acceleration that the drive cannot follow) rings an
-    undamped mode for ever.  The correction is a one-period Hann-windowed oscillation at
-    ``omegas[0]`` from ``t[0]`` (zero value and slope at both ends; of the order of the
-    acceleration step / omega^2) plus, for each faster mode, two samples moved (the 2nd and
-    3rd, 4th and 5th, ...: a mode faster than the command rate is reached only through the
-    kinks of the command), chosen together so every free vibration (:func:`free_vibration`
-    over ``window`` s) cancels; zero when the samples span less than ``window`` + 2
-    samples."""
+    of ``omegas`` (:func:`free_vibration`; the first the slowest) at rest after the start
+    transient: the start of a move (a step in its acceleration that the drive cannot
+    follow) rings an undamped mode for ever.  The correction is a one-period
+    Hann-windowed oscillation at the real part of ``omegas[0]`` from ``t[0]`` (zero value
+    and slope at both ends; of the order of the acceleration step / omega^2) plus, for
+    each faster mode, two samples moved (the 2nd and 3rd, 4th and 5th, ...: a mode faster
+    than the command rate is reached only through the kinks of the command), chosen
+    together so every free vibration (over ``window`` s) cancels; zero when the samples
+    span less than ``window`` + 2 samples."""
     tq = np.asarray(t, float)
     u = np.asarray(command, float)
     out = np.zeros_like(u)
     if not len(omegas):
         return out
-    tau = 2.0 * math.pi / float(omegas[0])
+    w0 = complex(omegas[0]).real
+    tau = 2.0 * math.pi / w0
     n_fast = 2 * (len(omegas) - 1)
     if tq.size < 3 + n_fast or tq[-1] - tq[0] < max(window, tau) + 2.0 * (tq[1] - tq[0]):
         return out
     s = tq - tq[0]
     hann = np.where(s < tau, np.sin(math.pi * s / tau) ** 2, 0.0)
-    basis = [hann * np.cos(omegas[0] * s), hann * np.sin(omegas[0] * s)]
+    basis = [hann * np.cos(w0 * s), hann * np.sin(w0 * s)]
     for k in range(n_fast):
         hat = np.zeros_like(u)
         hat[1 + k] = 1.0
@@ -330,12 +332,18 @@ def start_ringing_cancel(t: ArrayLike, command: ArrayLike, omegas: Sequence[floa
     rows = []
     rhs = []
     for w in omegas:
-        fb = [free_vibration(tq, b, float(w), window) for b in basis]
-        f = free_vibration(tq, u, float(w), window)
+        fb = [free_vibration(tq, b, complex(w), window) for b in basis]
+        f = free_vibration(tq, u, complex(w), window)
         rows += [[z.real for z in fb], [z.imag for z in fb]]
         rhs += [-f.real, -f.imag]
     a = np.linalg.solve(np.array(rows), np.array(rhs))
     return np.asarray(sum(ak * bk for ak, bk in zip(a, basis)))
+
+
+def _mode_rate(f_hz: float, zeta: float) -> complex:
+    """w_d + i zeta w_n [rad/s] of a mode of damped frequency ``f_hz`` and ratio ``zeta``."""
+    w_d = 2.0 * math.pi * f_hz
+    return complex(w_d, w_d * zeta / math.sqrt(max(1.0 - zeta * zeta, 1e-12)))
 
 
 def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
@@ -350,12 +358,16 @@ def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref:
         # the antenna mode left at rest after the start (docs/compensation.md): unless the
         # play is crossed during the start transient (the mode is then not linear)
         fs_t = _seconds(t)
-        # the antenna mode (the compensator's), then the faster ones, teeth in contact
-        f_mode = Compensator(m).mode_frequency_hz
-        engaged = DriveModel(m.config.replace({'mesh.backlash': 0.0}))
-        faster = [f for f in np.sort(modes(engaged).undamped_hz) if f > 1.5 * f_mode]
-        omegas = 2.0 * math.pi * np.array([f_mode, *faster])
-        window = START_WINDOW_PERIODS * 2.0 * math.pi / omegas[0]
+        # the antenna mode (the compensator's), then the faster ones, teeth in contact,
+        # each with its damping (the load's drag damps the antenna mode)
+        comp = Compensator(m)
+        res = modes(DriveModel(m.config.replace({'mesh.backlash': 0.0})))
+        pairs = [(comp.mode_frequency_hz, comp.mode_damping_ratio)] + sorted(
+            (float(f), float(max(z, 0.0))) for f, z in zip(res.frequencies_hz,
+                                                         res.damping_ratios)
+            if f > 1.5 * comp.mode_frequency_hz)
+        omegas = [_mode_rate(f, z) for f, z in pairs]
+        window = START_WINDOW_PERIODS / comp.mode_frequency_hz
         if not any(p.start < fs_t[0] + window for p in plans):
             x = np.asarray(theta1_ref, float).reshape(-1)
             delta = delta + start_ringing_cancel(fs_t, x + delta, omegas, window)
