@@ -300,40 +300,42 @@ def free_vibration(t: np.ndarray, u: np.ndarray, omega: complex, window: float) 
     return f
 
 
-def start_ringing_cancel(t: ArrayLike, command: ArrayLike, omegas: Sequence[complex],
-                         window: float) -> np.ndarray:
+def start_ringing_cancel(t: ArrayLike, command: ArrayLike, slow: complex | None,
+                         fast: Sequence[complex], window: float) -> np.ndarray:
     """A correction (added to ``command``, samples at ``t`` from rest) that leaves the modes
-    of ``omegas`` (:func:`free_vibration`; the first the slowest) at rest after the start
+    ``slow`` and ``fast`` (their rates as in :func:`free_vibration`) at rest after the start
     transient: the start of a move (a step in its acceleration that the drive cannot
-    follow) rings an undamped mode for ever.  The correction is a one-period
-    Hann-windowed oscillation at the real part of ``omegas[0]`` from ``t[0]`` (zero value
-    and slope at both ends; of the order of the acceleration step / omega^2) plus, for
-    each faster mode, two samples moved (the 2nd and 3rd, 4th and 5th, ...: a mode faster
-    than the command rate is reached only through the kinks of the command), chosen
-    together so every free vibration (over ``window`` s) cancels; zero when the samples
-    span less than ``window`` + 2 samples."""
+    follow) rings an undamped mode for ever.  The correction is, for the ``slow`` mode (the
+    antenna's; None: none), a one-period Hann-windowed oscillation at its frequency from
+    ``t[0]`` (zero value and slope at both ends; of the order of the acceleration step /
+    omega^2) and, for each ``fast`` mode, two samples moved (the 2nd and 3rd, 4th and 5th,
+    ...: a mode faster than the command rate is reached only through the kinks of the
+    command), chosen together so every free vibration (over ``window`` s) cancels; zero
+    when the samples span less than ``window`` (and the pulse) + 2 samples."""
     tq = np.asarray(t, float)
     u = np.asarray(command, float)
     out = np.zeros_like(u)
-    if not len(omegas):
+    rates = ([] if slow is None else [complex(slow)]) + [complex(w) for w in fast]
+    if not rates or tq.size < 3 + 2 * len(fast):
         return out
-    w0 = complex(omegas[0]).real
-    tau = 2.0 * math.pi / w0
-    n_fast = 2 * (len(omegas) - 1)
-    if tq.size < 3 + n_fast or tq[-1] - tq[0] < max(window, tau) + 2.0 * (tq[1] - tq[0]):
+    tau = 0.0 if slow is None else 2.0 * math.pi / complex(slow).real
+    if tq[-1] - tq[0] < max(window, tau) + 2.0 * (tq[1] - tq[0]):
         return out
     s = tq - tq[0]
-    hann = np.where(s < tau, np.sin(math.pi * s / tau) ** 2, 0.0)
-    basis = [hann * np.cos(w0 * s), hann * np.sin(w0 * s)]
-    for k in range(n_fast):
+    basis = []
+    if slow is not None:
+        hann = np.where(s < tau, np.sin(math.pi * s / tau) ** 2, 0.0)
+        w0 = complex(slow).real
+        basis += [hann * np.cos(w0 * s), hann * np.sin(w0 * s)]
+    for k in range(2 * len(fast)):
         hat = np.zeros_like(u)
         hat[1 + k] = 1.0
         basis.append(hat)
     rows = []
     rhs = []
-    for w in omegas:
-        fb = [free_vibration(tq, b, complex(w), window) for b in basis]
-        f = free_vibration(tq, u, complex(w), window)
+    for w in rates:
+        fb = [free_vibration(tq, b, w, window) for b in basis]
+        f = free_vibration(tq, u, w, window)
         rows += [[z.real for z in fb], [z.imag for z in fb]]
         rhs += [-f.real, -f.imag]
     a = np.linalg.solve(np.array(rows), np.array(rhs))
@@ -362,15 +364,14 @@ def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref:
         # each with its damping (the load's drag damps the antenna mode)
         comp = Compensator(m)
         res = modes(DriveModel(m.config.replace({'mesh.backlash': 0.0})))
-        pairs = [(comp.mode_frequency_hz, comp.mode_damping_ratio)] + sorted(
-            (float(f), float(max(z, 0.0))) for f, z in zip(res.frequencies_hz,
-                                                         res.damping_ratios)
-            if f > 1.5 * comp.mode_frequency_hz)
-        omegas = [_mode_rate(f, z) for f, z in pairs]
-        window = START_WINDOW_PERIODS / comp.mode_frequency_hz
+        f0 = comp.mode_frequency_hz
+        slow = _mode_rate(f0, comp.mode_damping_ratio)
+        fast = [_mode_rate(float(f), float(z)) for f, z in sorted(zip(
+            res.frequencies_hz, np.maximum(res.damping_ratios, 0.0))) if f > 1.5 * f0]
+        window = START_WINDOW_PERIODS / f0
         if not any(p.start < fs_t[0] + window for p in plans):
             x = np.asarray(theta1_ref, float).reshape(-1)
-            delta = delta + start_ringing_cancel(fs_t, x + delta, omegas, window)
+            delta = delta + start_ringing_cancel(fs_t, x + delta, slow, fast, window)
         return delta
     from .realtime import feedforward_series
     return feedforward_series(m, t, theta1_ref)
