@@ -164,7 +164,7 @@ def test_the_start_of_a_known_scan_leaves_the_antenna_mode_at_rest():
     m = trajectory_model(DriveModel(plant))
     soft, plans = soft_feedforward_series(m, move.t, move.theta1)
     known = trajectory_feedforward(m, move.t, move.theta1)
-    assert not plans
+    assert all(p.start > 0.3 for p in plans)       # (the cut scan stops at 0.4 s)
     f_mode = Compensator(m).mode_frequency_hz
     window = START_WINDOW_PERIODS / f_mode
     late = move.t >= window
