@@ -29,10 +29,18 @@ from the crossings both are bit for bit the same, and at rest the worm still tak
 exactly half the play.  The causal path for live streams (the node's ``worm_angle_command``)
 is unchanged: it cannot know a reversal before it happens.  Measured in docs/compensation.md,
 "A soft crossing of the play".
+
+The start of a known move from rest (a step in its acceleration that the drive cannot
+follow) leaves the drive's undamped modes ringing for ever, and near a sign change of a
+small demand that ringing lifts the teeth off their flank.  :func:`trajectory_feedforward`
+therefore also cancels the free vibration the start leaves in each engaged mode
+(:func:`start_ringing_cancel`: a one-period pulse at the antenna mode and two moved samples
+per faster mode, sized from the command's own slope changes, :func:`free_vibration`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -363,7 +371,9 @@ def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref:
         # the antenna mode (the compensator's), then the faster ones, teeth in contact,
         # each with its damping (the load's drag damps the antenna mode)
         comp = Compensator(m)
-        res = modes(DriveModel(m.config.replace({'mesh.backlash': 0.0})))
+        cfg = m.config
+        res = modes(DriveModel(dataclasses.replace(
+            cfg, mesh=dataclasses.replace(cfg.mesh, backlash=0.0))))
         f0 = comp.mode_frequency_hz
         slow = _mode_rate(f0, comp.mode_damping_ratio)
         fast = [_mode_rate(float(f), float(z)) for f, z in sorted(zip(
