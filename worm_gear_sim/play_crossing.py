@@ -346,7 +346,12 @@ def start_ringing_cancel(t: ArrayLike, command: ArrayLike, slow: complex | None,
         f = free_vibration(tq, u, w, window)
         rows += [[z.real for z in fb], [z.imag for z in fb]]
         rhs += [-f.real, -f.imag]
-    a = np.linalg.solve(np.array(rows), np.array(rhs))
+    # least squares on scaled columns: two fast modes that alias to close frequencies at
+    # the command rate cannot be told apart by moved samples (cancelled in part, not blown up)
+    mat = np.array(rows)
+    scale = np.linalg.norm(mat, axis=0)
+    scale[scale == 0.0] = 1.0
+    a = np.linalg.lstsq(mat / scale, np.array(rhs), rcond=1e-6)[0] / scale
     return np.asarray(sum(ak * bk for ak, bk in zip(a, basis)))
 
 
@@ -365,8 +370,8 @@ def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref:
     cs = m.config.compensation
     if has_play(m.p) and cs.backlash_inverse and cs.quasi_static and cs.enabled:
         delta, plans = soft_feedforward_series(m, t, theta1_ref)
-        # the antenna mode left at rest after the start (docs/compensation.md): unless the
-        # play is crossed during the start transient (the mode is then not linear)
+        # the modes left at rest after the start (docs/compensation.md): unless the play
+        # is crossed during the start transient (the mode is then not linear)
         fs_t = _seconds(t)
         # the antenna mode (the compensator's), then the faster ones, teeth in contact,
         # each with its damping (the load's drag damps the antenna mode)
@@ -379,8 +384,10 @@ def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref:
         fast = [_mode_rate(float(f), float(z)) for f, z in sorted(zip(
             res.frequencies_hz, np.maximum(res.damping_ratios, 0.0))) if f > 1.5 * f0]
         window = START_WINDOW_PERIODS / f0
-        if not any(p.start < fs_t[0] + window for p in plans):
-            x = np.asarray(theta1_ref, float).reshape(-1)
+        x = np.asarray(theta1_ref, float).reshape(-1)
+        # a move from its first sample (not one that rests first: bit for bit unchanged)
+        if x.size > 1 and x[1] != x[0] and not any(p.start < fs_t[0] + window
+                                                    for p in plans):
             delta = delta + start_ringing_cancel(fs_t, x + delta, slow, fast, window)
         return delta
     from .realtime import feedforward_series
