@@ -294,17 +294,18 @@ def free_vibration(t: np.ndarray, u: np.ndarray, omega: complex, window: float) 
     before ``t[0]``) leaves in a mode driven by its acceleration (q ~ u''), the mode's
     free motion being exp(i omega t) (``omega`` = w_d + i zeta w_n [rad/s]: undamped when
     real): sum of u'' = the slope changes m_k at t_k, weighted by
-    exp(-i omega (t_k - t[0])), over ``window`` [s] from the start; past it the
+    exp(-i omega (t_k - t_w)), over ``window`` [s] from the start (t_w its end: a mode
+    damped out within the window counts for nothing); past it the
     acceleration is taken as slowly varying, and its (geometric, Abel-summed) tail is the
     forced, quasi-static response, not free vibration.  The free part of q is then
-    Im(exp(i omega t) F) / |omega| (scaled by the mode's participation)."""
+    Im(exp(i omega (t - t_w)) F) / |omega| (scaled by the mode's participation)."""
     slope = np.diff(u) / np.diff(t)
     m = np.diff(np.concatenate(([0.0], slope)))       # u'' = sum m_k delta(t - t_k)
     k = min(int(np.searchsorted(t, t[0] + window)), m.size - 1)
-    z = np.exp(-1j * omega * (t[:k] - t[0]))
+    z = np.exp(-1j * omega * (t[:k] - t[k]))      # (referred to the window's end)
     f = complex(np.sum(m[:k] * z))
     dt = float(t[k + 1] - t[k])
-    f += complex(m[k] * np.exp(-1j * omega * (t[k] - t[0])) / (1.0 - np.exp(-1j * omega * dt)))
+    f += complex(m[k] / (1.0 - np.exp(-1j * omega * dt)))
     return f
 
 
