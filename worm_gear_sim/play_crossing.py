@@ -29,11 +29,20 @@ from the crossings both are bit for bit the same, and at rest the worm still tak
 exactly half the play.  The causal path for live streams (the node's ``worm_angle_command``)
 is unchanged: it cannot know a reversal before it happens.  Measured in docs/compensation.md,
 "A soft crossing of the play".
+
+The start of a known move from rest (a step in its acceleration that the drive cannot
+follow) leaves the drive's undamped modes ringing for ever, and near a sign change of a
+small demand that ringing lifts the teeth off their flank.  :func:`trajectory_feedforward`
+therefore also cancels the free vibration the start leaves in each engaged mode
+(:func:`start_ringing_cancel`: a one-period pulse at the antenna mode and two moved samples
+per faster mode, sized from the command's own slope changes, :func:`free_vibration`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,13 +50,14 @@ from numpy.typing import ArrayLike
 
 from .compensation import Compensator
 from .dynamics.inverse import gear_torque_demand
+from .dynamics.modal import modes
 from .dynamics.model import DriveModel, has_play
 from .params import Config
 
 __all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step',
            'flank_series', 'plan_crossings', 'coast_error', 'flank_offset',
            'soft_feedforward_series', 'crossing_time', 'CROSSING_PERIODS', 'SHORTEST_PERIODS',
-           'CROSSING_TOLERANCE']
+           'CROSSING_TOLERANCE', 'free_vibration', 'start_ringing_cancel', 'START_WINDOW_PERIODS']
 
 #: The longest crossing in antenna-mode periods (:func:`crossing_time`).
 CROSSING_PERIODS = 1.0
@@ -55,6 +65,9 @@ CROSSING_PERIODS = 1.0
 SHORTEST_PERIODS = 3.0
 #: The antenna's stray while the mesh is free, as a share of half the play.
 CROSSING_TOLERANCE = 1e-2
+#: The start transient whose free vibration :func:`start_ringing_cancel` cancels, in
+#: antenna-mode periods (the cancelling pulse lasts one period within it).
+START_WINDOW_PERIODS = 3.0
 
 
 def smooth_step(u: ArrayLike) -> np.ndarray:
@@ -137,6 +150,14 @@ def flank_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
     step = 0.5 * m.config.mesh.backlash / m.output_per_input if comp.backlash_inverse \
         else 0.0
     return FlankSeries(t_out, delta, flank, demand, step, rest)
+
+
+def _seconds(t: ArrayLike) -> np.ndarray:
+    """Sample times as float seconds (integer times: nanoseconds from the first sample)."""
+    a = np.asarray(t).reshape(-1)
+    if np.issubdtype(a.dtype, np.integer):
+        return (a.astype(np.int64) - np.int64(a[0])) * 1e-9
+    return a.astype(float)
 
 
 def crossing_time(model: DriveModel | Config) -> float:
@@ -268,6 +289,79 @@ def soft_feedforward_series(model: DriveModel | Config, t: ArrayLike, theta1_ref
     return delta, plans
 
 
+def free_vibration(t: np.ndarray, u: np.ndarray, omega: complex, window: float) -> complex:
+    """The free vibration a command u (samples at ``t``, joined by straight lines, at rest
+    before ``t[0]``) leaves in a mode driven by its acceleration (q ~ u''), the mode's
+    free motion being exp(i omega t) (``omega`` = w_d + i zeta w_n [rad/s]: undamped when
+    real): sum of u'' = the slope changes m_k at t_k, weighted by
+    exp(-i omega (t_k - t_w)), over ``window`` [s] from the start (t_w its end: a mode
+    damped out within the window counts for nothing); past it the
+    acceleration is taken as slowly varying, and its (geometric, Abel-summed) tail is the
+    forced, quasi-static response, not free vibration.  The free part of q is then
+    Im(exp(i omega (t - t_w)) F) / |omega| (scaled by the mode's participation)."""
+    slope = np.diff(u) / np.diff(t)
+    m = np.diff(np.concatenate(([0.0], slope)))       # u'' = sum m_k delta(t - t_k)
+    k = min(int(np.searchsorted(t, t[0] + window)), m.size - 1)
+    z = np.exp(-1j * omega * (t[:k] - t[k]))      # (referred to the window's end)
+    f = complex(np.sum(m[:k] * z))
+    dt = float(t[k + 1] - t[k])
+    f += complex(m[k] / (1.0 - np.exp(-1j * omega * dt)))
+    return f
+
+
+def start_ringing_cancel(t: ArrayLike, command: ArrayLike, slow: complex | None,
+                         fast: Sequence[complex], window: float) -> np.ndarray:
+    """A correction (added to ``command``, samples at ``t`` from rest) that leaves the modes
+    ``slow`` and ``fast`` (their rates as in :func:`free_vibration`) at rest after the start
+    transient: the start of a move (a step in its acceleration that the drive cannot
+    follow) rings an undamped mode for ever.  The correction is, for the ``slow`` mode (the
+    antenna's; None: none), a one-period Hann-windowed oscillation at its frequency from
+    ``t[0]`` (zero value and slope at both ends; of the order of the acceleration step /
+    omega^2) and, for each ``fast`` mode, two samples moved (the 2nd and 3rd, 4th and 5th,
+    ...: a mode faster than the command rate is reached only through the kinks of the
+    command), chosen together so every free vibration (over ``window`` s) cancels; zero
+    when the samples span less than ``window`` (and the pulse) + 2 samples."""
+    tq = np.asarray(t, float)
+    u = np.asarray(command, float)
+    out = np.zeros_like(u)
+    rates = ([] if slow is None else [complex(slow)]) + [complex(w) for w in fast]
+    if not rates or tq.size < 3 + 2 * len(fast):
+        return out
+    tau = 0.0 if slow is None else 2.0 * math.pi / complex(slow).real
+    if tq[-1] - tq[0] < max(window, tau) + 2.0 * (tq[1] - tq[0]):
+        return out
+    s = tq - tq[0]
+    basis = []
+    if slow is not None:
+        hann = np.where(s < tau, np.sin(math.pi * s / tau) ** 2, 0.0)
+        w0 = complex(slow).real
+        basis += [hann * np.cos(w0 * s), hann * np.sin(w0 * s)]
+    for k in range(2 * len(fast)):
+        hat = np.zeros_like(u)
+        hat[1 + k] = 1.0
+        basis.append(hat)
+    rows = []
+    rhs = []
+    for w in rates:
+        fb = [free_vibration(tq, b, w, window) for b in basis]
+        f = free_vibration(tq, u, w, window)
+        rows += [[z.real for z in fb], [z.imag for z in fb]]
+        rhs += [-f.real, -f.imag]
+    # least squares on scaled columns: two fast modes that alias to close frequencies at
+    # the command rate cannot be told apart by moved samples (cancelled in part, not blown up)
+    mat = np.array(rows)
+    scale = np.linalg.norm(mat, axis=0)
+    scale[scale == 0.0] = 1.0
+    a = np.linalg.lstsq(mat / scale, np.array(rhs), rcond=1e-6)[0] / scale
+    return np.asarray(sum(ak * bk for ak, bk in zip(a, basis)))
+
+
+def _mode_rate(f_hz: float, zeta: float) -> complex:
+    """w_d + i zeta w_n [rad/s] of a mode of damped frequency ``f_hz`` and ratio ``zeta``."""
+    w_d = 2.0 * math.pi * f_hz
+    return complex(w_d, w_d * zeta / math.sqrt(max(1.0 - zeta * zeta, 1e-12)))
+
+
 def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
                            ) -> np.ndarray:
     """The correction of a known trajectory (``compensate_trajectory``, the trajectory
@@ -276,6 +370,26 @@ def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref:
     m = DriveModel.of(model)
     cs = m.config.compensation
     if has_play(m.p) and cs.backlash_inverse and cs.quasi_static and cs.enabled:
-        return soft_feedforward_series(m, t, theta1_ref)[0]
+        delta, plans = soft_feedforward_series(m, t, theta1_ref)
+        # the modes left at rest after the start (docs/compensation.md): unless the play
+        # is crossed during the start transient (the mode is then not linear)
+        fs_t = _seconds(t)
+        # the antenna mode (the compensator's), then the faster ones, teeth in contact,
+        # each with its damping (the load's drag damps the antenna mode)
+        comp = Compensator(m)
+        cfg = m.config
+        res = modes(DriveModel(dataclasses.replace(
+            cfg, mesh=dataclasses.replace(cfg.mesh, backlash=0.0))))
+        f0 = comp.mode_frequency_hz
+        slow = _mode_rate(f0, comp.mode_damping_ratio)
+        fast = [_mode_rate(float(f), float(z)) for f, z in sorted(zip(
+            res.frequencies_hz, np.maximum(res.damping_ratios, 0.0))) if f > 1.5 * f0]
+        window = START_WINDOW_PERIODS / f0
+        x = np.asarray(theta1_ref, float).reshape(-1)
+        # a move from its first sample (not one that rests first: bit for bit unchanged)
+        if x.size > 1 and x[1] != x[0] and not any(p.start < fs_t[0] + window
+                                                    for p in plans):
+            delta = delta + start_ringing_cancel(fs_t, x + delta, slow, fast, window)
+        return delta
     from .realtime import feedforward_series
     return feedforward_series(m, t, theta1_ref)
