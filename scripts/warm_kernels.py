@@ -12,7 +12,8 @@ cost.  Two processes compile disjoint paths side by side:
 
 ``sim``: the Newmark kernel called from Python (``simulate``) and through the stepping
 simulator (``RealtimePredictor``); ``comp``: the compensator's kernel and the model inverse,
-and a known trajectory's correction (the node's trajectory worker) without and with play.
+a known trajectory's correction (the node's trajectory worker) without and with play, and
+the adaptation's estimator.
 Each process compiles only what its path calls; what one compiled the other loads from the
 cache.  Nothing here is checked: the tests check the results.
 """
@@ -49,6 +50,9 @@ def _comp() -> None:
     t = np.arange(20) * 1e-3
     for cfg in (Config(), Config().replace({'mesh.backlash': 2e-4})):
         trajectory_feedforward(cfg, t, 0.5 * t)
+    # the adaptation's estimator (the twin: the node's adapting loop offline)
+    from worm_gear_sim.adaptation.twin import run_twin
+    run_twin(Config(), Config().replace({'adaptation.window': 0.2}), 'sector', 0.3)
 
 
 PATHS = {'sim': _sim, 'comp': _comp}
