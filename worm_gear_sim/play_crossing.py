@@ -46,18 +46,29 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
 from .compensation import Compensator
 from .dynamics.inverse import gear_torque_demand
-from .dynamics.modal import modes
-from .dynamics.model import DriveModel, has_play
+from .dynamics.modal import modes, static_equilibrium
+from .dynamics.model import (
+    AUX_Q,
+    P_GAP_HALF,
+    DriveModel,
+    has_play,
+    linear_stiffness,
+    mass_matrix,
+)
+from .dynamics.profiles import SampledProfile
+from .dynamics.simulation import simulate
 from .params import Config
 
 __all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step',
            'flank_series', 'plan_crossings', 'coast_error', 'flank_offset',
            'soft_feedforward_series', 'crossing_time', 'CROSSING_PERIODS', 'SHORTEST_PERIODS',
-           'CROSSING_TOLERANCE', 'free_vibration', 'start_ringing_cancel', 'START_WINDOW_PERIODS']
+           'CROSSING_TOLERANCE', 'free_vibration', 'start_ringing_cancel', 'START_WINDOW_PERIODS',
+           'open_mesh_cancel', 'OPEN_MESH_FIRST_SAMPLE', 'OPEN_MESH_PROBE', 'start_modes']
 
 #: The longest crossing in antenna-mode periods (:func:`crossing_time`).
 CROSSING_PERIODS = 1.0
@@ -68,6 +79,12 @@ CROSSING_TOLERANCE = 1e-2
 #: The start transient whose free vibration :func:`start_ringing_cancel` cancels, in
 #: antenna-mode periods (the cancelling pulse lasts one period within it).
 START_WINDOW_PERIODS = 3.0
+#: The first command sample :func:`open_mesh_cancel` moves: the first segment, where a start
+#: from rest without preload opens the mesh, is left as it is.
+OPEN_MESH_FIRST_SAMPLE = 2
+#: The size of the command changes [rad] whose effect :func:`open_mesh_cancel` simulates
+#: (the drive without play is linear at this scale).
+OPEN_MESH_PROBE = 1e-7
 
 
 def smooth_step(u: ArrayLike) -> np.ndarray:
@@ -309,6 +326,25 @@ def free_vibration(t: np.ndarray, u: np.ndarray, omega: complex, window: float) 
     return f
 
 
+def _start_basis(t: np.ndarray, slow: complex | None, n_fast: int, first: int
+                 ) -> list[np.ndarray]:
+    """The corrections a start cancels its free vibration with (:func:`start_ringing_cancel`):
+    a one-period Hann-windowed oscillation at the ``slow`` mode (cosine and sine; none for
+    None), then ``2 n_fast`` single moved samples from sample ``first`` on."""
+    s = t - t[0]
+    basis = []
+    if slow is not None:
+        w0 = complex(slow).real
+        tau = 2.0 * math.pi / w0
+        hann = np.where(s < tau, np.sin(math.pi * s / tau) ** 2, 0.0)
+        basis += [hann * np.cos(w0 * s), hann * np.sin(w0 * s)]
+    for k in range(2 * n_fast):
+        hat = np.zeros_like(s)
+        hat[first + k] = 1.0
+        basis.append(hat)
+    return basis
+
+
 def start_ringing_cancel(t: ArrayLike, command: ArrayLike, slow: complex | None,
                          fast: Sequence[complex], window: float) -> np.ndarray:
     """A correction (added to ``command``, samples at ``t`` from rest) that leaves the modes
@@ -330,16 +366,7 @@ def start_ringing_cancel(t: ArrayLike, command: ArrayLike, slow: complex | None,
     tau = 0.0 if slow is None else 2.0 * math.pi / complex(slow).real
     if tq[-1] - tq[0] < max(window, tau) + 2.0 * (tq[1] - tq[0]):
         return out
-    s = tq - tq[0]
-    basis = []
-    if slow is not None:
-        hann = np.where(s < tau, np.sin(math.pi * s / tau) ** 2, 0.0)
-        w0 = complex(slow).real
-        basis += [hann * np.cos(w0 * s), hann * np.sin(w0 * s)]
-    for k in range(2 * len(fast)):
-        hat = np.zeros_like(u)
-        hat[1 + k] = 1.0
-        basis.append(hat)
+    basis = _start_basis(tq, slow, len(fast), 1)
     rows = []
     rhs = []
     for w in rates:
@@ -362,6 +389,102 @@ def _mode_rate(f_hz: float, zeta: float) -> complex:
     return complex(w_d, w_d * zeta / math.sqrt(max(1.0 - zeta * zeta, 1e-12)))
 
 
+def _window_end(t: np.ndarray, window: float) -> int:
+    """The sample a start transient of ``window`` s is referred to (:func:`free_vibration`)."""
+    return min(int(np.searchsorted(t, t[0] + window)), t.size - 2)
+
+
+def _rigid_mesh(m: DriveModel) -> DriveModel:
+    """The drive without play (the teeth in contact both ways): linear about a move."""
+    cfg = m.config
+    return DriveModel(dataclasses.replace(cfg, mesh=dataclasses.replace(cfg.mesh,
+                                                                         backlash=0.0)))
+
+
+def _start_state(m: DriveModel, s: np.ndarray, u: np.ndarray, n: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Run ``m`` from rest on the command ``u`` (straight lines between the samples at
+    ``s`` [s from 0], as the node applies commands) to ``s[n]``: (the state there, the
+    angles (theta2, theta3, theta4) from the rest and the rates, as one 6-vector; the
+    approach q at every step)."""
+    tr = simulate(m, SampledProfile(s, u), t_end=float(s[n]), theta1_initial=float(u[0]))
+    return np.concatenate([tr.theta[-1] - tr.theta[0], tr.omega[-1]]), tr.aux[:, AUX_Q]
+
+
+def open_mesh_cancel(model: DriveModel | Config, t: ArrayLike, command: ArrayLike,
+                     slow: complex, n_fast: int, window: float) -> np.ndarray:
+    """A correction (added to ``command``, samples at ``t`` from rest, already corrected by
+    :func:`start_ringing_cancel`) that cancels the free vibration the start leaves because
+    the mesh opens during it.  A drive at rest without load or drag has no tooth force, and
+    the first segment of a command from rest is a velocity step: each engaged mode answers
+    it with a sine, and the gear mode's (1.55 kHz) takes the tooth force below zero within
+    the first millisecond whatever the segment's slope, so the teeth part for a moment and
+    the linear cancellation misses the free vibration of that interval.  The drive is
+    simulated over the start transient (``window`` s) with the play and without it (the
+    rigid mesh, where the linear cancellation holds); their difference at the window's end
+    is the free vibration to remove.  It is cancelled with the same kind of correction
+    (the Hann pulse at ``slow``, 2 ``n_fast`` moved samples, here from sample
+    OPEN_MESH_FIRST_SAMPLE on: after the mesh has closed again, where the drive is linear),
+    each correction's effect simulated on the rigid mesh, solved in the modes' energy
+    coordinates.  Zero when the mesh stays closed over the window (then the linear
+    cancellation is all there is) or when the samples span less than it."""
+    m = DriveModel.of(model)
+    tq = np.asarray(t, float)
+    u = np.asarray(command, float)
+    out = np.zeros_like(u)
+    first = OPEN_MESH_FIRST_SAMPLE
+    tau = 2.0 * math.pi / complex(slow).real
+    if not has_play(m.p) or tq.size < first + 2 * n_fast + 2 \
+            or tq[-1] - tq[0] < max(window, tau) + 2.0 * (tq[1] - tq[0]):
+        return out
+    s = tq - tq[0]
+    n = _window_end(s, window)
+    played, q = _start_state(m, s, u, n)
+    if not np.any(np.abs(q[1:]) <= m.p[P_GAP_HALF]):
+        return out                                # the mesh stayed closed
+    rigid = _rigid_mesh(m)
+    base, _ = _start_state(rigid, s, u, n)
+    basis = _start_basis(s, slow, n_fast, first)
+    jac = np.column_stack([(_start_state(rigid, s, u + OPEN_MESH_PROBE * b, n)[0] - base)
+                           / OPEN_MESH_PROBE for b in basis])
+    # energy coordinates of the contact modes at the start: omega_i phi_i' M x, phi_i' M v
+    rest = static_equilibrium(rigid, float(u[0]))
+    mass = mass_matrix(rigid.p)
+    w2, phi = sla.eigh(linear_stiffness(rigid.p, float(rest[0]), float(rest[1])), mass)
+    proj = phi.T @ mass
+    energy = np.block([[np.sqrt(np.maximum(w2, 0.0))[:, None] * proj, np.zeros_like(proj)],
+                       [np.zeros_like(proj), proj]])
+    mat = energy @ jac
+    scale = np.linalg.norm(mat, axis=0)
+    scale[scale == 0.0] = 1.0
+    a = np.linalg.lstsq(mat / scale, -energy @ (played - base), rcond=1e-9)[0] / scale
+    return np.asarray(sum(ak * bk for ak, bk in zip(a, basis)))
+
+
+def start_modes(model: DriveModel | Config, t: ArrayLike, command: ArrayLike
+                ) -> tuple[complex, list[complex], float]:
+    """The modes a start from rest rings, as the drive has them while it moves: (the
+    antenna mode's rate (the compensator's, with the drag's damping), the faster ones',
+    teeth in contact, the start transient [s]: START_WINDOW_PERIODS antenna periods).  The
+    faster modes are those of the drive without play linearised where the move starts
+    (worm angle ``command[0]``) and sliding at the command's rate at the transient's end:
+    the teeth's compliance varies along the worm, and sliding friction moves the gear mode
+    (1 559 Hz at rest at 0 rad, 1 545 Hz sliding forward at the sector scan's start), enough
+    to undo a cancellation spread over a few milliseconds."""
+    m = DriveModel.of(model)
+    tq = np.asarray(t, float)
+    u = np.asarray(command, float)
+    comp = Compensator(m)
+    f0 = comp.mode_frequency_hz
+    window = START_WINDOW_PERIODS / f0
+    n = _window_end(tq, window)
+    rate = float((u[n + 1] - u[n]) / (tq[n + 1] - tq[n]))
+    res = modes(_rigid_mesh(m), float(u[0]), rate)
+    fast = [_mode_rate(float(f), float(z)) for f, z in sorted(zip(
+        res.frequencies_hz, np.maximum(res.damping_ratios, 0.0))) if f > 1.5 * f0]
+    return _mode_rate(f0, comp.mode_damping_ratio), fast, window
+
+
 def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
                            ) -> np.ndarray:
     """The correction of a known trajectory (``compensate_trajectory``, the trajectory
@@ -374,22 +497,14 @@ def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref:
         # the modes left at rest after the start (docs/compensation.md): unless the play
         # is crossed during the start transient (the mode is then not linear)
         fs_t = _seconds(t)
-        # the antenna mode (the compensator's), then the faster ones, teeth in contact,
-        # each with its damping (the load's drag damps the antenna mode)
-        comp = Compensator(m)
-        cfg = m.config
-        res = modes(DriveModel(dataclasses.replace(
-            cfg, mesh=dataclasses.replace(cfg.mesh, backlash=0.0))))
-        f0 = comp.mode_frequency_hz
-        slow = _mode_rate(f0, comp.mode_damping_ratio)
-        fast = [_mode_rate(float(f), float(z)) for f, z in sorted(zip(
-            res.frequencies_hz, np.maximum(res.damping_ratios, 0.0))) if f > 1.5 * f0]
-        window = START_WINDOW_PERIODS / f0
         x = np.asarray(theta1_ref, float).reshape(-1)
+        window = START_WINDOW_PERIODS / Compensator(m).mode_frequency_hz
         # a move from its first sample (not one that rests first: bit for bit unchanged)
-        if x.size > 1 and x[1] != x[0] and not any(p.start < fs_t[0] + window
+        if x.size > 2 and x[1] != x[0] and not any(p.start < fs_t[0] + window
                                                     for p in plans):
+            slow, fast, window = start_modes(m, fs_t, x + delta)
             delta = delta + start_ringing_cancel(fs_t, x + delta, slow, fast, window)
+            delta = delta + open_mesh_cancel(m, fs_t, x + delta, slow, len(fast), window)
         return delta
     from .realtime import feedforward_series
     return feedforward_series(m, t, theta1_ref)
