@@ -14,14 +14,17 @@ import pytest
 
 from worm_gear_sim import Config
 from worm_gear_sim.compensation import Compensator
-from worm_gear_sim.dynamics.model import AUX_Q, DriveModel
+from worm_gear_sim.dynamics.model import AUX_Q, AUX_WN, DriveModel
 from worm_gear_sim.dynamics.profiles import SampledProfile, TrapezoidalProfile
 from worm_gear_sim.dynamics.simulation import simulate
 from worm_gear_sim.play_crossing import (
     START_WINDOW_PERIODS,
     flank_series,
+    open_mesh_cancel,
     smooth_step,
     soft_feedforward_series,
+    start_modes,
+    start_ringing_cancel,
     trajectory_feedforward,
 )
 from worm_gear_sim.realtime import feedforward_series
@@ -169,12 +172,43 @@ def test_the_start_of_a_known_scan_leaves_the_antenna_mode_at_rest():
     window = START_WINDOW_PERIODS / f_mode
     late = move.t >= window
     assert np.array_equal(known[late], soft[late])
-    assert 0.0 < np.abs(known - soft).max() < 2e-5            # worm angle [rad]
+    assert 0.0 < np.abs(known - soft).max() < 3e-5            # worm angle [rad]
     ring = [_mode_amplitude(move.t, antenna_error(plant, move.t, move.theta1 + d,
                                                   move.theta1), 2 * math.pi * f_mode, 0.1, 0.3)
             for d in (soft, known)]
     assert ring[0] > 1e-7 and ring[1] < 0.05 * ring[0], ring
 
+
+
+def _gear_ringing(t, w, a, b):
+    """Amplitude of the gear mode (1 530-1 570 Hz, the best frequency) in w over [a, b]."""
+    return max(_mode_amplitude(t, w, 2 * math.pi * f, a, b) for f in range(1530, 1571, 2))
+
+
+def test_a_start_that_opens_the_mesh_leaves_the_gear_mode_at_rest():
+    """Without load or drag a drive at rest carries no tooth force, and the first command
+    segment (a velocity step) parts the teeth for ~0.3 ms whatever its slope: the linear
+    start cancellation then leaves the gear mode ringing (0.039 N of mesh force, 12 % of
+    the scan's 0.32 N).  With the open interval's free vibration simulated and cancelled
+    the ringing is < 2 % (measured 0.0007 N, 0.2 %).  A loaded drive's mesh stays closed:
+    no correction."""
+    plant = Config().replace({'mesh.backlash': 0.5 * ARCMIN})
+    move = sector_scan(plant, periods=0.05)             # 0.2 s of the scan
+    m = trajectory_model(DriveModel(plant))
+    d = trajectory_feedforward(m, move.t, move.theta1)
+    u = move.theta1 + d
+    tr = simulate(DriveModel(plant), SampledProfile(move.t, u), t_end=0.1, record_every=1,
+                  theta1_initial=float(u[0]))
+    w = tr.aux[:, AUX_WN]
+    mean = float(w[tr.t >= 0.05].mean())
+    assert 0.3 < mean < 0.35                           # N: the scan's inertia alone
+    assert _gear_ringing(tr.t, w, 0.05, 0.1) < 0.02 * mean
+    loaded = trajectory_model(DriveModel(plant.replace({'load.output_torque': 0.5})))
+    soft, _ = soft_feedforward_series(loaded, move.t, move.theta1)
+    slow, fast, window = start_modes(loaded, move.t, move.theta1 + soft)
+    x = move.theta1 + soft
+    x = x + start_ringing_cancel(move.t, x, slow, fast, window)
+    assert not np.any(open_mesh_cancel(loaded, move.t, x, slow, len(fast), window))
 
 def test_fast_reversals_keep_the_step_and_no_play_changes_nothing():
     """A reversal in a few milliseconds (the radar slew) leaves no time to coast: the

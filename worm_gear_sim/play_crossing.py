@@ -54,7 +54,6 @@ from .dynamics.inverse import gear_torque_demand
 from .dynamics.modal import modes, static_equilibrium
 from .dynamics.model import (
     AUX_Q,
-    P_GAP_HALF,
     DriveModel,
     has_play,
     linear_stiffness,
@@ -440,7 +439,8 @@ def open_mesh_cancel(model: DriveModel | Config, t: ArrayLike, command: ArrayLik
     s = tq - tq[0]
     n = _window_end(s, window)
     played, q = _start_state(m, s, u, n)
-    if not np.any(np.abs(q[1:]) <= m.p[P_GAP_HALF]):
+    half_play = 0.5 * m.config.mesh.backlash * m.config.geometry.gear_pitch_radius  # r_g b/2
+    if not np.any(np.abs(q[1:]) <= half_play):
         return out                                # the mesh stayed closed
     rigid = _rigid_mesh(m)
     base, _ = _start_state(rigid, s, u, n)
