@@ -60,7 +60,7 @@ from .dynamics.model import (
     mass_matrix,
 )
 from .dynamics.profiles import SampledProfile
-from .dynamics.simulation import simulate
+from .dynamics.simulation import Simulator
 from .params import Config
 
 __all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step',
@@ -406,7 +406,8 @@ def _start_state(m: DriveModel, s: np.ndarray, u: np.ndarray, n: int
     ``s`` [s from 0], as the node applies commands) to ``s[n]``: (the state there, the
     angles (theta2, theta3, theta4) from the rest and the rates, as one 6-vector; the
     approach q at every step)."""
-    tr = simulate(m, SampledProfile(s, u), t_end=float(s[n]), theta1_initial=float(u[0]))
+    # (the model is the compensator's, already in use: no usability check, no warnings)
+    tr = Simulator(m, theta1=float(u[0]), check=False).run(SampledProfile(s, u), float(s[n]))
     return np.concatenate([tr.theta[-1] - tr.theta[0], tr.omega[-1]]), tr.aux[:, AUX_Q]
 
 
