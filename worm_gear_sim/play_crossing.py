@@ -51,7 +51,7 @@ from numpy.typing import ArrayLike
 
 from .compensation import Compensator
 from .dynamics.inverse import gear_torque_demand
-from .dynamics.modal import modes, static_equilibrium
+from .dynamics.modal import modes, open_mesh_damping_matrix, static_equilibrium
 from .dynamics.model import (
     AUX_Q,
     DriveModel,
@@ -67,7 +67,8 @@ __all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step
            'flank_series', 'plan_crossings', 'coast_error', 'flank_offset',
            'soft_feedforward_series', 'crossing_time', 'CROSSING_PERIODS', 'SHORTEST_PERIODS',
            'CROSSING_TOLERANCE', 'free_vibration', 'start_ringing_cancel', 'START_WINDOW_PERIODS',
-           'open_mesh_cancel', 'OPEN_MESH_FIRST_SAMPLE', 'OPEN_MESH_PROBE', 'start_modes']
+           'open_mesh_cancel', 'OPEN_MESH_FIRST_SAMPLE', 'OPEN_MESH_PROBE', 'start_modes',
+           'open_worm_rate', 'worm_ringing_cancel']
 
 #: The longest crossing in antenna-mode periods (:func:`crossing_time`).
 CROSSING_PERIODS = 1.0
@@ -302,7 +303,58 @@ def soft_feedforward_series(model: DriveModel | Config, t: ArrayLike, theta1_ref
                            tolerance * half_play)
     planned = flank_offset(fs.t, plans, fs.rest_flank)
     delta = fs.delta + (planned - fs.flank) * fs.flank_step
-    return delta, plans
+    return delta + worm_ringing_cancel(m, fs.t, plans, fs.flank_step), plans
+
+
+def open_worm_rate(model: DriveModel | Config) -> complex:
+    """The rate (as in :func:`free_vibration`) of the worm on its shaft while the mesh is
+    open: J_w theta2'' = -K_w (theta2 - theta1) (Eq. 11 without tooth force), with the
+    damping that still acts then (:func:`~worm_gear_sim.dynamics.modal.
+    open_mesh_damping_matrix`)."""
+    m = DriveModel.of(model)
+    jw, kw = m.derived.J_w, m.derived.K_w
+    w_n = math.sqrt(kw / jw)
+    zeta = min(float(open_mesh_damping_matrix(m)[0, 0]) / (2.0 * jw * w_n), 0.999)
+    return complex(w_n * math.sqrt(1.0 - zeta * zeta), zeta * w_n)
+
+
+def worm_ringing_cancel(model: DriveModel | Config, t: np.ndarray,
+                        plans: Sequence[CrossingPlan], flank_step: float) -> np.ndarray:
+    """A correction that lands the worm on the new flank without ringing: while the mesh
+    is open the worm is alone on its shaft (:func:`open_worm_rate`, 8.6 kHz on the default
+    drive), and the crossing's smooth step, sampled and joined by straight lines, kinks
+    at every sample, so the worm reaches the new flank oscillating on its shaft and the
+    teeth chatter as the small tooth force builds up.  For each planned crossing (end >
+    start, spanning at least 2 samples) the two last samples before its end are moved so
+    that the free vibration of the step (``flank_step`` per unit of flank, :func:`free_vibration`
+    referred to the 2nd sample past the end) is zero."""
+    tq = np.asarray(t, float)
+    out = np.zeros_like(tq)
+    live = [p for p in plans if p.end > p.start]
+    if not live:
+        return out
+    rate = open_worm_rate(model)
+    for p in live:
+        k0 = max(int(np.searchsorted(tq, p.start)) - 1, 0)
+        k1 = int(np.searchsorted(tq, p.end, side='right')) - 1
+        if k1 - k0 < 2 or k1 + 4 > tq.size:
+            continue
+        # from the sample before the start to 2 past the end: every kink of the step is in
+        # the sum, and the last slope change (the tail of free_vibration) is zero
+        tt = tq[k0:k1 + 4]
+        step = (flank_offset(tt, [p], p.start_flank) - p.start_flank) * flank_step
+        span = float(tt[-2] - tt[0])
+        f = free_vibration(tt, step, rate, span)
+        fb = []
+        for j in (k1 - 1, k1):
+            hat = np.zeros_like(tt)
+            hat[j - k0] = 1.0
+            fb.append(free_vibration(tt, hat, rate, span))
+        mat = np.array([[z.real for z in fb], [z.imag for z in fb]])
+        a = np.linalg.lstsq(mat, -np.array([f.real, f.imag]), rcond=1e-9)[0]
+        out[k1 - 1] += a[0]
+        out[k1] += a[1]
+    return out
 
 
 def free_vibration(t: np.ndarray, u: np.ndarray, omega: complex, window: float) -> complex:
