@@ -19,13 +19,16 @@ from worm_gear_sim.dynamics.profiles import SampledProfile, TrapezoidalProfile
 from worm_gear_sim.dynamics.simulation import simulate
 from worm_gear_sim.play_crossing import (
     START_WINDOW_PERIODS,
+    flank_offset,
     flank_series,
     open_mesh_cancel,
+    open_worm_rate,
     smooth_step,
     soft_feedforward_series,
     start_modes,
     start_ringing_cancel,
     trajectory_feedforward,
+    worm_ringing_cancel,
 )
 from worm_gear_sim.realtime import feedforward_series
 from worm_gear_sim.studies.mismatch import benefit, mismatched, sector_scan, slew_reversals
@@ -104,6 +107,34 @@ def test_the_crossings_follow_the_demand_and_keep_the_rest_offset(scan):
     half = 0.5 * rest.mesh.backlash / mr.output_per_input    # r_g b / 2 / l_w
     assert d_soft[-1] == pytest.approx(half, rel=1e-9)
 
+
+
+def test_the_worm_crosses_the_play_without_ringing_on_its_shaft(scan):
+    """While the mesh is open the worm is alone on its shaft, J_w theta2'' = -K_w (theta2 -
+    theta1): integrated independently (scipy DOP853 on the command's straight lines)
+    through each planned crossing, the sampled smooth step leaves it oscillating; with the
+    two samples moved by worm_ringing_cancel (the only change) it leaves < 2 % of that."""
+    from scipy.integrate import solve_ivp
+    _, m, move, fs, soft, plans = scan
+    jw, kw = m.derived.J_w, m.derived.K_w
+    assert open_worm_rate(m) == pytest.approx(math.sqrt(kw / jw))      # undamped drive
+    fix = worm_ringing_cancel(m, fs.t, plans, fs.flank_step)
+    assert np.array_equal(np.flatnonzero(fix), np.flatnonzero(soft - (
+        fs.delta + (flank_offset(fs.t, plans, fs.rest_flank) - fs.flank) * fs.flank_step)))
+    for p in plans:
+        k0, k1 = np.searchsorted(fs.t, [p.start - 2e-3, p.end + 3e-3])
+        t = fs.t[k0:k1]
+        step = (flank_offset(t, [p], p.start_flank) - p.start_flank) * fs.flank_step
+        assert np.count_nonzero(fix[k0:k1]) == 2
+        ring = []
+        for u in (step, step + fix[k0:k1]):
+            def shaft(tt, y, t=t, u=u):
+                return [y[1], -kw / jw * (y[0] - np.interp(tt, t, u))]
+            sol = solve_ivp(shaft, (t[0], t[-1]), [0.0, 0.0], method='DOP853', rtol=1e-11,
+                            atol=1e-14, max_step=2e-5)
+            twist, rate = sol.y[0, -1] - u[-1], sol.y[1, -1]
+            ring.append(math.hypot(twist, rate / math.sqrt(kw / jw)))
+        assert ring[0] > 1e-8 and ring[1] < 0.02 * ring[0], ring
 
 def _touch_speeds(plant, t, command, windows):
     """The largest |dq/dt| [m/s] of the mesh approach at the instants the teeth touch

@@ -325,9 +325,11 @@ def worm_ringing_cancel(model: DriveModel | Config, t: np.ndarray,
     drive), and the crossing's smooth step, sampled and joined by straight lines, kinks
     at every sample, so the worm reaches the new flank oscillating on its shaft and the
     teeth chatter as the small tooth force builds up.  For each planned crossing (end >
-    start, spanning at least 2 samples) the two last samples before its end are moved so
-    that the free vibration of the step (``flank_step`` per unit of flank, :func:`free_vibration`
-    referred to the 2nd sample past the end) is zero."""
+    start, spanning at least 2 samples) the two samples nearest its middle (the worm
+    half-way across the play, away from both flanks: a drag can make the gear meet the worm
+    before the planned end) are moved so that the free vibration of the step
+    (``flank_step`` per unit of flank, :func:`free_vibration` referred to the 2nd sample
+    past the end) is zero."""
     tq = np.asarray(t, float)
     out = np.zeros_like(tq)
     live = [p for p in plans if p.end > p.start]
@@ -345,15 +347,17 @@ def worm_ringing_cancel(model: DriveModel | Config, t: np.ndarray,
         step = (flank_offset(tt, [p], p.start_flank) - p.start_flank) * flank_step
         span = float(tt[-2] - tt[0])
         f = free_vibration(tt, step, rate, span)
+        mid = int(np.searchsorted(tq, 0.5 * (p.start + p.end)))
+        moved = (mid - 1, mid)
         fb = []
-        for j in (k1 - 1, k1):
+        for j in moved:
             hat = np.zeros_like(tt)
             hat[j - k0] = 1.0
             fb.append(free_vibration(tt, hat, rate, span))
         mat = np.array([[z.real for z in fb], [z.imag for z in fb]])
         a = np.linalg.lstsq(mat, -np.array([f.real, f.imag]), rcond=1e-9)[0]
-        out[k1 - 1] += a[0]
-        out[k1] += a[1]
+        out[moved[0]] += a[0]
+        out[moved[1]] += a[1]
     return out
 
 
