@@ -30,12 +30,19 @@ exactly half the play.  The causal path for live streams (the node's ``worm_angl
 is unchanged: it cannot know a reversal before it happens.  Measured in docs/compensation.md,
 "A soft crossing of the play".
 
+The crossing's step reaches the drive sampled and joined by straight lines: while the mesh
+is open the worm rings on its shaft with the kinks, so two samples of each crossing are
+moved to land it without that ringing (:func:`worm_ringing_cancel`).
+
 The start of a known move from rest (a step in its acceleration that the drive cannot
 follow) leaves the drive's undamped modes ringing for ever, and near a sign change of a
 small demand that ringing lifts the teeth off their flank.  :func:`trajectory_feedforward`
-therefore also cancels the free vibration the start leaves in each engaged mode
-(:func:`start_ringing_cancel`: a one-period pulse at the antenna mode and two moved samples
-per faster mode, sized from the command's own slope changes, :func:`free_vibration`).
+therefore also cancels the free vibration the start leaves in each engaged mode, the
+modes taken where the move starts and as it slides (:func:`start_modes`;
+:func:`start_ringing_cancel`: a one-period pulse at the antenna mode and two moved samples
+per faster mode, sized from the command's own slope changes, :func:`free_vibration`), and,
+where the start parts the teeth (no load, no drag: no tooth force at rest), the free
+vibration of that open interval, simulated (:func:`open_mesh_cancel`).
 """
 
 from __future__ import annotations
