@@ -157,3 +157,51 @@ def test_metadata_covers_every_parameter():
     for key, m in meta.items():
         assert m['description'], key
     assert meta['integrator.time_step']['read_only']
+
+
+def _full_path(base, changes):
+    """The whole set validated field by field (what replace did before it checked only the
+    changed fields): the reference of the fast path."""
+    nested = base.to_nested_dict()
+    for key, value in changes.items():
+        sec, _, name = key.partition('.')
+        nested[sec][name] = value
+    return config_from_mapping(nested, usable=False)
+
+
+@pytest.mark.parametrize('changes', [
+    {'materials.gear_shaft_shear_modulus': 8.1e10, 'damping.modal_damping_ratios': [0.01, 0, 0]},
+    {'friction.mu_kinetic': 3, 'mesh.stiffness_model': 'linear'},          # int -> float
+    {'integrator.max_subdivision_level': 4.0},                             # float -> int
+    {'materials.flywheel_density': -1.0},                                  # range
+    {'damping.modal_damping_ratios': [0.01, -0.1, 0.0]},                   # list entry
+    {'mesh.stiffness_model': 'cubic'},                                     # choices
+    {'friction.mu_kinetic': float('nan')},                                 # finite
+    {'materials.flywheel_density': 'heavy', 'geometry.lead': -1.0},        # two bad: the first
+    {'mesh.backlash': 0.06},                                               # cross-field
+    {'input.accel_time': 0.6, 'input.move_time': 1.0},                     # cross-field
+    {'mesh.worm_error_harmonics': [0.0, 0.0, 0.0]},                        # cross-field
+])
+def test_replace_checks_the_changed_fields_like_the_full_validation(changes):
+    base = load_config(YAML_PATH).replace({'geometry.lead_angle': 0.064286})
+    try:
+        want = _full_path(base, changes)
+    except ConfigError as exc:
+        with pytest.raises(ConfigError) as got:
+            Config.replace(base, changes)
+        assert (got.value.key, str(got.value)) == (exc.key, str(exc))
+        return
+    got = base.replace(changes)
+    assert got == want and hash(got) == hash(want) and type(got) is Config
+    assert got.to_flat_dict() == want.to_flat_dict()
+    assert all(type(a) is type(b) for a, b in zip(got.to_flat_dict().values(),
+                                                  want.to_flat_dict().values()))
+    assert base.to_flat_dict() != got.to_flat_dict()     # the base is untouched
+
+
+def test_replace_names_an_unknown_key_first():
+    with pytest.raises(ConfigError) as exc:
+        Config().replace({'friction.mu_kinetic': 0.1, 'mesh.stifness_model': 'linear',
+                          'mesh.phase': 1.0})
+    assert exc.value.key == 'mesh.stifness_model'
+    assert 'did you mean mesh.stiffness_model' in str(exc.value)

@@ -24,9 +24,9 @@ from typing import Any
 
 from .schema import (
     Parameters,
+    replaced,
     sections_from_mapping,
 )
-from .validation import ConfigError, suggest
 
 __all__ = [
     'Config', 'config_from_mapping', 'default_config', 'check_usable',
@@ -42,13 +42,7 @@ class Config(Parameters):
         field, cross-field, and usable (:func:`check_usable`, naming the keys changed)."""
         changes = dict(overrides or {})
         changes.update({k.replace('__', '.'): v for k, v in kw.items()})
-        nested = self.to_nested_dict()
-        for key, value in changes.items():
-            sec, _, name = key.partition('.')
-            if sec not in nested or name not in nested[sec]:
-                raise ConfigError(key, 'unknown parameter' + suggest(key, self.to_flat_dict()))
-            nested[sec][name] = value
-        cfg = config_from_mapping(nested, source='overrides', usable=False)
+        cfg = replaced(self, changes)     # the changed fields checked, then across fields
         check_usable(cfg, changed=[k for k in changes])
         return cfg
 

@@ -29,10 +29,12 @@ door: value checks and the "type from the default" rule in :mod:`~worm_gear_sim.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, TypeVar
 
 from .validation import (
     ConfigError,
@@ -46,10 +48,11 @@ __all__ = [
     'DEG', 'PHASE_AT_MEAN_STIFFNESS', 'MAX_ERROR_ORDERS', 'ERROR_HARMONIC_LIMIT',
     'ERROR_SLOPE_LIMIT', 'Geometry', 'Materials', 'Shafts', 'Mesh', 'Friction',
     'Damping', 'Load', 'Integrator', 'InputProfile', 'NodeSettings', 'CompensationSettings',
-    'AdaptationSettings', 'ADAPTABLE_KEYS',
+    'AdaptationSettings', 'ADAPTABLE_KEYS', 'replaced', 'cross_checks',
 ]
 
 NODE_NAME = 'worm_gear_sim'
+P = TypeVar('P', bound='Parameters')
 DEG = math.pi / 180.0
 #: Largest |angle| [rad] the model accepts (commands, initial states, equilibria): at 1e9 rad
 #: the mesh phase and the approach q = l_w theta2 - r_g theta3 keep ~1e-7 of their resolution
@@ -540,6 +543,46 @@ def validate(cfg: Parameters) -> None:
             key = f'{sec}.{f.name}'
             default = field_default(f)
             coerce(key, getattr(obj, f.name), default, f.metadata)
+    cross_checks(cfg)
+
+
+def replaced(cfg: P, changes: Mapping[str, Any]) -> P:
+    """A copy of the validated ``cfg`` with the dotted-key ``changes``: each changed value
+    checked and coerced by its field's rule (:func:`coerce`, as :func:`sections_from_mapping`
+    does, in declaration order: the same error), then the cross-field checks; the unchanged
+    fields, checked when ``cfg`` was built, are not checked again.  An unknown key raises
+    :class:`ConfigError` (the first in ``changes`` order)."""
+    table = _field_table()
+    for key in changes:
+        if key not in table:
+            raise ConfigError(key, 'unknown parameter' + suggest(key, table))
+    per_section: dict[str, dict[str, Any]] = {}
+    for key in sorted(changes, key=lambda k: table[k][0]):
+        _, sec, f = table[key]
+        per_section.setdefault(sec, {})[f.name] = coerce(key, changes[key], field_default(f),
+                                                         f.metadata)
+    new = copy.copy(cfg)                 # no __post_init__: the sections are set below
+    for sec, values in per_section.items():
+        object.__setattr__(new, sec, dataclasses.replace(getattr(cfg, sec), **values))
+    cross_checks(new)
+    return new
+
+
+_FIELD_TABLE: dict[str, tuple[int, str, Any]] = {}
+
+
+def _field_table() -> dict[str, tuple[int, str, Any]]:
+    """Dotted name -> (declaration rank, section, dataclass field)."""
+    if not _FIELD_TABLE:
+        for sec, cls in SECTIONS.items():
+            for f in fields(cls):
+                _FIELD_TABLE[f'{sec}.{f.name}'] = (len(_FIELD_TABLE), sec, f)
+    return _FIELD_TABLE
+
+
+def cross_checks(cfg: Parameters) -> None:
+    """The checks across fields of a set whose every field is valid; raises
+    :class:`ConfigError` naming the key."""
     integ = cfg.integrator
     if not (2.0 * integ.newmark_beta >= integ.newmark_gamma - 1e-15):
         raise ConfigError('integrator.newmark_beta', f'{integ.newmark_beta:g} with gamma '
