@@ -87,3 +87,24 @@ def test_a_candidate_set_is_built_once_and_simulates_the_same(case):
     C = stepping_damping(played)
     assert C.shape == (6, 3) and stepping_damping(played) is C     # stacked: play
     assert np.array_equal(C, stepping_damping(DriveModel(played.config)))
+
+
+def test_the_remembered_command_gives_the_same_numbers(case):
+    """predict with a memo (the fit's evaluations: the command interpolated on the
+    integrator's grid once per record and window) equals predict without, bit for bit."""
+    from worm_gear_sim.dynamics.profiles import SampledProfile
+    from worm_gear_sim.identification import predict
+    base, rec = case
+    memo: dict = {}
+    for t_end in (0.02, None, 0.02):
+        plain = predict(base, rec, t_end)
+        assert np.array_equal(plain['theta4'], predict(base, rec, t_end, memo)['theta4'])
+        assert np.array_equal(plain['theta4'], predict(base, rec, t_end, memo)['theta4'])
+    assert sorted(memo, key=str) == [0.02, None]
+    prof = SampledProfile(rec.t, rec.theta1, remember=True)
+    ref = SampledProfile(rec.t, rec.theta1)
+    for grid in (np.linspace(0, 0.03, 7), np.linspace(0, 0.03, 7), np.linspace(0, 0.02, 7)):
+        got = prof.theta1_dot(grid)
+        assert np.array_equal(got, ref.theta1_dot(grid)) and not got.flags.writeable
+        assert np.array_equal(prof.theta1(grid), ref.theta1(grid))
+    assert prof.theta1(0.01) == ref.theta1(0.01)

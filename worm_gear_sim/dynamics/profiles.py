@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -170,7 +171,11 @@ class SampledProfile(Profile):
 
     name = 'sampled'
 
-    def __init__(self, times, values, interpolation: str = 'linear', source: str = ''):
+    def __init__(self, times, values, interpolation: str = 'linear', source: str = '',
+                 remember: bool = False):
+        """``remember``: keep the values on the last time grid asked for (read-only arrays;
+        asked again for an equal grid, the same numbers without interpolating): for a
+        caller that simulates the same command many times, e.g. a fit's evaluations."""
         t = np.asarray(times, float)
         y = np.asarray(values, float)
         if t.ndim != 1 or y.shape != t.shape or t.size == 0:
@@ -182,16 +187,36 @@ class SampledProfile(Profile):
         if interpolation not in ('linear', 'hold'):
             raise ConfigError('interpolation', f'must be linear or hold, got {interpolation!r}')
         self.times, self.values, self.interpolation, self.source = t, y, interpolation, source
+        self.remember = bool(remember)
+        self._grids: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+    def _remembered(self, what: str, t: np.ndarray,
+                    compute: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        if not self.remember or t.ndim != 1:
+            return compute(t)
+        last = self._grids.get(what)          # one tuple, replaced whole: thread-safe
+        if last is not None and last[0].shape == t.shape and np.array_equal(last[0], t):
+            return last[1]
+        out = compute(t)
+        out.flags.writeable = False
+        grid = t.copy()
+        grid.flags.writeable = False
+        self._grids[what] = (grid, out)
+        return out
 
     def theta1(self, t):
-        t = np.asarray(t, float)
+        return self._remembered('theta1', np.asarray(t, float), self._theta1)
+
+    def theta1_dot(self, t):
+        return self._remembered('theta1_dot', np.asarray(t, float), self._theta1_dot)
+
+    def _theta1(self, t: np.ndarray) -> np.ndarray:
         if self.interpolation == 'linear':
             return np.interp(t, self.times, self.values)
         idx = np.searchsorted(self.times, t, side='right') - 1
         return self.values[np.clip(idx, 0, None)]
 
-    def theta1_dot(self, t):
-        t = np.asarray(t, float)
+    def _theta1_dot(self, t: np.ndarray) -> np.ndarray:
         if self.interpolation == 'hold' or self.times.size < 2:
             return np.zeros_like(t)
         slopes = np.diff(self.values) / np.diff(self.times)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -139,12 +140,14 @@ def rigid_motion(model: DriveModel | Config) -> np.ndarray:
     return DriveModel.of(model).rigid_motion
 
 
-def predict(model: DriveModel | Config, rec: Record,
-            t_end: float | None = None) -> dict[str, np.ndarray]:
+def predict(model: DriveModel | Config, rec: Record, t_end: float | None = None,
+            memo: dict[str, Any] | None = None) -> dict[str, np.ndarray]:
     """The model's theta2, theta3, theta4 at the record's sample times up to ``t_end``.
 
     Starts at rest in static equilibrium at theta1[0] (under the record's load torque at
     t[0] when it has one), command (and load) interpolated linearly between the samples.
+    ``memo``: a dict the caller keeps for this record (a fit's evaluations): the command of
+    each ``t_end`` and its values on the integrator's grid are kept in it (the same numbers).
     Raises SimulationError if the integration fails."""
     t = np.asarray(rec.t, float)
     th1 = np.asarray(rec.theta1, float)
@@ -159,7 +162,11 @@ def predict(model: DriveModel | Config, rec: Record,
     sim = Simulator(model, theta1=float(th1[0]), t0=float(t[0]), interpolation='linear')
     if load is not None:
         sim.reset(float(th1[0]), float(t[0]), load_torque=float(load.values[0]))
-    prof = SampledProfile(t, th1, 'linear')
+    prof = None if memo is None else memo.get(t_end)
+    if prof is None:
+        prof = SampledProfile(t, th1, 'linear', remember=memo is not None)
+        if memo is not None:
+            memo[t_end] = prof
     if np.all(np.abs(steps - ks) < 1e-6):
         k = ks.astype(np.int64)
         stride = int(np.gcd.reduce(np.diff(k))) if k.size > 1 else 1

@@ -132,6 +132,7 @@ class Problem:
         self.sigma = {o: max(self.noise[o], 1e-3 * self.scale[o]) for o in self.outputs}
         self.period = self.dominant_period()
         self.n_evals = 0
+        self._memos: list[dict] = [{} for _ in self.records]   # predict's, per record
         self._last: tuple[bytes, float | None, np.ndarray] | None = None
 
     def dominant_period(self) -> float:
@@ -178,14 +179,14 @@ class Problem:
             model: DriveModel | None = usable_model(self.config(x))
         except ConfigError:
             model = None
-        for r in self.records:
+        for r, memo in zip(self.records, self._memos):
             t_end = None if window is None else r.t[0] + window
             n = r.t.size if t_end is None else max(2, int(np.searchsorted(r.t, t_end,
                                                                           side='right')))
             pred = None
             if model is not None:
                 try:
-                    pred = predict(model, r, t_end)
+                    pred = predict(model, r, t_end, memo)
                 except (SimulationError, ValueError):
                     pred = None
             for o in self.outputs:
