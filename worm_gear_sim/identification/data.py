@@ -141,7 +141,7 @@ def rigid_motion(model: DriveModel | Config) -> np.ndarray:
 
 
 def predict(model: DriveModel | Config, rec: Record, t_end: float | None = None,
-            memo: dict[str, Any] | None = None) -> dict[str, np.ndarray]:
+            memo: dict[float | None, Any] | None = None) -> dict[str, np.ndarray]:
     """The model's theta2, theta3, theta4 at the record's sample times up to ``t_end``.
 
     Starts at rest in static equilibrium at theta1[0] (under the record's load torque at

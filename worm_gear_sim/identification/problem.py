@@ -29,6 +29,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -132,7 +133,7 @@ class Problem:
         self.sigma = {o: max(self.noise[o], 1e-3 * self.scale[o]) for o in self.outputs}
         self.period = self.dominant_period()
         self.n_evals = 0
-        self._memos: list[dict] = [{} for _ in self.records]   # predict's, per record
+        self._memos: list[dict[float | None, Any]] = [{} for _ in self.records]  # predict's
         self._last: tuple[bytes, float | None, np.ndarray] | None = None
 
     def dominant_period(self) -> float:
