@@ -108,3 +108,26 @@ def test_the_remembered_command_gives_the_same_numbers(case):
         assert np.array_equal(got, ref.theta1_dot(grid)) and not got.flags.writeable
         assert np.array_equal(prof.theta1(grid), ref.theta1(grid))
     assert prof.theta1(0.01) == ref.theta1(0.01)
+
+
+def test_candidates_sharing_the_mesh_reuse_its_table_with_the_same_numbers():
+    """A fit's candidates differ in shafts, inertias, damping or friction: the tooth
+    compliance table (and the calibration of Eqs. 16-17) of their common mesh is built once
+    and kept; a model built with the kept table equals one built from scratch, and a
+    changed mesh gets its own table.  The check's natural modes are those of ``modes``."""
+    from worm_gear_sim.dynamics import periodic
+    from worm_gear_sim.dynamics.modal import modes, natural_modes
+    from worm_gear_sim.dynamics.model import DriveModel
+    base = load_config()
+    sets = [base.replace({KG: base.materials.gear_shaft_shear_modulus * 1.1}),
+            base.replace({'friction.mu_kinetic': 0.05}),
+            base.replace({'mesh.worm_fit_b': base.mesh.worm_fit_b * 1.5})]
+    kept = [DriveModel(c).p for c in sets]
+    for c, p in zip(sets, kept):
+        periodic._TABLES.clear()
+        fresh = DriveModel(c).p
+        assert np.array_equal(p, fresh)
+    assert not np.array_equal(kept[0][-2060:], kept[2][-2060:])   # another mesh, its table
+    hz, shapes = natural_modes(sets[0])
+    m = modes(sets[0], include_damping=False)
+    assert np.array_equal(hz, m.undamped_hz) and np.array_equal(shapes, m.shapes)

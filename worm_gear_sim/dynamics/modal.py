@@ -24,7 +24,7 @@ from .model import (
     without_play,
 )
 
-__all__ = ['static_equilibrium', 'ModalResult', 'modes', 'damping_matrix',
+__all__ = ['static_equilibrium', 'ModalResult', 'modes', 'natural_modes', 'damping_matrix',
            'open_mesh_damping_matrix', 'stepping_damping',
            'amplitude_time_step', 'step_resolution', 'step_resolution_warning',
            'StepResolutionWarning', 'STEPS_PER_PERIOD']
@@ -115,18 +115,30 @@ def modes(model: DriveModel | Parameters, theta1: float = 0.0, sliding_rate: flo
         if not (math.isfinite(float(x)) and abs(float(x)) <= limit):
             raise ValueError(f'modes: {name} = {x!r} must be finite and within +-{limit:g}')
     model = DriveModel.of(model)
-    p = model.p
-    u = static_equilibrium(p, theta1)
-    v = rigid_motion_vector(p) * sliding_rate
-    _, dQdu, dQdv, _ = forces(p, u, v, theta1)
-    M = mass_matrix(p)
-    K = -dQdu
+    u, K, dQdv, M = _linearised(model.p, theta1, sliding_rate)
     C = damping_matrix(model) - dQdv if include_damping else np.zeros((3, 3))
     undamped, shapes = _undamped_modes(K, M)
     # state-space eigenvalues for damped frequencies and damping ratios
     damped, zeta = _damped_modes(M, K, C, len(undamped))
     return ModalResult(frequencies_hz=damped, undamped_hz=undamped, damping_ratios=zeta,
                        shapes=shapes, M=M, K=K, C=C, operating_point=u)
+
+
+def _linearised(p: np.ndarray, theta1: float, sliding_rate: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(u, K, dQ/dv, M) of Eq. 15 linearised about the static equilibrium at theta1."""
+    u = static_equilibrium(p, theta1)
+    v = rigid_motion_vector(p) * sliding_rate
+    _, dQdu, dQdv, _ = forces(p, u, v, theta1)
+    return u, -dQdu, dQdv, mass_matrix(p)
+
+
+def natural_modes(model: DriveModel | Parameters) -> tuple[np.ndarray, np.ndarray]:
+    """(natural frequencies [Hz], shapes) of :func:`modes` at theta1 = 0, the same numbers,
+    without its damped frequencies and damping ratios (the usability check's)."""
+    model = DriveModel.of(model)
+    _, K, _, M = _linearised(model.p, 0.0, 0.0)
+    return _undamped_modes(K, M)
 
 
 def _undamped_modes(K: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -40,6 +40,7 @@ linear values (3.5e8 / 2.5e8 N/m).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -96,6 +97,7 @@ MODULE_OF_FIT = 2.0     # Eqs. 16-17 and the linear tooth stiffnesses are the pa
 TWO_PI = 2.0 * math.pi
 
 
+@functools.lru_cache(maxsize=64)    # numpy's I0 costs more than the rest of a model's build
 def _calibrated_origin(scale: float, b: float, target_mean: float,
                        cosine: bool = True) -> float:
     """x0 [deg] such that the mean over a mesh cycle of scale*(e^{b x} + e^{b(x+360)})
@@ -127,20 +129,17 @@ def pack_parameters(cfg: Parameters, derived: Derived | None = None) -> np.ndarr
     # Tooth stiffness scales with the module M (the M factor of Eqs. 16-17); the linear
     # values and the calibration of the contact-position origin refer to the paper's M2.
     m_scale = g.module / MODULE_OF_FIT
-    p[P_CWKW_LIN] = mesh.worm_tooth_stiffness_linear * mesh.worm_tooth_stiffness_multiplier \
-        * m_scale
-    p[P_CGKG_LIN] = mesh.gear_tooth_stiffness_linear * mesh.gear_tooth_stiffness_multiplier \
-        * m_scale
+    lin_w, lin_g = mesh.worm_tooth_stiffness_linear, mesh.gear_tooth_stiffness_linear
+    p[P_CWKW_LIN] = lin_w * mesh.worm_tooth_stiffness_multiplier * m_scale
+    p[P_CGKG_LIN] = lin_g * mesh.gear_tooth_stiffness_multiplier * m_scale
     worm_raw = g.module * math.exp(mesh.worm_fit_a)          # Eq. 16: M e^{a_w}
     gear_raw = g.module * math.exp(mesh.gear_fit_a)          # Eq. 17: M e^{a_g}
     if mesh.calibrate_to_linear_mean:
         fit_w = MODULE_OF_FIT * math.exp(mesh.worm_fit_a)
         fit_g = MODULE_OF_FIT * math.exp(mesh.gear_fit_a)
         cosine = mesh.contact_mapping == 'cosine'
-        x0w = _calibrated_origin(fit_w, mesh.worm_fit_b, mesh.worm_tooth_stiffness_linear,
-                                 cosine)
-        x0g = _calibrated_origin(fit_g, mesh.gear_fit_b, mesh.gear_tooth_stiffness_linear,
-                                 cosine)
+        x0w = _calibrated_origin(fit_w, mesh.worm_fit_b, lin_w, cosine)
+        x0g = _calibrated_origin(fit_g, mesh.gear_fit_b, lin_g, cosine)
     else:
         x0w = x0g = 0.0
     # second pair one axial pitch (360 deg) further on: e^{b(x+360)} = e^{bx} e^{360 b}
@@ -196,13 +195,13 @@ def _teeth_exact(p, phase):
 
 
 def _with_teeth_table(p: np.ndarray) -> np.ndarray:
-    """``p`` with Eq. 7's tooth compliance 1/c_w k_w + 1/c_g k_g of the cosine mapping
-    tabulated over the mesh cycle (once per parameter set: the force evaluation then
-    interpolates instead of two exponentials and a sine/cosine pair), if the table is
-    within its tolerances of Eqs. 16-17 (otherwise they are evaluated directly)."""
+    """``p`` with Eq. 7's 1/c_w k_w + 1/c_g k_g of the cosine mapping tabulated over the mesh
+    cycle (the force evaluation interpolates instead of two exponentials and a sine/cosine
+    pair) if within its tolerances of Eqs. 16-17 (otherwise they are evaluated directly)."""
     if p[P_MESH_LINEAR] != 0.0 or p[P_MESH_COSINE] == 0.0:
         return p
-    q = with_table(p, lambda phase: _teeth_exact(p, phase), 1024, 1e-12, 1e-9)
+    key = p[np.r_[P_MESH_LINEAR:P_PHASE0 + 1, P_MESH_COSINE]].tobytes()  # all Eq. 7 reads
+    q = with_table(p, lambda phase: _teeth_exact(p, phase), 1024, 1e-12, 1e-9, key)
     if q is not None:
         q[P_TEETH_TABLE] = 1.0
     return p if q is None else q
@@ -218,10 +217,10 @@ def worm_frequency(p: np.ndarray) -> float:
 
 
 def worm_inertia_factor(p: np.ndarray, dt: float) -> float:
-    """(x / tan x)^2 with x = omega_w dt / 2: the average-acceleration rule integrates a
-    mode of frequency omega at 2 atan(omega dt / 2) / dt; with the worm inertia scaled by this
-    factor in the step's inertia term the worm mode gets its exact frequency (no period
-    elongation).  1 when the mode is too coarse to correct (x > 1.2, dt > 0.38 period)."""
+    """(x / tan x)^2 with x = omega_w dt / 2: the average-acceleration rule integrates a mode
+    of frequency omega at 2 atan(omega dt / 2) / dt; this factor on the worm inertia in the
+    step's inertia term gives the worm mode its exact frequency (no period elongation).
+    1 when the mode is too coarse to correct (x > 1.2, dt > 0.38 period)."""
     x = 0.5 * worm_frequency(p) * dt
     if not 0.0 < x <= 1.2:
         return 1.0

@@ -66,11 +66,19 @@ def _lookup_many(p, phase):
 
 
 def with_table(p: np.ndarray, f: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
-               intervals: int, rtol: float, slope_rtol: float) -> np.ndarray | None:
+               intervals: int, rtol: float, slope_rtol: float,
+               key: bytes | None = None) -> np.ndarray | None:
     """``p`` with the table of ``f`` (phases -> (values, slopes), exact) over one period
     appended, or None if the interpolant misses f by more than ``rtol`` of |f| (value) or
     ``slope_rtol`` of max |f| (slope) at the quarter and mid points of its intervals (the
-    mid point is the worst place of a cubic Hermite interpolant)."""
+    mid point is the worst place of a cubic Hermite interpolant).  ``key``: the bytes of
+    everything ``f`` depends on; the last tables accepted are kept by it (with intervals and
+    tolerances), and a later call with an equal key appends the kept table (the same
+    numbers) instead of building it again."""
+    memo = None if key is None else (key, intervals, rtol, slope_rtol)
+    table = None if memo is None else _TABLES.get(memo)
+    if table is not None:
+        return np.concatenate((p, table)) if np.all(np.isfinite(p)) else None
     h = TWO_PI / intervals
     s = np.arange(intervals + 1) * h
     with np.errstate(all='ignore'):
@@ -84,4 +92,12 @@ def with_table(p: np.ndarray, f: Callable[[np.ndarray], tuple[np.ndarray, np.nda
         err_slope = np.abs(got_slope - exact_slope) / np.abs(exact).max()
     if not (np.all(np.isfinite(q)) and err.max() <= rtol and err_slope.max() <= slope_rtol):
         return None
+    if memo is not None:
+        if len(_TABLES) >= 8:
+            _TABLES.pop(next(iter(_TABLES)), None)
+        _TABLES[memo] = q[p.size:].copy()
     return q
+
+
+#: The last tables :func:`with_table` accepted, by key (a fit's candidates share one).
+_TABLES: dict[tuple[bytes, int, float, float], np.ndarray] = {}

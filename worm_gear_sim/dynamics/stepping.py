@@ -75,7 +75,7 @@ from .trajectory import ROW_BYTES, SimState, Trajectory
 __all__ = ['Stepper', 'SimulationError', 'RUN_MEMORY_LIMIT', 'RATE_LIMIT', 'TIME_LIMIT']
 
 
-@njit(cache=True, error_model='numpy')
+@njit(cache=True, error_model='numpy', nogil=True)   # a check's trial on a fit's threads
 def advance_segment(p, C, u, v, a, theta1_now, theta1_dot_now, t0, k0, dt, n, cmd_t,
                     cmd_value, slope, t_end, theta1_end, stats, ctl, load):
     """Real-time stepping: n steps on the grid t0 + (k0 + j) dt with the command on the

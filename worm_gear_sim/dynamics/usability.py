@@ -44,7 +44,6 @@ from ..schema import ANGLE_LIMIT, Parameters
 from ..validation import ConfigError
 
 if TYPE_CHECKING:
-    from .modal import ModalResult
     from .model import DriveModel
 
 __all__ = ['check_usable', 'usable_model', 'diagnose', 'SPRING_RATIO_MIN', 'OMEGA_DT_MAX',
@@ -227,9 +226,9 @@ def _check(cfg: Parameters, changed: Sequence[str]) -> DriveModel:
                 inner = outer                               # the weakest spring so far
 
     # Rule 3: the modes are computable (the diagnosis of a failing trial uses them)
-    from .modal import modes
-    m = modes(model, include_damping=False)
-    if not np.all(np.isfinite(m.undamped_hz)):
+    from .modal import natural_modes
+    m = natural_modes(model)
+    if not np.all(np.isfinite(m[0])):
         raise _blame(cfg, changed, (), 'the linearised natural frequencies are not finite')
     # Rule 3b: the step resolves every mode (at least 2 steps per period).  The implicit
     # step exists beyond that (average acceleration is stable at any step) and a short trial
@@ -259,22 +258,25 @@ def _check(cfg: Parameters, changed: Sequence[str]) -> DriveModel:
     return model
 
 
-def _unresolved_mode(cfg: Parameters, m: ModalResult) -> tuple[str, tuple[str, ...]] | None:
-    """(text, inertia keys) when the highest mode is beyond the step's Nyquist limit."""
+def _unresolved_mode(cfg: Parameters, m: tuple[np.ndarray, np.ndarray]
+                     ) -> tuple[str, tuple[str, ...]] | None:
+    """(text, inertia keys) when the highest mode is beyond the step's Nyquist limit; ``m``:
+    the natural frequencies [Hz] and shapes (:func:`~.modal.natural_modes`)."""
     dt = cfg.integrator.time_step
-    i = int(np.argmax(m.undamped_hz))
-    wdt = 2.0 * math.pi * float(m.undamped_hz[i]) * dt
+    hz, shapes = m
+    i = int(np.argmax(hz))
+    wdt = 2.0 * math.pi * float(hz[i]) * dt
     if wdt <= OMEGA_DT_MAX:
         return None
-    body = int(np.argmax(np.abs(m.shapes[:, i])))
+    body = int(np.argmax(np.abs(shapes[:, i])))
     names = ('worm', 'gear', 'antenna')
-    return (f'the highest mode ({m.undamped_hz[i]:.4g} Hz, mostly the {names[body]}) is not '
+    return (f'the highest mode ({hz[i]:.4g} Hz, mostly the {names[body]}) is not '
             f'resolved by integrator.time_step = {dt:g} s (omega dt = {wdt:.3g} > pi); reduce '
-            f'the time step below {OMEGA_DT_MAX / (2 * math.pi * m.undamped_hz[i]):.3g} s or '
+            f'the time step below {OMEGA_DT_MAX / (2 * math.pi * hz[i]):.3g} s or '
             f'check the {names[body]} inertia', _INERTIA[body])
 
 
-def _trial_failure(cfg: Parameters, changed: Sequence[str], m: ModalResult,
+def _trial_failure(cfg: Parameters, changed: Sequence[str], m: tuple[np.ndarray, np.ndarray],
                    what: str) -> ConfigError:
     """The trial move failed: name the unresolved mode if there is one (the usual cause:
     a tiny inertia or a huge stiffness puts a mode far above the step's Nyquist limit, where
@@ -293,8 +295,8 @@ def diagnose(cfg: Parameters) -> str:
     'no known cause; ...' with the keys that differ from the defaults ('' if none)."""
     try:
         with np.errstate(all='ignore'):
-            from .modal import modes
-            hit = _unresolved_mode(cfg, modes(cfg, include_damping=False))
+            from .modal import natural_modes
+            hit = _unresolved_mode(cfg, natural_modes(cfg))
     except Exception:  # noqa: BLE001 - a hint only
         hit = None
     parts = [hit[0] + f' ({", ".join(hit[1])})'] if hit else []
