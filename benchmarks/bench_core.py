@@ -76,9 +76,13 @@ def move_grid(cfg: Config, t_end: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
             np.concatenate(([0.0], prof.theta1_dot(grid))))
 
 
-def kernel_ns_per_step(cfg: Config, t_end: float = 0.5, repeats: int = 7):
+def kernel_ns_per_step(cfg: Config, t_end: float = 0.5, repeats: int = 7, rest: bool = False):
+    """(ns, Newton solves, force evaluations) per step of the configured move, or (``rest``)
+    of the drive held at rest under a constant command."""
     dt = cfg.integrator.time_step
     th, td = move_grid(cfg, t_end)
+    if rest:
+        th, td = np.zeros_like(th), np.zeros_like(td)
     n = th.shape[0] - 1
     e3, ea = np.empty((0, 3)), np.empty((0, 8))
     best = np.inf
@@ -327,6 +331,10 @@ def main(argv=None) -> int:
     ns, solves, evals = kernel_ns_per_step(slew, t_end=0.25, repeats=3)
     print(f'  default, worm slewing at 2 rad/s    {t_slew:7.1f} us  (kernel {ns:.1f} ns/step, '
           f'{solves:.3f} solves, {evals:.3f} evaluations per step)')
+    ns, solves, evals = kernel_ns_per_step(Config(), t_end=0.1, repeats=5, rest=True)
+    print(f'  default, at rest (no load, constant command): kernel {ns:.1f} ns/step ({solves:.3f}'
+          f' solves, {evals:.3f} evaluations per step, counted as if computed: a step that '
+          'leaves state and control unchanged is repeated, not computed again)')
     floor_rows()
     print()
     print('# accuracy at the node step, pointwise at every step over 25 ms (move + 5 ms '
