@@ -13,6 +13,7 @@ recorded as the paper's 18-step move (training) and a held-out S-curve move the 
                                                         # timing: 4-parameter robust fit
     python benchmarks/bench_identify.py --compare       # strategies x drives table
     python benchmarks/bench_identify.py --coverage      # calibration of the 95 % intervals
+    python benchmarks/bench_identify.py --evaluation    # CPU of one evaluation, by part
     python benchmarks/bench_identify.py --compare --strategies frequency+windows \
         --diff-steps 1e-6 1e-3 --surrogate              # how to fit the stick-slip model
 
@@ -264,6 +265,51 @@ def timing(args) -> None:
     print(f'  {_load()}')
 
 
+def evaluation(args) -> None:
+    """CPU of one evaluation of the timing fit's cost (``Problem.residuals``) on each of its
+    windows, at new candidate sets near the base (min over 5 x 25 sets): the whole
+    evaluation, the candidate set (Config, usability check, model) and the kernel."""
+    from worm_gear_sim.dynamics import stepping
+    from worm_gear_sim.dynamics.usability import usable_model
+    from worm_gear_sim.identification import Problem, fit_parameters
+    base = load_config(args.config) if args.config else load_config()
+    truth, _ = drives(base)['variant: lead angle, const mu, mapping']
+    train, _, _ = records(truth, seed=7)
+    problem = Problem(base, fit_parameters(base, KEYS), [train])
+    kernel = [0.0]
+    advance = stepping.advance
+
+    def timed(*a):
+        c0 = time.process_time()
+        out = advance(*a)
+        kernel[0] += time.process_time() - c0
+        return out
+
+    stepping.advance = timed        # this process only: a benchmark's probe
+    rng = np.random.default_rng(0)
+    print(f'one evaluation, CPU ms (min of 5 x 25 new sets); {os.getloadavg()}')
+    for w in problem.windows():
+        best = None
+        for _ in range(5):
+            xs = np.abs(rng.normal(0.0, 0.01, (25, len(KEYS))))
+            total = cand = 0.0
+            kernel[0] = 0.0
+            for x in xs:
+                c0 = time.process_time()
+                usable_model(problem.config(x))
+                c1 = time.process_time()
+                problem.residuals(x, w)
+                cand += c1 - c0
+                total += time.process_time() - c0
+            row = (total / 25e-3, cand / 25e-3, kernel[0] / 25e-3)
+            best = row if best is None or row[0] < best[0] else best
+        label = 'whole record' if w is None else f'window {w:.3f} s'
+        print(f'  {label:<18} {best[0]:6.2f}  candidate set {best[1]:.2f}  kernel {best[2]:.2f}'
+              f'  the rest {best[0] - best[1] - best[2]:.2f}')
+    stepping.advance = advance
+    print(f'  {os.getloadavg()}')
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--compare', action='store_true', help='strategies x drives table')
@@ -275,6 +321,8 @@ def main() -> None:
     ap.add_argument('--threads', type=int, default=2, help='threads of the timing run')
     ap.add_argument('--repeats', type=int, default=2, help='pairs of the timing run')
     ap.add_argument('--dask', action='store_true', help='also time the fit on Dask')
+    ap.add_argument('--evaluation', action='store_true',
+                    help='CPU of one evaluation of the timing fit per window, by part')
     ap.add_argument('--durations', type=float, nargs='*', default=[0.15, 0.5],
                     help='record lengths [s] in --compare')
     ap.add_argument('--method', default='dogbox', help='least_squares method (--compare)')
@@ -289,6 +337,8 @@ def main() -> None:
         compare(args)
     elif args.coverage:
         coverage(args)
+    elif args.evaluation:
+        evaluation(args)
     else:
         timing(args)
 
