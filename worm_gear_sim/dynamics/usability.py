@@ -225,9 +225,12 @@ def _check(cfg: Parameters, changed: Sequence[str]) -> DriveModel:
             if k_out < springs[inner][0]:
                 inner = outer                               # the weakest spring so far
 
-    # Rule 3: the modes are computable (the diagnosis of a failing trial uses them)
-    from .modal import natural_modes
-    m = natural_modes(model)
+    # Rule 3: the modes are computable, damped as :func:`~.modal.modes` gives them to its
+    # users (the compensator's antenna mode, the diagnosis of a failing trial): an
+    # undamped eigenproblem can succeed where the damped pencil has no finite eigenvalue
+    from .modal import modes
+    full = modes(model)
+    m = (full.undamped_hz, full.shapes)
     if not np.all(np.isfinite(m[0])):
         raise _blame(cfg, changed, (), 'the linearised natural frequencies are not finite')
     # Rule 3b: the step resolves every mode (at least 2 steps per period).  The implicit
