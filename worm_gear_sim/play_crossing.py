@@ -578,17 +578,18 @@ def rest_starts(theta1_ref: ArrayLike, command: ArrayLike, tolerance: float = RE
     u = np.asarray(command, float).reshape(-1)
     out = []
     moving = np.diff(x) != 0.0
-    r = 0                                   # the first sample of the current rest
-    for k in range(x.size - 1):
-        if not moving[k]:
-            continue
-        if k == 0 or not moving[k - 1]:
-            j = k
-            while j > r and abs(u[j] - u[j - 1]) > tolerance:
-                j -= 1
-            if j > r or r == 0:
-                out.append((r, j))
-        r = k + 1
+    # a move's first segment, and the first sample of the rest before it (after the last
+    # moving segment; 0 for the first rest)
+    first = np.flatnonzero(moving & ~np.concatenate(([False], moving[:-1])))
+    last = np.flatnonzero(moving)
+    for k in first.tolist():
+        i = int(np.searchsorted(last, k))
+        r = int(last[i - 1]) + 1 if i else 0
+        j = k
+        while j > r and abs(u[j] - u[j - 1]) > tolerance:
+            j -= 1
+        if j > r or r == 0:
+            out.append((r, j))
     return out
 
 
