@@ -37,7 +37,9 @@ moved to land it without that ringing (:func:`worm_ringing_cancel`).
 The start of a known move from rest (a step in its acceleration that the drive cannot
 follow) leaves the drive's undamped modes ringing for ever, and near a sign change of a
 small demand that ringing lifts the teeth off their flank.  :func:`trajectory_feedforward`
-therefore also cancels the free vibration the start leaves in each engaged mode, the
+therefore also cancels, at every start from rest (the first sample or after a rest,
+:func:`rest_starts`), the free vibration the start leaves in each engaged mode (the
+antenna mode unless the drag damps it out within the start transient), the
 modes taken where the move starts and as it slides (:func:`start_modes`;
 :func:`start_ringing_cancel`: a one-period pulse at the antenna mode and two moved samples
 per faster mode, sized from the command's own slope changes, :func:`free_vibration`), and,
@@ -75,7 +77,8 @@ __all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step
            'soft_feedforward_series', 'crossing_time', 'CROSSING_PERIODS', 'SHORTEST_PERIODS',
            'CROSSING_TOLERANCE', 'free_vibration', 'start_ringing_cancel', 'START_WINDOW_PERIODS',
            'open_mesh_cancel', 'OPEN_MESH_FIRST_SAMPLE', 'OPEN_MESH_PROBE', 'start_modes',
-           'open_worm_rate', 'worm_ringing_cancel']
+           'open_worm_rate', 'worm_ringing_cancel', 'rest_starts', 'REST_TOLERANCE',
+           'START_MODE_DECAY']
 
 #: The longest crossing in antenna-mode periods (:func:`crossing_time`).
 CROSSING_PERIODS = 1.0
@@ -86,9 +89,14 @@ CROSSING_TOLERANCE = 1e-2
 #: The start transient whose free vibration :func:`start_ringing_cancel` cancels, in
 #: antenna-mode periods (the cancelling pulse lasts one period within it).
 START_WINDOW_PERIODS = 3.0
+#: The share of the antenna mode's free vibration left after the start transient below
+#: which :func:`start_modes` leaves that mode out (it has died out: nothing rings on).
+START_MODE_DECAY = 1e-2
 #: The first command sample :func:`open_mesh_cancel` moves: the first segment, where a start
 #: from rest without preload opens the mesh, is left as it is.
 OPEN_MESH_FIRST_SAMPLE = 2
+#: Two command samples closer than this [rad of worm angle] are at rest (:func:`rest_starts`).
+REST_TOLERANCE = 1e-12
 #: The size of the command changes [rad] whose effect :func:`open_mesh_cancel` simulates
 #: (the drive without play is linear at this scale).
 OPEN_MESH_PROBE = 1e-7
@@ -475,7 +483,7 @@ def _start_state(m: DriveModel, s: np.ndarray, u: np.ndarray, n: int
 
 
 def open_mesh_cancel(model: DriveModel | Config, t: ArrayLike, command: ArrayLike,
-                     slow: complex, n_fast: int, window: float) -> np.ndarray:
+                     slow: complex | None, n_fast: int, window: float) -> np.ndarray:
     """A correction (added to ``command``, samples at ``t`` from rest, already corrected by
     :func:`start_ringing_cancel`) that cancels the free vibration the start leaves because
     the mesh opens during it.  A drive at rest without load or drag has no tooth force, and
@@ -486,7 +494,7 @@ def open_mesh_cancel(model: DriveModel | Config, t: ArrayLike, command: ArrayLik
     simulated over the start transient (``window`` s) with the play and without it (the
     rigid mesh, where the linear cancellation holds); their difference at the window's end
     is the free vibration to remove.  It is cancelled with the same kind of correction
-    (the Hann pulse at ``slow``, 2 ``n_fast`` moved samples, here from sample
+    (the Hann pulse at ``slow`` unless None, 2 ``n_fast`` moved samples, here from sample
     OPEN_MESH_FIRST_SAMPLE on: after the mesh has closed again, where the drive is linear),
     each correction's effect simulated on the rigid mesh, solved in the modes' energy
     coordinates.  Zero when the mesh stays closed over the window (then the linear
@@ -496,7 +504,7 @@ def open_mesh_cancel(model: DriveModel | Config, t: ArrayLike, command: ArrayLik
     u = np.asarray(command, float)
     out = np.zeros_like(u)
     first = OPEN_MESH_FIRST_SAMPLE
-    tau = 2.0 * math.pi / complex(slow).real
+    tau = 0.0 if slow is None else 2.0 * math.pi / complex(slow).real
     if not has_play(m.p) or tq.size < first + 2 * n_fast + 2 \
             or tq[-1] - tq[0] < max(window, tau) + 2.0 * (tq[1] - tq[0]):
         return out
@@ -526,15 +534,20 @@ def open_mesh_cancel(model: DriveModel | Config, t: ArrayLike, command: ArrayLik
 
 
 def start_modes(model: DriveModel | Config, t: ArrayLike, command: ArrayLike
-                ) -> tuple[complex, list[complex], float]:
+                ) -> tuple[complex | None, list[complex], float]:
     """The modes a start from rest rings, as the drive has them while it moves: (the
-    antenna mode's rate (the compensator's, with the drag's damping), the faster ones',
-    teeth in contact, the start transient [s]: START_WINDOW_PERIODS antenna periods).  The
-    faster modes are those of the drive without play linearised where the move starts
-    (worm angle ``command[0]``) and sliding at the command's rate at the transient's end:
-    the teeth's compliance varies along the worm, and sliding friction moves the gear mode
-    (1 559 Hz at rest at 0 rad, 1 545 Hz sliding forward at the sector scan's start), enough
-    to undo a cancellation spread over a few milliseconds."""
+    antenna mode's rate (the compensator's, with the drag's damping), or None where that
+    damping leaves less than START_MODE_DECAY of its free vibration after the start
+    transient; the faster ones', teeth in contact; the start transient [s]:
+    START_WINDOW_PERIODS antenna periods).  A mode so damped does not ring on: it has died
+    out within the transient, and a pulse in the transient's first period could cancel
+    what is left at its end only with an amplitude growing as the inverse of that decay
+    (on the sector scan with 86 N m s/rad of drag, damping ratio 0.95: 0.35 rad of worm
+    angle).  The faster modes are those of the drive without play linearised where the
+    move starts (worm angle ``command[0]``) and sliding at the command's rate at the
+    transient's end: the teeth's compliance varies along the worm, and sliding friction
+    moves the gear mode (1 559 Hz at rest at 0 rad, 1 545 Hz sliding forward at the sector
+    scan's start), enough to undo a cancellation spread over a few milliseconds."""
     m = DriveModel.of(model)
     tq = np.asarray(t, float)
     u = np.asarray(command, float)
@@ -546,29 +559,66 @@ def start_modes(model: DriveModel | Config, t: ArrayLike, command: ArrayLike
     res = modes(_rigid_mesh(m), float(u[0]), rate)
     fast = [_mode_rate(float(f), float(z)) for f, z in sorted(zip(
         res.frequencies_hz, np.maximum(res.damping_ratios, 0.0))) if f > 1.5 * f0]
-    return _mode_rate(f0, comp.mode_damping_ratio), fast, window
+    slow = _mode_rate(f0, comp.mode_damping_ratio)
+    if math.exp(-slow.imag * window) < START_MODE_DECAY:
+        return None, fast, window
+    return slow, fast, window
+
+
+def rest_starts(theta1_ref: ArrayLike, command: ArrayLike, tolerance: float = REST_TOLERANCE
+                ) -> list[tuple[int, int]]:
+    """The starts from rest of a known trajectory: for each sample k where the reference
+    ``theta1_ref`` leaves a rest (x[k+1] != x[k], and k = 0 or x[k-1] == x[k]), (the first
+    sample of that rest, the last sample j <= k where the corrected ``command`` is still at
+    rest: |u[j] - u[j-1]| <= ``tolerance``, the centring preview moving the command a few
+    samples ahead of the reference).  Sample 0 counts as at rest (the drive rests before
+    the first sample); a start whose command never rests within the reference's rest (a
+    one-sample stop) is left out."""
+    x = np.asarray(theta1_ref, float).reshape(-1)
+    u = np.asarray(command, float).reshape(-1)
+    out = []
+    moving = np.diff(x) != 0.0
+    # a move's first segment, and the first sample of the rest before it (after the last
+    # moving segment; 0 for the first rest)
+    first = np.flatnonzero(moving & ~np.concatenate(([False], moving[:-1])))
+    last = np.flatnonzero(moving)
+    for k in first.tolist():
+        i = int(np.searchsorted(last, k))
+        r = int(last[i - 1]) + 1 if i else 0
+        j = k
+        while j > r and abs(u[j] - u[j - 1]) > tolerance:
+            j -= 1
+        if j > r or r == 0:
+            out.append((r, j))
+    return out
 
 
 def trajectory_feedforward(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
                            ) -> np.ndarray:
     """The correction of a known trajectory (``compensate_trajectory``, the trajectory
-    bridge): with play and the backlash inverse, :func:`soft_feedforward_series`; else
+    bridge): with play and the backlash inverse, :func:`soft_feedforward_series` with the
+    free vibration of every start from rest cancelled (:func:`rest_starts`,
+    :func:`start_ringing_cancel`, :func:`open_mesh_cancel`); else
     :func:`~worm_gear_sim.realtime.feedforward_series` (the same corrections without play)."""
     m = DriveModel.of(model)
     cs = m.config.compensation
     if has_play(m.p) and cs.backlash_inverse and cs.quasi_static and cs.enabled:
         delta, plans = soft_feedforward_series(m, t, theta1_ref)
-        # the modes left at rest after the start (docs/compensation.md): unless the play
-        # is crossed during the start transient (the mode is then not linear)
+        delta = np.array(delta, float)
+        # the modes left at rest after each start (docs/compensation.md): unless the play
+        # is crossed during the rest before it or the start transient (not linear then)
         fs_t = _seconds(t)
         x = np.asarray(theta1_ref, float).reshape(-1)
         window = START_WINDOW_PERIODS / Compensator(m).mode_frequency_hz
-        # a move from its first sample (not one that rests first: bit for bit unchanged)
-        if x.size > 2 and x[1] != x[0] and not any(p.start < fs_t[0] + window
-                                                    for p in plans):
-            slow, fast, window = start_modes(m, fs_t, x + delta)
-            delta = delta + start_ringing_cancel(fs_t, x + delta, slow, fast, window)
-            delta = delta + open_mesh_cancel(m, fs_t, x + delta, slow, len(fast), window)
+        for r, k in rest_starts(x, x + delta):
+            if x.size - k < 3 or any(p.start < fs_t[k] + window and p.end >= fs_t[r]
+                                     for p in plans):
+                continue
+            tk = fs_t[k:]
+            slow, fast, window_k = start_modes(m, tk, x[k:] + delta[k:])
+            delta[k:] += start_ringing_cancel(tk, x[k:] + delta[k:], slow, fast, window_k)
+            delta[k:] += open_mesh_cancel(m, tk, x[k:] + delta[k:], slow, len(fast),
+                                          window_k)
         return delta
     from .realtime import feedforward_series
     return feedforward_series(m, t, theta1_ref)
