@@ -30,13 +30,13 @@ import numpy as np
 
 from ..compensation import centring_preview
 from ..dynamics.model import DriveModel
-from ..dynamics.simulation import Simulator
 from ..params import Config
 from ..realtime.predictor import RealtimePredictor
 from ..studies.mismatch import sector_scan, slew_reversals
 from ..studies.tracking_pass import pass_window
 from ..trajectory_compensation import antenna_error
 from .live import LiveAdaptation
+from .plant import EncoderPlant
 
 __all__ = ['SCENARIOS', 'scenario', 'TwinRun', 'run_twin', 'BASE_NS', 'prepare_start']
 
@@ -119,9 +119,7 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
     out_per_in = pred.model.output_per_input
     names = cfg.node.joint_names[1:]
     live = LiveAdaptation(pred, names)
-    plant_sim = Simulator(plant, theta1=float(x[0]))
-    rng = np.random.default_rng(seed)
-    res = 2.0 * math.pi / 2 ** encoder_bits if encoder_bits > 0 else 0.0
+    drive = EncoderPlant(plant, float(x[0]), noise=noise, encoder_bits=encoder_bits, seed=seed)
     n_keep = int(np.count_nonzero(keep))
     err = np.full(n_keep, np.nan)
     index = {base_ns + int(round(tk * 1e9)): k for k, tk in enumerate(t[:n_keep])}
@@ -139,16 +137,10 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
                     run.steps.append((t[k], live.adapter.applied_values()))
         got = []
         for c in out.corrections:
-            tc = (c.stamp_ns - base_ns) * 1e-9
-            if tc > plant_sim.t:
-                plant_sim.advance_to(tc, c.theta1_ref + c.delta)
-            th4 = plant_sim.joint_state()[0][3]
+            th4, meas = drive.command((c.stamp_ns - base_ns) * 1e-9, c.theta1_ref + c.delta)
             j = index.get(c.stamp_ns)
             if j is not None:
                 err[j] = th4 - c.theta1_ref * out_per_in
-            meas = th4 + (noise * rng.standard_normal() if noise > 0 else 0.0)
-            if res > 0:
-                meas = round(meas / res) * res
             got.append((c.stamp_ns, meas, c.delta))
             if adapt:
                 live.measured(c.stamp_ns, names[2:], [meas])
