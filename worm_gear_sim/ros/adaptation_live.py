@@ -1,0 +1,291 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The live counterpart of the offline twin (``worm-gear-sim adapt``): the node, a plant
+node and a commander as separate ROS processes over DDS (the wiring only; the scenario,
+the plant and the adaptation are the core's, the ones the twin runs).
+
+:func:`run_live` starts
+
+* the node (``python -m worm_gear_sim.ros``) from the start set as the twin runs it
+  (:func:`~worm_gear_sim.adaptation.twin.prepare_start`: adaptation on, the compensation
+  applied, the preview), with its ``measured_joint_states`` subscription made reliable,
+  keep last 1000 (a QoS override: no encoder sample is lost);
+* the plant node (``python -m worm_gear_sim.ros.adaptation_plant``), the drive's stand-in:
+  the node's ``~/compensated_command`` steps it, its encoder comes back on
+  ``measured_joint_states`` stamped with the command's stamp;
+
+and is itself the commander (:class:`ScenarioCommander`, in the caller's process): it waits
+until both are up and connected, streams the scenario's references (the twin's
+:func:`~worm_gear_sim.adaptation.twin.scenario`, the same samples) on
+``worm_angle_reference`` at ``node.publish_rate_hz`` in real time, ``preview + lead``
+ahead of their stamps, waits until the plant has answered the last one, keeps the node's
+last ``~/adapted_parameters``, stops both (SIGINT) and reads the plant's record.  The
+result is a :class:`~worm_gear_sim.adaptation.twin.TwinRun` like the twin's: the antenna
+error of the plant with the live node's adapting feed-forward, beside the uncompensated
+one (the same offline computation as the twin's).
+
+Only the timing differs from the twin: there each encoder sample reaches the adaptation
+right after the prediction of its stamp; here it comes back through two processes, a few
+samples later, so a decision may see a few samples less.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from ..adaptation.twin import TwinRun, prepare_start, scenario
+from ..config_io import params_document, params_yaml_text
+from ..dynamics.model import DriveModel
+from ..params import Config
+from ..schema import NODE_NAME
+from ..topics import (
+    COMPENSATED_COMMAND_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    MEASURED_TOPIC,
+    REFERENCE_TOPIC,
+    private_topic,
+)
+from ..trajectory_compensation import antenna_error
+from .adaptation import ADAPTED_TOPIC
+from .interface import REFERENCE_DEPTH
+
+__all__ = ['ScenarioCommander', 'LiveRun', 'run_live', 'node_command', 'plant_command']
+
+#: The node's encoder subscription made reliable, keep last 1000 (its default is the
+#: sensor-data profile: best effort, keep last 5, which drops samples behind a stall).
+MEASURED_QOS = ('-p', f'qos_overrides./{MEASURED_TOPIC}.subscription.reliability:=reliable',
+                '-p', f'qos_overrides./{MEASURED_TOPIC}.subscription.depth:=1000')
+MAX_BURST = 100          # samples per timer call after a stall of this process
+
+
+class ScenarioCommander(Node):
+    """Streams stamped references (t, theta1_ref) once started; keeps the node's last
+    ``~/adapted_parameters`` and the stamp of the last encoder sample seen."""
+
+    def __init__(self, t: np.ndarray, theta1: np.ndarray, joint: str, ahead: float,
+                 node_under_test: str = NODE_NAME, **kwargs: Any) -> None:
+        super().__init__('adaptation_commander', **kwargs)
+        self.t, self.theta1, self.ahead = t, theta1, ahead
+        self.target = node_under_test
+        self.t0_ns: int | None = None
+        self.k_next = 0
+        self.node_alive = False
+        self.adapted: dict[str, Any] = {}
+        self.adapted_count = 0
+        self.last_measured_ns = 0
+        self.measured_count = 0
+        reliable = QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+        self.pub = self.create_publisher(JointState, REFERENCE_TOPIC, reliable)
+        self._msg = JointState(name=[joint], position=[0.0])
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                             reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(String, private_topic(ADAPTED_TOPIC, node_under_test),
+                                 self._on_adapted, latched)
+        self.create_subscription(JointState, MEASURED_TOPIC, self._on_measured, reliable)
+        self.create_subscription(DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diag, 10)
+        self.create_timer(1e-3, self._on_timer)
+
+    def connected(self) -> bool:
+        """The node is spinning (its /diagnostics seen), and the node and the plant are
+        subscribed to the references, the plant to the node's commands, the node to the
+        plant's encoder."""
+        return (self.node_alive and self.count_subscribers(REFERENCE_TOPIC) >= 2
+                and self.count_subscribers(private_topic(COMPENSATED_COMMAND_TOPIC,
+                                                         self.target)) >= 1
+                and self.count_subscribers(MEASURED_TOPIC) >= 2)
+
+    def start(self, delay: float = 0.05) -> None:
+        self.t0_ns = self.get_clock().now().nanoseconds + int(delay * 1e9)
+
+    def stamp(self, k: int) -> int:
+        assert self.t0_ns is not None
+        return self.t0_ns + int(round(self.t[k] * 1e9))
+
+    def done(self) -> bool:
+        return self.k_next >= self.t.size
+
+    def _on_timer(self) -> None:
+        if self.t0_ns is None or self.done():
+            return
+        horizon = self.get_clock().now().nanoseconds + int(self.ahead * 1e9)
+        m = self._msg
+        for _ in range(MAX_BURST):
+            if self.done() or self.stamp(self.k_next) > horizon:
+                break
+            m.header.stamp.sec, m.header.stamp.nanosec = divmod(self.stamp(self.k_next),
+                                                                1_000_000_000)
+            m.position[0] = float(self.theta1[self.k_next])
+            self.pub.publish(m)
+            self.k_next += 1
+
+    def _on_adapted(self, msg: String) -> None:
+        self.adapted = json.loads(msg.data)
+        self.adapted_count += 1
+
+    def _on_measured(self, msg: JointState) -> None:
+        self.measured_count += 1
+        self.last_measured_ns = max(self.last_measured_ns,
+                                    msg.header.stamp.sec * 1_000_000_000
+                                    + msg.header.stamp.nanosec)
+
+    def _on_diag(self, msg: DiagnosticArray) -> None:
+        if any(s.name.startswith(f'{self.target}:') for s in msg.status):
+            self.node_alive = True
+
+
+@dataclass
+class LiveRun(TwinRun):
+    """A :class:`TwinRun` from the live processes, plus: stamps kept without a plant sample
+    (``missing``), the plant's counters, the wall time of the stream and the logs."""
+
+    missing: int = 0
+    plant_counters: dict[str, int] = field(default_factory=dict)
+    stream_wall_s: float = math.nan
+    node_log: str = ''
+    plant_log: str = ''
+
+
+def _write_params(cfg: Config, path: Path) -> Path:
+    path.write_text(params_yaml_text(params_document(cfg)))
+    return path
+
+
+def node_command(params: Path) -> list[str]:
+    """The node's process for ``params`` (encoder subscription reliable, keep last 1000)."""
+    return [sys.executable, '-m', 'worm_gear_sim.ros', '--ros-args', '--params-file',
+            str(params), *MEASURED_QOS]
+
+
+def plant_command(plant: Path, record: Path, *, noise: float, encoder_bits: int,
+                  seed: int) -> list[str]:
+    """The plant node's process."""
+    return [sys.executable, '-m', 'worm_gear_sim.ros.adaptation_plant', '--plant', str(plant),
+            '--noise', repr(noise), '--encoder-bits', str(encoder_bits), '--seed', str(seed),
+            '--record', str(record)]
+
+
+def _start(args: list[str], env: dict[str, str], log: Path) -> tuple[subprocess.Popen, IO]:
+    fh = open(log, 'w+')
+    return subprocess.Popen(args, env=env, stdout=fh, stderr=subprocess.STDOUT), fh
+
+
+def _stop(proc: subprocess.Popen, fh: IO, timeout: float = 20.0) -> str:
+    import signal
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    fh.seek(0)
+    text = fh.read()
+    fh.close()
+    return text
+
+
+def run_live(plant: Config, start: Config, name: str, duration: float, *, context: Any,
+             env: dict[str, str], workdir: Path, noise: float = 1e-6, encoder_bits: int = 20,
+             seed: int = 0, lead: float = 0.02, startup_timeout: float = 120.0,
+             drain_timeout: float = 30.0) -> LiveRun:
+    """Scenario ``name`` for ``duration`` s through the live processes (module docstring);
+    ``context``: an initialised rclpy Context on the processes' domain (``env``: theirs,
+    ROS_DOMAIN_ID and discovery range); ``workdir``: params files, record and logs;
+    ``noise``, ``encoder_bits``, ``seed``: the plant's encoder (as :func:`~worm_gear_sim.
+    adaptation.twin.run_twin`); ``lead``: streamed this much further ahead than the
+    preview.  Raises RuntimeError (with the logs' tails) if the processes do not connect
+    within ``startup_timeout`` s."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    cfg = prepare_start(start)
+    ahead = cfg.compensation.preview_time
+    t, x = scenario(cfg, name, duration + ahead + 5.0 / cfg.node.publish_rate_hz)
+    keep = t <= duration + 1e-12
+    record = workdir / 'plant_record.npz'
+    record.unlink(missing_ok=True)
+    node_p, node_fh = _start(node_command(_write_params(cfg, workdir / 'start.yaml')), env,
+                             workdir / 'node.log')
+    plant_p, plant_fh = _start(plant_command(_write_params(plant, workdir / 'plant.yaml'),
+                                             record, noise=noise, encoder_bits=encoder_bits,
+                                             seed=seed), env, workdir / 'plant.log')
+    commander = ScenarioCommander(t, x, cfg.node.joint_names[0], ahead + lead,
+                                  context=context)
+    ex = SingleThreadedExecutor(context=context)
+    ex.add_node(commander)
+    logs = ['', '']
+    try:
+        t_wait = time.monotonic()
+        while not commander.connected():
+            if time.monotonic() - t_wait > startup_timeout or node_p.poll() is not None \
+                    or plant_p.poll() is not None:
+                raise RuntimeError('the node and the plant did not connect within '
+                                   f'{startup_timeout:g} s')
+            ex.spin_once(timeout_sec=0.05)
+        _spin_for(ex, 0.3)                       # matching settles both ways
+        commander.start()
+        t_stream = time.monotonic()
+        last_kept = commander.stamp(int(np.count_nonzero(keep)) - 1)
+        deadline = None
+        while commander.last_measured_ns < last_kept:
+            ex.spin_once(timeout_sec=0.01)
+            if commander.done() and deadline is None:
+                deadline = time.monotonic() + drain_timeout
+            if deadline is not None and time.monotonic() > deadline:
+                break
+            if node_p.poll() is not None or plant_p.poll() is not None:
+                break
+        stream_wall = time.monotonic() - t_stream
+        seen = commander.adapted_count           # one more ~/adapted_parameters after the
+        t_last = time.monotonic()                # last sample: the estimate at the end
+        while commander.adapted_count == seen and time.monotonic() - t_last < \
+                2.0 * cfg.node.diagnostic_period + 0.5:
+            ex.spin_once(timeout_sec=0.05)
+    finally:
+        logs = [_stop(node_p, node_fh), _stop(plant_p, plant_fh)]
+        ex.shutdown()
+        commander.destroy_node()
+    return _result(plant, cfg, t[keep], x[keep], commander, record, logs, stream_wall)
+
+
+def _spin_for(ex: SingleThreadedExecutor, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.01)
+
+
+def _result(plant: Config, cfg: Config, t: np.ndarray, x: np.ndarray,
+            commander: ScenarioCommander, record: Path, logs: list[str],
+            stream_wall: float) -> LiveRun:
+    """The live run as the twin's record (module docstring)."""
+    err = np.full(t.size, np.nan)
+    plant_counters: dict[str, int] = {}
+    if record.exists():
+        rec = np.load(record)
+        assert commander.t0_ns is not None
+        rate = cfg.node.publish_rate_hz
+        index = np.round((rec['stamp_ns'] - commander.t0_ns) * 1e-9 * rate).astype(np.int64)
+        ok = (index >= 0) & (index < t.size)
+        err[index[ok]] = rec['theta4'][ok] - x[index[ok]] * DriveModel(cfg).output_per_input
+        plant_counters = {k.removeprefix('counter_'): int(rec[k]) for k in rec.files
+                          if k.startswith('counter_')}
+    ad = commander.adapted
+    run = LiveRun(t, x, antenna_error(plant, t, x, x), err,
+                  estimates=ad.get('estimate', {}), in_use=ad.get('in_use', {}),
+                  counters=ad.get('counters', {}), missing=int(np.count_nonzero(np.isnan(err))),
+                  plant_counters=plant_counters, stream_wall_s=stream_wall,
+                  node_log=logs[0], plant_log=logs[1])
+    return run
