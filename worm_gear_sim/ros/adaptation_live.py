@@ -8,25 +8,31 @@ the plant and the adaptation are the core's, the ones the twin runs).
 
 * the node (``python -m worm_gear_sim.ros``) from the start set as the twin runs it
   (:func:`~worm_gear_sim.adaptation.twin.prepare_start`: adaptation on, the compensation
-  applied, the preview), with its ``measured_joint_states`` subscription made reliable,
-  keep last 1000 (a QoS override: no encoder sample is lost);
+  applied, the preview), on the simulated clock (``use_sim_time``), with its
+  ``measured_joint_states`` subscription made reliable, keep last 1000 (a QoS override: no
+  encoder sample is lost);
 * the plant node (``python -m worm_gear_sim.ros.adaptation_plant``), the drive's stand-in:
   the node's ``~/compensated_command`` steps it, its encoder comes back on
   ``measured_joint_states`` stamped with the command's stamp;
 
 and is itself the commander (:class:`ScenarioCommander`, in the caller's process): it waits
-until both are up and connected, streams the scenario's references (the twin's
+until both are up and connected, then streams the scenario's references (the twin's
 :func:`~worm_gear_sim.adaptation.twin.scenario`, the same samples) on
-``worm_angle_reference`` at ``node.publish_rate_hz`` in real time, ``preview + lead``
-ahead of their stamps, waits until the plant has answered the last one, keeps the node's
-last ``~/adapted_parameters``, stops both (SIGINT) and reads the plant's record.  The
-result is a :class:`~worm_gear_sim.adaptation.twin.TwinRun` like the twin's: the antenna
-error of the plant with the live node's adapting feed-forward, beside the uncompensated
-one (the same offline computation as the twin's).
+``worm_angle_reference``, ``preview + lead`` ahead of ``/clock``, which it advances at the
+wall clock's rate (``speed``) but never more than ``max_lag`` past the last encoder sample
+it has seen.  On a machine that keeps up this is real time; on a starved one (2 shared
+cores: the plant with play and the node each cost a few hundred us per 1 ms sample) the
+clock slows down instead of the node dropping late samples, so the result measures the
+adaptation, not the machine.  It waits until the plant has answered the last sample,
+keeps the node's last ``~/adapted_parameters`` (published on every applied step and every
+``node.diagnostic_period`` of the simulated clock), stops both (SIGINT) and reads the
+plant's record.  The result is a :class:`~worm_gear_sim.adaptation.twin.TwinRun` like the
+twin's: the antenna error of the plant driven by the live node's adapting feed-forward,
+beside the uncompensated one (the same offline computation as the twin's).
 
 Only the timing differs from the twin: there each encoder sample reaches the adaptation
-right after the prediction of its stamp; here it comes back through two processes, a few
-samples later, so a decision may see a few samples less.
+right after the prediction of its stamp; here it comes back through two processes, up to
+``lead + max_lag`` of stream time later, so a decision may see fewer samples.
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -71,6 +78,8 @@ __all__ = ['ScenarioCommander', 'LiveRun', 'run_live', 'node_command', 'plant_co
 MEASURED_QOS = ('-p', f'qos_overrides./{MEASURED_TOPIC}.subscription.reliability:=reliable',
                 '-p', f'qos_overrides./{MEASURED_TOPIC}.subscription.depth:=1000')
 MAX_BURST = 100          # samples per timer call after a stall of this process
+#: The simulated clock's first reading [ns] (any time > 0; the node follows /clock).
+CLOCK_START_NS = 1_000_000_000
 
 
 class ScenarioCommander(Node):
@@ -78,12 +87,16 @@ class ScenarioCommander(Node):
     ``~/adapted_parameters`` and the stamp of the last encoder sample seen."""
 
     def __init__(self, t: np.ndarray, theta1: np.ndarray, joint: str, ahead: float,
-                 node_under_test: str = NODE_NAME, **kwargs: Any) -> None:
+                 node_under_test: str = NODE_NAME, speed: float = 1.0, max_lag: float = 0.1,
+                 **kwargs: Any) -> None:
         super().__init__('adaptation_commander', **kwargs)
         self.t, self.theta1, self.ahead = t, theta1, ahead
         self.target = node_under_test
+        self.speed, self.max_lag_ns = speed, int(max_lag * 1e9)
         self.t0_ns: int | None = None
         self.k_next = 0
+        self.clock_ns = CLOCK_START_NS
+        self._wall = time.monotonic()
         self.node_alive = False
         self.adapted: dict[str, Any] = {}
         self.adapted_count = 0
@@ -92,6 +105,8 @@ class ScenarioCommander(Node):
         reliable = QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         self.pub = self.create_publisher(JointState, REFERENCE_TOPIC, reliable)
         self._msg = JointState(name=[joint], position=[0.0])
+        self.pub_clock = self.create_publisher(Clock, '/clock', QoSProfile(depth=1))
+        self._clock_msg = Clock()
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                              reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(String, private_topic(ADAPTED_TOPIC, node_under_test),
@@ -110,7 +125,8 @@ class ScenarioCommander(Node):
                 and self.count_subscribers(MEASURED_TOPIC) >= 2)
 
     def start(self, delay: float = 0.05) -> None:
-        self.t0_ns = self.get_clock().now().nanoseconds + int(delay * 1e9)
+        """Stream from the simulated clock's now + ``delay``."""
+        self.t0_ns = self.clock_ns + int(delay * 1e9)
 
     def stamp(self, k: int) -> int:
         assert self.t0_ns is not None
@@ -120,9 +136,23 @@ class ScenarioCommander(Node):
         return self.k_next >= self.t.size
 
     def _on_timer(self) -> None:
+        """Advance /clock by the wall time since the last call times ``speed`` (never more
+        than ``max_lag`` past the last encoder sample once streaming), then publish every
+        sample stamped at most ``ahead`` past it."""
+        wall = time.monotonic()
+        step = int((wall - self._wall) * self.speed * 1e9)
+        self._wall = wall
+        clock = self.clock_ns + step
+        if self.t0_ns is not None:
+            clock = min(clock, max(self.last_measured_ns, self.t0_ns) + self.max_lag_ns)
+        if not self.done():           # then held: the node never sees the stream pause
+            self.clock_ns = max(self.clock_ns, clock)
+        c = self._clock_msg
+        c.clock.sec, c.clock.nanosec = divmod(self.clock_ns, 1_000_000_000)
+        self.pub_clock.publish(c)
         if self.t0_ns is None or self.done():
             return
-        horizon = self.get_clock().now().nanoseconds + int(self.ahead * 1e9)
+        horizon = self.clock_ns + int(self.ahead * 1e9)
         m = self._msg
         for _ in range(MAX_BURST):
             if self.done() or self.stamp(self.k_next) > horizon:
@@ -168,7 +198,7 @@ def _write_params(cfg: Config, path: Path) -> Path:
 def node_command(params: Path) -> list[str]:
     """The node's process for ``params`` (encoder subscription reliable, keep last 1000)."""
     return [sys.executable, '-m', 'worm_gear_sim.ros', '--ros-args', '--params-file',
-            str(params), *MEASURED_QOS]
+            str(params), '-p', 'use_sim_time:=true', *MEASURED_QOS]
 
 
 def plant_command(plant: Path, record: Path, *, noise: float, encoder_bits: int,
@@ -201,15 +231,17 @@ def _stop(proc: subprocess.Popen, fh: IO, timeout: float = 20.0) -> str:
 
 def run_live(plant: Config, start: Config, name: str, duration: float, *, context: Any,
              env: dict[str, str], workdir: Path, noise: float = 1e-6, encoder_bits: int = 20,
-             seed: int = 0, lead: float = 0.02, startup_timeout: float = 120.0,
-             drain_timeout: float = 30.0) -> LiveRun:
+             seed: int = 0, lead: float = 0.02, speed: float = 1.0, max_lag: float = 0.1,
+             startup_timeout: float = 120.0, drain_timeout: float = 30.0) -> LiveRun:
     """Scenario ``name`` for ``duration`` s through the live processes (module docstring);
     ``context``: an initialised rclpy Context on the processes' domain (``env``: theirs,
     ROS_DOMAIN_ID and discovery range); ``workdir``: params files, record and logs;
     ``noise``, ``encoder_bits``, ``seed``: the plant's encoder (as :func:`~worm_gear_sim.
     adaptation.twin.run_twin`); ``lead``: streamed this much further ahead than the
-    preview.  Raises RuntimeError (with the logs' tails) if the processes do not connect
-    within ``startup_timeout`` s."""
+    preview; ``speed``: the simulated clock's rate against the wall clock (at most);
+    ``max_lag``: how far [s] the clock may run past the last encoder sample.  Raises
+    RuntimeError if the processes do not connect within ``startup_timeout`` s (the logs are
+    in ``workdir``)."""
     workdir.mkdir(parents=True, exist_ok=True)
     cfg = prepare_start(start)
     ahead = cfg.compensation.preview_time
@@ -223,7 +255,7 @@ def run_live(plant: Config, start: Config, name: str, duration: float, *, contex
                                              record, noise=noise, encoder_bits=encoder_bits,
                                              seed=seed), env, workdir / 'plant.log')
     commander = ScenarioCommander(t, x, cfg.node.joint_names[0], ahead + lead,
-                                  context=context)
+                                  speed=speed, max_lag=max_lag, context=context)
     ex = SingleThreadedExecutor(context=context)
     ex.add_node(commander)
     logs = ['', '']
@@ -249,11 +281,7 @@ def run_live(plant: Config, start: Config, name: str, duration: float, *, contex
             if node_p.poll() is not None or plant_p.poll() is not None:
                 break
         stream_wall = time.monotonic() - t_stream
-        seen = commander.adapted_count           # one more ~/adapted_parameters after the
-        t_last = time.monotonic()                # last sample: the estimate at the end
-        while commander.adapted_count == seen and time.monotonic() - t_last < \
-                2.0 * cfg.node.diagnostic_period + 0.5:
-            ex.spin_once(timeout_sec=0.05)
+        _spin_for(ex, 0.2)                       # the last ~/adapted_parameters in flight
     finally:
         logs = [_stop(node_p, node_fh), _stop(plant_p, plant_fh)]
         ex.shutdown()
