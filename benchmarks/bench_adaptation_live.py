@@ -10,7 +10,7 @@ there).  Each drive runs twice from the NOMINAL model, with the same encoder see
 
 * the offline twin (``worm-gear-sim adapt``, :func:`~worm_gear_sim.adaptation.twin.
   run_twin`);
-* live (:func:`~worm_gear_sim.ros.adaptation_live.run_live`): the node and the plant node as
+* live (:func:`~worm_gear_sim.ros.live_adaptation.run_live`): the node and the plant node as
   processes, this process streaming the scenario at 1 kHz in real time (ROS_DOMAIN_ID from
   the environment, discovery LOCALHOST).
 
@@ -75,7 +75,7 @@ def main() -> int:
     args = ap.parse_args()
     import rclpy
 
-    from worm_gear_sim.ros.adaptation_live import run_live
+    from worm_gear_sim.ros.live_adaptation import run_live
     domain = int(os.environ.get('ROS_DOMAIN_ID', '0'))
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                PYTHONUNBUFFERED='1')

@@ -4,7 +4,7 @@
 by the compensated command, read by an encoder.
 
 :class:`EncoderPlant` is one source for the offline twin (:mod:`.twin`) and the live plant
-node (:mod:`worm_gear_sim.ros.adaptation_plant`): a :class:`~worm_gear_sim.dynamics.
+node (:mod:`worm_gear_sim.ros.plant`): a :class:`~worm_gear_sim.dynamics.
 simulation.Simulator` of the plant's parameter set, started at rest under its load at the
 first reference theta1_ref(0), stepped to each command's instant with that command held
 (the servo's command theta1_ref + delta), and its antenna angle theta4 read with encoder

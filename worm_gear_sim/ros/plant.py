@@ -4,7 +4,7 @@
 (the wiring only; the plant is the core's :class:`~worm_gear_sim.adaptation.plant.
 EncoderPlant`, the one the offline twin ``worm-gear-sim adapt`` steps).
 
-    python -m worm_gear_sim.ros.adaptation_plant --plant PLANT.yaml [--noise RAD]
+    python -m worm_gear_sim.ros.plant --plant PLANT.yaml [--noise RAD]
         [--encoder-bits N] [--seed N] [--record OUT.npz] [--node-name worm_gear_sim]
         [--ros-args ...]
 
@@ -132,7 +132,8 @@ class PlantNode(Node):
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog='adaptation_plant', description=__doc__.split('\n\n')[0])
+    ap = argparse.ArgumentParser(prog='worm_gear_sim.ros.plant',
+                                 description=__doc__.split('\n\n')[0])
     ap.add_argument('--plant', required=True, metavar='PLANT.yaml',
                     help='the simulated drive (a params file)')
     ap.add_argument('--noise', type=float, default=1e-6, help='encoder noise RMS [1e-6 rad]')

@@ -11,7 +11,7 @@ the plant and the adaptation are the core's, the ones the twin runs).
   applied, the preview), on the simulated clock (``use_sim_time``), with its
   ``measured_joint_states`` subscription made reliable, keep last 1000 (a QoS override: no
   encoder sample is lost);
-* the plant node (``python -m worm_gear_sim.ros.adaptation_plant``), the drive's stand-in:
+* the plant node (``python -m worm_gear_sim.ros.plant``), the drive's stand-in:
   the node's ``~/compensated_command`` steps it, its encoder comes back on
   ``measured_joint_states`` stamped with the command's stamp;
 
@@ -55,9 +55,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from ..adaptation.twin import TwinRun, prepare_start, scenario
+from ..adaptation.twin import TwinRun, plant_errors, prepare_start, scenario
 from ..config_io import params_document, params_yaml_text
-from ..dynamics.model import DriveModel
 from ..params import Config
 from ..schema import NODE_NAME
 from ..topics import (
@@ -67,7 +66,6 @@ from ..topics import (
     REFERENCE_TOPIC,
     private_topic,
 )
-from ..trajectory_compensation import antenna_error
 from .adaptation import ADAPTED_TOPIC
 from .interface import REFERENCE_DEPTH
 
@@ -204,7 +202,7 @@ def node_command(params: Path) -> list[str]:
 def plant_command(plant: Path, record: Path, *, noise: float, encoder_bits: int,
                   seed: int) -> list[str]:
     """The plant node's process."""
-    return [sys.executable, '-m', 'worm_gear_sim.ros.adaptation_plant', '--plant', str(plant),
+    return [sys.executable, '-m', 'worm_gear_sim.ros.plant', '--plant', str(plant),
             '--noise', repr(noise), '--encoder-bits', str(encoder_bits), '--seed', str(seed),
             '--record', str(record)]
 
@@ -299,7 +297,7 @@ def _result(plant: Config, cfg: Config, t: np.ndarray, x: np.ndarray,
             commander: ScenarioCommander, record: Path, logs: list[str],
             stream_wall: float) -> LiveRun:
     """The live run as the twin's record (module docstring)."""
-    err = np.full(t.size, np.nan)
+    theta4 = np.full(t.size, np.nan)
     plant_counters: dict[str, int] = {}
     if record.exists():
         rec = np.load(record)
@@ -307,11 +305,12 @@ def _result(plant: Config, cfg: Config, t: np.ndarray, x: np.ndarray,
         rate = cfg.node.publish_rate_hz
         index = np.round((rec['stamp_ns'] - commander.t0_ns) * 1e-9 * rate).astype(np.int64)
         ok = (index >= 0) & (index < t.size)
-        err[index[ok]] = rec['theta4'][ok] - x[index[ok]] * DriveModel(cfg).output_per_input
+        theta4[index[ok]] = rec['theta4'][ok]
         plant_counters = {k.removeprefix('counter_'): int(rec[k]) for k in rec.files
                           if k.startswith('counter_')}
     ad = commander.adapted
-    run = LiveRun(t, x, antenna_error(plant, t, x, x), err,
+    unc, err = plant_errors(plant, cfg, t, x, theta4)
+    run = LiveRun(t, x, unc, err,
                   estimates=ad.get('estimate', {}), in_use=ad.get('in_use', {}),
                   counters=ad.get('counters', {}), missing=int(np.count_nonzero(np.isnan(err))),
                   plant_counters=plant_counters, stream_wall_s=stream_wall,
