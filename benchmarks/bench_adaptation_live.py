@@ -117,7 +117,8 @@ def main() -> int:
                   f'sample, encoder samples rejected {live.counters.get("rejected", "?")}, '
                   f'used {live.counters.get("used", "?")} (twin '
                   f'{twin.counters.get("used", "?")}), stream {live.stream_wall_s:.1f} s '
-                  f'wall; plant {live.plant_counters}', flush=True)
+                  f'wall; first sample held {live.held}x; stalled {live.stalled}; plant '
+                  f'{live.plant_counters}', flush=True)
             line = []
             for k in KEYS:
                 r = fl[k] / ft[k]

@@ -16,7 +16,11 @@ the plant and the adaptation are the core's, the ones the twin runs).
   ``measured_joint_states`` stamped with the command's stamp;
 
 and is itself the commander (:class:`ScenarioCommander`, in the caller's process): it waits
-until both are up and connected, then streams the scenario's references (the twin's
+until both are up and connected, holds the first sample (a grid step later every 20 ms of
+wall time, the clock held behind them) until the plant's
+first encoder sample comes back (a command published before the node's publisher has
+matched the plant would be lost, and the clock would wait for it for ever: measured), then
+streams the scenario's references (the twin's
 :func:`~worm_gear_sim.adaptation.twin.scenario`, the same samples) on
 ``worm_angle_reference``, ``preview + lead`` ahead of ``/clock``, which it advances at the
 wall clock's rate (``speed``) but never more than ``max_lag`` past the last encoder sample
@@ -78,6 +82,7 @@ MEASURED_QOS = ('-p', f'qos_overrides./{MEASURED_TOPIC}.subscription.reliability
 MAX_BURST = 100          # samples per timer call after a stall of this process
 #: The simulated clock's first reading [ns] (any time > 0; the node follows /clock).
 CLOCK_START_NS = 1_000_000_000
+HOLD_PERIOD_S = 0.02     # the first sample is repeated this often until the plant answers
 
 
 class ScenarioCommander(Node):
@@ -93,6 +98,11 @@ class ScenarioCommander(Node):
         self.speed, self.max_lag_ns = speed, int(max_lag * 1e9)
         self.t0_ns: int | None = None
         self.k_next = 0
+        self.period_ns = int(round((t[1] - t[0]) * 1e9))
+        self.holding = False
+        self.held = 0
+        self._hold_ns: int | None = None
+        self._hold_wall = -math.inf
         self.clock_ns = CLOCK_START_NS
         self._wall = time.monotonic()
         self.node_alive = False
@@ -122,9 +132,15 @@ class ScenarioCommander(Node):
                                                          self.target)) >= 1
                 and self.count_subscribers(MEASURED_TOPIC) >= 2)
 
-    def start(self, delay: float = 0.05) -> None:
-        """Stream from the simulated clock's now + ``delay``."""
-        self.t0_ns = self.clock_ns + int(delay * 1e9)
+    def start(self) -> None:
+        """Hold the first sample (repeated every HOLD_PERIOD_S of wall time, on the stream's
+        grid) until the first encoder sample comes back, then stream from the next grid
+        stamp: the node and the plant start at rest there, and no sample is streamed into a
+        connection that is not matched yet (a lost command would stall the clock)."""
+        self.holding = True
+
+    def streaming(self) -> bool:
+        return self.t0_ns is not None
 
     def stamp(self, k: int) -> int:
         assert self.t0_ns is not None
@@ -143,11 +159,15 @@ class ScenarioCommander(Node):
         clock = self.clock_ns + step
         if self.t0_ns is not None:
             clock = min(clock, max(self.last_measured_ns, self.t0_ns) + self.max_lag_ns)
+        if self._hold_ns is not None and self.t0_ns is None:    # holding: see _hold
+            clock = min(clock, self._hold_ns - int(self.ahead * 1e9))
         if not self.done():           # then held: the node never sees the stream pause
             self.clock_ns = max(self.clock_ns, clock)
         c = self._clock_msg
         c.clock.sec, c.clock.nanosec = divmod(self.clock_ns, 1_000_000_000)
         self.pub_clock.publish(c)
+        if self.holding:
+            self._hold(wall)
         if self.t0_ns is None or self.done():
             return
         horizon = self.clock_ns + int(self.ahead * 1e9)
@@ -160,6 +180,26 @@ class ScenarioCommander(Node):
             m.position[0] = float(self.theta1[self.k_next])
             self.pub.publish(m)
             self.k_next += 1
+
+    def _hold(self, wall: float) -> None:
+        m = self._msg
+        if self.last_measured_ns > 0 and self._hold_ns is not None:
+            self.holding = False                  # the chain answers: stream
+            self.t0_ns = self._hold_ns + self.period_ns
+            return
+        if wall - self._hold_wall < HOLD_PERIOD_S:
+            return
+        # one grid step of stream time per hold message, the clock ``ahead`` behind it: the
+        # hold lasts a few ms of the node's time however long the chain takes to answer
+        if self._hold_ns is None:
+            self._hold_ns = self.clock_ns + int(self.ahead * 1e9)
+        else:
+            self._hold_ns += self.period_ns
+        self._hold_wall = wall
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(self._hold_ns, 1_000_000_000)
+        m.position[0] = float(self.theta1[0])
+        self.pub.publish(m)
+        self.held += 1
 
     def _on_adapted(self, msg: String) -> None:
         self.adapted = json.loads(msg.data)
@@ -179,9 +219,13 @@ class ScenarioCommander(Node):
 @dataclass
 class LiveRun(TwinRun):
     """A :class:`TwinRun` from the live processes, plus: stamps kept without a plant sample
-    (``missing``), the plant's counters, the wall time of the stream and the logs."""
+    (``missing``), whether the encoder stopped coming (``stalled``: no progress for
+    ``stall_timeout`` s, a process ended, or the drain timed out), the first sample's hold
+    messages, the plant's counters, the wall time of the stream and the logs."""
 
     missing: int = 0
+    stalled: bool = False
+    held: int = 0
     plant_counters: dict[str, int] = field(default_factory=dict)
     stream_wall_s: float = math.nan
     node_log: str = ''
@@ -230,7 +274,8 @@ def _stop(proc: subprocess.Popen, fh: IO, timeout: float = 20.0) -> str:
 def run_live(plant: Config, start: Config, name: str, duration: float, *, context: Any,
              env: dict[str, str], workdir: Path, noise: float = 1e-6, encoder_bits: int = 20,
              seed: int = 0, lead: float = 0.02, speed: float = 1.0, max_lag: float = 0.1,
-             startup_timeout: float = 120.0, drain_timeout: float = 30.0) -> LiveRun:
+             startup_timeout: float = 120.0, drain_timeout: float = 30.0,
+             stall_timeout: float = 20.0) -> LiveRun:
     """Scenario ``name`` for ``duration`` s through the live processes (module docstring);
     ``context``: an initialised rclpy Context on the processes' domain (``env``: theirs,
     ROS_DOMAIN_ID and discovery range); ``workdir``: params files, record and logs;
@@ -257,6 +302,7 @@ def run_live(plant: Config, start: Config, name: str, duration: float, *, contex
     ex = SingleThreadedExecutor(context=context)
     ex.add_node(commander)
     logs = ['', '']
+    stalled = False
     try:
         t_wait = time.monotonic()
         while not commander.connected():
@@ -265,18 +311,29 @@ def run_live(plant: Config, start: Config, name: str, duration: float, *, contex
                 raise RuntimeError('the node and the plant did not connect within '
                                    f'{startup_timeout:g} s')
             ex.spin_once(timeout_sec=0.05)
-        _spin_for(ex, 0.3)                       # matching settles both ways
         commander.start()
+        while not commander.streaming():
+            if time.monotonic() - t_wait > startup_timeout or node_p.poll() is not None \
+                    or plant_p.poll() is not None:
+                raise RuntimeError('the plant did not answer within '
+                                   f'{startup_timeout:g} s')
+            ex.spin_once(timeout_sec=0.01)
         t_stream = time.monotonic()
         last_kept = commander.stamp(int(np.count_nonzero(keep)) - 1)
         deadline = None
+        seen, t_seen = commander.last_measured_ns, t_stream
         while commander.last_measured_ns < last_kept:
             ex.spin_once(timeout_sec=0.01)
+            now = time.monotonic()
+            if commander.last_measured_ns != seen:
+                seen, t_seen = commander.last_measured_ns, now
             if commander.done() and deadline is None:
-                deadline = time.monotonic() + drain_timeout
-            if deadline is not None and time.monotonic() > deadline:
+                deadline = now + drain_timeout
+            if (deadline is not None and now > deadline) or now - t_seen > stall_timeout:
+                stalled = True
                 break
             if node_p.poll() is not None or plant_p.poll() is not None:
+                stalled = True
                 break
         stream_wall = time.monotonic() - t_stream
         _spin_for(ex, 0.2)                       # the last ~/adapted_parameters in flight
@@ -284,7 +341,9 @@ def run_live(plant: Config, start: Config, name: str, duration: float, *, contex
         logs = [_stop(node_p, node_fh), _stop(plant_p, plant_fh)]
         ex.shutdown()
         commander.destroy_node()
-    return _result(plant, cfg, t[keep], x[keep], commander, record, logs, stream_wall)
+    run = _result(plant, cfg, t[keep], x[keep], commander, record, logs, stream_wall)
+    run.stalled, run.held = stalled, commander.held
+    return run
 
 
 def _spin_for(ex: SingleThreadedExecutor, seconds: float) -> None:
