@@ -143,40 +143,6 @@ def test_a_real_change_is_applied_in_bounded_steps(base):
     assert ad.applied_x[0] == pytest.approx(20.0, rel=0.02)
 
 
-def test_encoder_samples_after_a_step_are_taken_against_the_model_that_predicted_them(base):
-    """Encoder samples come back after later predictions: a step applied for the
-    predictions after t, then the samples up to t (predicted by the model before it), gives
-    the same estimate as the samples first and the step after them."""
-    cfg = base.replace({'adaptation.keys': ['load.output_torque',
-                                            'load.output_viscous_coefficient']})
-    ratio = DriveModel(cfg).output_per_input
-    c = 0.5 * sum(output_compliance(DriveModel(cfg)))
-    t = np.arange(0.0, 3.0, 1.0 / RATE)
-    th4 = sector(t)
-    t_on, late = 1.5, 0.1                     # the step; the samples that come after it
-
-    def sample(ad: Adapter, k: int, load_model: float) -> None:
-        pred = float(th4[k]) - c * load_model      # the model's prediction: its wind-up
-        ad.update(float(t[k]), float(th4[k]) - c * 2.0, pred / ratio, pred, pred)
-
-    runs = []
-    for order in ('in time', 'late'):
-        ad = Adapter(cfg, cfg.adaptation)
-        step = ad.applied_x.copy()
-        step[ad.layout.i_load] = 1.0
-        before = t <= t_on - (late if order == 'late' else 0.0)
-        for k in np.flatnonzero(before):
-            sample(ad, k, 0.0)
-        ad.applied(step, ad.model, t_on)
-        for k in np.flatnonzero(~before):
-            sample(ad, k, 0.0 if t[k] <= t_on else 1.0)
-        runs.append(ad)
-    a, b = runs
-    assert a.samples_used > 2000 and a.samples_used == b.samples_used
-    assert np.allclose(a.theta, b.theta, rtol=1e-12, atol=1e-12)
-    assert a.estimates()['load.output_torque'] == pytest.approx(2.0, rel=0.05)
-
-
 def test_a_negative_play_is_refused(base):
     """The residual of less play than none (the flank offset reversed): the estimate goes
     negative and is never applied; the reason is kept."""

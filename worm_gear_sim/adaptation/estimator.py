@@ -412,11 +412,6 @@ class Adapter:
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
         self._play0 = float(model.config.mesh.backlash)
-        # (t after which it predicted, values) of the models in use, the newest last: an
-        # encoder sample comes back after later predictions, perhaps after a step
-        self._in_force: collections.deque = collections.deque(
-            [(-math.inf, self.applied_x.copy())], maxlen=8)
-        self._step_hold = (math.inf, math.inf)
 
     # ---- per sample ------------------------------------------------------------------------
     def update(self, t: float, theta4_meas: float, theta2: float, theta3: float,
@@ -452,7 +447,7 @@ class Adapter:
             self._flank, self._flank_t = flank, t
         # the flank of the model in use: where it differs, one of the two is wrong and the
         # residual holds a flank error the linear picture does not have
-        ax = self._model_at(t)
+        ax = self.applied_x
         torque_m = self._inertia * a4 + (ax[lay.i_drag] if lay.i_drag >= 0 else
                                          self._drag0) * w4 + \
             (ax[lay.i_load] if lay.i_load >= 0 else self._load0)
@@ -461,7 +456,7 @@ class Adapter:
         timing.push(t, theta4_meas - theta4_pred, w4, a4)
         if flank_m != self._flank_m:
             if lay.i_play < 0 and self._play0 > 0.0 or lay.i_play >= 0 and \
-                    ax[lay.i_play] > 0.0:   # the model crosses its play here
+                    self.applied_x[lay.i_play] > 0.0:   # the model crosses its play here
                 timing.model_flank_changed(t, self._flank_m, flank_m)
                 self._model_flank_t = t
             self._flank_m, self._flank_t = flank_m, max(self._flank_t, t)
@@ -472,14 +467,13 @@ class Adapter:
         soon = torque * (torque + drag * ahead) < 0.0 or \
             torque_m * (torque_m + (ax[lay.i_drag] if lay.i_drag >= 0 else self._drag0)
                         * ahead) < 0.0
-        if soon or t - self._flank_t < FLANK_HOLD_OFF or t < self._hold_until or \
-                self._step_hold[0] < t < self._step_hold[1]:
+        if soon or t - self._flank_t < FLANK_HOLD_OFF or t < self._hold_until:
             self.samples_skipped += 1
             return False
         c_pos, c_neg = self._compliance
         compliance = c_pos if w4 > 0.0 else c_neg if w4 < 0.0 else 0.5 * (c_pos + c_neg)
         s = self.settings
-        _sample_step(th, self.P, self._std2, self._phi, ax, self._S, self._b,
+        _sample_step(th, self.P, self._std2, self._phi, self.applied_x, self._S, self._b,
                      self._sc, lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
                      lay.gear0, lay.gear_orders, theta2, theta3, w4, flank, flank_m, torque,
                      compliance, theta4_meas - theta4_pred, dt / s.memory,
@@ -548,7 +542,7 @@ class Adapter:
         if lay.i_load < 0 and lay.i_drag < 0:
             return
         play = self.theta[lay.i_play] if lay.i_play >= 0 else self._play0
-        model_play = self._model_at(t)[lay.i_play] if lay.i_play >= 0 else self._play0
+        model_play = self.applied_x[lay.i_play] if lay.i_play >= 0 else self._play0
         noise = self.settings.measurement_noise
         got = self._timing.ready(t, play, MIN_PLAY_NOISES * noise, model_play, noise,
                                  self._inertia / drag if drag > 0.0 else 0.0)
@@ -651,25 +645,14 @@ class Adapter:
                 out += float(np.sum(np.abs(delta[i0:i0 + 2 * k])))
         return out
 
-    def applied(self, step: np.ndarray, model: DriveModel, t: float | None = None) -> None:
-        """The caller applied ``step`` (a Decision's) to the model in use, for the
-        predictions after ``t`` [s] (None: after the last encoder sample's).  Samples up
-        to ``t`` that come later are taken against the model that predicted them."""
-        t = self._last_t if t is None or math.isnan(t) else float(t)
+    def applied(self, step: np.ndarray, model: DriveModel) -> None:
+        """The caller applied ``step`` (a Decision's) to the model in use."""
         self.applied_x = np.array(step, float)
-        self._in_force.append((t, self.applied_x.copy()))
         self.model = model
-        self._step_hold = (t, t + FLANK_HOLD_OFF)     # the prediction's transient after it
+        self._hold_until = self._last_t + FLANK_HOLD_OFF   # the prediction's transient
         self.switches += 1
         if self.target is not None and np.array_equal(self.target, self.applied_x):
             self.target = None
-
-    def _model_at(self, t: float) -> np.ndarray:
-        """The values of the model that predicted the instant ``t``."""
-        for t_on, x in reversed(self._in_force):
-            if t > t_on:
-                return x
-        return self._in_force[0][1]
 
     def refused(self, reason: str) -> None:
         """The target cannot be applied (``reason``): the model in use stays."""

@@ -198,7 +198,7 @@ class LiveAdaptation:
         except (ValueError, ArithmeticError) as exc:   # ConfigError is a ValueError
             ad.refused(f'{type(exc).__name__}: {exc}')
             return self._refused(ad.last_refusal, counted=True)
-        ad.applied(p.step, pred.model, self._seconds(stamp_ns))
+        ad.applied(p.step, pred.model)
         self.counters['switches'] += 1
         return []
 
