@@ -82,7 +82,7 @@ MEASURED_QOS = ('-p', f'qos_overrides./{MEASURED_TOPIC}.subscription.reliability
 MAX_BURST = 100          # samples per timer call after a stall of this process
 #: The simulated clock's first reading [ns] (any time > 0; the node follows /clock).
 CLOCK_START_NS = 1_000_000_000
-HOLD_PERIOD_S = 0.02     # the first sample is repeated this often until the plant answers
+HOLD_PERIOD_S = 0.02     # wall time between the hold samples (see ScenarioCommander.start)
 
 
 class ScenarioCommander(Node):
