@@ -115,7 +115,7 @@ def main() -> int:
                       f"{in_use_line(run.in_use)} | {wall:.0f} s wall", flush=True)
             print(f'   live: {live.missing} of {live.t.size} samples without a plant '
                   f'sample, encoder samples rejected {live.counters.get("rejected", "?")}, '
-                  f'used {live.counters.get("used", "?")} (twin '
+                  f'used {live.counters.get("used", "?")} (in the last ~/adapted_parameters; twin '
                   f'{twin.counters.get("used", "?")}), stream {live.stream_wall_s:.1f} s '
                   f'wall; first sample held {live.held}x; stalled {live.stalled}; plant '
                   f'{live.plant_counters}', flush=True)
