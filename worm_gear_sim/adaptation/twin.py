@@ -30,15 +30,16 @@ import numpy as np
 
 from ..compensation import centring_preview
 from ..dynamics.model import DriveModel
-from ..dynamics.simulation import Simulator
 from ..params import Config
 from ..realtime.predictor import RealtimePredictor
 from ..studies.mismatch import sector_scan, slew_reversals
 from ..studies.tracking_pass import pass_window
 from ..trajectory_compensation import antenna_error
 from .live import LiveAdaptation
+from .plant import EncoderPlant
 
-__all__ = ['SCENARIOS', 'scenario', 'TwinRun', 'run_twin', 'BASE_NS', 'prepare_start']
+__all__ = ['SCENARIOS', 'scenario', 'TwinRun', 'run_twin', 'BASE_NS', 'prepare_start',
+           'plant_errors']
 
 SCENARIOS = ('sector', 'slew', 'pass')
 #: Stamp of t = 0 [ns] (stamps must be > 0).
@@ -100,6 +101,16 @@ def prepare_start(start: Config, preview: float | None = None) -> Config:
                           'compensation.preview_time': p})
 
 
+def plant_errors(plant: Config, start: Config, t: np.ndarray, theta1_ref: np.ndarray,
+                 theta4: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(uncompensated, compensated) antenna error [rad] at the uniform times ``t``: the
+    plant driven by the raw reference (simulated here), and ``theta4`` (the plant driven by
+    the adapting feed-forward) - theta1_ref l_w / r_g (the start set's ratio); nan where
+    ``theta4`` is."""
+    unc = antenna_error(plant, t, theta1_ref, theta1_ref)
+    return unc, theta4 - theta1_ref * DriveModel(start).output_per_input
+
+
 def run_twin(plant: Config, start: Config, name: str, duration: float, *,
              noise: float = 1e-6, encoder_bits: int = 20, seed: int = 0, adapt: bool = True,
              preview: float | None = None, base_ns: int = BASE_NS, record: bool = False,
@@ -116,16 +127,13 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
     t, x = scenario(cfg, name, duration + ahead + 5.0 / cfg.node.publish_rate_hz)
     keep = t <= duration + 1e-12
     pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=base_ns)
-    out_per_in = pred.model.output_per_input
     names = cfg.node.joint_names[1:]
     live = LiveAdaptation(pred, names)
-    plant_sim = Simulator(plant, theta1=float(x[0]))
-    rng = np.random.default_rng(seed)
-    res = 2.0 * math.pi / 2 ** encoder_bits if encoder_bits > 0 else 0.0
+    drive = EncoderPlant(plant, float(x[0]), noise=noise, encoder_bits=encoder_bits, seed=seed)
     n_keep = int(np.count_nonzero(keep))
-    err = np.full(n_keep, np.nan)
+    theta4 = np.full(n_keep, np.nan)
     index = {base_ns + int(round(tk * 1e9)): k for k, tk in enumerate(t[:n_keep])}
-    run = TwinRun(t[keep], x[keep], np.zeros(0), err)
+    run = TwinRun(t[keep], x[keep], np.zeros(0), np.zeros(0))
     for k in range(t.size):
         ns = base_ns + int(round(t[k] * 1e9))
         out = pred.push(ns, float(x[k]))
@@ -139,16 +147,10 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
                     run.steps.append((t[k], live.adapter.applied_values()))
         got = []
         for c in out.corrections:
-            tc = (c.stamp_ns - base_ns) * 1e-9
-            if tc > plant_sim.t:
-                plant_sim.advance_to(tc, c.theta1_ref + c.delta)
-            th4 = plant_sim.joint_state()[0][3]
+            th4, meas = drive.command((c.stamp_ns - base_ns) * 1e-9, c.theta1_ref + c.delta)
             j = index.get(c.stamp_ns)
             if j is not None:
-                err[j] = th4 - c.theta1_ref * out_per_in
-            meas = th4 + (noise * rng.standard_normal() if noise > 0 else 0.0)
-            if res > 0:
-                meas = round(meas / res) * res
+                theta4[j] = th4
             got.append((c.stamp_ns, meas, c.delta))
             if adapt:
                 live.measured(c.stamp_ns, names[2:], [meas])
@@ -156,7 +158,8 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
             run.record.append((ns, float(x[k]), got))
         if on_sample is not None:
             on_sample(t[k])
-    run.error_uncompensated = antenna_error(plant, run.t, run.theta1_ref, run.theta1_ref)
+    run.error_uncompensated, run.error_compensated = plant_errors(plant, cfg, run.t,
+                                                                  run.theta1_ref, theta4)
     run.estimates = live.estimates()
     run.in_use = live.adapter.applied_values()
     run.counters = {**live.counters, **{f'predictor_{k}': v for k, v in

@@ -1,0 +1,175 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""A simulated drive as a ROS node: the live stand-in for the real one when the node adapts
+(the wiring only; the plant is the core's :class:`~worm_gear_sim.adaptation.plant.
+EncoderPlant`, the one the offline twin ``worm-gear-sim adapt`` steps).
+
+    python -m worm_gear_sim.ros.plant --plant PLANT.yaml [--noise RAD]
+        [--encoder-bits N] [--seed N] [--record OUT.npz] [--node-name worm_gear_sim]
+        [--ros-args ...]
+
+* ``worm_angle_reference`` (sensor_msgs/JointState, in): the servo's stream; its first
+  sample sets the plant's t = 0 and the worm angle it starts from, at rest under its load
+  (as the twin's plant);
+* ``<node>/compensated_command`` (JointState, in): the node's command theta1_ref + delta for
+  each stamp; the plant is stepped to that stamp with it held (commands before t = 0 or not
+  after the last one are counted and dropped);
+* ``measured_joint_states`` (JointState, out, reliable, keep last 1000): the encoder's
+  theta4 (noise, steps) under ``node.joint_names[3]`` of the plant's file, stamped with the
+  command's stamp.  Start the node with ``-p qos_overrides./measured_joint_states.
+  subscription.reliability:=reliable -p qos_overrides./measured_joint_states.subscription.
+  depth:=1000`` so that no encoder sample is lost (its default is the sensor-data profile,
+  best effort, keep last 5).
+
+``--record``: on exit (SIGINT/SIGTERM) writes OUT.npz with, per command, ``stamp_ns``,
+``command``, ``theta4`` (the plant's, without noise) and ``measured``, plus ``base_ns`` and
+``theta1_start`` (the first reference) and the counters.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.utilities import remove_ros_args
+from sensor_msgs.msg import JointState
+
+from ..adaptation.plant import EncoderPlant
+from ..config_io import load_config
+from ..params import Config
+from ..topics import COMPENSATED_COMMAND_TOPIC, MEASURED_TOPIC, REFERENCE_TOPIC, private_topic
+from .callbacks import stamp_ns
+from .interface import REFERENCE_DEPTH
+
+__all__ = ['PlantNode', 'main', 'PLANT_NODE_NAME']
+
+PLANT_NODE_NAME = 'worm_gear_plant'
+#: Commands kept while the first reference has not come (the plant does not know its t = 0).
+MAX_EARLY = 1000
+
+
+class PlantNode(Node):
+    """The plant node (module docstring)."""
+
+    def __init__(self, plant: Config, *, noise: float = 1e-6, encoder_bits: int = 20,
+                 seed: int = 0, node_under_test: str = 'worm_gear_sim', **kwargs: Any) -> None:
+        super().__init__(PLANT_NODE_NAME, **kwargs)
+        self.config = plant
+        self._plant_args = {'noise': noise, 'encoder_bits': encoder_bits, 'seed': seed}
+        self.plant: EncoderPlant | None = None
+        self.base_ns: int | None = None
+        self.theta1_start = float('nan')
+        self.counters = {'commands': 0, 'published': 0, 'before_start': 0,
+                         'out_of_order': 0, 'malformed': 0}
+        self._early: list[tuple[int, float]] = []
+        self._last_ns = 0
+        self.record: list[tuple[int, float, float, float]] = []
+        reliable = QoSProfile(depth=REFERENCE_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+        self._out = JointState(name=[plant.node.joint_names[3]], position=[0.0])
+        self._pub = self.create_publisher(JointState, MEASURED_TOPIC, reliable)
+        self.create_subscription(JointState, REFERENCE_TOPIC, self._on_reference, reliable)
+        self.create_subscription(JointState, private_topic(COMPENSATED_COMMAND_TOPIC,
+                                                           node_under_test),
+                                 self._on_command, reliable)
+
+    def _on_reference(self, msg: JointState) -> None:
+        if self.plant is not None or not msg.position:
+            return
+        ns = stamp_ns(msg.header.stamp)
+        if ns <= 0:
+            return
+        self.base_ns, self.theta1_start = ns, float(msg.position[0])
+        self.plant = EncoderPlant(self.config, self.theta1_start, **self._plant_args)
+        self.get_logger().info(f'plant started at theta1 = {self.theta1_start:.6g} rad')
+        early, self._early = self._early, []
+        for ns_c, value in sorted(early):
+            self._command(ns_c, value)
+
+    def _on_command(self, msg: JointState) -> None:
+        ns = stamp_ns(msg.header.stamp)
+        if not msg.position or ns <= 0:
+            self.counters['malformed'] += 1
+            return
+        if self.plant is None:
+            if len(self._early) < MAX_EARLY:
+                self._early.append((ns, float(msg.position[0])))
+            return
+        self._command(ns, float(msg.position[0]))
+
+    def _command(self, ns: int, value: float) -> None:
+        assert self.plant is not None and self.base_ns is not None
+        self.counters['commands'] += 1
+        if ns < self.base_ns:
+            self.counters['before_start'] += 1
+            return
+        if ns <= self._last_ns:
+            self.counters['out_of_order'] += 1
+            return
+        self._last_ns = ns
+        theta4, meas = self.plant.command((ns - self.base_ns) * 1e-9, value)
+        m = self._out
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+        m.position[0] = meas
+        self._pub.publish(m)
+        self.counters['published'] += 1
+        self.record.append((ns, value, theta4, meas))
+
+    def write_record(self, path: Path) -> None:
+        """The record (module docstring) as an .npz file."""
+        rec = np.array(self.record, dtype=float).reshape(-1, 4)
+        stamps = np.array([r[0] for r in self.record], dtype=np.int64)
+        np.savez(path, stamp_ns=stamps, command=rec[:, 1], theta4=rec[:, 2],
+                 measured=rec[:, 3], base_ns=np.int64(self.base_ns or 0),
+                 theta1_start=self.theta1_start,
+                 **{f'counter_{k}': v for k, v in self.counters.items()})
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog='worm_gear_sim.ros.plant',
+                                 description=__doc__.split('\n\n')[0])
+    ap.add_argument('--plant', required=True, metavar='PLANT.yaml',
+                    help='the simulated drive (a params file)')
+    ap.add_argument('--noise', type=float, default=1e-6, help='encoder noise RMS [1e-6 rad]')
+    ap.add_argument('--encoder-bits', type=int, default=20, help='resolution 2 pi / 2^N [20]')
+    ap.add_argument('--seed', type=int, default=0, help='noise seed [0]')
+    ap.add_argument('--record', metavar='OUT.npz', help='write the record here on exit')
+    ap.add_argument('--node-name', default='worm_gear_sim',
+                    help='the node whose ~/compensated_command drives the plant')
+    return ap.parse_args(argv)
+
+
+def main(args: list[str] | None = None) -> int:
+    argv = sys.argv if args is None else args
+    opts = _parse(remove_ros_args(args=argv)[1:])
+    plant = load_config(opts.plant)
+    from .run import make_executor, spin_until_shutdown
+    rclpy.init(args=argv)
+    node = None
+    try:
+        node = PlantNode(plant, noise=opts.noise, encoder_bits=opts.encoder_bits,
+                         seed=opts.seed, node_under_test=opts.node_name)
+        ex = make_executor('events')
+        ex.add_node(node)
+        node.get_logger().info(f'ready: {opts.plant} -> {MEASURED_TOPIC}')
+        spin_until_shutdown(ex, slice_s=0.2)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            if opts.record:
+                node.write_record(Path(opts.record))
+            print(f'plant: {node.counters}', flush=True)
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
