@@ -448,8 +448,8 @@ class Adapter:
         # the flank of the model in use: where it differs, one of the two is wrong and the
         # residual holds a flank error the linear picture does not have
         ax = self.applied_x
-        torque_m = self._inertia * a4 + (ax[lay.i_drag] if lay.i_drag >= 0 else
-                                         self._drag0) * w4 + \
+        drag_m = ax[lay.i_drag] if lay.i_drag >= 0 else self._drag0
+        torque_m = self._inertia * a4 + drag_m * w4 + \
             (ax[lay.i_load] if lay.i_load >= 0 else self._load0)
         flank_m = 1.0 if torque_m > 0.0 else -1.0 if torque_m < 0.0 else self._flank_m
         timing = self._timing
@@ -465,20 +465,20 @@ class Adapter:
         # a flank change within the hold-off ahead (the torques' rates: c alpha4)
         ahead = FLANK_HOLD_OFF * a4
         soon = torque * (torque + drag * ahead) < 0.0 or \
-            torque_m * (torque_m + (ax[lay.i_drag] if lay.i_drag >= 0 else self._drag0)
-                        * ahead) < 0.0
+            torque_m * (torque_m + drag_m * ahead) < 0.0
         if soon or t - self._flank_t < FLANK_HOLD_OFF or t < self._hold_until:
             self.samples_skipped += 1
             return False
         c_pos, c_neg = self._compliance
         compliance = c_pos if w4 > 0.0 else c_neg if w4 < 0.0 else 0.5 * (c_pos + c_neg)
         s = self.settings
-        _sample_step(th, self.P, self._std2, self._phi, self.applied_x, self._S, self._b,
+        lam = math.exp(-dt / s.window)
+        _sample_step(th, self.P, self._std2, self._phi, ax, self._S, self._b,
                      self._sc, lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
                      lay.gear0, lay.gear_orders, theta2, theta3, w4, flank, flank_m, torque,
                      compliance, theta4_meas - theta4_pred, dt / s.memory,
-                     math.exp(-dt / s.window), s.measurement_noise ** 2, HUBER_SIGMAS)
-        self._w_max = max(abs(w4), self._w_max * math.exp(-dt / s.window))
+                     lam, s.measurement_noise ** 2, HUBER_SIGMAS)
+        self._w_max = max(abs(w4), self._w_max * lam)
         if math.isnan(self._first_t):
             self._first_t = t
         self.samples_used += 1
@@ -539,7 +539,7 @@ class Adapter:
         """The real drive's flank change as a measurement of (T, c) (:mod:`.flank_timing`):
         T + c omega4(t_p) = -J alpha4(t_p), its noise a timing error of SWITCH_TIME_SD."""
         lay = self.layout
-        if lay.i_load < 0 and lay.i_drag < 0:
+        if lay.i_load < 0 and lay.i_drag < 0 or not self._timing.event_due(t):
             return
         play = self.theta[lay.i_play] if lay.i_play >= 0 else self._play0
         model_play = self.applied_x[lay.i_play] if lay.i_play >= 0 else self._play0

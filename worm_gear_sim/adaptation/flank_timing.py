@@ -230,6 +230,11 @@ class FlankTiming:
         self.events += 1
         self._event = (t, -0.5 * (new - old))
 
+    def event_due(self, t: float) -> bool:
+        """Whether :meth:`ready` would look at ``t`` (a model crossing past its window)."""
+        ev = self._event
+        return ev is not None and t >= ev[0] + WINDOW + LEVEL_WINDOW
+
     def ready(self, t: float, play: float, min_play: float, model_play: float,
               noise: float = 0.0, float_lag: float = 0.0
               ) -> tuple[float, float, float] | None:

@@ -121,7 +121,8 @@ class LiveAdaptation:
         if len(names) != len(positions):
             return self._reject('malformed')
         try:
-            k = list(names).index(self.joint_names[2])
+            k = (names if isinstance(names, (list, tuple)) else list(names)).index(
+                self.joint_names[2])
         except ValueError:
             return self._reject('other_joint')
         try:
@@ -140,7 +141,8 @@ class LiveAdaptation:
         if pred is None:
             return self._reject('outside_prediction')
         self._last_ns = stamp_ns
-        if self.adapter.update(t, meas, float(pred[0]), float(pred[1]), float(pred[2])):
+        theta2, theta3, theta4 = pred.tolist()
+        if self.adapter.update(t, meas, theta2, theta3, theta4):
             self.counters['used'] += 1
         return None
 
@@ -313,6 +315,8 @@ class _Predictions:
     def at(self, t: float) -> np.ndarray | None:
         n = self._n
         ts = self._t
+        if n and t == ts[n - 1]:               # the usual case: the newest prediction's stamp
+            return self._x[n - 1]
         if not n or t > ts[n - 1] or t < ts[max(n - self._cap, 0)]:
             return None
         k = int(np.searchsorted(ts[:n], t))
