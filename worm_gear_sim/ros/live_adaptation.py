@@ -305,19 +305,17 @@ def run_live(plant: Config, start: Config, name: str, duration: float, *, contex
     stalled = False
     try:
         t_wait = time.monotonic()
-        while not commander.connected():
-            if time.monotonic() - t_wait > startup_timeout or node_p.poll() is not None \
-                    or plant_p.poll() is not None:
-                raise RuntimeError('the node and the plant did not connect within '
-                                   f'{startup_timeout:g} s')
-            ex.spin_once(timeout_sec=0.05)
+
+        def wait(ready: Any, what: str, slice_s: float) -> None:
+            while not ready():
+                if time.monotonic() - t_wait > startup_timeout or node_p.poll() is not None \
+                        or plant_p.poll() is not None:
+                    raise RuntimeError(f'{what} within {startup_timeout:g} s')
+                ex.spin_once(timeout_sec=slice_s)
+
+        wait(commander.connected, 'the node and the plant did not connect', 0.05)
         commander.start()
-        while not commander.streaming():
-            if time.monotonic() - t_wait > startup_timeout or node_p.poll() is not None \
-                    or plant_p.poll() is not None:
-                raise RuntimeError('the plant did not answer within '
-                                   f'{startup_timeout:g} s')
-            ex.spin_once(timeout_sec=0.01)
+        wait(commander.streaming, 'the plant did not answer', 0.01)
         t_stream = time.monotonic()
         last_kept = commander.stamp(int(np.count_nonzero(keep)) - 1)
         deadline = None
