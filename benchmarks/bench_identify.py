@@ -205,10 +205,17 @@ def coverage(args) -> None:
     print(f'load average after {os.getloadavg()}')
 
 
+def _cpu() -> float:
+    """CPU seconds of this process and of its children that ended (the worker processes)."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
 def timing(args) -> None:
-    """The 4-parameter robust fit in this process on 1 thread and on ``--threads`` threads
-    (the Jacobian's columns, ``FitOptions.threads``), alternating ``--repeats`` times, each
-    pair between two measurements of the ceiling (what the machine gives this process's
+    """The 4-parameter robust fit in this process on 1 thread, on ``--threads`` threads (the
+    starts and the Jacobian's columns, ``FitOptions.threads``) and with the evaluations on as many
+    forked worker processes (``FitOptions.processes``), alternating ``--repeats`` times, each
+    round between two measurements of the ceiling (what the machine gives this process's
     threads right now, bench_batch.py); then (``--dask``) on a Dask LocalCluster."""
     from bench_batch import QUIET, _load, ceiling
     base = load_config(args.config) if args.config else load_config()
@@ -218,19 +225,22 @@ def timing(args) -> None:
     print(f'4-parameter fit, {train.t.size} samples ({DURATION} s at {RATE:g} Hz), '
           f'strategy robust; {_load()}')
     first = None
-    walls: dict[int, list[float]] = {1: [], n: []}
+    ways = {'1 thread': (1, 0), f'{n} threads': (n, 0),
+            f'{n} worker processes': (n, n)}
+    walls: dict[str, list[float]] = {w: [] for w in ways}
     for rep in range(args.repeats):
         c_before = ceiling(n)
-        for th in (1, n):
-            t0, c0 = time.perf_counter(), time.process_time()
-            res = identify(base, [train], KEYS, options=FitOptions(serial=True, threads=th))
-            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-            walls[th].append(wall)
+        for way, (th, proc) in ways.items():
+            t0, c0 = time.perf_counter(), _cpu()
+            res = identify(base, [train], KEYS,
+                           options=FitOptions(serial=True, threads=th, processes=proc))
+            wall, cpu = time.perf_counter() - t0, _cpu() - c0
+            walls[way].append(wall)
             h, c = held_out(res.config, hold, clean)
             nfev = sum(s['nfev'] for s in res.starts)
             same = first is None or (res.values == first.values and res.ci95 == first.ci95)
             first = first or res
-            print(f'  [{rep + 1}] in this process, {th} thread(s) {wall:6.2f} s (CPU/wall '
+            print(f'  [{rep + 1}] {way:<18} {wall:6.2f} s (CPU/wall '
                   f'{cpu / wall:4.2f})  nfev {nfev}  values '
                   + ' '.join(f'{v:.6g}' for v in res.values)
                   + f'  held-out theta4 {h:.2f} % (vs truth {c:.2f} %)  '
@@ -238,12 +248,14 @@ def timing(args) -> None:
                   f'{"" if same else "  DIFFERENT from the first run"}', flush=True)
         c_after = ceiling(n)
         quiet = min(c_before, c_after) >= QUIET * n
-        print(f'  [{rep + 1}] ratio 1 / {n} threads {walls[1][-1] / walls[n][-1]:.2f}; ceiling '
-              f'before {c_before:.2f}x after {c_after:.2f}x'
-              f'{" (free cores)" if quiet else " (the cores were busy: not conclusive)"}; '
-              f'{_load()}', flush=True)
-    print(f'  best: 1 thread {min(walls[1]):.2f} s, {n} threads {min(walls[n]):.2f} s; '
-          'target <= 5 s')
+        one, *more = (walls[w][-1] for w in ways)
+        print(f'  [{rep + 1}] ratio 1 thread / ' + ' / '.join(
+            f'{w} {one / v:.2f}' for w, v in zip(list(ways)[1:], more))
+            + f'; ceiling before {c_before:.2f}x after {c_after:.2f}x'
+            f'{" (free cores)" if quiet else " (the cores were busy: not conclusive)"}; '
+            f'{_load()}', flush=True)
+    print('  best: ' + ', '.join(f'{w} {min(v):.2f} s' for w, v in walls.items())
+          + '; target <= 5 s')
     if not args.dask:
         return
     from worm_gear_sim.studies import local_cluster_client

@@ -34,6 +34,7 @@ path.
 from __future__ import annotations
 
 import math
+import os
 import threading
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
@@ -129,6 +130,9 @@ _USABLE: dict[Parameters, bool] = {}
 _MODEL_CACHE_SIZE = 16
 _MODELS: dict[Parameters, DriveModel] = {}
 _LOCK = threading.Lock()
+# a forked child (dynamics.forked) gets the caches whole, never half-updated, and a free lock
+os.register_at_fork(before=_LOCK.acquire, after_in_parent=_LOCK.release,
+                    after_in_child=_LOCK.release)
 
 
 def _differs_from_defaults(cfg: Parameters) -> tuple[str, ...]:

@@ -19,6 +19,7 @@ measures, compared in docs/identification.md, make it robust:
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -29,6 +30,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..dynamics.batch import default_workers, map_like_serial
+from ..dynamics.forked import can_fork, fork_is_safe
 from ..dynamics.modal import modes
 from ..dynamics.stepping import SimulationError
 from ..params import Config
@@ -154,6 +156,13 @@ class FitOptions:
     #: process, and of the report's Jacobian (None: the cores, ``default_workers()``; the
     #: same numbers for any count); a local fit on a Dask worker process uses 1
     threads: int | None = None
+    #: worker processes forked for the evaluations (the Jacobian's columns and the rest) when
+    #: the local fits run in this process (:meth:`Problem.on_processes`; the starts then run
+    #: at once, on threads that wait for the processes).  None:
+    #: as many as ``threads`` where forking is safe (Linux, no other thread in this process:
+    #: :func:`~worm_gear_sim.dynamics.forked.fork_is_safe`) and ``threads`` > 1, else none;
+    #: 0: none (the columns on threads).  The same numbers either way.
+    processes: int | None = None
 
     def local(self, priors: tuple[tuple[int, float], ...] = (), threads: int = 1
               ) -> LocalSettings:
@@ -164,6 +173,19 @@ class FitOptions:
         n = default_workers() if self.threads is None else int(self.threads)
         if n < 1:
             raise IdentificationError(f'threads = {self.threads!r}: must be >= 1')
+        return n
+
+    def in_process_workers(self) -> int:
+        """Worker processes of the Jacobian's columns (0: the columns on threads)."""
+        if self.processes is None:
+            n = self.in_process_threads()
+            return n if n > 1 and fork_is_safe() else 0
+        n = int(self.processes)
+        if n < 0:
+            raise IdentificationError(f'processes = {self.processes!r}: must be >= 0')
+        if n and not can_fork():
+            raise IdentificationError(f'processes = {n}: forked worker processes need Linux; '
+                                      'use processes=0 (threads)')
         return n
 
     def resolved(self) -> tuple[bool, bool, int]:
@@ -377,10 +399,14 @@ def identify(base: Config, records: Sequence[Record], keys: Sequence[str], *,
     windows = problem.windows() if use_windows else [None]
     prior_sigma = _priors(opt, keys, direct_info)
     priors = tuple((keys.index(k), float(sg)) for k, sg in prior_sigma.items())
-    results = _run_starts(problem, starts, windows, opt, priors, on_start_done)
-    results.sort(key=lambda r: r['index'])
-    problem.threads = opt.in_process_threads()
-    best, stats = assess(problem, results, opt.max_nfev)
+    in_process = opt.serial or (len(starts) == 1 and opt.client is None
+                                and opt.scheduler is None)
+    n_proc = opt.in_process_workers() if in_process else 0
+    with problem.on_processes(n_proc) if n_proc else contextlib.nullcontext():
+        results = _run_starts(problem, starts, windows, opt, priors, on_start_done, in_process)
+        results.sort(key=lambda r: r['index'])
+        problem.threads = opt.in_process_threads()
+        best, stats = assess(problem, results, opt.max_nfev)
     if fit_base is not base:   # 'before' and the base values: the caller's base
         rms_before, per_before = residual_rms(problem, base)
         stats['rms_before'] = rms_before
@@ -410,10 +436,12 @@ def identify(base: Config, records: Sequence[Record], keys: Sequence[str], *,
 def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
                 windows: Sequence[float | None], opt: FitOptions,
                 priors: tuple[tuple[int, float], ...],
-                on_done: Callable[[dict], None] | None) -> list[dict[str, Any]]:
-    """Local fits from every start: in this process (``serial`` or a single start; the starts
-    and each Jacobian's columns on ``FitOptions.threads`` threads, every start computed as in
-    a serial loop, so the same numbers) or on Dask (the sweeps' engine: a LocalCluster by
+                on_done: Callable[[dict], None] | None, in_process: bool
+                ) -> list[dict[str, Any]]:
+    """Local fits from every start: ``in_process`` (``serial`` or a single start; the starts
+    and each Jacobian's columns on ``FitOptions.threads`` threads, or the columns on the
+    problem's worker processes, every start computed as in a serial loop, so the same
+    numbers) or on Dask (the sweeps' engine: a LocalCluster by
     default, ``scheduler`` for a cluster)."""
     out: list[dict[str, Any]] = []
     bar = None
@@ -436,14 +464,18 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
             on_done(r)
 
     try:
-        if opt.serial or (len(starts) == 1 and opt.client is None and opt.scheduler is None):
+        if in_process:
             start_bar()
             threads = opt.in_process_threads()
             local = opt.local(priors, threads)
-            # the starts on threads too: one start's columns use the cores another left idle
+            # the starts on threads too: one start's columns use the cores another left idle;
+            # with worker processes, every start at once (its thread only waits for them)
+            on_processes = problem.on_processes_now()
             map_like_serial(lambda i: _start_task(problem, list(starts[i]), list(windows),
                                                   local, i),
-                            range(len(starts)), workers=threads, on_result=lambda _, r: done(r))
+                            range(len(starts)),
+                            workers=len(starts) if on_processes else threads,
+                            on_result=lambda _, r: done(r))
         else:
             from ..studies.engine import _dask_client, warm_up
             with _dask_client(opt.client, opt.scheduler, opt.workers) as cl:

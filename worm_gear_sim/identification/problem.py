@@ -21,19 +21,26 @@ stays below 1 %.
 The columns are independent simulations: :meth:`Problem.jacobian` runs them on
 ``Problem.threads`` threads (:func:`~worm_gear_sim.dynamics.batch.map_like_serial`; the kernel
 releases the interpreter lock), each column computed by exactly the serial call, so the
-Jacobian is the same bit for bit whatever the number of threads.
+Jacobian is the same bit for bit whatever the number of threads.  Inside
+:meth:`Problem.on_processes` they run on forked worker processes instead
+(:mod:`~worm_gear_sim.dynamics.forked`: copies of this problem, the same code; the Python of
+each candidate set, which holds the interpreter lock, then runs on every core at once), and so
+does every other evaluation: the same numbers again.
 """
 
 from __future__ import annotations
 
+import os
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from ..dynamics.batch import map_like_serial
+from ..dynamics.forked import ForkedWorkers
 from ..dynamics.modal import modes
 from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
@@ -59,6 +66,8 @@ __all__ = ['DIFF_STEP', 'Problem', 'jacobian']
 DIFF_STEP = 1e-3
 
 _COUNT_LOCK = threading.Lock()     # Problem.n_evals when the Jacobian runs on threads
+os.register_at_fork(before=_COUNT_LOCK.acquire, after_in_parent=_COUNT_LOCK.release,
+                    after_in_child=_COUNT_LOCK.release)
 
 
 class Problem:
@@ -67,6 +76,8 @@ class Problem:
     #: threads of the Jacobian's columns (1: in the calling thread; a fit running on several
     #: processes keeps 1 in each)
     threads: int = 1
+    #: the forked worker processes of the Jacobian's columns inside :meth:`on_processes`
+    _workers: ForkedWorkers[Problem] | None = None
 
     def __init__(self, base: Config, params: Sequence[FitParameter],
                  records: Sequence[Record], outputs: Sequence[str] | None = None):
@@ -136,6 +147,31 @@ class Problem:
         self._memos: list[dict[float | None, Any]] = [{} for _ in self.records]  # predict's
         self._last: tuple[bytes, float | None, np.ndarray] | None = None
 
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state.pop('_workers', None)        # a pool stays with the process that forked it
+        return state
+
+    @contextmanager
+    def on_processes(self, workers: int) -> Iterator[None]:
+        """Inside the block, every evaluation (:meth:`residuals`, the Jacobian's columns)
+        runs on ``workers`` processes forked now (each a copy of this problem; the calling
+        threads wait), not in the calling thread or on :attr:`threads` threads; the pool is
+        closed on leaving.  Fork from a single-threaded process
+        (:func:`~worm_gear_sim.dynamics.forked.fork_is_safe`)."""
+        if self._workers is not None:
+            raise RuntimeError('the Jacobian already runs on worker processes')
+        with ForkedWorkers(self, workers) as pool:
+            self._workers = pool
+            try:
+                yield
+            finally:
+                self._workers = None
+
+    def on_processes_now(self) -> bool:
+        """The evaluations run on worker processes (inside :meth:`on_processes`)."""
+        return self._workers is not None
+
     def dominant_period(self) -> float:
         """Period [s] of the lowest measured oscillation (for time windows)."""
         freqs = [f for f, _, _, fs in measured_frequencies(self.base, self.records)
@@ -175,6 +211,14 @@ class Problem:
             return last[2].copy()
         with _COUNT_LOCK:
             self.n_evals += 1
+        pool = self._workers
+        out = (self.computed(x, window) if pool is None
+               else pool.map(_computed, [(x, window)])[0])
+        self._last = (key, window, out)
+        return out.copy()
+
+    def computed(self, x: np.ndarray, window: float | None = None) -> np.ndarray:
+        """:meth:`residuals` computed here, without its cache."""
         parts = []
         try:   # the model the usability check of the new set built (built once)
             model: DriveModel | None = usable_model(self.config(x))
@@ -198,9 +242,7 @@ class Problem:
                     parts.append(np.full(n, 10.0 * self.scale[o] / self.sigma[o]))
                 else:
                     parts.append((pred[o][:n] - meas) / self.sigma[o])
-        out = np.concatenate(parts)
-        self._last = (key, window, out)
-        return out.copy()
+        return np.concatenate(parts)
 
     def cost(self, x: np.ndarray, window: float | None = None) -> float:
         r = self.residuals(x, window)
@@ -227,13 +269,24 @@ class Problem:
             else:
                 plan.append((i, [None, x - e], h))
         points = [p for _, pts, _ in plan for p in pts if p is not None]
-        done = iter(map_like_serial(lambda xp: self.residuals(xp, window), points,
-                                    workers=self.threads))
+        pool = self._workers
+        if pool is None:
+            done = iter(map_like_serial(lambda xp: self.residuals(xp, window), points,
+                                        workers=self.threads))
+        else:
+            with _COUNT_LOCK:
+                self.n_evals += len(points)
+            done = iter(pool.map(_computed, [(xp, window) for xp in points]))
         for i, (fwd, back), step in plan:
             rf = r0 if fwd is None else next(done)
             rb = r0 if back is None else next(done)
             J[:, i] = (rf - rb) / step
         return J
+
+
+def _computed(problem: Problem, point: tuple[np.ndarray, float | None]) -> np.ndarray:
+    """One evaluation in a worker process (its copy of the problem)."""
+    return problem.computed(*point)
 
 
 def jacobian(problem: Problem, x: np.ndarray, h: float = DIFF_STEP,
