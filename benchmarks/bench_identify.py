@@ -231,17 +231,18 @@ def timing(args) -> None:
     for rep in range(args.repeats):
         c_before = ceiling(n)
         for way, (th, proc) in ways.items():
-            t0, c0 = time.perf_counter(), _cpu()
+            t0, c0, p0 = time.perf_counter(), _cpu(), time.process_time()
             res = identify(base, [train], KEYS,
                            options=FitOptions(serial=True, threads=th, processes=proc))
             wall, cpu = time.perf_counter() - t0, _cpu() - c0
+            parent = time.process_time() - p0
             walls[way].append(wall)
             h, c = held_out(res.config, hold, clean)
             nfev = sum(s['nfev'] for s in res.starts)
             same = first is None or (res.values == first.values and res.ci95 == first.ci95)
             first = first or res
-            print(f'  [{rep + 1}] {way:<18} {wall:6.2f} s (CPU/wall '
-                  f'{cpu / wall:4.2f})  nfev {nfev}  values '
+            print(f'  [{rep + 1}] {way:<18} {wall:6.2f} s (CPU/wall {cpu / wall:4.2f}, '
+                  f'this process {parent / wall:4.2f})  nfev {nfev}  values '
                   + ' '.join(f'{v:.6g}' for v in res.values)
                   + f'  held-out theta4 {h:.2f} % (vs truth {c:.2f} %)  '
                   f'{"trustworthy" if res.trustworthy else "NOT trustworthy"}'
