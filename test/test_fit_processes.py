@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import os
 import pickle
 import threading
 
@@ -15,7 +16,7 @@ import numpy as np
 import pytest
 
 from worm_gear_sim import load_config
-from worm_gear_sim.dynamics.forked import ForkedWorkers, can_fork, fork_is_safe
+from worm_gear_sim.dynamics.forked import ForkedWorkers, WorkerDied, can_fork, fork_is_safe
 from worm_gear_sim.dynamics.profiles import TrapezoidalProfile
 from worm_gear_sim.identification import (
     FitOptions,
@@ -140,3 +141,18 @@ def test_workers_map_in_order_and_rebuild_the_lowest_error():
         pool.map(_fails_at, [0])
     with pytest.raises(ValueError, match='workers'):
         ForkedWorkers(0, 0)
+
+
+def _dies(_state: None, item: int) -> int:
+    if item == 1:
+        os._exit(3)
+    return item
+
+
+def test_a_worker_that_dies_stops_the_map_and_the_pool():
+    pool = ForkedWorkers(None, 2)
+    with pytest.raises(WorkerDied, match='exit codes'):
+        pool.map(_dies, [0, 1, 2])
+    assert not any(p.is_alive() for p, _ in pool._procs)
+    with pytest.raises(RuntimeError, match='closed'):
+        pool.map(_dies, [0])

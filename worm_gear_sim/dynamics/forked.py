@@ -34,15 +34,16 @@ import itertools
 import multiprocessing
 import os
 import pickle
+import queue
 import signal
 import sys
 import threading
 import traceback
 from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor
-from typing import Any, Generic, TypeVar
+from multiprocessing.connection import Connection, wait
+from typing import Any, Generic, TypeVar, cast
 
-__all__ = ['ForkedWorkers', 'fork_is_safe', 'can_fork']
+__all__ = ['ForkedWorkers', 'WorkerDied', 'fork_is_safe', 'can_fork']
 
 S = TypeVar('S')
 T = TypeVar('T')
@@ -60,7 +61,8 @@ def can_fork() -> bool:
 def fork_is_safe() -> bool:
     """Forking now copies a consistent process: :func:`can_fork`, and this process runs one
     Python thread (no other thread can hold a lock the child would need)."""
-    return can_fork() and threading.active_count() == 1
+    return (can_fork() and threading.active_count() == 1
+            and not multiprocessing.current_process().daemon)   # a daemon has no children
 
 
 def _child_init(parent: int) -> None:
@@ -96,17 +98,39 @@ class _Raised:
         return exc
 
 
-def _run(token: int, fn: Callable[[Any, Any], Any], item: Any) -> tuple[bool, Any]:
+def _run(state: Any, fn: Callable[[Any, Any], Any], item: Any) -> tuple[bool, Any]:
     try:
-        return True, fn(_STATES[token], item)
+        return True, fn(state, item)
     except Exception as exc:
         return False, _Raised(exc)
+
+
+def _child_main(conn: Connection, token: int, parent: int, siblings: list[Connection]
+                ) -> None:
+    """A worker: ``(fn, item)`` in, ``(ok, result or _Raised)`` out, until None or EOF."""
+    _child_init(parent)
+    for other in siblings:           # the parent's ends of the earlier workers' pipes
+        other.close()
+    state = _STATES[token]
+    while True:
+        try:
+            msg = conn.recv()
+        except EOFError:
+            return
+        if msg is None:
+            return
+        conn.send(_run(state, *msg))
+
+
+class WorkerDied(RuntimeError):
+    """A worker process ended while it computed an item (killed, out of memory, a crash)."""
 
 
 class ForkedWorkers(Generic[S]):
     """``workers`` processes forked now, each with ``state`` as it is now; use as a context
     manager (or :meth:`close`).  ``fn`` given to :meth:`map` must be a module-level function
-    (it is sent by name) taking ``(state, item)``."""
+    (it is sent by name) taking ``(state, item)``.  Each worker is a pipe: a calling thread
+    takes an idle worker, sends it an item and waits for the result (no broker thread)."""
 
     def __init__(self, state: S, workers: int) -> None:
         n = int(workers)
@@ -115,45 +139,93 @@ class ForkedWorkers(Generic[S]):
         if not can_fork():
             raise RuntimeError('forked worker processes need Linux (fork)')
         self.workers = n
-        self._token = next(_TOKENS)
-        _STATES[self._token] = state
+        self._idle: queue.SimpleQueue[Connection] = queue.SimpleQueue()
+        self._procs: list[tuple[Any, Connection]] = []
+        self._closed = False
+        token = next(_TOKENS)
+        _STATES[token] = state
+        ctx = multiprocessing.get_context('fork')
         try:
-            self._pool: ProcessPoolExecutor | None = ProcessPoolExecutor(
-                n, mp_context=multiprocessing.get_context('fork'), initializer=_child_init,
-                initargs=(os.getpid(),))
-            # every child forked here, in the calling thread, before the pool's own threads
-            for f in [self._pool.submit(os.getpid) for _ in range(n)]:
-                f.result()
+            for _ in range(n):
+                mine, theirs = ctx.Pipe()
+                proc = ctx.Process(target=_child_main, args=(theirs, token, os.getpid(),
+                                                             [c for _, c in self._procs]),
+                                   daemon=True, name='wgs-forked')
+                proc.start()
+                theirs.close()
+                self._procs.append((proc, mine))
+                self._idle.put(mine)
         except BaseException:
-            self.close()
+            self.close(now=True)
             raise
         finally:
-            _STATES.pop(self._token, None)             # the children hold their copy
+            _STATES.pop(token, None)             # the children hold their copy
 
     def map(self, fn: Callable[[S, T], R], items: Iterable[T]) -> list[R]:
         """``[fn(state, x) for x in items]`` on the children, in item order; the exception of
-        the lowest failing item, as the serial loop raises it.  Safe to call from several
-        threads at once."""
-        if self._pool is None:
-            raise RuntimeError('the worker processes are closed')
-        futures = [self._pool.submit(_run, self._token, fn, x) for x in items]
-        out: list[R] = []
+        the lowest failing item, as the serial loop raises it (no item after a failed one is
+        started).  Safe to call from several threads at once."""
+        seq = list(items)
+        out: list[Any] = [None] * len(seq)
+        failed: dict[int, _Raised] = {}
+        pending: dict[Connection, int] = {}
+        i = 0
         try:
-            for f in futures:
-                ok, value = f.result()
-                if not ok:
-                    raise value.rebuilt()
-                out.append(value)
-        finally:
-            for f in futures:
-                f.cancel()
+            while i < len(seq) or pending:
+                while i < len(seq) and not failed:
+                    if self._closed:
+                        raise RuntimeError('the worker processes are closed')
+                    try:                 # block for a worker only when none works for us
+                        conn = self._idle.get(block=not pending)
+                    except queue.Empty:
+                        break
+                    pending[conn] = i
+                    conn.send((fn, seq[i]))
+                    i += 1
+                if not pending:
+                    break
+                for conn in wait(list(pending)):
+                    k = pending.pop(cast(Connection, conn))
+                    ok, value = self._received(cast(Connection, conn))
+                    self._idle.put(cast(Connection, conn))
+                    if ok:
+                        out[k] = value
+                    else:
+                        failed[k] = value
+        except BaseException:      # Ctrl-C, a dead worker: results may still be on the way
+            self.close(now=True)
+            raise
+        if failed:
+            raise failed[min(failed)].rebuilt()
         return out
 
-    def close(self) -> None:
-        """Stop the children: pending items cancelled, running ones finish."""
-        pool, self._pool = getattr(self, '_pool', None), None
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+    def _received(self, conn: Connection) -> tuple[bool, Any]:
+        try:
+            return conn.recv()
+        except (EOFError, OSError):
+            codes = [p.exitcode for p, _ in self._procs]
+            raise WorkerDied(f'a forked worker process ended while computing an item '
+                             f'(exit codes {codes})') from None
+
+    def close(self, now: bool = False) -> None:
+        """Stop the children (``now``: without waiting for the items they compute)."""
+        if self._closed:
+            return
+        self._closed = True
+        for proc, conn in self._procs:
+            try:
+                if now:
+                    proc.terminate()
+                else:
+                    conn.send(None)
+            except OSError:
+                pass
+        for proc, conn in self._procs:
+            proc.join(timeout=None if now else 5.0)
+            if proc.is_alive():                  # pragma: no cover - a stuck child
+                proc.kill()
+                proc.join()
+            conn.close()
 
     def __enter__(self) -> ForkedWorkers[S]:
         return self
