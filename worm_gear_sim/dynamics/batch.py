@@ -19,7 +19,10 @@ metrics) takes turns.  Against the alternatives:
 * *processes* (a pool, Dask) pay their start-up (1-4 s measured for two: numpy, scipy,
   numba and the cached kernels loaded in each) and pickle every result back (a 0.5 s record
   of every 4 us step is 20 MB); a pool kept alive (a Dask cluster) is the tool for many
-  machines;
+  machines.  Processes *forked* from this one start in milliseconds with everything loaded
+  (:mod:`.forked`): the backend where each item's Python, not its kernel, bounds the threads
+  and the results are small (a fit's residual vectors; ``identify`` uses it), but forking
+  is safe only from a single-threaded process, so threads stay the general default;
 * a *numba prange batch kernel* (one compiled loop over drives calling ``advance`` with
   per-drive packed parameter rows: it works, the entry point is re-entrant) would re-implement
   everything :class:`~worm_gear_sim.dynamics.stepping.Stepper` does around the kernel (rest
