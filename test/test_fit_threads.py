@@ -87,6 +87,13 @@ def test_a_candidate_set_is_built_once_and_simulates_the_same(case):
     C = stepping_damping(played)
     assert C.shape == (6, 3) and stepping_damping(played) is C     # stacked: play
     assert np.array_equal(C, stepping_damping(DriveModel(played.config)))
+    # the structural damping, kept per model too (the check's modes and the integrator's):
+    # a caller's copy, the same numbers as a fresh model's
+    from worm_gear_sim.dynamics.modal import damping_matrix
+    D = damping_matrix(played)
+    D[0, 0] += 1.0
+    assert np.array_equal(damping_matrix(played), damping_matrix(DriveModel(played.config)))
+    assert np.array_equal(damping_matrix(played), C[:3])
 
 
 def test_the_remembered_command_gives_the_same_numbers(case):

@@ -184,10 +184,11 @@ class ForkedWorkers(Generic[S]):
                     i += 1
                 if not pending:
                     break
-                for conn in wait(list(pending)):
-                    k = pending.pop(cast(Connection, conn))
-                    ok, value = self._received(cast(Connection, conn))
-                    self._idle.put(cast(Connection, conn))
+                for ready in wait(list(pending)):
+                    done = cast(Connection, ready)
+                    k = pending.pop(done)
+                    ok, value = self._received(done)
+                    self._idle.put(done)
                     if ok:
                         out[k] = value
                     else:

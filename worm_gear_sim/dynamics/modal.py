@@ -196,6 +196,8 @@ def damping_matrix(model: DriveModel | Parameters) -> np.ndarray:
     damping M Phi diag(2 zeta w) Phi^T M, with K0 the frictionless stiffness at the mean mesh
     stiffness."""
     model = DriveModel.of(model)
+    if model.damping_C is not None:         # computed for this model already (its check's
+        return model.damping_C.copy()       # modes, then the integrator's damping)
     p, d = model.p, model.config.damping
     M = mass_matrix(p)
     K0 = linear_stiffness(p)
@@ -207,7 +209,8 @@ def damping_matrix(model: DriveModel | Parameters) -> np.ndarray:
         w = 2 * np.pi * f_hz
         z = zetas[:len(w)]
         C = C + M @ phi @ np.diag(2.0 * z * w) @ phi.T @ M
-    return np.ascontiguousarray(C)
+    model.damping_C = np.ascontiguousarray(C)
+    return model.damping_C.copy()
 
 
 def open_mesh_damping_matrix(model: DriveModel | Parameters) -> np.ndarray:

@@ -275,13 +275,14 @@ class DriveModel:
     by everyone holding the model (it stays a writeable array because the compiled kernels
     are specialised on that array type)."""
 
-    __slots__ = ('config', 'derived', 'p', 'stepping_C')
+    __slots__ = ('config', 'derived', 'p', 'stepping_C', 'damping_C')
 
     def __init__(self, config: Parameters) -> None:
         self.config = config
         self.derived = derive(config)
         self.p = pack_parameters(config, self.derived)
         self.stepping_C: np.ndarray | None = None    # modal.stepping_damping's, kept
+        self.damping_C: np.ndarray | None = None     # modal.damping_matrix's, kept
 
     @classmethod
     def of(cls, model: DriveModel | Parameters) -> DriveModel:
