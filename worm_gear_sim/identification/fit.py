@@ -176,7 +176,8 @@ class FitOptions:
         return n
 
     def in_process_workers(self) -> int:
-        """Worker processes of the Jacobian's columns (0: the columns on threads)."""
+        """Worker processes of the evaluations (0: in the calling threads, the columns on
+        threads)."""
         if self.processes is None:
             n = self.in_process_threads()
             return n if n > 1 and fork_is_safe() else 0
@@ -439,10 +440,10 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
                 on_done: Callable[[dict], None] | None, in_process: bool
                 ) -> list[dict[str, Any]]:
     """Local fits from every start: ``in_process`` (``serial`` or a single start; the starts
-    and each Jacobian's columns on ``FitOptions.threads`` threads, or the columns on the
-    problem's worker processes, every start computed as in a serial loop, so the same
-    numbers) or on Dask (the sweeps' engine: a LocalCluster by
-    default, ``scheduler`` for a cluster)."""
+    and each Jacobian's columns on ``FitOptions.threads`` threads, or every evaluation on
+    the problem's worker processes; every start computed as in a serial loop, so the same
+    numbers) or on Dask (the sweeps' engine: a LocalCluster by default, ``scheduler`` for a
+    cluster)."""
     out: list[dict[str, Any]] = []
     bar = None
 

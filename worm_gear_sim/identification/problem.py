@@ -76,7 +76,7 @@ class Problem:
     #: threads of the Jacobian's columns (1: in the calling thread; a fit running on several
     #: processes keeps 1 in each)
     threads: int = 1
-    #: the forked worker processes of the Jacobian's columns inside :meth:`on_processes`
+    #: the forked worker processes of every evaluation inside :meth:`on_processes`
     _workers: ForkedWorkers[Problem] | None = None
 
     def __init__(self, base: Config, params: Sequence[FitParameter],
@@ -160,7 +160,7 @@ class Problem:
         closed on leaving.  Fork from a single-threaded process
         (:func:`~worm_gear_sim.dynamics.forked.fork_is_safe`)."""
         if self._workers is not None:
-            raise RuntimeError('the Jacobian already runs on worker processes')
+            raise RuntimeError('the evaluations already run on worker processes')
         with ForkedWorkers(self, workers) as pool:
             self._workers = pool
             try:
