@@ -71,8 +71,10 @@ def register(subparsers: Any) -> None:
     p.add_argument('--accept', type=float, default=0.05, metavar='SHARE',
                    help='accept when the held-out theta4 RMS error is within this share of '
                    'its amplitude (default: %(default)s)')
-    p.add_argument('--serial', action='store_true', help='fit in this process (no Dask)')
-    p.add_argument('--workers', type=int, metavar='N', help='Dask worker processes')
+    p.add_argument('--serial', action='store_true', help='fit in this process (the default '
+                   'without --workers: the evaluations on one forked worker process per core)')
+    p.add_argument('--workers', type=int, metavar='N', help='fit the starts on a Dask '
+                   'LocalCluster of N worker processes')
     p.add_argument('--no-plot', action='store_true', help='skip the figure')
     p.set_defaults(func=cmd_calibrate)
 
@@ -133,7 +135,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     res_bits = 2 * math.pi / 2 ** args.encoder_bits if args.encoder_bits > 0 else 0.0
     run = plant_runner(plant, args.sample_rate, measure, args.noise, res_bits, args.seed)
     outputs = [o.strip() for o in args.outputs.split(',')] if args.outputs else None
-    opt = FitOptions(strategy='robust', serial=args.serial, workers=args.workers)
+    opt = FitOptions(strategy='robust', serial=args.serial or args.workers is None,
+                     workers=args.workers)
     t0 = time.perf_counter()
     res = calibrate(cfg, keys, limits, run, options=opt, outputs=outputs,
                     accept_rel=args.accept)

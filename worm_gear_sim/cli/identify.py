@@ -79,11 +79,13 @@ def register(subparsers: Any) -> None:
     g.add_argument('--max-nfev', type=int, default=100, metavar='N',
                    help='residual evaluations per local fit stage (default: %(default)s)')
     e = p.add_argument_group('engine (multi-start)')
-    e.add_argument('--scheduler', metavar='ADDRESS', help='an existing Dask scheduler, '
-                   'e.g. tcp://host:8786')
-    e.add_argument('--workers', type=int, metavar='N', help='LocalCluster worker processes '
-                   '(default: all cores)')
-    e.add_argument('--serial', action='store_true', help='run every start in this process')
+    e.add_argument('--scheduler', metavar='ADDRESS', help='run the starts on an existing Dask '
+                   'scheduler, e.g. tcp://host:8786')
+    e.add_argument('--workers', type=int, metavar='N', help='run the starts on a Dask '
+                   'LocalCluster of N worker processes')
+    e.add_argument('--serial', action='store_true', help='run every start in this process '
+                   '(the default without --workers or --scheduler: the evaluations on one '
+                   'forked worker process per core)')
     b = p.add_argument_group('rosbag2 records')
     b.add_argument('--command-topic', metavar='TOPIC', help='theta1: std_msgs/Float64 or the '
                    'stamped JointState reference (default: worm_angle_reference, else '
@@ -167,6 +169,13 @@ def write_params_yaml(cfg: Config, path: Path, header: Sequence[str]) -> None:
                           + params_yaml_text(params_document(cfg)))
 
 
+def in_process(args: argparse.Namespace) -> bool:
+    """Whether the fit runs in this process: ``--serial``, or neither ``--workers`` nor
+    ``--scheduler`` (on one machine the in-process fit, its evaluations on forked worker
+    processes, is the fastest: docs/identification.md)."""
+    return bool(args.serial) or (args.workers is None and args.scheduler is None)
+
+
 def cmd_identify(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     keys = [k.strip() for item in args.fit for k in item.split(',') if k.strip()]
@@ -192,7 +201,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
                 f'(at most {MAX_FIT_SAMPLES} per record)')
     opt = FitOptions(strategy=args.strategy, n_starts=args.starts, seed=args.seed,
                      max_nfev=args.max_nfev, workers=args.workers, scheduler=args.scheduler,
-                     serial=args.serial, progress=not (args.no_progress or args.quiet))
+                     serial=in_process(args), progress=not (args.no_progress or args.quiet))
     t0 = time.perf_counter()
     outputs = [o.strip() for o in args.outputs.split(',') if o.strip()] \
         if args.outputs else None
