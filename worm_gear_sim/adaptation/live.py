@@ -9,11 +9,24 @@
 * every encoder message (stamp, joint names, positions) -> :meth:`measured`: checked
   (non-finite values or stamp, a stamp not after the previous one, no antenna joint, outside
   the stored predictions, names and positions of unequal length: rejected and counted by
-  reason, the estimate untouched), then the residual measured - predicted theta4 at the
-  stamp goes to the :class:`~.estimator.Adapter`;
+  reason, the estimate untouched), then it waits with the prediction of its stamp (which
+  does not change later) for its entry (below);
 
-and now and then the adapter's decision is applied, off the sample path and at a stamp
-fixed when it is taken:
+and every time a prediction has been handed over, :meth:`step` with its stamp: the waiting
+samples enter the estimate, then the adapter may decide.
+
+**What a decision sees depends on the stamps only.**  An encoder sample stamped s enters
+the :class:`~.estimator.Adapter` (the residual measured - predicted theta4) at the first
+:meth:`step` stamped >= s + ``adaptation.sample_delay`` (D), before that step's decision.
+The twin hands each sample over right after the prediction of its stamp; the node gets it
+back from the drive a transport delay later (live with a plant node: a few ms to a few
+tens of ms of stream time).  Either way it enters at the same step, so the node equals the
+twin exactly whenever the encoder comes back within D.  A sample that comes after its
+entry step has passed enters at once and is counted (``late_samples``): only then do the
+node and the twin see different sets of samples at a decision.
+
+The adapter's decisions are applied off the sample path, at a stamp fixed when they are
+taken:
 
 * at the prediction stamped t the adapter decides a step; its preparation (the overrides
   made a Config, validated by :meth:`~worm_gear_sim.params.Config.replace`; the model and
@@ -31,6 +44,10 @@ fixed when it is taken:
   done, so the node equals the twin exactly while ``late_steps`` is 0; a late step only
   moves the step's instant (by whole leads), never its values.
 
+So the node equals the twin bit for bit (same samples, same machine) while ``late_samples``
+and ``late_steps`` are both 0.  A sample predicted before a step and entering after it is
+judged with the set that predicted it (:meth:`~.estimator.Adapter.applied` keeps it).
+
 A set refused on the way (a ConfigError, an unusable set, a negative play) is never
 applied: the model in use stays, the reason is kept in :attr:`LiveAdaptation.last_refusal`
 and returned once per new reason (the node logs it, throttled).
@@ -39,6 +56,7 @@ and returned once per new reason (the node logs it, throttled).
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass
@@ -88,7 +106,8 @@ class LiveAdaptation:
         self.history = _Predictions(history)
         self.adapter = Adapter(predictor.model, predictor.config.adaptation)
         self.counters: dict[str, int] = {'samples': 0, 'used': 0, 'rejected': 0,
-                                         'switches': 0, 'refusals': 0, 'late_steps': 0}
+                                         'switches': 0, 'refusals': 0, 'late_steps': 0,
+                                         'late_samples': 0}
         self.counters.update({f'rejected_{r}': 0 for r in REJECT_REASONS})
         self.last_refusal = ''
         self.last_note = ''
@@ -96,6 +115,11 @@ class LiveAdaptation:
         self._last_ns: int | None = None
         self._submit = submit or run_now
         self._lead_ns = int(round(APPLY_LEAD * 1e9))
+        self._delay_ns = int(round(predictor.config.adaptation.sample_delay * 1e9))
+        #: samples waiting for their entry: (entry stamp [ns], t, measured theta4,
+        #: predicted theta2, theta3, theta4), in stamp order
+        self.waiting: deque[tuple[int, float, float, float, float, float]] = deque()
+        self._step_ns = -1                    # the stamp of the last step
         self.pending: _Pending | None = None
 
     # ---- inputs ------------------------------------------------------------------------
@@ -142,9 +166,25 @@ class LiveAdaptation:
             return self._reject('outside_prediction')
         self._last_ns = stamp_ns
         theta2, theta3, theta4 = pred.tolist()
-        if self.adapter.update(t, meas, theta2, theta3, theta4):
-            self.counters['used'] += 1
+        entry = stamp_ns + self._delay_ns
+        if entry > self._step_ns:
+            self.waiting.append((entry, t, meas, theta2, theta3, theta4))
+        else:                       # its entry step has passed: at once, after the older
+            self.counters['late_samples'] += 1          # (none wait: they entered there)
+            if self.waiting:
+                self._enter(self._step_ns)
+            if self.adapter.update(t, meas, theta2, theta3, theta4):
+                self.counters['used'] += 1
         return None
+
+    def _enter(self, stamp_ns: int) -> None:
+        """The waiting samples whose entry stamp has come, into the estimate."""
+        waiting, update = self.waiting, self.adapter.update
+        used = 0
+        while waiting and waiting[0][0] <= stamp_ns:
+            _, t, meas, theta2, theta3, theta4 = waiting.popleft()
+            used += update(t, meas, theta2, theta3, theta4)
+        self.counters['used'] += used
 
     # ---- switching ---------------------------------------------------------------------
     def step(self, stamp_ns: int) -> list[str]:
@@ -154,8 +194,12 @@ class LiveAdaptation:
         the first time it comes)."""
         if self._base_ns is None:
             return []
+        stamp_ns = int(stamp_ns)
+        self._step_ns = stamp_ns
+        if self.waiting:
+            self._enter(stamp_ns)
         if self.pending is not None:
-            return self._apply_due(int(stamp_ns))
+            return self._apply_due(stamp_ns)
         ad = self.adapter
         refusals = ad.refusals
         d = ad.poll(self._seconds(stamp_ns))
@@ -200,7 +244,7 @@ class LiveAdaptation:
         except (ValueError, ArithmeticError) as exc:   # ConfigError is a ValueError
             ad.refused(f'{type(exc).__name__}: {exc}')
             return self._refused(ad.last_refusal, counted=True)
-        ad.applied(p.step, pred.model)
+        ad.applied(p.step, pred.model, self._seconds(stamp_ns))
         self.counters['switches'] += 1
         return []
 
@@ -213,8 +257,10 @@ class LiveAdaptation:
 
     def rebase(self) -> None:
         """The predictor's model was changed from outside (a parameter update): the adapter
-        restarts from it (a step being prepared is dropped)."""
+        restarts from it (a step being prepared is dropped, and the samples waiting: the
+        replaced model predicted them)."""
         self.pending = None
+        self.waiting.clear()
         self.adapter.rebase(self.predictor.model)
 
     # ---- read-out ----------------------------------------------------------------------
