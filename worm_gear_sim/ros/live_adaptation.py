@@ -28,10 +28,11 @@ it has seen.  The node releases a command (and its prediction) ``preview`` after
 reference of its stamp, so its predictions run at most ``lead + max_lag`` past that encoder
 sample: with ``max_lag`` = (``adaptation.sample_delay`` - ``lead``) / 2 (the default), less
 than the sample delay by as much again, every encoder sample reaches the node before its
-entry step (:mod:`worm_gear_sim.adaptation.live`; ``late_samples`` counts the others).  On a machine that keeps up this is real time; on a starved one (2 shared
-cores: the plant with play and the node each cost a few hundred us per 1 ms sample) the
-clock slows down instead of the node dropping late samples, so the result measures the
-adaptation, not the machine.  It waits until the plant has answered the last sample,
+entry step (:mod:`worm_gear_sim.adaptation.live`; ``late_samples`` counts the others).
+On a machine that keeps up this is real time; on a starved one (2 shared cores: the plant
+with play and the node each cost a few hundred us per 1 ms sample) the clock slows down
+instead of a sample coming late, so the result measures the adaptation, not the
+machine.  It waits until the plant has answered the last sample,
 keeps the node's last ``~/adapted_parameters`` (published on every applied step and every
 ``node.diagnostic_period`` of the simulated clock), stops both (SIGINT) and reads the
 plant's record.  The result is a :class:`~worm_gear_sim.adaptation.twin.TwinRun` like the
