@@ -169,22 +169,11 @@ class LiveAdaptation:
         entry = stamp_ns + self._delay_ns
         if entry > self._step_ns:
             self.waiting.append((entry, t, meas, theta2, theta3, theta4))
-        else:                       # its entry step has passed: at once, after the older
-            self.counters['late_samples'] += 1          # (none wait: they entered there)
-            if self.waiting:
-                self._enter(self._step_ns)
+        else:       # its entry step has passed: at once (none waits: the older, stamped
+            self.counters['late_samples'] += 1      # before it, entered at that step)
             if self.adapter.update(t, meas, theta2, theta3, theta4):
                 self.counters['used'] += 1
         return None
-
-    def _enter(self, stamp_ns: int) -> None:
-        """The waiting samples whose entry stamp has come, into the estimate."""
-        waiting, update = self.waiting, self.adapter.update
-        used = 0
-        while waiting and waiting[0][0] <= stamp_ns:
-            _, t, meas, theta2, theta3, theta4 = waiting.popleft()
-            used += update(t, meas, theta2, theta3, theta4)
-        self.counters['used'] += used
 
     # ---- switching ---------------------------------------------------------------------
     def step(self, stamp_ns: int) -> list[str]:
@@ -196,8 +185,14 @@ class LiveAdaptation:
             return []
         stamp_ns = int(stamp_ns)
         self._step_ns = stamp_ns
-        if self.waiting:
-            self._enter(stamp_ns)
+        waiting = self.waiting
+        if waiting and waiting[0][0] <= stamp_ns:      # (inline: once per sample)
+            update = self.adapter.update
+            used = 0
+            while waiting and waiting[0][0] <= stamp_ns:
+                _, t, meas, theta2, theta3, theta4 = waiting.popleft()
+                used += update(t, meas, theta2, theta3, theta4)
+            self.counters['used'] += used
         if self.pending is not None:
             return self._apply_due(stamp_ns)
         ad = self.adapter
