@@ -200,10 +200,11 @@ def test_an_unusable_step_keeps_the_model_and_says_why_once(base):
     ad = live.adapter
     msgs = []
     lead = int(APPLY_LEAD * 1e9)
+    delay = int(cfg.adaptation.sample_delay * 1e9)    # decisions on the samples' clock
     for k in range(3):
         ad.target = np.array([-0.01])        # a negative play: the validation refuses it
         ad._next_poll = -math.inf
-        ns = BASE_NS + k * 4 * lead
+        ns = BASE_NS + delay + k * 4 * lead
         msgs += live.step(ns)                # decided, prepared (refused on the way) ...
         assert live.counters['refusals'] == k
         msgs += live.step(ns + lead)         # ... and not applied at its stamp
@@ -215,7 +216,9 @@ def test_an_unusable_step_keeps_the_model_and_says_why_once(base):
 def test_a_step_is_applied_at_its_fixed_stamp_and_a_late_one_at_the_next(base):
     """A decided step is swapped in at the first prediction stamped >= its decision +
     APPLY_LEAD, never earlier; prepared late (the worker still busy), it moves to the next
-    multiple of the lead and is counted; its values are the decided ones either way."""
+    multiple of the lead and is counted; its values are the decided ones either way.  The
+    adapter decides on the samples' clock: nothing before adaptation.sample_delay has
+    passed since the first prediction."""
     from concurrent.futures import Future
     cfg = base.replace({'adaptation.enabled': True, 'adaptation.keys': ['load.output_torque'],
                         'adaptation.max_step': 1.0, 'node.compensation_applied': True})
@@ -234,19 +237,22 @@ def test_a_step_is_applied_at_its_fixed_stamp_and_a_late_one_at_the_next(base):
         live = LiveAdaptation(pred, cfg.node.joint_names[1:], submit=submit)
         live.predicted(BASE_NS, (0.0, 0.0, 0.0))
         live.adapter.target = np.array([2.5])
-        live.step(BASE_NS)
+        t0 = BASE_NS + int(cfg.adaptation.sample_delay * 1e9)
+        live.step(t0 - 1)
+        assert not jobs and live.pending is None
+        live.step(t0)
         assert len(jobs) == 1 and live.pending is not None
-        live.step(BASE_NS + lead - 1)
+        live.step(t0 + lead - 1)
         assert pred.config is cfg
-        live.step(BASE_NS + lead)
+        live.step(t0 + lead)
         if late:
             assert pred.config is cfg and live.counters['late_steps'] == 1
-            live.step(BASE_NS + 2 * lead - 1)          # prepared now, but not due
+            live.step(t0 + 2 * lead - 1)          # prepared now, but not due
             job, fut = jobs[0]
             fut.set_result(job())
-            live.step(BASE_NS + 2 * lead - 1)
+            live.step(t0 + 2 * lead - 1)
             assert pred.config is cfg
-            live.step(BASE_NS + 2 * lead)
+            live.step(t0 + 2 * lead)
         assert pred.config.load.output_torque == 2.5 and live.pending is None
         assert live.counters['switches'] == 1 and len(jobs) == 1
         assert live.counters['late_steps'] == int(late)

@@ -23,12 +23,18 @@ back from the drive a transport delay later (live with a plant node: a few ms to
 tens of ms of stream time).  Either way it enters at the same step, so the node equals the
 twin exactly whenever the encoder comes back within D.  A sample that comes after its
 entry step has passed enters at once and is counted (``late_samples``): only then do the
-node and the twin see different sets of samples at a decision.
+node and the twin see different sets of samples at a decision.  The adapter runs on the
+samples' clock, D behind the predictions: at the step stamped T it decides as of T - D
+(:meth:`~.estimator.Adapter.poll` at T - D, nothing before the first prediction + D), so
+each decision has the samples up to its own time, as it had before the delay, one delay
+later (docs/adaptation.md: deciding at T with the samples up to T - D only moved every
+decision D earlier against the data).
 
 The adapter's decisions are applied off the sample path, at a stamp fixed when they are
 taken:
 
-* at the prediction stamped t the adapter decides a step; its preparation (the overrides
+* at the prediction stamped t (its decision as of t - D) the adapter decides a step; its
+  preparation (the overrides
   made a Config, validated by :meth:`~worm_gear_sim.params.Config.replace`; the model and
   the compensator designed by
   :meth:`~worm_gear_sim.realtime.predictor.RealtimePredictor.prepare`, with the simulator's
@@ -195,9 +201,14 @@ class LiveAdaptation:
             self.counters['used'] += used
         if self.pending is not None:
             return self._apply_due(stamp_ns)
+        # the adapter decides on the samples' clock, D behind the predictions: at the stamp
+        # t + D it has the samples up to t, as the twin had at t before the delay
+        t_samples = self._seconds(stamp_ns - self._delay_ns)
+        if t_samples < 0.0:
+            return []
         ad = self.adapter
         refusals = ad.refusals
-        d = ad.poll(self._seconds(stamp_ns))
+        d = ad.poll(t_samples)
         msgs: list[str] = []
         if d.note and d.note != self.last_note:
             self.last_note = d.note
