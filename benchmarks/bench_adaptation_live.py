@@ -114,7 +114,8 @@ def main() -> int:
                             workdir=work / f'drive{i}', seed=args.seed + i)
             t2 = time.perf_counter()
             same = run_twin(plant, base, args.scenario, args.duration, seed=args.seed + i,
-                            base_ns=live.t0_ns, hold=live.held)
+                            base_ns=live.t0_ns, hold=live.held,
+                            plant_from_ns=live.plant_ns)
             t3 = time.perf_counter()
             ft, fl = figures(twin, args.duration), figures(live, args.duration)
             fs = figures(same, args.duration)

@@ -47,7 +47,8 @@ def test_live_node_learns_the_plant_from_its_encoder(ros_dds_context, ros_subpro
     # same encoder samples at the same stamps (none late), the plant process stepped the
     # same commands
     assert run.counters['late_samples'] == 0 and run.counters['late_steps'] == 0
-    twin = run_twin(plant, start, 'sector', 1.6, seed=3, base_ns=run.t0_ns, hold=run.held)
+    twin = run_twin(plant, start, 'sector', 1.6, seed=3, base_ns=run.t0_ns, hold=run.held,
+                    plant_from_ns=run.plant_ns)
     assert twin.counters['late_samples'] == 0 and twin.counters['switches'] >= 1
     assert np.array_equal(run.error_compensated, twin.error_compensated)
     assert run.in_use == twin.in_use

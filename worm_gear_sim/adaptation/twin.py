@@ -114,15 +114,17 @@ def plant_errors(plant: Config, start: Config, t: np.ndarray, theta1_ref: np.nda
 def run_twin(plant: Config, start: Config, name: str, duration: float, *,
              noise: float = 1e-6, encoder_bits: int = 20, seed: int = 0, adapt: bool = True,
              preview: float | None = None, base_ns: int = BASE_NS, hold: int = 0,
-             record: bool = False, on_sample: Callable[[float], None] | None = None
-             ) -> TwinRun:
+             plant_from_ns: int | None = None, record: bool = False,
+             on_sample: Callable[[float], None] | None = None) -> TwinRun:
     """Stream scenario ``name`` for ``duration`` s (module docstring): the plant driven by
     the adapting feed-forward (``adapt`` False: the feed-forward of the start set, never
     adapted), and by the raw reference for the uncompensated error.  ``noise``: encoder
     noise RMS [rad]; ``encoder_bits``: resolution 2 pi / 2^bits (0: none); ``base_ns``: the
     stamp of t = 0; ``hold``: this many samples of the first reference on the stream's grid
     before t = 0 (the live harness's start, :mod:`worm_gear_sim.ros.live_adaptation`: the
-    pipeline and the plant start at the first of them); ``record``: keep per pushed sample
+    pipeline and the plant start at the first of them; ``plant_from_ns``: the plant starts
+    at this stamp instead, at rest at the first reference, and takes no earlier command, as
+    the live plant node that connected later); ``record``: keep per pushed sample
     (stamp, theta1_ref, [(stamp, encoder theta4, delta) of each correction released]) in
     ``TwinRun.record`` (what a node would receive, in its order)."""
     cfg = prepare_start(start, preview)
@@ -131,6 +133,7 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
     keep = t <= duration + 1e-12
     period_ns = int(round((t[1] - t[0]) * 1e9))
     first_ns = base_ns - int(hold) * period_ns
+    plant_ns = first_ns if plant_from_ns is None else int(plant_from_ns)
     pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=first_ns)
     names = cfg.node.joint_names[1:]
     live = LiveAdaptation(pred, names)
@@ -154,7 +157,9 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
                     run.steps.append(((ns - base_ns) * 1e-9, live.adapter.applied_values()))
         got = []
         for c in out.corrections:
-            th4, meas = drive.command((c.stamp_ns - first_ns) * 1e-9, c.theta1_ref + c.delta)
+            if c.stamp_ns < plant_ns:
+                continue
+            th4, meas = drive.command((c.stamp_ns - plant_ns) * 1e-9, c.theta1_ref + c.delta)
             j = index.get(c.stamp_ns)
             if j is not None:
                 theta4[j] = th4

@@ -45,7 +45,8 @@ right after the prediction of its stamp; here it comes back through two processe
 its stamp, so this does not change what a decision sees while ``late_samples`` and
 ``late_steps`` stay 0; and the run starts with the held samples (``LiveRun.held``, the
 first at ``LiveRun.first_ns``), which the twin replays with ``run_twin(..., base_ns=
-run.t0_ns, hold=run.held)``: then the two are the same computation on the same samples.
+run.t0_ns, hold=run.held, plant_from_ns=run.plant_ns)``: then the two are the same
+computation on the same samples.
 """
 
 from __future__ import annotations
@@ -137,7 +138,7 @@ class ScenarioCommander(Node):
         """The node is spinning (its /diagnostics seen), and the node and the plant are
         subscribed to the references, the plant to the node's commands, the node to the
         plant's encoder."""
-        return (self.node_alive and self.count_subscribers(REFERENCE_TOPIC) >= 2
+        return (self.node_alive and self.pub.get_subscription_count() >= 2
                 and self.count_subscribers(private_topic(COMPENSATED_COMMAND_TOPIC,
                                                          self.target)) >= 1
                 and self.count_subscribers(MEASURED_TOPIC) >= 2)
@@ -231,7 +232,8 @@ class LiveRun(TwinRun):
     """A :class:`TwinRun` from the live processes, plus: stamps kept without a plant sample
     (``missing``), whether the encoder stopped coming (``stalled``: no progress for
     ``stall_timeout`` s, a process ended, or the drain timed out), the first sample's hold
-    messages (``held``, the first stamped ``first_ns``; the stream's t = 0 is ``t0_ns``),
+    messages (``held``, the first stamped ``first_ns``; the stream's t = 0 is ``t0_ns``; the
+    plant started at ``plant_ns``, the first reference it saw connected),
     the plant's counters, the wall time of the stream and the logs."""
 
     missing: int = 0
@@ -239,6 +241,7 @@ class LiveRun(TwinRun):
     held: int = 0
     first_ns: int = 0
     t0_ns: int = 0
+    plant_ns: int = 0
     plant_counters: dict[str, int] = field(default_factory=dict)
     stream_wall_s: float = math.nan
     node_log: str = ''
@@ -261,7 +264,7 @@ def plant_command(plant: Path, record: Path, *, noise: float, encoder_bits: int,
     """The plant node's process."""
     return [sys.executable, '-m', 'worm_gear_sim.ros.plant', '--plant', str(plant),
             '--noise', repr(noise), '--encoder-bits', str(encoder_bits), '--seed', str(seed),
-            '--record', str(record)]
+            '--record', str(record), '--subscribers', '2']
 
 
 def _start(args: list[str], env: dict[str, str], log: Path) -> tuple[subprocess.Popen, IO]:
@@ -377,6 +380,7 @@ def _result(plant: Config, cfg: Config, t: np.ndarray, x: np.ndarray,
     """The live run as the twin's record (module docstring)."""
     theta4 = np.full(t.size, np.nan)
     plant_counters: dict[str, int] = {}
+    plant_ns = 0
     if record.exists():
         rec = np.load(record)
         assert commander.t0_ns is not None
@@ -386,11 +390,12 @@ def _result(plant: Config, cfg: Config, t: np.ndarray, x: np.ndarray,
         theta4[index[ok]] = rec['theta4'][ok]
         plant_counters = {k.removeprefix('counter_'): int(rec[k]) for k in rec.files
                           if k.startswith('counter_')}
+        plant_ns = int(rec['base_ns'])
     ad = commander.adapted
     unc, err = plant_errors(plant, cfg, t, x, theta4)
     run = LiveRun(t, x, unc, err,
                   estimates=ad.get('estimate', {}), in_use=ad.get('in_use', {}),
                   counters=ad.get('counters', {}), missing=int(np.count_nonzero(np.isnan(err))),
-                  plant_counters=plant_counters, stream_wall_s=stream_wall,
+                  plant_counters=plant_counters, stream_wall_s=stream_wall, plant_ns=plant_ns,
                   node_log=logs[0], plant_log=logs[1])
     return run
