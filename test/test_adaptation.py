@@ -64,6 +64,9 @@ def test_keys_are_validated(base):
         base.replace({'adaptation.keys': ['geometry.module']})
     with pytest.raises(ConfigError, match='adaptation.keys'):
         base.replace({'adaptation.enabled': True, 'adaptation.keys': []})
+    for bad in (0.0, -0.01, 0.2):      # > 0 and below the hold-off after a step
+        with pytest.raises(ConfigError, match='adaptation.sample_delay'):
+            base.replace({'adaptation.sample_delay': bad})
 
 
 def test_compliance_is_the_models_static_wind_up(base):

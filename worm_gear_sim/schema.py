@@ -425,7 +425,8 @@ class AdaptationSettings:
                              'first prediction stamped >= s + sample_delay (what each '
                              'decision sees depends on the stamps only, not on when the '
                              'sample came; one that comes later enters at once and is '
-                             'counted, late_samples)', 's', 0.0, 1.0, lo_open=True)
+                             'counted, late_samples); at most 0.1 s, below the 0.15 s '
+                             'hold-off after an applied step', 's', 0.0, 0.1, lo_open=True)
     params_file: str = _f('worm_gear_sim_adapted.yaml', 'Where the node\'s '
                           '~/write_adapted_parameters service writes the params file of the '
                           'model in use (relative: to the working directory)')

@@ -410,9 +410,6 @@ class Adapter:
         self._timing = FlankTiming()
         self._model_flank_t = -math.inf
         self._switches: collections.deque = collections.deque(maxlen=16)
-        # the sets in use before the last steps: (the step's time, the set before it)
-        self._before: collections.deque = collections.deque(maxlen=8)
-        self._switch_t = -math.inf
         self._rate = 0.0
         self._play0 = float(model.config.mesh.backlash)
 
@@ -448,10 +445,9 @@ class Adapter:
         flank = 1.0 if torque > 0.0 else -1.0 if torque < 0.0 else self._flank
         if flank != self._flank:
             self._flank, self._flank_t = flank, t
-        # the flank of the model that predicted this sample (the one in use at t: a sample
-        # may enter after a later step, :meth:`applied`): where it differs, one of the two is
-        # wrong and the residual holds a flank error the linear picture does not have
-        ax = self.applied_x if t > self._switch_t else self._in_use_at(t)
+        # the flank of the model in use: where it differs, one of the two is wrong and the
+        # residual holds a flank error the linear picture does not have
+        ax = self.applied_x
         drag_m = ax[lay.i_drag] if lay.i_drag >= 0 else self._drag0
         torque_m = self._inertia * a4 + drag_m * w4 + \
             (ax[lay.i_load] if lay.i_load >= 0 else self._load0)
@@ -460,11 +456,11 @@ class Adapter:
         timing.push(t, theta4_meas - theta4_pred, w4, a4)
         if flank_m != self._flank_m:
             if lay.i_play < 0 and self._play0 > 0.0 or lay.i_play >= 0 and \
-                    ax[lay.i_play] > 0.0:   # the model crosses its play here
+                    self.applied_x[lay.i_play] > 0.0:   # the model crosses its play here
                 timing.model_flank_changed(t, self._flank_m, flank_m)
                 self._model_flank_t = t
             self._flank_m, self._flank_t = flank_m, max(self._flank_t, t)
-        self._flank_time_update(t, drag, ax)
+        self._flank_time_update(t, drag)
         self._step_update(t, drag)
         # a flank change within the hold-off ahead (the torques' rates: c alpha4)
         ahead = FLANK_HOLD_OFF * a4
@@ -539,24 +535,14 @@ class Adapter:
                      HUBER_SIGMAS)
         self.flank_times += 1
 
-    def _in_use_at(self, t: float) -> np.ndarray:
-        """The set in use at ``t`` [s], at or before the last step's time: the set before
-        the first step taken after ``t`` (the oldest kept, further back)."""
-        x = self.applied_x
-        for t_s, before in reversed(self._before):
-            if t > t_s:
-                break
-            x = before
-        return x
-
-    def _flank_time_update(self, t: float, drag: float, ax: np.ndarray) -> None:
+    def _flank_time_update(self, t: float, drag: float) -> None:
         """The real drive's flank change as a measurement of (T, c) (:mod:`.flank_timing`):
         T + c omega4(t_p) = -J alpha4(t_p), its noise a timing error of SWITCH_TIME_SD."""
         lay = self.layout
         if lay.i_load < 0 and lay.i_drag < 0 or not self._timing.event_due(t):
             return
         play = self.theta[lay.i_play] if lay.i_play >= 0 else self._play0
-        model_play = ax[lay.i_play] if lay.i_play >= 0 else self._play0
+        model_play = self.applied_x[lay.i_play] if lay.i_play >= 0 else self._play0
         noise = self.settings.measurement_noise
         got = self._timing.ready(t, play, MIN_PLAY_NOISES * noise, model_play, noise,
                                  self._inertia / drag if drag > 0.0 else 0.0)
@@ -659,19 +645,11 @@ class Adapter:
                 out += float(np.sum(np.abs(delta[i0:i0 + 2 * k])))
         return out
 
-    def applied(self, step: np.ndarray, model: DriveModel, t: float | None = None) -> None:
-        """The caller applied ``step`` (a Decision's) to the model in use after its
-        prediction at ``t`` [s] (None: the last sample's time): the samples up to ``t``
-        were predicted by the set before (kept for :meth:`update`, as samples may enter
-        later), those within FLANK_HOLD_OFF after it are not used (the prediction's
-        transient)."""
-        t = self._last_t if t is None or math.isnan(t) else max(float(t), self._last_t)
-        if not math.isnan(t):
-            self._before.append((t, self.applied_x))
-            self._switch_t = t
-            self._hold_until = t + FLANK_HOLD_OFF
+    def applied(self, step: np.ndarray, model: DriveModel) -> None:
+        """The caller applied ``step`` (a Decision's) to the model in use."""
         self.applied_x = np.array(step, float)
         self.model = model
+        self._hold_until = self._last_t + FLANK_HOLD_OFF   # the prediction's transient
         self.switches += 1
         if self.target is not None and np.array_equal(self.target, self.applied_x):
             self.target = None

@@ -51,8 +51,10 @@ taken:
   moves the step's instant (by whole leads), never its values.
 
 So the node equals the twin bit for bit (same samples, same machine) while ``late_samples``
-and ``late_steps`` are both 0.  A sample predicted before a step and entering after it is
-judged with the set that predicted it (:meth:`~.estimator.Adapter.applied` keeps it).
+and ``late_steps`` are both 0.  The samples predicted before a step and entering after it
+(those of the last D) are held off with the step's transient: the hold-off
+(:data:`~.estimator.FLANK_HOLD_OFF`, 0.15 s from the last sample entered) is longer than D
+(``adaptation.sample_delay`` <= 0.1 s).
 
 A set refused on the way (a ConfigError, an unusable set, a negative play) is never
 applied: the model in use stays, the reason is kept in :attr:`LiveAdaptation.last_refusal`
@@ -250,7 +252,7 @@ class LiveAdaptation:
         except (ValueError, ArithmeticError) as exc:   # ConfigError is a ValueError
             ad.refused(f'{type(exc).__name__}: {exc}')
             return self._refused(ad.last_refusal, counted=True)
-        ad.applied(p.step, pred.model, self._seconds(stamp_ns))
+        ad.applied(p.step, pred.model)
         self.counters['switches'] += 1
         return []
 
