@@ -64,6 +64,9 @@ def test_keys_are_validated(base):
         base.replace({'adaptation.keys': ['geometry.module']})
     with pytest.raises(ConfigError, match='adaptation.keys'):
         base.replace({'adaptation.enabled': True, 'adaptation.keys': []})
+    for bad in (0.0, -0.01, 0.2):      # > 0 and below the hold-off after a step
+        with pytest.raises(ConfigError, match='adaptation.sample_delay'):
+            base.replace({'adaptation.sample_delay': bad})
 
 
 def test_compliance_is_the_models_static_wind_up(base):
@@ -200,10 +203,11 @@ def test_an_unusable_step_keeps_the_model_and_says_why_once(base):
     ad = live.adapter
     msgs = []
     lead = int(APPLY_LEAD * 1e9)
+    delay = int(cfg.adaptation.sample_delay * 1e9)    # decisions on the samples' clock
     for k in range(3):
         ad.target = np.array([-0.01])        # a negative play: the validation refuses it
         ad._next_poll = -math.inf
-        ns = BASE_NS + k * 4 * lead
+        ns = BASE_NS + delay + k * 4 * lead
         msgs += live.step(ns)                # decided, prepared (refused on the way) ...
         assert live.counters['refusals'] == k
         msgs += live.step(ns + lead)         # ... and not applied at its stamp
@@ -215,7 +219,9 @@ def test_an_unusable_step_keeps_the_model_and_says_why_once(base):
 def test_a_step_is_applied_at_its_fixed_stamp_and_a_late_one_at_the_next(base):
     """A decided step is swapped in at the first prediction stamped >= its decision +
     APPLY_LEAD, never earlier; prepared late (the worker still busy), it moves to the next
-    multiple of the lead and is counted; its values are the decided ones either way."""
+    multiple of the lead and is counted; its values are the decided ones either way.  The
+    adapter decides on the samples' clock: nothing before adaptation.sample_delay has
+    passed since the first prediction."""
     from concurrent.futures import Future
     cfg = base.replace({'adaptation.enabled': True, 'adaptation.keys': ['load.output_torque'],
                         'adaptation.max_step': 1.0, 'node.compensation_applied': True})
@@ -234,19 +240,22 @@ def test_a_step_is_applied_at_its_fixed_stamp_and_a_late_one_at_the_next(base):
         live = LiveAdaptation(pred, cfg.node.joint_names[1:], submit=submit)
         live.predicted(BASE_NS, (0.0, 0.0, 0.0))
         live.adapter.target = np.array([2.5])
-        live.step(BASE_NS)
+        t0 = BASE_NS + int(cfg.adaptation.sample_delay * 1e9)
+        live.step(t0 - 1)
+        assert not jobs and live.pending is None
+        live.step(t0)
         assert len(jobs) == 1 and live.pending is not None
-        live.step(BASE_NS + lead - 1)
+        live.step(t0 + lead - 1)
         assert pred.config is cfg
-        live.step(BASE_NS + lead)
+        live.step(t0 + lead)
         if late:
             assert pred.config is cfg and live.counters['late_steps'] == 1
-            live.step(BASE_NS + 2 * lead - 1)          # prepared now, but not due
+            live.step(t0 + 2 * lead - 1)          # prepared now, but not due
             job, fut = jobs[0]
             fut.set_result(job())
-            live.step(BASE_NS + 2 * lead - 1)
+            live.step(t0 + 2 * lead - 1)
             assert pred.config is cfg
-            live.step(BASE_NS + 2 * lead)
+            live.step(t0 + 2 * lead)
         assert pred.config.load.output_torque == 2.5 and live.pending is None
         assert live.counters['switches'] == 1 and len(jobs) == 1
         assert live.counters['late_steps'] == int(late)
@@ -314,3 +323,56 @@ def test_twin_on_its_own_model_changes_nothing(base):
     run = run_twin(plant, start, 'sector', 2.5, seed=5)
     assert run.steps == [] and run.counters['used'] > 500
     assert run.counters['refusals'] == 0
+
+
+def _replay(cfg: Config, record: list, lag: int) -> tuple[LiveAdaptation, list[float]]:
+    """The twin's record handed over as a node would get it, each encoder sample ``lag``
+    samples (ms) after the prediction of its stamp; the adaptation and the corrections."""
+    from collections import deque
+
+    from worm_gear_sim.adaptation.twin import prepare_start
+    cfg = prepare_start(cfg)
+    pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=record[0][0])
+    live = LiveAdaptation(pred, cfg.node.joint_names[1:])
+    antenna = cfg.node.joint_names[3:]
+    coming: deque = deque()
+    deltas = []
+    for i, (ns, ref, got) in enumerate(record):
+        out = pred.push(ns, ref)
+        for p in out.predictions:
+            live.predicted(p.stamp_ns, p.theta)
+        if out.predictions:
+            live.step(out.predictions[-1].stamp_ns)
+        deltas += [c.delta for c in out.corrections]
+        coming.extend((i + lag, stamp, meas) for stamp, meas, _ in got)
+        while coming and coming[0][0] <= i:
+            _, stamp, meas = coming.popleft()
+            assert live.measured(stamp, antenna, [meas]) is None
+    return live, deltas
+
+
+def test_a_sample_enters_at_its_stamp_plus_the_delay_whenever_it_comes(base):
+    """The entry rule (adaptation.sample_delay D = 50 ms): encoder samples handed over 30 ms
+    after their prediction give the twin's adaptation bit for bit (they enter at the same
+    steps as the twin's, handed over at once); 80 ms after, each comes after its entry step:
+    it enters at once, counted late, and is still used."""
+    plant = base.replace({'load.output_torque': 3.0, 'load.output_viscous_coefficient': 10.0})
+    start = base.replace({'adaptation.keys': ['load.output_torque',
+                                              'load.output_viscous_coefficient'],
+                          'adaptation.window': 0.3, 'adaptation.step_interval': 0.1,
+                          'adaptation.max_step': 0.005})
+    assert start.adaptation.sample_delay == 0.05
+    twin = run_twin(plant, start, 'sector', 1.0, seed=3, record=True)
+    assert twin.counters['late_samples'] == 0 and len(twin.steps) >= 2
+    live, deltas = _replay(start, twin.record, lag=30)
+    assert live.counters['late_samples'] == 0
+    assert deltas == [d for _, _, got in twin.record for _, _, d in got]
+    assert live.estimates() == twin.estimates and live.adapter.applied_values() == twin.in_use
+    for key in ('used', 'switches', 'refusals', 'rejected', 'late_steps'):
+        assert live.counters[key] == twin.counters[key], key
+    late, _ = _replay(start, twin.record, lag=80)
+    n = sum(len(got) for _, _, got in twin.record[:-80])
+    assert late.counters['samples'] == late.counters['late_samples'] == n
+    assert not late.waiting and late.counters['used'] == late.adapter.samples_used
+    assert late.counters['used'] > 0.8 * twin.counters['used']     # 80 ms fewer at the end
+    assert late.counters['switches'] >= 1

@@ -4,7 +4,9 @@
 processes (domain of the tests, discovery LOCALHOST), this process streaming a short sector
 scan (``worm_gear_sim.ros.live_adaptation.run_live``).  The plant node answers every
 command with an encoder sample, the node uses them (none rejected), learns the plant's load
-and its feed-forward, applied by the plant, removes the error the load makes."""
+and its feed-forward, applied by the plant, removes the error the load makes; and the run
+is the offline twin's on the same samples (the held start replayed), bit for bit, when no
+encoder sample and no step came late."""
 
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ pytestmark = pytest.mark.ros
 
 def test_live_node_learns_the_plant_from_its_encoder(ros_dds_context, ros_subprocess_env,
                                                      tmp_path):
+    from worm_gear_sim.adaptation.twin import run_twin
     from worm_gear_sim.params import Config
     from worm_gear_sim.ros.live_adaptation import run_live
     base = Config()
@@ -40,3 +43,12 @@ def test_live_node_learns_the_plant_from_its_encoder(ros_dds_context, ros_subpro
     early = run.t < 0.5                       # before the first window nothing changed
     assert np.allclose(run.error_compensated[early], run.error_uncompensated[early],
                        atol=2e-6)
+    # the same computation as the twin's on the same samples: the node's decisions saw the
+    # same encoder samples at the same stamps (none late), the plant process stepped the
+    # same commands
+    assert run.counters['late_samples'] == 0 and run.counters['late_steps'] == 0
+    twin = run_twin(plant, start, 'sector', 1.6, seed=3, base_ns=run.t0_ns, hold=run.held,
+                    plant_from_ns=run.plant_ns)
+    assert twin.counters['late_samples'] == 0 and twin.counters['switches'] >= 1
+    assert np.array_equal(run.error_compensated, twin.error_compensated)
+    assert run.in_use == twin.in_use

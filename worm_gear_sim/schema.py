@@ -421,6 +421,12 @@ class AdaptationSettings:
                          'applied step', 'rad', 0.0, 1.0, lo_open=True)
     step_interval: float = _f(0.25, 'Time between applied steps (and switch decisions)', 's',
                               0.01, 60.0)
+    sample_delay: float = _f(0.05, 'An encoder sample stamped s enters the estimate at the '
+                             'first prediction stamped >= s + sample_delay (what each '
+                             'decision sees depends on the stamps only, not on when the '
+                             'sample came; one that comes later enters at once and is '
+                             'counted, late_samples); at most 0.1 s, below the 0.15 s '
+                             'hold-off after an applied step', 's', 0.0, 0.1, lo_open=True)
     params_file: str = _f('worm_gear_sim_adapted.yaml', 'Where the node\'s '
                           '~/write_adapted_parameters service writes the params file of the '
                           'model in use (relative: to the working directory)')

@@ -9,13 +9,32 @@
 * every encoder message (stamp, joint names, positions) -> :meth:`measured`: checked
   (non-finite values or stamp, a stamp not after the previous one, no antenna joint, outside
   the stored predictions, names and positions of unequal length: rejected and counted by
-  reason, the estimate untouched), then the residual measured - predicted theta4 at the
-  stamp goes to the :class:`~.estimator.Adapter`;
+  reason, the estimate untouched), then it waits with the prediction of its stamp (which
+  does not change later) for its entry (below);
 
-and now and then the adapter's decision is applied, off the sample path and at a stamp
-fixed when it is taken:
+and every time a prediction has been handed over, :meth:`step` with its stamp: the waiting
+samples enter the estimate, then the adapter may decide.
 
-* at the prediction stamped t the adapter decides a step; its preparation (the overrides
+**What a decision sees depends on the stamps only.**  An encoder sample stamped s enters
+the :class:`~.estimator.Adapter` (the residual measured - predicted theta4) at the first
+:meth:`step` stamped >= s + ``adaptation.sample_delay`` (D), before that step's decision.
+The twin hands each sample over right after the prediction of its stamp; the node gets it
+back from the drive a transport delay later (live with a plant node: a few ms to a few
+tens of ms of stream time).  Either way it enters at the same step, so the node equals the
+twin exactly whenever the encoder comes back within D.  A sample that comes after its
+entry step has passed enters at once and is counted (``late_samples``): only then do the
+node and the twin see different sets of samples at a decision.  The adapter runs on the
+samples' clock, D behind the predictions: at the step stamped T it decides as of T - D
+(:meth:`~.estimator.Adapter.poll` at T - D, nothing before the first prediction + D), so
+each decision has the samples up to its own time, as it had before the delay, one delay
+later (docs/adaptation.md: deciding at T with the samples up to T - D only moved every
+decision D earlier against the data).
+
+The adapter's decisions are applied off the sample path, at a stamp fixed when they are
+taken:
+
+* at the prediction stamped t (its decision as of t - D) the adapter decides a step; its
+  preparation (the overrides
   made a Config, validated by :meth:`~worm_gear_sim.params.Config.replace`; the model and
   the compensator designed by
   :meth:`~worm_gear_sim.realtime.predictor.RealtimePredictor.prepare`, with the simulator's
@@ -31,6 +50,12 @@ fixed when it is taken:
   done, so the node equals the twin exactly while ``late_steps`` is 0; a late step only
   moves the step's instant (by whole leads), never its values.
 
+So the node equals the twin bit for bit (same samples, same machine) while ``late_samples``
+and ``late_steps`` are both 0.  The samples predicted before a step and entering after it
+(those of the last D) are held off with the step's transient: the hold-off
+(:data:`~.estimator.FLANK_HOLD_OFF`, 0.15 s from the last sample entered) is longer than D
+(``adaptation.sample_delay`` <= 0.1 s).
+
 A set refused on the way (a ConfigError, an unusable set, a negative play) is never
 applied: the model in use stays, the reason is kept in :attr:`LiveAdaptation.last_refusal`
 and returned once per new reason (the node logs it, throttled).
@@ -39,6 +64,7 @@ and returned once per new reason (the node logs it, throttled).
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass
@@ -88,7 +114,8 @@ class LiveAdaptation:
         self.history = _Predictions(history)
         self.adapter = Adapter(predictor.model, predictor.config.adaptation)
         self.counters: dict[str, int] = {'samples': 0, 'used': 0, 'rejected': 0,
-                                         'switches': 0, 'refusals': 0, 'late_steps': 0}
+                                         'switches': 0, 'refusals': 0, 'late_steps': 0,
+                                         'late_samples': 0}
         self.counters.update({f'rejected_{r}': 0 for r in REJECT_REASONS})
         self.last_refusal = ''
         self.last_note = ''
@@ -96,6 +123,11 @@ class LiveAdaptation:
         self._last_ns: int | None = None
         self._submit = submit or run_now
         self._lead_ns = int(round(APPLY_LEAD * 1e9))
+        self._delay_ns = int(round(predictor.config.adaptation.sample_delay * 1e9))
+        #: samples waiting for their entry: (entry stamp [ns], t, measured theta4,
+        #: predicted theta2, theta3, theta4), in stamp order
+        self.waiting: deque[tuple[int, float, float, float, float, float]] = deque()
+        self._step_ns = -1                    # the stamp of the last step
         self.pending: _Pending | None = None
 
     # ---- inputs ------------------------------------------------------------------------
@@ -142,8 +174,13 @@ class LiveAdaptation:
             return self._reject('outside_prediction')
         self._last_ns = stamp_ns
         theta2, theta3, theta4 = pred.tolist()
-        if self.adapter.update(t, meas, theta2, theta3, theta4):
-            self.counters['used'] += 1
+        entry = stamp_ns + self._delay_ns
+        if entry > self._step_ns:
+            self.waiting.append((entry, t, meas, theta2, theta3, theta4))
+        else:       # its entry step has passed: at once (none waits: the older, stamped
+            self.counters['late_samples'] += 1      # before it, entered at that step)
+            if self.adapter.update(t, meas, theta2, theta3, theta4):
+                self.counters['used'] += 1
         return None
 
     # ---- switching ---------------------------------------------------------------------
@@ -154,11 +191,26 @@ class LiveAdaptation:
         the first time it comes)."""
         if self._base_ns is None:
             return []
+        stamp_ns = int(stamp_ns)
+        self._step_ns = stamp_ns
+        waiting = self.waiting
+        if waiting and waiting[0][0] <= stamp_ns:      # (inline: once per sample)
+            update = self.adapter.update
+            used = 0
+            while waiting and waiting[0][0] <= stamp_ns:
+                _, t, meas, theta2, theta3, theta4 = waiting.popleft()
+                used += update(t, meas, theta2, theta3, theta4)
+            self.counters['used'] += used
         if self.pending is not None:
-            return self._apply_due(int(stamp_ns))
+            return self._apply_due(stamp_ns)
+        # the adapter decides on the samples' clock, D behind the predictions: at the stamp
+        # t + D it has the samples up to t, as the twin had at t before the delay
+        t_samples = self._seconds(stamp_ns - self._delay_ns)
+        if t_samples < 0.0:
+            return []
         ad = self.adapter
         refusals = ad.refusals
-        d = ad.poll(self._seconds(stamp_ns))
+        d = ad.poll(t_samples)
         msgs: list[str] = []
         if d.note and d.note != self.last_note:
             self.last_note = d.note
@@ -213,8 +265,10 @@ class LiveAdaptation:
 
     def rebase(self) -> None:
         """The predictor's model was changed from outside (a parameter update): the adapter
-        restarts from it (a step being prepared is dropped)."""
+        restarts from it (a step being prepared is dropped, and the samples waiting: the
+        replaced model predicted them)."""
         self.pending = None
+        self.waiting.clear()
         self.adapter.rebase(self.predictor.model)
 
     # ---- read-out ----------------------------------------------------------------------

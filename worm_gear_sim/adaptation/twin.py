@@ -113,20 +113,28 @@ def plant_errors(plant: Config, start: Config, t: np.ndarray, theta1_ref: np.nda
 
 def run_twin(plant: Config, start: Config, name: str, duration: float, *,
              noise: float = 1e-6, encoder_bits: int = 20, seed: int = 0, adapt: bool = True,
-             preview: float | None = None, base_ns: int = BASE_NS, record: bool = False,
+             preview: float | None = None, base_ns: int = BASE_NS, hold: int = 0,
+             plant_from_ns: int | None = None, record: bool = False,
              on_sample: Callable[[float], None] | None = None) -> TwinRun:
     """Stream scenario ``name`` for ``duration`` s (module docstring): the plant driven by
     the adapting feed-forward (``adapt`` False: the feed-forward of the start set, never
     adapted), and by the raw reference for the uncompensated error.  ``noise``: encoder
     noise RMS [rad]; ``encoder_bits``: resolution 2 pi / 2^bits (0: none); ``base_ns``: the
-    stamp of t = 0; ``record``: keep per pushed sample (stamp, theta1_ref, [(stamp, encoder
-    theta4, delta) of each correction released]) in ``TwinRun.record`` (what a node would
-    receive, in its order)."""
+    stamp of t = 0; ``hold``: this many samples of the first reference on the stream's grid
+    before t = 0 (the live harness's start, :mod:`worm_gear_sim.ros.live_adaptation`: the
+    pipeline and the plant start at the first of them; ``plant_from_ns``: the plant starts
+    at this stamp instead, at rest at the first reference, and takes no earlier command, as
+    the live plant node that connected later); ``record``: keep per pushed sample
+    (stamp, theta1_ref, [(stamp, encoder theta4, delta) of each correction released]) in
+    ``TwinRun.record`` (what a node would receive, in its order)."""
     cfg = prepare_start(start, preview)
     ahead = cfg.compensation.preview_time
     t, x = scenario(cfg, name, duration + ahead + 5.0 / cfg.node.publish_rate_hz)
     keep = t <= duration + 1e-12
-    pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=base_ns)
+    period_ns = int(round((t[1] - t[0]) * 1e9))
+    first_ns = base_ns - int(hold) * period_ns
+    plant_ns = first_ns if plant_from_ns is None else int(plant_from_ns)
+    pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=first_ns)
     names = cfg.node.joint_names[1:]
     live = LiveAdaptation(pred, names)
     drive = EncoderPlant(plant, float(x[0]), noise=noise, encoder_bits=encoder_bits, seed=seed)
@@ -134,9 +142,11 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
     theta4 = np.full(n_keep, np.nan)
     index = {base_ns + int(round(tk * 1e9)): k for k, tk in enumerate(t[:n_keep])}
     run = TwinRun(t[keep], x[keep], np.zeros(0), np.zeros(0))
-    for k in range(t.size):
-        ns = base_ns + int(round(t[k] * 1e9))
-        out = pred.push(ns, float(x[k]))
+    stamps = [first_ns + j * period_ns for j in range(int(hold))] + \
+        [base_ns + int(round(tk * 1e9)) for tk in t]
+    refs = np.concatenate([np.full(int(hold), x[0]), x])
+    for k, ns in enumerate(stamps):
+        out = pred.push(ns, float(refs[k]))
         if adapt:                   # as the node: predictions, the decision, then encoders
             for p in out.predictions:
                 live.predicted(p.stamp_ns, p.theta)
@@ -144,10 +154,12 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
                 before = live.counters['switches']
                 run.messages += live.step(out.predictions[-1].stamp_ns)
                 if live.counters['switches'] != before:
-                    run.steps.append((t[k], live.adapter.applied_values()))
+                    run.steps.append(((ns - base_ns) * 1e-9, live.adapter.applied_values()))
         got = []
         for c in out.corrections:
-            th4, meas = drive.command((c.stamp_ns - base_ns) * 1e-9, c.theta1_ref + c.delta)
+            if c.stamp_ns < plant_ns:
+                continue
+            th4, meas = drive.command((c.stamp_ns - plant_ns) * 1e-9, c.theta1_ref + c.delta)
             j = index.get(c.stamp_ns)
             if j is not None:
                 theta4[j] = th4
@@ -155,9 +167,9 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
             if adapt:
                 live.measured(c.stamp_ns, names[2:], [meas])
         if record:
-            run.record.append((ns, float(x[k]), got))
-        if on_sample is not None:
-            on_sample(t[k])
+            run.record.append((ns, float(refs[k]), got))
+        if on_sample is not None and k >= hold:
+            on_sample(t[k - hold])
     run.error_uncompensated, run.error_compensated = plant_errors(plant, cfg, run.t,
                                                                   run.theta1_ref, theta4)
     run.estimates = live.estimates()

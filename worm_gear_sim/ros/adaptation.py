@@ -16,7 +16,9 @@ same object the offline twin (``worm-gear-sim adapt``) drives:
   sample (non-finite, out of order, no antenna joint, outside the predictions) is counted
   and logged once per LOG_THROTTLE_S;
 * ``~/adapted_parameters`` (std_msgs/String, JSON, transient local, depth 1): the estimate
-  and the values in use, on every applied step and every diagnostics period.  A JSON
+  and the values in use, on every applied step, every diagnostics period and at the first
+  late encoder sample and the first late step (so the last message's late counters are 0
+  only if none came late).  A JSON
   text keeps the harmonics' arrays and the dotted names as they are in a params file;
   diagnostic_msgs/KeyValue would carry the same as strings without a header, and a message
   of our own would need an interface package;
@@ -97,7 +99,7 @@ class AdaptiveNode(WormGearSimNode):
         for p in out.predictions:
             live.predicted(p.stamp_ns if stamp_ns is None else stamp_ns, p.theta)
         last = out.predictions[-1].stamp_ns if stamp_ns is None else stamp_ns
-        switches = live.counters['switches']
+        switches, late = live.counters['switches'], live.counters['late_steps']
         for msg in live.step(last):
             if msg.startswith('adapted set not applied'):
                 self._warn('adaptation_refused', msg)
@@ -106,6 +108,8 @@ class AdaptiveNode(WormGearSimNode):
         if live.counters['switches'] != switches:
             self._adapt_config = self.rt.config       # our own step, not an outside set
             self._publish_adapted()
+        elif late == 0 and live.counters['late_steps']:
+            self._publish_adapted()                   # the first late step: at once
 
     def _on_measured(self, msg: JointState) -> None:
         super()._on_measured(msg)
@@ -113,7 +117,11 @@ class AdaptiveNode(WormGearSimNode):
         if live is None:
             return
         stamp = stamp_ns(msg.header.stamp) or self._clock.now().nanoseconds
+        late = live.counters['late_samples']
         reason = live.measured(stamp, msg.name, msg.position)
+        if late == 0 and live.counters['late_samples']:
+            self._publish_adapted()     # the first late sample: the node no longer equals
+            #                             the twin, said at once (counters are cumulative)
         if reason is not None:
             self._warn('adaptation_rejected', f'adaptation: rejected {MEASURED_TOPIC} sample '
                        f'({reason}); {live.counters["rejected"]} so far')

@@ -24,10 +24,15 @@ streams the scenario's references (the twin's
 :func:`~worm_gear_sim.adaptation.twin.scenario`, the same samples) on
 ``worm_angle_reference``, ``preview + lead`` ahead of ``/clock``, which it advances at the
 wall clock's rate (``speed``) but never more than ``max_lag`` past the last encoder sample
-it has seen.  On a machine that keeps up this is real time; on a starved one (2 shared
-cores: the plant with play and the node each cost a few hundred us per 1 ms sample) the
-clock slows down instead of the node dropping late samples, so the result measures the
-adaptation, not the machine.  It waits until the plant has answered the last sample,
+it has seen.  The node releases a command (and its prediction) ``preview`` after the
+reference of its stamp, so its predictions run at most ``lead + max_lag`` past that encoder
+sample: with ``max_lag`` = (``adaptation.sample_delay`` - ``lead``) / 2 (the default), less
+than the sample delay by as much again, every encoder sample reaches the node before its
+entry step (:mod:`worm_gear_sim.adaptation.live`; ``late_samples`` counts the others).
+On a machine that keeps up this is real time; on a starved one (2 shared cores: the plant
+with play and the node each cost a few hundred us per 1 ms sample) the clock slows down
+instead of a sample coming late, so the result measures the adaptation, not the
+machine.  It waits until the plant has answered the last sample,
 keeps the node's last ``~/adapted_parameters`` (published on every applied step and every
 ``node.diagnostic_period`` of the simulated clock), stops both (SIGINT) and reads the
 plant's record.  The result is a :class:`~worm_gear_sim.adaptation.twin.TwinRun` like the
@@ -36,7 +41,12 @@ beside the uncompensated one (the same offline computation as the twin's).
 
 Only the timing differs from the twin: there each encoder sample reaches the adaptation
 right after the prediction of its stamp; here it comes back through two processes, up to
-``lead + max_lag`` of stream time later, so a decision may see fewer samples.
+``lead + max_lag`` of stream time later.  Each sample enters the estimate at a step fixed by
+its stamp, so this does not change what a decision sees while ``late_samples`` and
+``late_steps`` stay 0; and the run starts with the held samples (``LiveRun.held``, the
+first at ``LiveRun.first_ns``), which the twin replays with ``run_twin(..., base_ns=
+run.t0_ns, hold=run.held, plant_from_ns=run.plant_ns)``: then the two are the same
+computation on the same samples.
 """
 
 from __future__ import annotations
@@ -90,7 +100,7 @@ class ScenarioCommander(Node):
     ``~/adapted_parameters`` and the stamp of the last encoder sample seen."""
 
     def __init__(self, t: np.ndarray, theta1: np.ndarray, joint: str, ahead: float,
-                 node_under_test: str = NODE_NAME, speed: float = 1.0, max_lag: float = 0.1,
+                 node_under_test: str = NODE_NAME, speed: float = 1.0, max_lag: float = 0.015,
                  **kwargs: Any) -> None:
         super().__init__('adaptation_commander', **kwargs)
         self.t, self.theta1, self.ahead = t, theta1, ahead
@@ -102,6 +112,7 @@ class ScenarioCommander(Node):
         self.holding = False
         self.held = 0
         self._hold_ns: int | None = None
+        self.first_ns: int | None = None          # the first hold sample's stamp
         self._hold_wall = -math.inf
         self.clock_ns = CLOCK_START_NS
         self._wall = time.monotonic()
@@ -127,7 +138,7 @@ class ScenarioCommander(Node):
         """The node is spinning (its /diagnostics seen), and the node and the plant are
         subscribed to the references, the plant to the node's commands, the node to the
         plant's encoder."""
-        return (self.node_alive and self.count_subscribers(REFERENCE_TOPIC) >= 2
+        return (self.node_alive and self.pub.get_subscription_count() >= 2
                 and self.count_subscribers(private_topic(COMPENSATED_COMMAND_TOPIC,
                                                          self.target)) >= 1
                 and self.count_subscribers(MEASURED_TOPIC) >= 2)
@@ -192,7 +203,7 @@ class ScenarioCommander(Node):
         # one grid step of stream time per hold message, the clock ``ahead`` behind it: the
         # hold lasts a few ms of the node's time however long the chain takes to answer
         if self._hold_ns is None:
-            self._hold_ns = self.clock_ns + int(self.ahead * 1e9)
+            self._hold_ns = self.first_ns = self.clock_ns + int(self.ahead * 1e9)
         else:
             self._hold_ns += self.period_ns
         self._hold_wall = wall
@@ -221,11 +232,16 @@ class LiveRun(TwinRun):
     """A :class:`TwinRun` from the live processes, plus: stamps kept without a plant sample
     (``missing``), whether the encoder stopped coming (``stalled``: no progress for
     ``stall_timeout`` s, a process ended, or the drain timed out), the first sample's hold
-    messages, the plant's counters, the wall time of the stream and the logs."""
+    messages (``held``, the first stamped ``first_ns``; the stream's t = 0 is ``t0_ns``; the
+    plant started at ``plant_ns``, the first reference it saw connected),
+    the plant's counters, the wall time of the stream and the logs."""
 
     missing: int = 0
     stalled: bool = False
     held: int = 0
+    first_ns: int = 0
+    t0_ns: int = 0
+    plant_ns: int = 0
     plant_counters: dict[str, int] = field(default_factory=dict)
     stream_wall_s: float = math.nan
     node_log: str = ''
@@ -248,7 +264,7 @@ def plant_command(plant: Path, record: Path, *, noise: float, encoder_bits: int,
     """The plant node's process."""
     return [sys.executable, '-m', 'worm_gear_sim.ros.plant', '--plant', str(plant),
             '--noise', repr(noise), '--encoder-bits', str(encoder_bits), '--seed', str(seed),
-            '--record', str(record)]
+            '--record', str(record), '--subscribers', '2']
 
 
 def _start(args: list[str], env: dict[str, str], log: Path) -> tuple[subprocess.Popen, IO]:
@@ -273,7 +289,8 @@ def _stop(proc: subprocess.Popen, fh: IO, timeout: float = 20.0) -> str:
 
 def run_live(plant: Config, start: Config, name: str, duration: float, *, context: Any,
              env: dict[str, str], workdir: Path, noise: float = 1e-6, encoder_bits: int = 20,
-             seed: int = 0, lead: float = 0.02, speed: float = 1.0, max_lag: float = 0.1,
+             seed: int = 0, lead: float = 0.02, speed: float = 1.0,
+             max_lag: float | None = None,
              startup_timeout: float = 120.0, drain_timeout: float = 30.0,
              stall_timeout: float = 20.0) -> LiveRun:
     """Scenario ``name`` for ``duration`` s through the live processes (module docstring);
@@ -282,12 +299,18 @@ def run_live(plant: Config, start: Config, name: str, duration: float, *, contex
     ``noise``, ``encoder_bits``, ``seed``: the plant's encoder (as :func:`~worm_gear_sim.
     adaptation.twin.run_twin`); ``lead``: streamed this much further ahead than the
     preview; ``speed``: the simulated clock's rate against the wall clock (at most);
-    ``max_lag``: how far [s] the clock may run past the last encoder sample.  Raises
+    ``max_lag``: how far [s] the clock may run past the last encoder sample (None:
+    (``adaptation.sample_delay`` - ``lead``) / 2, module docstring).  Raises
     RuntimeError if the processes do not connect within ``startup_timeout`` s (the logs are
     in ``workdir``)."""
     workdir.mkdir(parents=True, exist_ok=True)
     cfg = prepare_start(start)
     ahead = cfg.compensation.preview_time
+    if max_lag is None:
+        max_lag = 0.5 * (cfg.adaptation.sample_delay - lead)
+    if not max_lag > 0.0:
+        raise ValueError(f'max_lag {max_lag!r}: must be > 0 s (adaptation.sample_delay '
+                         f'{cfg.adaptation.sample_delay!r} s must exceed lead {lead!r} s)')
     t, x = scenario(cfg, name, duration + ahead + 5.0 / cfg.node.publish_rate_hz)
     keep = t <= duration + 1e-12
     record = workdir / 'plant_record.npz'
@@ -341,6 +364,7 @@ def run_live(plant: Config, start: Config, name: str, duration: float, *, contex
         commander.destroy_node()
     run = _result(plant, cfg, t[keep], x[keep], commander, record, logs, stream_wall)
     run.stalled, run.held = stalled, commander.held
+    run.first_ns, run.t0_ns = commander.first_ns or 0, commander.t0_ns or 0
     return run
 
 
@@ -356,6 +380,7 @@ def _result(plant: Config, cfg: Config, t: np.ndarray, x: np.ndarray,
     """The live run as the twin's record (module docstring)."""
     theta4 = np.full(t.size, np.nan)
     plant_counters: dict[str, int] = {}
+    plant_ns = 0
     if record.exists():
         rec = np.load(record)
         assert commander.t0_ns is not None
@@ -365,11 +390,12 @@ def _result(plant: Config, cfg: Config, t: np.ndarray, x: np.ndarray,
         theta4[index[ok]] = rec['theta4'][ok]
         plant_counters = {k.removeprefix('counter_'): int(rec[k]) for k in rec.files
                           if k.startswith('counter_')}
+        plant_ns = int(rec['base_ns'])
     ad = commander.adapted
     unc, err = plant_errors(plant, cfg, t, x, theta4)
     run = LiveRun(t, x, unc, err,
                   estimates=ad.get('estimate', {}), in_use=ad.get('in_use', {}),
                   counters=ad.get('counters', {}), missing=int(np.count_nonzero(np.isnan(err))),
-                  plant_counters=plant_counters, stream_wall_s=stream_wall,
+                  plant_counters=plant_counters, stream_wall_s=stream_wall, plant_ns=plant_ns,
                   node_log=logs[0], plant_log=logs[1])
     return run

@@ -9,8 +9,12 @@ EncoderPlant`, the one the offline twin ``worm-gear-sim adapt`` steps).
         [--ros-args ...]
 
 * ``worm_angle_reference`` (sensor_msgs/JointState, in): the servo's stream; its first
-  sample sets the plant's t = 0 and the worm angle it starts from, at rest under its load
-  (as the twin's plant);
+  sample once the plant is connected sets the plant's t = 0 and the worm angle it starts
+  from, at rest under its load (as the twin's plant).  Connected: its encoder publisher
+  matched with ``--subscribers`` readers (the node; the live harness adds itself) and its
+  command subscription with the node's writer, both for READY_SAMPLES references in a row
+  (so no command or encoder sample after t = 0 is lost to a connection still being made;
+  earlier references are counted, ``before_ready``);
 * ``<node>/compensated_command`` (JointState, in): the node's command theta1_ref + delta for
   each stamp; the plant is stepped to that stamp with it held (commands before t = 0 or not
   after the last one are counted and dropped);
@@ -53,13 +57,16 @@ __all__ = ['PlantNode', 'main', 'PLANT_NODE_NAME']
 PLANT_NODE_NAME = 'worm_gear_plant'
 #: Commands kept while the first reference has not come (the plant does not know its t = 0).
 MAX_EARLY = 1000
+#: References seen connected in a row before the plant starts (module docstring).
+READY_SAMPLES = 3
 
 
 class PlantNode(Node):
     """The plant node (module docstring)."""
 
     def __init__(self, plant: Config, *, noise: float = 1e-6, encoder_bits: int = 20,
-                 seed: int = 0, node_under_test: str = 'worm_gear_sim', **kwargs: Any) -> None:
+                 seed: int = 0, node_under_test: str = 'worm_gear_sim', subscribers: int = 1,
+                 **kwargs: Any) -> None:
         super().__init__(PLANT_NODE_NAME, **kwargs)
         self.config = plant
         self._plant_args = {'noise': noise, 'encoder_bits': encoder_bits, 'seed': seed}
@@ -67,7 +74,9 @@ class PlantNode(Node):
         self.base_ns: int | None = None
         self.theta1_start = float('nan')
         self.counters = {'commands': 0, 'published': 0, 'before_start': 0,
-                         'out_of_order': 0, 'malformed': 0}
+                         'out_of_order': 0, 'malformed': 0, 'before_ready': 0}
+        self._subscribers = int(subscribers)
+        self._ready = 0
         self._early: list[tuple[int, float]] = []
         self._last_ns = 0
         self.record: list[tuple[int, float, float, float]] = []
@@ -75,15 +84,21 @@ class PlantNode(Node):
         self._out = JointState(name=[plant.node.joint_names[3]], position=[0.0])
         self._pub = self.create_publisher(JointState, MEASURED_TOPIC, reliable)
         self.create_subscription(JointState, REFERENCE_TOPIC, self._on_reference, reliable)
-        self.create_subscription(JointState, private_topic(COMPENSATED_COMMAND_TOPIC,
-                                                           node_under_test),
-                                 self._on_command, reliable)
+        self._commands = self.create_subscription(
+            JointState, private_topic(COMPENSATED_COMMAND_TOPIC, node_under_test),
+            self._on_command, reliable)
 
     def _on_reference(self, msg: JointState) -> None:
         if self.plant is not None or not msg.position:
             return
         ns = stamp_ns(msg.header.stamp)
         if ns <= 0:
+            return
+        connected = self._pub.get_subscription_count() >= self._subscribers and \
+            self._commands.get_publisher_count() >= 1
+        self._ready = self._ready + 1 if connected else 0
+        if self._ready < READY_SAMPLES:
+            self.counters['before_ready'] += 1
             return
         self.base_ns, self.theta1_start = ns, float(msg.position[0])
         self.plant = EncoderPlant(self.config, self.theta1_start, **self._plant_args)
@@ -142,6 +157,8 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     ap.add_argument('--record', metavar='OUT.npz', help='write the record here on exit')
     ap.add_argument('--node-name', default='worm_gear_sim',
                     help='the node whose ~/compensated_command drives the plant')
+    ap.add_argument('--subscribers', type=int, default=1,
+                    help='encoder readers to wait for before starting [1: the node]')
     return ap.parse_args(argv)
 
 
@@ -154,7 +171,8 @@ def main(args: list[str] | None = None) -> int:
     node = None
     try:
         node = PlantNode(plant, noise=opts.noise, encoder_bits=opts.encoder_bits,
-                         seed=opts.seed, node_under_test=opts.node_name)
+                         seed=opts.seed, node_under_test=opts.node_name,
+                         subscribers=opts.subscribers)
         ex = make_executor('events')
         ex.add_node(node)
         node.get_logger().info(f'ready: {opts.plant} -> {MEASURED_TOPIC}')
