@@ -6,7 +6,6 @@ serial path raises; no worker process outlives its block."""
 
 from __future__ import annotations
 
-import math
 import multiprocessing
 import os
 import pickle
@@ -14,10 +13,9 @@ import threading
 
 import numpy as np
 import pytest
+from fit_case import KG, ZETA, fit_case
 
-from worm_gear_sim import load_config
 from worm_gear_sim.dynamics.forked import ForkedWorkers, WorkerDied, can_fork, fork_is_safe
-from worm_gear_sim.dynamics.profiles import TrapezoidalProfile
 from worm_gear_sim.identification import (
     FitOptions,
     IdentificationError,
@@ -25,25 +23,14 @@ from worm_gear_sim.identification import (
     fit_parameters,
     identify,
     jacobian,
-    record_from_model,
 )
 from worm_gear_sim.validation import ConfigError
 
 pytestmark = pytest.mark.skipif(not can_fork(), reason='forked worker processes need Linux')
 
-KG = 'materials.gear_shaft_shear_modulus'
-ZETA = 'damping.modal_damping_ratios[0]'
-MOVE = TrapezoidalProfile(0.11309733552923255, 0.020, 0.004, 0.005)
-
-
 @pytest.fixture(scope='module')
 def case():
-    base = load_config()
-    truth = base.replace({KG: base.materials.gear_shaft_shear_modulus * 1.1,
-                          'damping.modal_damping_ratios': [0.01, 0.0, 0.0]})
-    rec = record_from_model(truth, MOVE, 0.04, 1e4, ('theta4',), noise_rad=1e-6,
-                            resolution_rad=2 * math.pi / 2 ** 20, seed=3)
-    return base, rec
+    return fit_case()
 
 
 def _children() -> set[int]:

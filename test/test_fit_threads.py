@@ -5,13 +5,11 @@ thread, bit for bit (each column is the serial call), and a whole multi-start fi
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
+from fit_case import KG, ZETA, fit_case
 
 from worm_gear_sim import load_config
-from worm_gear_sim.dynamics.profiles import TrapezoidalProfile
 from worm_gear_sim.identification import (
     FitOptions,
     IdentificationError,
@@ -19,22 +17,12 @@ from worm_gear_sim.identification import (
     fit_parameters,
     identify,
     jacobian,
-    record_from_model,
 )
-
-KG = 'materials.gear_shaft_shear_modulus'
-ZETA = 'damping.modal_damping_ratios[0]'
-MOVE = TrapezoidalProfile(0.11309733552923255, 0.020, 0.004, 0.005)
 
 
 @pytest.fixture(scope='module')
 def case():
-    base = load_config()
-    truth = base.replace({KG: base.materials.gear_shaft_shear_modulus * 1.1,
-                          'damping.modal_damping_ratios': [0.01, 0.0, 0.0]})
-    rec = record_from_model(truth, MOVE, 0.04, 1e4, ('theta4',), noise_rad=1e-6,
-                            resolution_rad=2 * math.pi / 2 ** 20, seed=3)
-    return base, rec
+    return fit_case()
 
 
 def test_jacobian_on_threads_equals_the_serial_one(case):
