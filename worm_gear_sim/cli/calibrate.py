@@ -29,7 +29,7 @@ from typing import Any
 from ..config_io import load_config
 from ..identification import FitOptions
 from ..validation import ConfigError
-from .common import CliError, add_config_options, config_from_args, say
+from .common import CliError, add_config_options, config_from_args, fit_in_process, say
 from .identify import _jsonable, write_params_yaml
 
 __all__ = ['register', 'cmd_calibrate', 'report_calibration', 'add_limit_options',
@@ -135,7 +135,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     res_bits = 2 * math.pi / 2 ** args.encoder_bits if args.encoder_bits > 0 else 0.0
     run = plant_runner(plant, args.sample_rate, measure, args.noise, res_bits, args.seed)
     outputs = [o.strip() for o in args.outputs.split(',')] if args.outputs else None
-    opt = FitOptions(strategy='robust', serial=args.serial or args.workers is None,
+    opt = FitOptions(strategy='robust', serial=fit_in_process(args),
                      workers=args.workers)
     t0 = time.perf_counter()
     res = calibrate(cfg, keys, limits, run, options=opt, outputs=outputs,

@@ -40,6 +40,14 @@ class Parser(argparse.ArgumentParser):
         raise SystemExit(0)
 
 
+def fit_in_process(args: argparse.Namespace) -> bool:
+    """Whether a fit (``identify``, ``calibrate``) runs in this process: ``--serial``, or
+    neither ``--workers`` nor ``--scheduler`` (on one machine the in-process fit, its
+    evaluations on forked worker processes, is the fastest: docs/identification.md)."""
+    return bool(getattr(args, 'serial', False)) or (
+        getattr(args, 'workers', None) is None and getattr(args, 'scheduler', None) is None)
+
+
 def add_config_options(p: argparse.ArgumentParser, end_time: bool = True) -> None:
     """``--config``, repeatable ``--set`` and (optionally) ``--end-time``."""
     g = p.add_argument_group('configuration')

@@ -37,7 +37,7 @@ from ..identification import (
 )
 from ..params import Config
 from ..records import Record, read_record
-from .common import CliError, add_config_options, config_from_args, say
+from .common import CliError, add_config_options, config_from_args, fit_in_process, say
 
 __all__ = ['register', 'cmd_identify', 'parse_bounds', 'write_params_yaml']
 
@@ -169,13 +169,6 @@ def write_params_yaml(cfg: Config, path: Path, header: Sequence[str]) -> None:
                           + params_yaml_text(params_document(cfg)))
 
 
-def in_process(args: argparse.Namespace) -> bool:
-    """Whether the fit runs in this process: ``--serial``, or neither ``--workers`` nor
-    ``--scheduler`` (on one machine the in-process fit, its evaluations on forked worker
-    processes, is the fastest: docs/identification.md)."""
-    return bool(args.serial) or (args.workers is None and args.scheduler is None)
-
-
 def cmd_identify(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     keys = [k.strip() for item in args.fit for k in item.split(',') if k.strip()]
@@ -201,7 +194,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
                 f'(at most {MAX_FIT_SAMPLES} per record)')
     opt = FitOptions(strategy=args.strategy, n_starts=args.starts, seed=args.seed,
                      max_nfev=args.max_nfev, workers=args.workers, scheduler=args.scheduler,
-                     serial=in_process(args), progress=not (args.no_progress or args.quiet))
+                     serial=fit_in_process(args), progress=not (args.no_progress or args.quiet))
     t0 = time.perf_counter()
     outputs = [o.strip() for o in args.outputs.split(',') if o.strip()] \
         if args.outputs else None
