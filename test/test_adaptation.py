@@ -376,3 +376,25 @@ def test_a_sample_enters_at_its_stamp_plus_the_delay_whenever_it_comes(base):
     assert not late.waiting and late.counters['used'] == late.adapter.samples_used
     assert late.counters['used'] > 0.8 * twin.counters['used']     # 80 ms fewer at the end
     assert late.counters['switches'] >= 1
+
+
+def test_a_clock_restart_restarts_the_adaptation_as_at_a_start(base):
+    """The live harness's handshake (samples at rest, answered by a plant, then the clock
+    goes back to the run's start): the pipeline restarts, the adaptation restarts with it
+    (its predictions, waiting samples and estimate belong to the old stream) and the plant
+    too, so the run equals the plain twin's bit for bit; nothing after the restart is
+    rejected."""
+    plant = base.replace({'load.output_torque': 3.0, 'load.output_viscous_coefficient': 10.0})
+    start = base.replace({'adaptation.keys': ['load.output_torque',
+                                              'load.output_viscous_coefficient'],
+                          'adaptation.window': 0.3, 'adaptation.step_interval': 0.1,
+                          'adaptation.max_step': 0.005})
+    plain = run_twin(plant, start, 'sector', 1.0, seed=3)
+    hs = run_twin(plant, start, 'sector', 1.0, seed=3, handshake=8)
+    assert len(plain.steps) >= 2 and plain.counters['restarts'] == 0
+    assert hs.counters['restarts'] == 1 and hs.counters['predictor_clock_restarts'] == 1
+    assert hs.counters['rejected'] == 0 and hs.counters['samples'] > plain.counters['samples']
+    assert np.array_equal(hs.error_compensated, plain.error_compensated)
+    assert hs.steps == plain.steps and hs.estimates == plain.estimates
+    for key in ('used', 'switches', 'late_samples', 'late_steps'):
+        assert hs.counters[key] == plain.counters[key], key

@@ -115,7 +115,7 @@ class LiveAdaptation:
         self.adapter = Adapter(predictor.model, predictor.config.adaptation)
         self.counters: dict[str, int] = {'samples': 0, 'used': 0, 'rejected': 0,
                                          'switches': 0, 'refusals': 0, 'late_steps': 0,
-                                         'late_samples': 0}
+                                         'late_samples': 0, 'restarts': 0}
         self.counters.update({f'rejected_{r}': 0 for r in REJECT_REASONS})
         self.last_refusal = ''
         self.last_note = ''
@@ -129,12 +129,39 @@ class LiveAdaptation:
         self.waiting: deque[tuple[int, float, float, float, float, float]] = deque()
         self._step_ns = -1                    # the stamp of the last step
         self.pending: _Pending | None = None
+        self._starts = _pipeline_starts(predictor)
+        self._pred_ns = 0                     # the stamp of the last prediction
+
+    def _restart(self) -> None:
+        """The pipeline restarted (a clock restart, a resync, a change of input: its
+        simulator starts again at rest and its stamps may start over): the stored
+        predictions, the samples waiting and a step being prepared belong to the old stream.
+        The adaptation starts afresh from the model in use, as a node started from it would
+        (its estimate at the prior, its nominal set the model in use); the counters go on
+        (``restarts`` counts these)."""
+        self.history = _Predictions(self.history.capacity)
+        self.adapter = Adapter(self.predictor.model, self.predictor.config.adaptation)
+        self.waiting.clear()
+        self.pending = None
+        self._base_ns = self._last_ns = None
+        self._step_ns = -1
+        self.last_note = ''
+        self.counters['restarts'] += 1
 
     # ---- inputs ------------------------------------------------------------------------
     def predicted(self, stamp_ns: int, theta: Sequence[float]) -> None:
-        """A prediction of the drive (theta2, theta3, theta4) at ``stamp_ns``."""
+        """A prediction of the drive (theta2, theta3, theta4) at ``stamp_ns``; the first
+        after a restart of the pipeline restarts the adaptation (:meth:`_restart`)."""
+        stamp_ns = int(stamp_ns)
+        starts = _pipeline_starts(self.predictor)
+        if starts != self._starts or stamp_ns < self._pred_ns:
+            # (a prediction going back: the new stream's, after the old stream's last ones
+            # released at a resync)
+            self._starts = starts
+            self._restart()
+        self._pred_ns = stamp_ns
         if self._base_ns is None:
-            self._base_ns = int(stamp_ns)
+            self._base_ns = stamp_ns
         self.history.push(self._seconds(stamp_ns), theta)
 
     def _seconds(self, stamp_ns: int) -> float:
@@ -314,6 +341,13 @@ class _Pending:
     base: Parameters
 
 
+def _pipeline_starts(predictor: RealtimePredictor) -> int:
+    """How often the pipeline's simulator restarted (clock restarts, resyncs, input
+    switches)."""
+    c = predictor.counters
+    return c['clock_restarts'] + c['resyncs'] + c['input_switches']
+
+
 def run_now(prepare: Callable[[], Prepared]) -> Future:
     """A :data:`Submit` that prepares at once (the twin): a done future (its result, or the
     exception the preparation raised)."""
@@ -349,6 +383,10 @@ class _Predictions:
         self._x = np.zeros((2 * capacity, 3))
         self._n = 0
         self._cap = capacity
+
+    @property
+    def capacity(self) -> int:
+        return self._cap
 
     def push(self, t: float, theta: Sequence[float]) -> None:
         n = self._n

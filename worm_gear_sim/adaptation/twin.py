@@ -101,6 +101,29 @@ def prepare_start(start: Config, preview: float | None = None) -> Config:
                           'compensation.preview_time': p})
 
 
+#: Where the twin's handshake stamps its samples, after the scenario's start [ns].
+HANDSHAKE_AFTER_NS = 10_000_000_000
+
+
+def _handshake(pred: RealtimePredictor, live: LiveAdaptation, drive: EncoderPlant,
+               theta1: float, first_ns: int, period_ns: int, n: int) -> None:
+    """``n`` samples of ``theta1`` from ``first_ns`` through the pipeline (clock ``now``
+    = stamp - preview), the adaptation and ``drive`` (started at the first): the live
+    harness's handshake before its clock goes back (:func:`run_twin`)."""
+    ahead = int(pred.config.compensation.preview_time * 1e9)
+    names = pred.config.node.joint_names[1:]
+    for j in range(n):
+        ns = first_ns + j * period_ns
+        out = pred.push(ns, theta1, now_ns=ns - ahead)
+        for p in out.predictions:
+            live.predicted(p.stamp_ns, p.theta)
+        if out.predictions:
+            live.step(out.predictions[-1].stamp_ns)
+        for c in out.corrections:
+            _, meas = drive.command((c.stamp_ns - first_ns) * 1e-9, c.theta1_ref + c.delta)
+            live.measured(c.stamp_ns, names[2:], [meas])
+
+
 def plant_errors(plant: Config, start: Config, t: np.ndarray, theta1_ref: np.ndarray,
                  theta4: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(uncompensated, compensated) antenna error [rad] at the uniform times ``t``: the
@@ -114,7 +137,7 @@ def plant_errors(plant: Config, start: Config, t: np.ndarray, theta1_ref: np.nda
 def run_twin(plant: Config, start: Config, name: str, duration: float, *,
              noise: float = 1e-6, encoder_bits: int = 20, seed: int = 0, adapt: bool = True,
              preview: float | None = None, base_ns: int = BASE_NS, hold: int = 0,
-             plant_from_ns: int | None = None, record: bool = False,
+             plant_from_ns: int | None = None, handshake: int = 0, record: bool = False,
              on_sample: Callable[[float], None] | None = None) -> TwinRun:
     """Stream scenario ``name`` for ``duration`` s (module docstring): the plant driven by
     the adapting feed-forward (``adapt`` False: the feed-forward of the start set, never
@@ -124,7 +147,11 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
     before t = 0 (the live harness's start, :mod:`worm_gear_sim.ros.live_adaptation`: the
     pipeline and the plant start at the first of them; ``plant_from_ns``: the plant starts
     at this stamp instead, at rest at the first reference, and takes no earlier command, as
-    the live plant node that connected later); ``record``: keep per pushed sample
+    the live plant node that connected later); ``handshake``: this many samples of the
+    first reference, answered by a plant, 10 s of stream time after the scenario's start,
+    then the clock goes back to the scenario's start (the live harness's handshake): the
+    pipeline, the adaptation and the plant restart, and the run is the plain one;
+    ``record``: keep per pushed sample
     (stamp, theta1_ref, [(stamp, encoder theta4, delta) of each correction released]) in
     ``TwinRun.record`` (what a node would receive, in its order)."""
     cfg = prepare_start(start, preview)
@@ -145,8 +172,14 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
     stamps = [first_ns + j * period_ns for j in range(int(hold))] + \
         [base_ns + int(round(tk * 1e9)) for tk in t]
     refs = np.concatenate([np.full(int(hold), x[0]), x])
+    if handshake:
+        _handshake(pred, live, EncoderPlant(plant, float(x[0]), noise=noise,
+                                            encoder_bits=encoder_bits, seed=seed),
+                   float(x[0]), first_ns + HANDSHAKE_AFTER_NS, period_ns, int(handshake))
     for k, ns in enumerate(stamps):
-        out = pred.push(ns, float(refs[k]))
+        # (after a handshake the first sample comes with the clock gone back: a restart)
+        out = pred.push(ns, float(refs[k]),
+                        now_ns=ns - int(ahead * 1e9) if handshake and k == 0 else None)
         if adapt:                   # as the node: predictions, the decision, then encoders
             for p in out.predictions:
                 live.predicted(p.stamp_ns, p.theta)

@@ -69,7 +69,13 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from ..adaptation.twin import TwinRun, plant_errors, prepare_start, scenario
+from ..adaptation.twin import (
+    HANDSHAKE_AFTER_NS,
+    TwinRun,
+    plant_errors,
+    prepare_start,
+    scenario,
+)
 from ..config_io import params_document, params_yaml_text
 from ..params import Config
 from ..schema import NODE_NAME
@@ -93,6 +99,9 @@ MAX_BURST = 100          # samples per timer call after a stall of this process
 #: The simulated clock's first reading [ns] (any time > 0; the node follows /clock).
 CLOCK_START_NS = 1_000_000_000
 HOLD_PERIOD_S = 0.02     # wall time between the hold samples (see ScenarioCommander.start)
+#: After the handshake's first answer, wall time without a new encoder sample before the
+#: clock goes back and the stream starts [s] (nothing of the handshake still in flight).
+SETTLE_S = 0.3
 
 
 class ScenarioCommander(Node):
@@ -114,7 +123,10 @@ class ScenarioCommander(Node):
         self._hold_ns: int | None = None
         self.first_ns: int | None = None          # the first hold sample's stamp
         self._hold_wall = -math.inf
-        self.clock_ns = CLOCK_START_NS
+        self._settle_from: float | None = None
+        self._settle_seen = 0
+        self._stream_after = -math.inf
+        self.clock_ns = CLOCK_START_NS + HANDSHAKE_AFTER_NS      # the handshake's clock
         self._wall = time.monotonic()
         self.node_alive = False
         self.adapted: dict[str, Any] = {}
@@ -144,10 +156,13 @@ class ScenarioCommander(Node):
                 and self.count_subscribers(MEASURED_TOPIC) >= 2)
 
     def start(self) -> None:
-        """Hold the first sample (repeated every HOLD_PERIOD_S of wall time, on the stream's
-        grid) until the first encoder sample comes back, then stream from the next grid
-        stamp: the node and the plant start at rest there, and no sample is streamed into a
-        connection that is not matched yet (a lost command would stall the clock)."""
+        """The handshake: hold the first sample (repeated every HOLD_PERIOD_S of wall time,
+        on the stream's grid, HANDSHAKE_AFTER_NS after the run's clock) until the first
+        encoder sample comes back and nothing more comes for SETTLE_S; then the clock goes
+        back to CLOCK_START_NS and the stream starts there: the node's pipeline and its
+        adaptation and the plant restart at rest at its first sample, as the twin starts,
+        and no sample of the run is streamed into a connection that is not matched yet (a
+        lost command would stall the clock)."""
         self.holding = True
 
     def streaming(self) -> bool:
@@ -172,6 +187,8 @@ class ScenarioCommander(Node):
             clock = min(clock, max(self.last_measured_ns, self.t0_ns) + self.max_lag_ns)
         if self._hold_ns is not None and self.t0_ns is None:    # holding: see _hold
             clock = min(clock, self._hold_ns - int(self.ahead * 1e9))
+        if wall < self._stream_after:                 # the clock just went back: held
+            clock = self.clock_ns
         if not self.done():           # then held: the node never sees the stream pause
             self.clock_ns = max(self.clock_ns, clock)
         c = self._clock_msg
@@ -179,7 +196,7 @@ class ScenarioCommander(Node):
         self.pub_clock.publish(c)
         if self.holding:
             self._hold(wall)
-        if self.t0_ns is None or self.done():
+        if self.t0_ns is None or self.done() or wall < self._stream_after:
             return
         horizon = self.clock_ns + int(self.ahead * 1e9)
         m = self._msg
@@ -195,8 +212,17 @@ class ScenarioCommander(Node):
     def _hold(self, wall: float) -> None:
         m = self._msg
         if self.last_measured_ns > 0 and self._hold_ns is not None:
-            self.holding = False                  # the chain answers: stream
-            self.t0_ns = self._hold_ns + self.period_ns
+            # the chain answers: let what is in flight arrive, then the clock goes back and
+            # the stream starts afresh (the node, its adaptation and the plant restart)
+            if self._settle_from is None or self.last_measured_ns != self._settle_seen:
+                self._settle_from, self._settle_seen = wall, self.last_measured_ns
+            elif wall - self._settle_from >= SETTLE_S:
+                self.holding = False
+                self.clock_ns = CLOCK_START_NS
+                self.t0_ns = CLOCK_START_NS + int(self.ahead * 1e9) + self.period_ns
+                self.last_measured_ns = 0
+                # the node and the plant see the clock go back before the first sample
+                self._stream_after = wall + SETTLE_S
             return
         if wall - self._hold_wall < HOLD_PERIOD_S:
             return

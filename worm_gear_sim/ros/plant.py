@@ -15,9 +15,16 @@ EncoderPlant`, the one the offline twin ``worm-gear-sim adapt`` steps).
   command subscription with the node's writer, both for READY_SAMPLES references in a row
   (so no command or encoder sample after t = 0 is lost to a connection still being made;
   earlier references are counted, ``before_ready``);
+  A reference stamped more than RESTART_BACK_NS before the newest one seen (the clock went
+  back: the live harness's start after its handshake, a restarted simulation) restarts the
+  plant there, as at its first start: at rest under its load, the encoder's noise from its
+  seed again, the record emptied (``restarts`` counted), as the node's pipeline and
+  adaptation restart on the clock going back;
 * ``<node>/compensated_command`` (JointState, in): the node's command theta1_ref + delta for
-  each stamp; the plant is stepped to that stamp with it held (commands before t = 0 or not
-  after the last one are counted and dropped);
+  each stamp; the plant is stepped to that stamp with it held (commands not after the last
+  one are counted and dropped; commands stamped before the plant's start wait, up to
+  MAX_EARLY, for a restart that they may belong to, and are counted ``before_start`` when
+  it does not take them);
 * ``measured_joint_states`` (JointState, out, reliable, keep last 1000): the encoder's
   theta4 (noise, steps) under ``node.joint_names[3]`` of the plant's file, stamped with the
   command's stamp.  Start the node with ``-p qos_overrides./measured_joint_states.
@@ -25,9 +32,10 @@ EncoderPlant`, the one the offline twin ``worm-gear-sim adapt`` steps).
   depth:=1000`` so that no encoder sample is lost (its default is the sensor-data profile,
   best effort, keep last 5).
 
-``--record``: on exit (SIGINT/SIGTERM) writes OUT.npz with, per command, ``stamp_ns``,
-``command``, ``theta4`` (the plant's, without noise) and ``measured``, plus ``base_ns`` and
-``theta1_start`` (the first reference) and the counters.
+``--record``: on exit (SIGINT/SIGTERM) writes OUT.npz with, per command since the last
+(re)start, ``stamp_ns``, ``command``, ``theta4`` (the plant's, without noise) and
+``measured``, plus ``base_ns`` and ``theta1_start`` (the reference it started at) and the
+counters.
 """
 
 from __future__ import annotations
@@ -59,6 +67,9 @@ PLANT_NODE_NAME = 'worm_gear_plant'
 MAX_EARLY = 1000
 #: References seen connected in a row before the plant starts (module docstring).
 READY_SAMPLES = 3
+#: A reference this far [ns] before the newest one seen restarts the plant (the node's
+#: pipeline restarts on its clock going back by more than 1 ms).
+RESTART_BACK_NS = 1_000_000
 
 
 class PlantNode(Node):
@@ -74,7 +85,9 @@ class PlantNode(Node):
         self.base_ns: int | None = None
         self.theta1_start = float('nan')
         self.counters = {'commands': 0, 'published': 0, 'before_start': 0,
-                         'out_of_order': 0, 'malformed': 0, 'before_ready': 0}
+                         'out_of_order': 0, 'malformed': 0, 'before_ready': 0, 'restarts': 0}
+        self._newest_ref_ns = 0
+        self._first_ref_ns = 0                # the first reference of the stream
         self._subscribers = int(subscribers)
         self._ready = 0
         self._early: list[tuple[int, float]] = []
@@ -89,10 +102,27 @@ class PlantNode(Node):
             self._on_command, reliable)
 
     def _on_reference(self, msg: JointState) -> None:
-        if self.plant is not None or not msg.position:
+        if not msg.position:
             return
         ns = stamp_ns(msg.header.stamp)
         if ns <= 0:
+            return
+        newest, self._newest_ref_ns = self._newest_ref_ns, max(self._newest_ref_ns, ns)
+        if not newest:
+            self._first_ref_ns = ns
+        if self.plant is not None:
+            if ns < newest - RESTART_BACK_NS:         # the clock went back: start again
+                self.counters['restarts'] += 1
+                self._newest_ref_ns = ns
+                # commands waiting from the old stream's span are its stragglers; those
+                # before it came from the new stream ahead of this reference
+                old = self._first_ref_ns
+                self._first_ref_ns = ns
+                self.counters['before_start'] += sum(1 for c in self._early if c[0] >= old)
+                self._early = [c for c in self._early if c[0] < old]
+                self.record.clear()
+                self._last_ns = 0
+                self._start(ns, float(msg.position[0]))
             return
         connected = self._pub.get_subscription_count() >= self._subscribers and \
             self._commands.get_publisher_count() >= 1
@@ -100,9 +130,15 @@ class PlantNode(Node):
         if self._ready < READY_SAMPLES:
             self.counters['before_ready'] += 1
             return
-        self.base_ns, self.theta1_start = ns, float(msg.position[0])
+        self._start(ns, float(msg.position[0]))
+
+    def _start(self, ns: int, theta1: float) -> None:
+        """The plant starts (again) at rest at the reference stamped ``ns``; the commands
+        waiting for it are stepped."""
+        self.base_ns, self.theta1_start = ns, theta1
         self.plant = EncoderPlant(self.config, self.theta1_start, **self._plant_args)
-        self.get_logger().info(f'plant started at theta1 = {self.theta1_start:.6g} rad')
+        self.get_logger().info(f'plant started at theta1 = {self.theta1_start:.6g} rad '
+                               f'(stamp {ns} ns)')
         early, self._early = self._early, []
         for ns_c, value in sorted(early):
             self._command(ns_c, value)
@@ -112,9 +148,11 @@ class PlantNode(Node):
         if not msg.position or ns <= 0:
             self.counters['malformed'] += 1
             return
-        if self.plant is None:
-            if len(self._early) < MAX_EARLY:
+        if self.plant is None or (self.base_ns is not None and ns < self.base_ns):
+            if len(self._early) < MAX_EARLY:       # before the start: it may be a restart's
                 self._early.append((ns, float(msg.position[0])))
+            else:
+                self.counters['before_start'] += 1
             return
         self._command(ns, float(msg.position[0]))
 
@@ -138,6 +176,8 @@ class PlantNode(Node):
 
     def write_record(self, path: Path) -> None:
         """The record (module docstring) as an .npz file."""
+        self.counters['before_start'] += len(self._early)     # no start took them
+        self._early = []
         rec = np.array(self.record, dtype=float).reshape(-1, 4)
         stamps = np.array([r[0] for r in self.record], dtype=np.int64)
         np.savez(path, stamp_ns=stamps, command=rec[:, 1], theta4=rec[:, 2],
