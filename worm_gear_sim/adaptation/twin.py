@@ -144,10 +144,11 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
     adapted), and by the raw reference for the uncompensated error.  ``noise``: encoder
     noise RMS [rad]; ``encoder_bits``: resolution 2 pi / 2^bits (0: none); ``base_ns``: the
     stamp of t = 0; ``hold``: this many samples of the first reference on the stream's grid
-    before t = 0 (the live harness's start, :mod:`worm_gear_sim.ros.live_adaptation`: the
-    pipeline and the plant start at the first of them; ``plant_from_ns``: the plant starts
-    at this stamp instead, at rest at the first reference, and takes no earlier command, as
-    the live plant node that connected later); ``handshake``: this many samples of the
+    before t = 0, the pipeline and the plant starting at the first of them (a start a few
+    samples earlier: how much the adaptive path depends on its start; the live harness
+    started so before its handshake ended in a restart); ``plant_from_ns``: the plant
+    starts at this stamp instead, at rest at the first reference, and takes no earlier
+    command; ``handshake``: this many samples of the
     first reference, answered by a plant, 10 s of stream time after the scenario's start,
     then the clock goes back to the scenario's start (the live harness's handshake): the
     pipeline, the adaptation and the plant restart, and the run is the plain one;

@@ -16,15 +16,18 @@ the plant and the adaptation are the core's, the ones the twin runs).
   ``measured_joint_states`` stamped with the command's stamp;
 
 and is itself the commander (:class:`ScenarioCommander`, in the caller's process): it waits
-until both are up and connected, holds the first sample (a grid step later every 20 ms of
-wall time, the clock held behind them) until the plant's
-first encoder sample comes back (a command published before the node's publisher has
-matched the plant would be lost, and the clock would wait for it for ever: measured), then
-streams the scenario's references (the twin's
-:func:`~worm_gear_sim.adaptation.twin.scenario`, the same samples) on
-``worm_angle_reference``, ``preview + lead`` ahead of ``/clock``, which it advances at the
-wall clock's rate (``speed``) but never more than ``max_lag`` past the last encoder sample
-it has seen.  The node releases a command (and its prediction) ``preview`` after the
+until both are up and connected, then makes a handshake: it holds the first sample (a grid
+step later every 20 ms of wall time, the clock held behind them, 10 s of stream time after
+the run's start) until the plant's first encoder sample comes back and nothing more comes
+for SETTLE_S (a command published before the node's publisher has matched the plant would
+be lost, and the clock would wait for it for ever: measured).  Then the clock goes back to
+the run's start: the node's pipeline restarts (a clock going back), its adaptation with it
+(:mod:`worm_gear_sim.adaptation.live`), and the plant node restarts at the first reference
+of the run (a reference going back), as the twin starts.  Then it streams the scenario's
+references (the twin's :func:`~worm_gear_sim.adaptation.twin.scenario`, the same samples)
+on ``worm_angle_reference``, ``preview + lead`` ahead of ``/clock``, which it advances at
+the wall clock's rate (``speed``) but never more than ``max_lag`` past the last encoder
+sample it has seen.  The node releases a command (and its prediction) ``preview`` after the
 reference of its stamp, so its predictions run at most ``lead + max_lag`` past that encoder
 sample: with ``max_lag`` = (``adaptation.sample_delay`` - ``lead``) / 2 (the default), less
 than the sample delay by as much again, every encoder sample reaches the node before its
@@ -43,10 +46,9 @@ Only the timing differs from the twin: there each encoder sample reaches the ada
 right after the prediction of its stamp; here it comes back through two processes, up to
 ``lead + max_lag`` of stream time later.  Each sample enters the estimate at a step fixed by
 its stamp, so this does not change what a decision sees while ``late_samples`` and
-``late_steps`` stay 0; and the run starts with the held samples (``LiveRun.held``, the
-first at ``LiveRun.first_ns``), which the twin replays with ``run_twin(..., base_ns=
-run.t0_ns, hold=run.held, plant_from_ns=run.plant_ns)``: then the two are the same
-computation on the same samples.
+``late_steps`` stay 0, and the handshake leaves nothing behind the restart: then the live
+run and ``run_twin(...)`` with the same plant, start set, scenario and seed are the same
+computation on the same samples (``test/test_adaptation_live.py``: bit for bit).
 """
 
 from __future__ import annotations
@@ -257,9 +259,9 @@ class ScenarioCommander(Node):
 class LiveRun(TwinRun):
     """A :class:`TwinRun` from the live processes, plus: stamps kept without a plant sample
     (``missing``), whether the encoder stopped coming (``stalled``: no progress for
-    ``stall_timeout`` s, a process ended, or the drain timed out), the first sample's hold
-    messages (``held``, the first stamped ``first_ns``; the stream's t = 0 is ``t0_ns``; the
-    plant started at ``plant_ns``, the first reference it saw connected),
+    ``stall_timeout`` s, a process ended, or the drain timed out), the handshake's hold
+    messages (``held``, the first stamped ``first_ns``; the run's t = 0 is ``t0_ns``; the
+    plant (re)started last at ``plant_ns``: ``t0_ns`` after the handshake),
     the plant's counters, the wall time of the stream and the logs."""
 
     missing: int = 0
