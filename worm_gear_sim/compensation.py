@@ -65,6 +65,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -447,9 +448,9 @@ class Compensator:
             lo += 1
         self._lo = lo
 
-    def copy_history(self, other: Compensator) -> None:
+    def copy_history(self, other: Any) -> None:
         """Take over the reference history and last outputs of ``other`` (a redesign that
-        keeps the stream)."""
+        keeps the stream; a Compensator, or a blend of two, whose new one's)."""
         self._ht, self._hx = other._ht.copy(), other._hx.copy()
         self._lo, self._hi = other._lo, other._hi
         self._last_delta, self._reference = other._last_delta, other._reference

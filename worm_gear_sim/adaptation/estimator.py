@@ -271,14 +271,14 @@ def _kalman_step(theta, P, q, p_max, phi, y, r_var, huber):
 @njit(cache=True)
 def _sample_step(th, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play, worm0, nw,
                  gear0, ng, th2, th3, w4, flank, flank_m, torque, compliance, resid, forget,
-                 lam, r_var, huber):
+                 lam, r_var, huber, sure):
     """One encoder sample into the estimate and the window (module docstring): the soft
     flank from the estimate's covariance, the regressors, y = r + phi^T theta_model (the
     model's play on its own flank), forgetting, the Kalman step; the windowed sums with the
     estimate's hard flank (where it agrees with the model's, the model in use's linearised
     residual is the residual itself)."""
     soft = flank
-    if i_play >= 0:
+    if i_play >= 0 and not sure:
         var = 0.0
         if i_load >= 0:
             var += P[i_load, i_load]
@@ -405,10 +405,12 @@ class Adapter:
         self._flank_t = -math.inf
         self._first_t = math.nan
         self._next_poll = -math.inf
-        self._w_max = 0.0
+        self._w_max = self._a_max = 0.0
         self._hold_until = -math.inf
         self._timing = FlankTiming()
         self._model_flank_t = -math.inf
+        self._applied_t = -math.inf       # the last step applied (when its samples start)
+        self._cross_t = -math.inf         # the drive's last crossing measured
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
         self._play0 = float(model.config.mesh.backlash)
@@ -477,12 +479,22 @@ class Adapter:
                      self._sc, lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
                      lay.gear0, lay.gear_orders, theta2, theta3, w4, flank, flank_m, torque,
                      compliance, theta4_meas - theta4_pred, dt / s.memory,
-                     lam, s.measurement_noise ** 2, HUBER_SIGMAS)
+                     lam, s.measurement_noise ** 2, HUBER_SIGMAS, self._flank_sure(t, load, drag))
         self._w_max = max(abs(w4), self._w_max * lam)
+        self._a_max = max(abs(a4), self._a_max * lam)
         if math.isnan(self._first_t):
             self._first_t = t
         self.samples_used += 1
         return True
+
+    def _flank_sure(self, t: float, load: float, drag: float) -> bool:
+        """The drive stays on one flank: no crossing measured and the estimate's flank held
+        for a window, and the estimated load outweighs twice the largest drag and inertia
+        torque of the recent motion.  Then the play is a hard regressor even while load and
+        play share one offset and the load's own uncertainty stays wide (a drive without
+        drag: the soft flank would keep the play a noise for ever, measured)."""
+        return (t - max(self._flank_t, self._cross_t) > self.settings.window and abs(load)
+                > 2.0 * (max(drag, 0.0) * self._w_max + self._inertia * self._a_max))
 
     def _step_update(self, t: float, drag: float) -> None:
         """A crossing of the drive's own, seen as a step of the residual while the model
@@ -499,7 +511,9 @@ class Adapter:
                 least = 0.5 * b
         elif self._play0 > 0.0:
             least = 0.5 * self._play0
-        got = self._timing.detect(t, self.settings.measurement_noise, self._model_flank_t,
+        # (a step applied to the model steps the residual too: not the drive's crossing)
+        got = self._timing.detect(t, self.settings.measurement_noise,
+                                  max(self._model_flank_t, self._applied_t),
                                   least)
         if got is None:
             return
@@ -520,6 +534,7 @@ class Adapter:
         if lay.i_load < 0 and lay.i_drag < 0:
             return
         self._switches.append((t_p, w_p, a_p))
+        self._cross_t = max(self._cross_t, t_p)
         phi = np.zeros(lay.n)
         if lay.i_load >= 0:
             phi[lay.i_load] = 1.0
@@ -540,6 +555,9 @@ class Adapter:
         T + c omega4(t_p) = -J alpha4(t_p), its noise a timing error of SWITCH_TIME_SD."""
         lay = self.layout
         if lay.i_load < 0 and lay.i_drag < 0 or not self._timing.event_due(t):
+            return
+        if self._timing.event_spans(self._applied_t):    # the model changed inside the
+            self._timing.drop_event()                     # window: its residual steps
             return
         play = self.theta[lay.i_play] if lay.i_play >= 0 else self._play0
         model_play = self.applied_x[lay.i_play] if lay.i_play >= 0 else self._play0
@@ -645,10 +663,12 @@ class Adapter:
                 out += float(np.sum(np.abs(delta[i0:i0 + 2 * k])))
         return out
 
-    def applied(self, step: np.ndarray, model: DriveModel) -> None:
-        """The caller applied ``step`` (a Decision's) to the model in use."""
+    def applied(self, step: np.ndarray, model: DriveModel, at: float | None = None) -> None:
+        """The caller applied ``step`` (a Decision's) to the model in use; ``at``: the time
+        of the first sample it predicts [s] (None: the last sample's)."""
         self.applied_x = np.array(step, float)
         self.model = model
+        self._applied_t = self._last_t if at is None else float(at)
         self._hold_until = self._last_t + FLANK_HOLD_OFF   # the prediction's transient
         self.switches += 1
         if self.target is not None and np.array_equal(self.target, self.applied_x):

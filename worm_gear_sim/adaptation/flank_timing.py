@@ -230,6 +230,14 @@ class FlankTiming:
         self.events += 1
         self._event = (t, -0.5 * (new - old))
 
+    def event_spans(self, t: float) -> bool:
+        """Whether ``t`` falls inside the open event's window (its levels included)."""
+        ev = self._event
+        return ev is not None and abs(t - ev[0]) <= WINDOW + LEVEL_WINDOW
+
+    def drop_event(self) -> None:
+        self._event = None
+
     def event_due(self, t: float) -> bool:
         """Whether :meth:`ready` would look at ``t`` (a model crossing past its window)."""
         ev = self._event

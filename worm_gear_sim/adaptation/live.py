@@ -72,6 +72,7 @@ from typing import Any
 
 import numpy as np
 
+from ..dynamics.modal import modes
 from ..dynamics.model import DriveModel
 from ..params import Config, config_from_mapping
 from ..realtime.predictor import Prepared, RealtimePredictor
@@ -82,12 +83,16 @@ from .estimator import Adapter
 __all__ = ['LiveAdaptation', 'REJECT_REASONS', 'APPLY_LEAD', 'Submit', 'run_now',
            'in_worker']
 
+#: A step's correction is blended in over this many periods of the antenna mode of the
+#: model it brings (at most one ``adaptation.step_interval``): a drive without drag rings
+#: for ever after a step of the command (:mod:`~worm_gear_sim.realtime.blend`).
+BLEND_PERIODS = 5.0
 #: A step decided at the prediction stamped t is applied at the first prediction stamped
 #: >= t + APPLY_LEAD [s] (module docstring): time for the worker to prepare it (5-15 ms
 #: measured under load) with margin; small against the hold-offs of the estimate (0.15 s).
 APPLY_LEAD = 0.05
 #: Runs a preparation: returns a future-like object (``done()``, ``result()``).
-Submit = Callable[[Callable[[], Prepared]], Any]
+Submit = Callable[[Callable[[], Any]], Any]
 #: The interpreter's switch interval while a preparation runs in a worker thread [s]: the
 #: sample thread waits at most about this long for the GIL (Python's default, 5 ms, made a
 #: sample wait up to 5-7 ms while the worker prepared: measured, bench_adaptation.py).
@@ -251,8 +256,9 @@ class LiveAdaptation:
         # the simulator's state now, whenever the worker runs: the same result as the twin
         trial = None if pred.sim is None else pred.sim.trial_copy()
 
-        def prepare() -> Prepared:
-            return pred.prepare(DriveModel(_as_config(base).replace(overrides)), trial)
+        def prepare() -> tuple[Prepared, float]:
+            new = pred.prepare(DriveModel(_as_config(base).replace(overrides)), trial)
+            return new, blend_time(new.model, base.adaptation.step_interval)
 
         self.pending = _Pending(d.step, int(stamp_ns) + self._lead_ns, self._submit(prepare),
                                 base)
@@ -275,11 +281,12 @@ class LiveAdaptation:
         if pred.config is not p.base:   # replaced from outside meanwhile: not this step
             return []
         try:
-            pred.reconfigure(p.future.result())
+            prepared, blend = p.future.result()
+            pred.reconfigure(prepared, blend=blend)
         except (ValueError, ArithmeticError) as exc:   # ConfigError is a ValueError
             ad.refused(f'{type(exc).__name__}: {exc}')
             return self._refused(ad.last_refusal, counted=True)
-        ad.applied(p.step, pred.model)
+        ad.applied(p.step, pred.model, at=self._seconds(stamp_ns))
         self.counters['switches'] += 1
         return []
 
@@ -348,7 +355,14 @@ def _pipeline_starts(predictor: RealtimePredictor) -> int:
     return c['clock_restarts'] + c['resyncs'] + c['input_switches']
 
 
-def run_now(prepare: Callable[[], Prepared]) -> Future:
+def blend_time(model: DriveModel, most: float) -> float:
+    """How long a step's correction is blended in [s]: BLEND_PERIODS periods of the
+    model's lowest mode (the antenna's), at most ``most``."""
+    f0 = float(modes(model).frequencies_hz[0])
+    return min(BLEND_PERIODS / f0, most) if f0 > 0.0 and math.isfinite(f0) else most
+
+
+def run_now(prepare: Callable[[], Any]) -> Future:
     """A :data:`Submit` that prepares at once (the twin): a done future (its result, or the
     exception the preparation raised)."""
     fut: Future = Future()
@@ -363,7 +377,7 @@ def in_worker(pool: Executor) -> Submit:
     """A :data:`Submit` that runs each preparation in ``pool`` (a worker thread) with the
     switch interval lowered while it runs (:func:`~worm_gear_sim.realtime.switch_interval.
     short_switch_interval`, shared with the trajectory worker)."""
-    def run(prepare: Callable[[], Prepared]) -> Prepared:
+    def run(prepare: Callable[[], Any]) -> Any:
         with short_switch_interval():
             return prepare()
 

@@ -18,6 +18,7 @@ from ..dynamics.simulation import Simulator
 from ..params import Config
 from ..schema import LOAD_LIMIT
 from .admission import Admission, Candidate, JumpConfirmation
+from .blend import BlendedCompensator, unwrap
 from .command_timing import CommandQueue, StreamClock
 from .drive import SimulatedDrive
 from .outputs import COUNTER_NAMES, Correction, Event, Output, Prepared, Reject
@@ -31,10 +32,7 @@ RESTART_MIN_BACK_NS = 100_000_000  # a stamp this much older may start a new tim
 CLOCK_TOLERANCE_NS = 1_000_000  # now_ns may step back this much without a restart
 INFO_EVENTS = ('started', 'stream_resumed')
 RETRACTED_COUNTS = ('overruns', 'dropped_time_ns', 'rest_samples')   # a stale hold's
-
-
-#: Load torque samples kept from before the first reference (the newest; 10 s at 100 Hz).
-LOAD_PENDING = 1000
+LOAD_PENDING = 1000     # load samples kept from before the first reference (10 s at 100 Hz)
 
 
 class RealtimePredictor:
@@ -49,8 +47,7 @@ class RealtimePredictor:
     ``max_stamp_age`` / ``max_stamp_lead`` [s]: accepted stamp window around ``now_ns`` (lead:
     plus the preview time); ``stale_margin`` [s]: lateness allowed to samples before ``hold``
     declares the stream stale; ``confirm_samples``: agreeing candidates that confirm a jump or
-    a restart.
-    """
+    a restart."""
 
     def __init__(self, model: DriveModel | Config, *, compensate: bool = True,
                  apply_compensation: bool | None = None, simulate: bool = True,
@@ -60,8 +57,7 @@ class RealtimePredictor:
         if confirm_samples < 2:
             raise ValueError('confirm_samples must be >= 2')
         if not (max_stamp_age > 0.0 and max_stamp_lead > 0.0 and stale_margin >= 0.0):
-            raise ValueError('max_stamp_age and max_stamp_lead must be > 0, '
-                             'stale_margin >= 0')
+            raise ValueError('max_stamp_age and max_stamp_lead must be > 0, stale_margin >= 0')
         self.counters: dict[str, int] = dict.fromkeys(COUNTER_NAMES, 0)
         self.compensate = bool(compensate)
         self._apply_arg = apply_compensation
@@ -73,7 +69,7 @@ class RealtimePredictor:
         self.confirm_samples = int(confirm_samples)
         self.compensation_error = ''
         self.last_error = ''
-        self._comp: Compensator | None = None
+        self._comp: Compensator | BlendedCompensator | None = None
         model = DriveModel.of(model)
         self.sim: Simulator | None = Simulator(model, 0.0, 0.0) if simulate else None
         if self.sim is not None:                      # compile / load the kernel now
@@ -140,14 +136,18 @@ class RealtimePredictor:
             (self.sim.trial_copy() if trial is None else trial).reconfigure(model)
         return self._design(model)
 
-    def reconfigure(self, new: DriveModel | Config | Prepared) -> None:
+    def reconfigure(self, new: DriveModel | Config | Prepared, blend: float = 0.0) -> None:
         """Swap in a validated configuration (or what :meth:`prepare` made of one),
-        keeping time, state, reference history and pending corrections.  On ValueError
-        nothing changed."""
+        keeping time, state, reference history and pending corrections; ``blend`` > 0: the
+        correction hands over to the new compensator over that long [s] (:mod:`.blend`).
+        On ValueError nothing changed."""
         prepared = new if isinstance(new, Prepared) else self.prepare(new)
         if self.sim is not None:
             self.sim.reconfigure(prepared.model)
+        old = self._comp
         self._set_config(prepared)
+        if blend > 0.0 and old is not None and prepared.compensator is not None:
+            self._comp = BlendedCompensator(old, prepared.compensator, blend)
         self._before_stale: dict | None = None   # no retraction to the old set
         if self._stream.period0 != float(self._period_ns):  # pragma: no cover - read-only
             self._stream = StreamClock(float(self._period_ns))
@@ -224,7 +224,7 @@ class RealtimePredictor:
 
     @property
     def compensator(self) -> Compensator | None:
-        return self._comp
+        return unwrap(self._comp)
 
     @property
     def stream_clock(self) -> StreamClock:
