@@ -410,7 +410,7 @@ class Adapter:
         self._timing = FlankTiming()
         self._model_flank_t = -math.inf
         self._applied_t = -math.inf       # the last step applied (when its samples start)
-        self._cross_t = -math.inf         # the drive's last crossing measured
+        self._cross_t = -math.inf         # the drive's last crossing, measured or estimated
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
         self._play0 = float(model.config.mesh.backlash)
@@ -447,6 +447,7 @@ class Adapter:
         flank = 1.0 if torque > 0.0 else -1.0 if torque < 0.0 else self._flank
         if flank != self._flank:
             self._flank, self._flank_t = flank, t
+            self._cross_t = max(self._cross_t, t)          # (the estimate's crossing)
         # the flank of the model in use: where it differs, one of the two is wrong and the
         # residual holds a flank error the linear picture does not have
         ax = self.applied_x
@@ -488,12 +489,12 @@ class Adapter:
         return True
 
     def _flank_sure(self, t: float, load: float, drag: float) -> bool:
-        """The drive stays on one flank: no crossing measured and the estimate's flank held
-        for a window, and the estimated load outweighs twice the largest drag and inertia
+        """The drive stays on one flank: no crossing measured or estimated for a window
+        (the model in use may cross: it is the drive's flank that counts), and the estimated load outweighs twice the largest drag and inertia
         torque of the recent motion.  Then the play is a hard regressor even while load and
         play share one offset and the load's own uncertainty stays wide (a drive without
         drag: the soft flank would keep the play a noise for ever, measured)."""
-        return (t - max(self._flank_t, self._cross_t) > self.settings.window and abs(load)
+        return (t - self._cross_t > self.settings.window and abs(load)
                 > 2.0 * (max(drag, 0.0) * self._w_max + self._inertia * self._a_max))
 
     def _step_update(self, t: float, drag: float) -> None:
