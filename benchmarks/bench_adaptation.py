@@ -3,11 +3,13 @@
 """Live adaptation on drives that differ from the nominal model, and what it costs per sample.
 
     python benchmarks/bench_adaptation.py [--drives 4] [--seed 1] [--duration 60]
-        [--scenario sector] [--stiffness-spread 0.0] [--cost-samples 3000] [--no-drives]
+        [--scenario sector] [--stiffness-spread 0.0] [--drag-max 60] [--cost-samples 3000]
+        [--no-drives]
         [--latency-seconds 8]
 
 Each drive: the default set with a random play (0.5-5 arcmin), load torque (0.5-5 N m),
-antenna drag (0-60 N m s/rad), worm error orders 1-3 and gear order 1 (each coefficient
+antenna drag (0-60 N m s/rad, capped at ``--drag-max``; 0: the same drives without drag,
+the other draws unchanged), worm error orders 1-3 and gear order 1 (each coefficient
 2-30 urad, random sign) and, with ``--stiffness-spread s``, teeth and bearing stiffness
 multiplied by 1 +- s (not adapted).  The offline twin (``worm-gear-sim adapt``, the node's
 loop) runs the scenario from the NOMINAL model; printed per drive (figures, never
@@ -69,13 +71,14 @@ from worm_gear_sim.realtime.predictor import RealtimePredictor  # noqa: E402
 ARCMIN = math.pi / 180.0 / 60.0
 
 
-def drive(base: Config, rng: np.random.Generator, spread: float) -> tuple[dict, Config]:
+def drive(base: Config, rng: np.random.Generator, spread: float, drag_max: float = 60.0
+          ) -> tuple[dict, Config]:
     def coef() -> float:
         return float(rng.uniform(2e-6, 30e-6) * rng.choice([-1.0, 1.0]))
 
     v = {'mesh.backlash': rng.uniform(0.5, 5.0) * ARCMIN,
          'load.output_torque': rng.uniform(0.5, 5.0),
-         'load.output_viscous_coefficient': rng.uniform(0.0, 60.0),
+         'load.output_viscous_coefficient': min(rng.uniform(0.0, 60.0), drag_max),
          'mesh.worm_error_harmonics': [coef() for _ in range(6)],
          'mesh.gear_error_harmonics': [coef() for _ in range(2)]}
     if spread > 0:
@@ -105,7 +108,7 @@ def run_drives(args: argparse.Namespace, base: Config) -> None:
     rng = np.random.default_rng(args.seed)
     rows = []
     for i in range(args.drives):
-        v, plant = drive(base, rng, args.stiffness_spread)
+        v, plant = drive(base, rng, args.stiffness_spread, args.drag_max)
         t0 = time.perf_counter()
         run = run_twin(plant, base, args.scenario, args.duration, seed=args.seed + i)
         wall = time.perf_counter() - t0
@@ -283,6 +286,8 @@ def main() -> int:
     ap.add_argument('--duration', type=float, default=60.0)
     ap.add_argument('--scenario', default='sector')
     ap.add_argument('--stiffness-spread', type=float, default=0.0)
+    ap.add_argument('--drag-max', type=float, default=60.0,
+                    help='cap on the antenna drag drawn in [0, 60] N m s/rad (0: no drag)')
     ap.add_argument('--cost-samples', type=int, default=3000)
     ap.add_argument('--no-drives', action='store_true')
     ap.add_argument('--latency-seconds', type=float, default=8.0)
