@@ -480,22 +480,20 @@ class Adapter:
                      self._sc, lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
                      lay.gear0, lay.gear_orders, theta2, theta3, w4, flank, flank_m, torque,
                      compliance, theta4_meas - theta4_pred, dt / s.memory,
-                     lam, s.measurement_noise ** 2, HUBER_SIGMAS, self._flank_sure(t, load, drag))
+                     lam, s.measurement_noise ** 2, HUBER_SIGMAS,
+                     # the flank is sure when the drive stays on one: no crossing measured
+                     # or estimated for a window (the model in use's do not count) and the
+                     # load outweighs twice the recent drag and inertia torques.  Else
+                     # load and play, one offset on such a drive, leave the load's own
+                     # uncertainty wide and the soft flank the play a noise for ever
+                     t - self._cross_t > s.window and abs(load) > 2.0 * (
+                         max(drag, 0.0) * self._w_max + self._inertia * self._a_max))
         self._w_max = max(abs(w4), self._w_max * lam)
         self._a_max = max(abs(a4), self._a_max * lam)
         if math.isnan(self._first_t):
             self._first_t = t
         self.samples_used += 1
         return True
-
-    def _flank_sure(self, t: float, load: float, drag: float) -> bool:
-        """The drive stays on one flank: no crossing measured or estimated for a window
-        (the model in use may cross: it is the drive's flank that counts), and the estimated load outweighs twice the largest drag and inertia
-        torque of the recent motion.  Then the play is a hard regressor even while load and
-        play share one offset and the load's own uncertainty stays wide (a drive without
-        drag: the soft flank would keep the play a noise for ever, measured)."""
-        return (t - self._cross_t > self.settings.window and abs(load)
-                > 2.0 * (max(drag, 0.0) * self._w_max + self._inertia * self._a_max))
 
     def _step_update(self, t: float, drag: float) -> None:
         """A crossing of the drive's own, seen as a step of the residual while the model
