@@ -32,6 +32,16 @@ def sector(t: np.ndarray) -> np.ndarray:
     return -math.radians(5.0) * np.cos(2 * math.pi * t / 4.0)
 
 
+def load_drag_case(base: Config, window: float, max_step: float) -> tuple[Config, Config]:
+    """A plant with a load and drag, and a start set adapting those two (fast settings)."""
+    plant = base.replace({'load.output_torque': 3.0, 'load.output_viscous_coefficient': 10.0})
+    start = base.replace({'adaptation.keys': ['load.output_torque',
+                                              'load.output_viscous_coefficient'],
+                          'adaptation.window': window, 'adaptation.step_interval': 0.1,
+                          'adaptation.max_step': max_step})
+    return plant, start
+
+
 def feed(ad: Adapter, t: np.ndarray, th4: np.ndarray, extra: np.ndarray, ratio: float,
          poll: bool = False) -> list:
     """Stream predicted theta4 (and theta2 = theta4 / ratio, theta3 = theta4) with the
@@ -297,11 +307,7 @@ def test_twin_learns_a_load_and_does_not_get_worse(base):
     """A short twin run on a drive with a load and drag (no flank change): after the first
     window the adapting feed-forward beats the uncompensated drive by far, and the model's
     load approaches the plant's."""
-    plant = base.replace({'load.output_torque': 3.0, 'load.output_viscous_coefficient': 10.0})
-    start = base.replace({'adaptation.keys': ['load.output_torque',
-                                              'load.output_viscous_coefficient'],
-                          'adaptation.window': 0.5, 'adaptation.step_interval': 0.1,
-                          'adaptation.max_step': 0.05})
+    plant, start = load_drag_case(base, 0.5, 0.05)
     run = run_twin(plant, start, 'sector', 1.6, seed=3)
     late = run.t >= 1.3
     rms_u = np.sqrt(np.mean(run.error_uncompensated[late] ** 2))
@@ -356,11 +362,7 @@ def test_a_sample_enters_at_its_stamp_plus_the_delay_whenever_it_comes(base):
     after their prediction give the twin's adaptation bit for bit (they enter at the same
     steps as the twin's, handed over at once); 80 ms after, each comes after its entry step:
     it enters at once, counted late, and is still used."""
-    plant = base.replace({'load.output_torque': 3.0, 'load.output_viscous_coefficient': 10.0})
-    start = base.replace({'adaptation.keys': ['load.output_torque',
-                                              'load.output_viscous_coefficient'],
-                          'adaptation.window': 0.3, 'adaptation.step_interval': 0.1,
-                          'adaptation.max_step': 0.005})
+    plant, start = load_drag_case(base, 0.3, 0.005)
     assert start.adaptation.sample_delay == 0.05
     twin = run_twin(plant, start, 'sector', 1.0, seed=3, record=True)
     assert twin.counters['late_samples'] == 0 and len(twin.steps) >= 2
@@ -384,11 +386,7 @@ def test_a_clock_restart_restarts_the_adaptation_as_at_a_start(base):
     (its predictions, waiting samples and estimate belong to the old stream) and the plant
     too, so the run equals the plain twin's bit for bit; nothing after the restart is
     rejected."""
-    plant = base.replace({'load.output_torque': 3.0, 'load.output_viscous_coefficient': 10.0})
-    start = base.replace({'adaptation.keys': ['load.output_torque',
-                                              'load.output_viscous_coefficient'],
-                          'adaptation.window': 0.3, 'adaptation.step_interval': 0.1,
-                          'adaptation.max_step': 0.005})
+    plant, start = load_drag_case(base, 0.3, 0.005)
     plain = run_twin(plant, start, 'sector', 1.0, seed=3)
     hs = run_twin(plant, start, 'sector', 1.0, seed=3, handshake=8)
     assert len(plain.steps) >= 2 and plain.counters['restarts'] == 0
