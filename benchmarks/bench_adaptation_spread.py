@@ -4,20 +4,22 @@
 targets per drive, started plainly and with a few samples of rest before the scan.
 
     python benchmarks/bench_adaptation_spread.py [--seeds 1 2 3] [--drives 4]
-        [--only SEED:DRIVE ...] [--holds 0 6] [--noise-seeds 0] [--duration 60]
+        [--only SEED:DRIVE ...] [--holds 0 6] [--noise-seeds 0] [--noise-hold 0]
+        [--duration 60]
         [--workers 2] [--json out.json]
 
-The drives are those of ``bench_adaptation.py`` (the same random draws per seed).  Each
+The drives are those of ``bench_adaptation.py`` (the same random draws per seed). Each
 drive runs the offline twin (``sector``, from the nominal model) once per ``--holds`` value
 (``run_twin(..., hold=h)``: h samples of the first reference before t = 0, the live
 harness's start) and per extra encoder-noise seed (``--noise-seeds k``: the encoder noise
-drawn from seed + drive + 100 k as well).  Printed per drive and variant (figures, never
-asserted): the RMS ratio uncompensated / compensated over 10-20 s (target >= 10x), over
-the last 10 s (>= 30x), the worst 1 s window after two worm revolutions (>= 1x) and the
-steps applied; then the spread per target, max / min over the variants (1 when the start
-does not matter), the targets met per variant and in all variants, and where the step
-sequences of the first two variants first differ.  ``--json`` keeps the figures and the
-step sequences.  At most ``--workers`` processes (each ~1 core for ~1 s per simulated s).
+drawn from seed + drive + 100 k as well, with ``--noise-hold``). Printed per drive and
+variant (figures, never asserted): the RMS ratio uncompensated / compensated over 10-20 s
+(target >= 10x), over the last 10 s (>= 30x), the worst 1 s window after two worm
+revolutions (>= 1x) and the steps applied; then the spread per target, max / min over the
+variants (1 when the start does not matter), the targets met per variant and in all
+variants, and where the step sequences of the first two variants first differ. ``--json``
+keeps the figures and the step sequences. At most ``--workers`` processes (each ~1 core for
+~1 s per simulated s).
 """
 
 from __future__ import annotations
@@ -89,15 +91,16 @@ def main() -> int:
     ap.add_argument('--seeds', type=int, nargs='+', default=[1, 2, 3])
     ap.add_argument('--drives', type=int, default=4)
     ap.add_argument('--only', nargs='*', default=[], help='SEED:DRIVE pairs')
-    ap.add_argument('--holds', type=int, nargs='+', default=[0, 6])
+    ap.add_argument('--holds', type=int, nargs='*', default=[0, 6])
     ap.add_argument('--noise-seeds', type=int, default=0)
+    ap.add_argument('--noise-hold', type=int, default=0, help='hold of the noise variants')
     ap.add_argument('--duration', type=float, default=60.0)
     ap.add_argument('--workers', type=int, default=2)
     ap.add_argument('--json', default='')
     args = ap.parse_args()
     pairs = [tuple(int(v) for v in p.split(':')) for p in args.only] or \
         [(s, i) for s in args.seeds for i in range(args.drives)]
-    variants = [(h, 0) for h in args.holds] + [(args.holds[0], k + 1)
+    variants = [(h, 0) for h in args.holds] + [(args.noise_hold, k + 1)
                                                 for k in range(args.noise_seeds)]
     jobs = [(s, i, h, e, args.duration) for s, i in pairs for h, e in variants]
     print(f'load average at start: {os.getloadavg()}; {len(jobs)} twin runs of '
