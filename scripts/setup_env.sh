@@ -33,11 +33,6 @@ if ! "$VENV/bin/python" -c "import rclpy, std_msgs.msg, std_srvs.srv, sensor_msg
 fi
 # numba's on-disk cache (cache=True) is checked against the file of each compiled function
 # only: a kernel whose callee changed in another module would load stale machine code.  Any
-# change to the package's sources clears the package's numba cache.
-src_hash=$(find worm_gear_sim -name '*.py' -print0 | sort -z | xargs -0 cat | sha1sum | cut -c1-40)
-mkdir -p worm_gear_sim/__pycache__             # one stamp for every venv: they share the cache
-hash_file=worm_gear_sim/__pycache__/.numba_sources
-if [ "$(cat "$hash_file" 2>/dev/null || true)" != "$src_hash" ]; then
-    find worm_gear_sim \( -name '*.nbi' -o -name '*.nbc' \) -delete
-    echo "$src_hash" > "$hash_file"
-fi
+# change to the package's sources clears the package's numba cache (the package does the same
+# when it is first imported: worm_gear_sim/kernel_cache.py).
+"$VENV/bin/python" -c "from worm_gear_sim.kernel_cache import ensure_fresh_cache as f; f()"

@@ -19,7 +19,11 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from . import kernel_cache as _kernel_cache
+
 __version__ = '0.1.0'
+
+_kernel_cache.ensure_fresh_cache()   # before any kernel is compiled or loaded (kernel_cache)
 
 #: public name -> submodule that defines it
 _EXPORTS: dict[str, str] = {
