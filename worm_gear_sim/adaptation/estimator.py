@@ -486,8 +486,8 @@ class Adapter:
                      # load outweighs twice the recent drag and inertia torques.  Else
                      # load and play, one offset on such a drive, leave the load's own
                      # uncertainty wide and the soft flank the play a noise for ever
-                     t - self._cross_t > s.window and abs(load) > 2.0 * (
-                         max(drag, 0.0) * self._w_max + self._inertia * self._a_max))
+                     lay.i_play >= 0 and t - self._cross_t > s.window and abs(load) > 2.0
+                     * (max(drag, 0.0) * self._w_max + self._inertia * self._a_max))
         self._w_max = max(abs(w4), self._w_max * lam)
         self._a_max = max(abs(a4), self._a_max * lam)
         if math.isnan(self._first_t):

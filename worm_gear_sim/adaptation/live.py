@@ -134,6 +134,7 @@ class LiveAdaptation:
         self.waiting: deque[tuple[int, float, float, float, float, float]] = deque()
         self._step_ns = -1                    # the stamp of the last step
         self.pending: _Pending | None = None
+        self._pipeline_counters = predictor.counters
         self._starts = _pipeline_starts(predictor)
         self._pred_ns = 0                     # the stamp of the last prediction
 
@@ -158,7 +159,8 @@ class LiveAdaptation:
         """A prediction of the drive (theta2, theta3, theta4) at ``stamp_ns``; the first
         after a restart of the pipeline restarts the adaptation (:meth:`_restart`)."""
         stamp_ns = int(stamp_ns)
-        starts = _pipeline_starts(self.predictor)
+        c = self._pipeline_counters                      # (inline: once per sample)
+        starts = c['clock_restarts'] + c['resyncs'] + c['input_switches']
         if starts != self._starts or stamp_ns < self._pred_ns:
             # (a prediction going back: the new stream's, after the old stream's last ones
             # released at a resync)
