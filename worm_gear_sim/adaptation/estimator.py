@@ -441,8 +441,9 @@ class Adapter:
             return False
         lay = self.layout
         th = self.theta
-        load = th[lay.i_load] if lay.i_load >= 0 else self._load0
-        drag = th[lay.i_drag] if lay.i_drag >= 0 else self._drag0
+        # (item(): Python floats, the same numbers, cheaper arithmetic than numpy scalars)
+        load = th.item(lay.i_load) if lay.i_load >= 0 else self._load0
+        drag = th.item(lay.i_drag) if lay.i_drag >= 0 else self._drag0
         torque = self._inertia * a4 + drag * w4 + load
         flank = 1.0 if torque > 0.0 else -1.0 if torque < 0.0 else self._flank
         if flank != self._flank:
@@ -451,9 +452,9 @@ class Adapter:
         # the flank of the model in use: where it differs, one of the two is wrong and the
         # residual holds a flank error the linear picture does not have
         ax = self.applied_x
-        drag_m = ax[lay.i_drag] if lay.i_drag >= 0 else self._drag0
+        drag_m = ax.item(lay.i_drag) if lay.i_drag >= 0 else self._drag0
         torque_m = self._inertia * a4 + drag_m * w4 + \
-            (ax[lay.i_load] if lay.i_load >= 0 else self._load0)
+            (ax.item(lay.i_load) if lay.i_load >= 0 else self._load0)
         flank_m = 1.0 if torque_m > 0.0 else -1.0 if torque_m < 0.0 else self._flank_m
         timing = self._timing
         timing.push(t, theta4_meas - theta4_pred, w4, a4)
