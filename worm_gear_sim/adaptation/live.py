@@ -72,7 +72,6 @@ from typing import Any
 
 import numpy as np
 
-from ..dynamics.modal import modes
 from ..dynamics.model import DriveModel
 from ..params import Config, config_from_mapping
 from ..realtime.predictor import Prepared, RealtimePredictor
@@ -135,7 +134,7 @@ class LiveAdaptation:
         self._step_ns = -1                    # the stamp of the last step
         self.pending: _Pending | None = None
         self._pipeline_counters = predictor.counters
-        self._starts = _pipeline_starts(predictor)
+        self._starts = _pipeline_starts(predictor.counters)
         self._pred_ns = 0                     # the stamp of the last prediction
 
     def _restart(self) -> None:
@@ -159,8 +158,7 @@ class LiveAdaptation:
         """A prediction of the drive (theta2, theta3, theta4) at ``stamp_ns``; the first
         after a restart of the pipeline restarts the adaptation (:meth:`_restart`)."""
         stamp_ns = int(stamp_ns)
-        c = self._pipeline_counters                      # (inline: once per sample)
-        starts = c['clock_restarts'] + c['resyncs'] + c['input_switches']
+        starts = _pipeline_starts(self._pipeline_counters)
         if starts != self._starts or stamp_ns < self._pred_ns:
             # (a prediction going back: the new stream's, after the old stream's last ones
             # released at a resync)
@@ -260,7 +258,7 @@ class LiveAdaptation:
 
         def prepare() -> tuple[Prepared, float]:
             new = pred.prepare(DriveModel(_as_config(base).replace(overrides)), trial)
-            return new, blend_time(new.model, base.adaptation.step_interval)
+            return new, blend_time(new.compensator, base.adaptation.step_interval)
 
         self.pending = _Pending(d.step, int(stamp_ns) + self._lead_ns, self._submit(prepare),
                                 base)
@@ -350,17 +348,17 @@ class _Pending:
     base: Parameters
 
 
-def _pipeline_starts(predictor: RealtimePredictor) -> int:
-    """How often the pipeline's simulator restarted (clock restarts, resyncs, input
-    switches)."""
-    c = predictor.counters
+def _pipeline_starts(c: dict[str, int]) -> int:
+    """How often the pipeline's simulator restarted, from its counters (clock restarts,
+    resyncs, input switches)."""
     return c['clock_restarts'] + c['resyncs'] + c['input_switches']
 
 
-def blend_time(model: DriveModel, most: float) -> float:
-    """How long a step's correction is blended in [s]: BLEND_PERIODS periods of the
-    model's lowest mode (the antenna's), at most ``most``."""
-    f0 = float(modes(model).frequencies_hz[0])
+def blend_time(compensator: Any, most: float) -> float:
+    """How long a step's correction is blended in [s]: BLEND_PERIODS periods of the antenna
+    mode the new compensator was designed for (``mode_frequency_hz``: teeth in contact), at
+    most ``most``; no compensator: ``most`` (nothing is blended then)."""
+    f0 = float(getattr(compensator, 'mode_frequency_hz', 0.0))
     return min(BLEND_PERIODS / f0, most) if f0 > 0.0 and math.isfinite(f0) else most
 
 
