@@ -82,13 +82,15 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from ..dynamics.inverse import inverse_theta1
 from ..dynamics.model import DriveModel, with_load_torque
 from ..params import Config
 from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS, Parameters
+from . import per_sample as ps
 from .flank_timing import WINDOW, FlankTiming
+from .per_sample import _kalman_step, _sample_step, sample_fast
+from .slots import Slot
 
 __all__ = ['PRIOR_STD', 'FLANK_HOLD_OFF', 'Layout', 'output_compliance',
            'Adapter', 'Decision']
@@ -210,115 +212,6 @@ def output_compliance(model: DriveModel, phases: int = 8) -> tuple[float, float]
     return out[0], out[1]
 
 
-# ---- compiled per-sample work ----------------------------------------------------------------
-@njit(cache=True)
-def _regressor(phi, i_load, i_drag, i_play, worm0, nw, gear0, ng, th2, th3, w4, flank,
-               compliance):
-    phi[:] = 0.0
-    if i_load >= 0:
-        phi[i_load] = -compliance
-    if i_drag >= 0:
-        phi[i_drag] = -compliance * w4
-    if i_play >= 0:
-        phi[i_play] = -0.5 * flank
-    for k in range(nw):
-        phi[worm0 + 2 * k] = math.sin((k + 1) * th2)
-        phi[worm0 + 2 * k + 1] = math.cos((k + 1) * th2)
-    for m in range(ng):
-        phi[gear0 + 2 * m] = math.sin((m + 1) * th3)
-        phi[gear0 + 2 * m + 1] = math.cos((m + 1) * th3)
-
-
-@njit(cache=True)
-def _kalman_step(theta, P, q, p_max, phi, y, r_var, huber):
-    """Random walk (P += q, each variance capped at its prior) then the measurement
-    y = phi^T theta + noise(r_var).  An innovation beyond ``huber`` times its predicted
-    standard deviation sqrt(phi^T P phi + r_var) is down-weighted (its noise variance
-    inflated by |nu| / huber, Huber's weight): mean and covariance stay consistent.  Returns
-    the normalised innovation nu."""
-    n = theta.size
-    for i in range(n):
-        P[i, i] += q[i]
-    for i in range(n):
-        if P[i, i] > p_max[i]:
-            s = math.sqrt(p_max[i] / P[i, i])
-            for j in range(n):
-                P[i, j] *= s
-                P[j, i] *= s
-    Pphi = P @ phi
-    pp = 0.0
-    innov = y
-    for i in range(n):
-        pp += phi[i] * Pphi[i]
-        innov -= phi[i] * theta[i]
-    nu = innov / math.sqrt(pp + r_var)
-    r_eff = r_var
-    if abs(nu) > huber:
-        r_eff = (pp + r_var) * abs(nu) / huber - pp
-        if r_eff < r_var:
-            r_eff = r_var
-    s = pp + r_eff
-    for i in range(n):
-        theta[i] += Pphi[i] / s * innov
-    for i in range(n):
-        for j in range(i, n):
-            v = P[i, j] - Pphi[i] * Pphi[j] / s
-            P[i, j] = v
-            P[j, i] = v
-    return nu
-
-
-@njit(cache=True)
-def _sample_step(th, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play, worm0, nw,
-                 gear0, ng, th2, th3, w4, flank, flank_m, torque, compliance, resid, forget,
-                 lam, r_var, huber, sure):
-    """One encoder sample into the estimate and the window (module docstring): the soft
-    flank from the estimate's covariance, the regressors, y = r + phi^T theta_model (the
-    model's play on its own flank), forgetting, the Kalman step; the windowed sums with the
-    estimate's hard flank (where it agrees with the model's, the model in use's linearised
-    residual is the residual itself)."""
-    soft = flank
-    if i_play >= 0 and not sure:
-        var = 0.0
-        if i_load >= 0:
-            var += P[i_load, i_load]
-        if i_drag >= 0:
-            var += w4 * w4 * P[i_drag, i_drag]
-            if i_load >= 0:
-                var += 2.0 * w4 * P[i_load, i_drag]
-        if var > 0.0:
-            soft = math.erf(torque / math.sqrt(2.0 * var))
-            bp = th[i_play]
-            r_var += 0.25 * (1.0 - soft * soft) * (bp * bp + P[i_play, i_play])
-    _regressor(phi, i_load, i_drag, i_play, worm0, nw, gear0, ng, th2, th3, w4, soft,
-               compliance)
-    y = resid
-    for i in range(phi.size):
-        y += phi[i] * applied[i]
-    if i_play >= 0:
-        y += (0.5 * soft - 0.5 * flank_m) * applied[i_play]
-    q = np.empty(phi.size)
-    for i in range(phi.size):
-        q[i] = P[i, i] * forget
-    _kalman_step(th, P, q, std2, phi, y, r_var, huber)
-    if i_play >= 0:
-        phi[i_play] = -0.5 * flank     # the window judges sets by the hard flank: for the
-    _window_step(S, b, sc, phi, y, lam)  # model in use (same flank) y - phi x is r itself
-
-
-@njit(cache=True)
-def _window_step(S, b, sc, phi, y, lam):
-    """Exponentially weighted sums: S = sum w phi phi^T, b = sum w phi y, sc = [sum w y^2,
-    sum w]."""
-    n = phi.size
-    for i in range(n):
-        b[i] = lam * b[i] + phi[i] * y
-        for j in range(n):
-            S[i, j] = lam * S[i, j] + phi[i] * phi[j]
-    sc[0] = lam * sc[0] + y * y
-    sc[1] = lam * sc[1] + 1.0
-
-
 def _window_ms(S: np.ndarray, b: np.ndarray, sc: np.ndarray, x: np.ndarray) -> float:
     """Windowed mean square of y - phi^T x."""
     if sc[1] <= 0.0:
@@ -349,9 +242,22 @@ class Adapter:
     rejects bad samples); call :meth:`poll` now and then; tell it :meth:`applied` or
     :meth:`refused`; :meth:`rebase` after an outside change of the model."""
 
+    # the per-sample scalars, in the array the compiled sample shares (:mod:`.per_sample`)
+    _last_t, _th4, _w4, _a4, _rate = (Slot('_st', i) for i in (
+        ps.S_LAST_T, ps.S_TH4, ps.S_W4, ps.S_A4, ps.S_RATE))
+    _flank, _flank_t, _cross_t, _flank_m, _hold_until = (Slot('_st', i) for i in (
+        ps.S_FLANK, ps.S_FLANK_T, ps.S_CROSS_T, ps.S_FLANK_M, ps.S_HOLD_UNTIL))
+    _w_max, _a_max, _first_t = (Slot('_st', i) for i in (ps.S_W_MAX, ps.S_A_MAX, ps.S_FIRST_T))
+    _rates, samples_used, samples_skipped = (Slot('_st', i, int) for i in (
+        ps.S_RATES, ps.S_USED, ps.S_SKIPPED))
+    _inertia, _load0, _drag0, _play0 = (Slot('_st', i) for i in (
+        ps.S_INERTIA, ps.S_LOAD0, ps.S_DRAG0, ps.S_PLAY0))
+    _model_flank_t, _applied_t = Slot('_st', ps.S_MODEL_FLANK_T), Slot('_st', ps.S_APPLIED_T)
+
     def __init__(self, model: DriveModel | Config, settings: Any) -> None:
         model = DriveModel.of(model)
         self.settings = settings
+        self._st = np.zeros(ps.N_ST)
         cfg = model.config
         worm = max(int(settings.worm_error_orders), len(cfg.mesh.worm_error_harmonics) // 2)
         gear = max(int(settings.gear_error_orders), len(cfg.mesh.gear_error_harmonics) // 2)
@@ -414,12 +320,32 @@ class Adapter:
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
         self._play0 = float(model.config.mesh.backlash)
+        st, s, lay = self._st, self.settings, self.layout
+        st[ps.S_C_POS], st[ps.S_C_NEG] = self._compliance
+        st[ps.S_WINDOW], st[ps.S_MEMORY] = s.window, s.memory
+        st[ps.S_NOISE], st[ps.S_NOISE2] = s.measurement_noise, s.measurement_noise ** 2
+        st[ps.S_MAX_GAP], st[ps.S_ACCEL_TC] = MAX_GAP, ACCEL_TIME_CONSTANT
+        st[ps.S_HOLD_OFF], st[ps.S_HUBER] = FLANK_HOLD_OFF, HUBER_SIGMAS
+        self._lay = np.array([lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
+                              lay.gear0, lay.gear_orders], np.int64)
 
     # ---- per sample ------------------------------------------------------------------------
     def update(self, t: float, theta4_meas: float, theta2: float, theta3: float,
                theta4_pred: float) -> bool:
         """One encoder sample at ``t`` [s] (measured theta4) with the prediction of that
-        instant (theta2, theta3, theta4); True when it entered the estimate."""
+        instant (theta2, theta3, theta4); True when it entered the estimate.  Compiled
+        (:func:`.per_sample.sample_fast`) unless the sample needs the Python path."""
+        timing = self._timing
+        used = sample_fast(self._st, timing._ts, timing._a, self.theta, self.P, self._std2,
+                           self._phi, self.applied_x, self._S, self._b, self._sc, self._lay,
+                           t, theta4_meas, theta2, theta3, theta4_pred)
+        if used >= 0:
+            return used == 1
+        return self._update(t, theta4_meas, theta2, theta3, theta4_pred)
+
+    def _update(self, t: float, theta4_meas: float, theta2: float, theta3: float,
+                theta4_pred: float) -> bool:
+        """:meth:`update` in Python: every case (the compiled path's twin)."""
         dt = t - self._last_t
         self._last_t = t
         if not dt <= MAX_GAP:                       # first sample, or after a pause

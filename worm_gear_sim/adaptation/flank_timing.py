@@ -49,6 +49,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
+
+from .slots import Slot
 
 __all__ = ['FlankTiming', 'WINDOW', 'LEVEL_WINDOW', 'STEP_SIDE', 'STEP_GAP', 'STEP_STRIDE',
            'STEP_NOISES', 'ONSET_NOISES', 'ONSET_SAMPLES', 'float_onset', 'arch_top']
@@ -65,6 +68,10 @@ STEP_SIDE = 0.04
 STEP_GAP = 0.06
 STEP_STRIDE = 0.01
 STEP_NOISES = 15.0
+
+# FlankTiming._ts (read by the adapter's compiled sample, :mod:`.per_sample`): the rows in
+# the record, the step detector's next look and last step, the open event's due time
+T_N, T_NEXT_LOOK, T_LAST_STEP, T_EVENT_DUE, N_TS = range(5)
 
 
 #: Float onset: the rise before the model's crossing counts from this many measurement
@@ -136,12 +143,19 @@ def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 class FlankTiming:
     """Collects (t, r, omega4, alpha4) per sample; :meth:`model_flank_changed` opens an
     event at t_m; :meth:`ready` returns (t_p, omega4(t_p), alpha4(t_p)) once the window
-    after it has passed, or None; :meth:`detect` finds the drive's own crossings."""
+    after it has passed, or None; :meth:`detect` finds the drive's own crossings.
+    The record's length and the due times are in ``_ts``, which the adapter's compiled
+    sample reads (:mod:`.per_sample`)."""
+
+    _n = Slot('_ts', T_N, int)
+    _next_look = Slot('_ts', T_NEXT_LOOK)
+    _last_step = Slot('_ts', T_LAST_STEP)
 
     def __init__(self) -> None:
+        self._ts = np.zeros(N_TS)
         self._a = np.zeros((4096, 4))          # rows (t, r, omega4, alpha4); [0, n) in use
         self._n = 0
-        self._event: tuple[float, float] | None = None      # (t_m, s)
+        self._event = None
         self.events = 0
         self.measured = 0
         self.onsets = 0
@@ -162,6 +176,16 @@ class FlankTiming:
         row = a[n]
         row[0], row[1], row[2], row[3] = t, r, w4, a4
         self._n = n + 1
+
+    @property
+    def _event(self) -> tuple[float, float] | None:
+        """The open event (t_m, s), or None."""
+        return self._open
+
+    @_event.setter
+    def _event(self, ev: tuple[float, float] | None) -> None:
+        self._open = ev
+        self._ts[T_EVENT_DUE] = math.inf if ev is None else ev[0] + WINDOW + LEVEL_WINDOW
 
     def _since(self, t0: float) -> np.ndarray | None:
         """The rows from ``t0`` on (None if the record does not reach back that far)."""
@@ -190,35 +214,12 @@ class FlankTiming:
         if t < self._next_look:
             return None
         self._next_look = t + STEP_STRIDE
-        span = 2 * STEP_SIDE + STEP_GAP
-        centre = t - 0.5 * span
-        if t_model > centre - span or centre - self._last_step < span:
+        found, t_p, w_p, a_p, step = detect_core(self._a, self._n, t, noise, t_model,
+                                                 self._last_step, least)
+        if not found:
             return None
-        a = self._since(t - span)
-        if a is None:
-            return None
-        ts, r = a[:, 0] - centre, a[:, 1]
-        left = ts < -0.5 * STEP_GAP
-        right = ts > 0.5 * STEP_GAP
-        if np.count_nonzero(left) < 4 or np.count_nonzero(right) < 4:
-            return None
-        pl, pr = _line(ts[left], r[left]), _line(ts[right], r[right])
-        step = pr[1] - pl[1]
-        drift = max(abs(pl[0]), abs(pr[0])) * STEP_GAP
-        if not (abs(step) > max(STEP_NOISES * noise, least) and abs(step) > 2.0 * drift):
-            return None
-        mid = ~(left | right)
-        tm = ts[mid]
-        level = r[mid] - (pl[1] + pl[0] * tm + 0.5 * step)     # 0 at the middle
-        t_c = 0.0
-        if tm.size > 1:
-            cross = np.nonzero(np.sign(level[1:]) != np.sign(level[:-1]))[0]
-            if cross.size:
-                k = int(cross[0])
-                t_c = float(tm[k] - level[k] * (tm[k + 1] - tm[k]) / (level[k + 1] - level[k]))
-        self._last_step = t_p = centre + t_c
-        return (t_p, float(np.interp(t_c, ts, a[:, 2])), float(np.interp(t_c, ts, a[:, 3])),
-                float(step))
+        self._last_step = t_p
+        return t_p, w_p, a_p, step
 
     def model_flank_changed(self, t: float, old: float, new: float) -> None:
         """The model's flank changed at ``t`` from ``old`` to ``new`` (+1 / -1; 0 unknown)."""
@@ -297,3 +298,73 @@ class FlankTiming:
         t_p = t_m + shift
         self.measured += 1
         return (t_p, float(np.interp(t_p, ts, a[:, 2])), float(np.interp(t_p, ts, a[:, 3])))
+
+
+@njit(cache=True)
+def _sign(x):
+    return 1.0 if x > 0.0 else -1.0 if x < 0.0 else 0.0
+
+
+@njit(cache=True)
+def _side_line(a, k0, n, centre, lo, hi):
+    """Least-squares line r = k t + d through the rows k0..n-1 with lo < t - centre < hi:
+    (count, k, d), as :func:`_line` (the means first, then the centred sums)."""
+    m = 0
+    sx = sy = 0.0
+    for i in range(k0, n):
+        x = a[i, 0] - centre
+        if lo < x < hi:
+            m += 1
+            sx += x
+            sy += a[i, 1]
+    if m == 0:
+        return 0, 0.0, 0.0
+    xm, ym = sx / m, sy / m
+    sxx = sxy = 0.0
+    for i in range(k0, n):
+        x = a[i, 0] - centre
+        if lo < x < hi:
+            dx = x - xm
+            sxx += dx * dx
+            sxy += dx * (a[i, 1] - ym)
+    k = sxy / sxx if sxx > 0.0 else 0.0
+    return m, k, ym - k * xm
+
+
+@njit(cache=True)
+def detect_core(a, n, t, noise, t_model, last_step, least):
+    """:meth:`FlankTiming.detect`'s look at ``t`` over the record's rows a[:n]: (found,
+    t_p, omega4, alpha4, step)."""
+    nothing = (False, 0.0, 0.0, 0.0, 0.0)
+    span = 2 * STEP_SIDE + STEP_GAP
+    centre = t - 0.5 * span
+    if t_model > centre - span or centre - last_step < span:
+        return nothing
+    t0 = t - span
+    if n == 0 or a[0, 0] > t0 + 1e-9:
+        return nothing
+    k0 = np.searchsorted(a[:n, 0], t0)
+    half = 0.5 * STEP_GAP
+    ml, kl, dl = _side_line(a, k0, n, centre, -np.inf, -half)
+    mr, kr, dr = _side_line(a, k0, n, centre, half, np.inf)
+    if ml < 4 or mr < 4:
+        return nothing
+    step = dr - dl
+    drift = max(abs(kl), abs(kr)) * STEP_GAP
+    if not (abs(step) > max(STEP_NOISES * noise, least) and abs(step) > 2.0 * drift):
+        return nothing
+    t_c = 0.0
+    prev_t = prev_l = 0.0
+    seen = 0
+    for i in range(k0, n):                    # the rows in the gap: where the residual
+        x = a[i, 0] - centre                  # crosses the step's middle
+        if -half <= x <= half:
+            level = a[i, 1] - (dl + kl * x + 0.5 * step)      # 0 at the middle
+            if seen and _sign(level) != _sign(prev_l):
+                t_c = prev_t - prev_l * (x - prev_t) / (level - prev_l)
+                break
+            prev_t, prev_l = x, level
+            seen += 1
+    ts = a[k0:n, 0] - centre
+    return (True, centre + t_c, np.interp(t_c, ts, a[k0:n, 2]),
+            np.interp(t_c, ts, a[k0:n, 3]), step)

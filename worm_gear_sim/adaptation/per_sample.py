@@ -1,0 +1,241 @@
+# Copyright 2026 worm_gear_sim developers
+# Licensed under the Apache License, Version 2.0
+"""The adapter's per-sample work, compiled (:class:`~.estimator.Adapter`, :mod:`.estimator`'s
+docstring for what it computes): the regressors, the Kalman step, the windowed sums, and
+:func:`sample_fast`, one encoder sample in one call when nothing rare happens in it.
+
+The adapter's per-sample scalars (the rates, the flanks, the hold-offs, the counts) live in
+one float array (``Adapter._st``, indices ``S_*``) and those of its
+:class:`~.flank_timing.FlankTiming` in another (``_ts``, indices ``T_*``), read and written
+as attributes by :class:`Slot`: the Python path of a sample (:meth:`.estimator.Adapter.
+update`) and the compiled one work on the same numbers.  :func:`sample_fast` does the
+sample exactly as the Python path does (the same operations in the same order: the same
+floats; the step detector's look is :func:`~.flank_timing.detect_core` in both), or, when
+the sample needs the Python path (the detector finds a step, a flank-change event is due,
+the model in use changes flank with a play, the record is full), returns -1 having changed
+nothing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .flank_timing import STEP_STRIDE, T_EVENT_DUE, T_LAST_STEP, T_N, T_NEXT_LOOK, detect_core
+
+# Adapter._st: per-sample state, then constants set at a rebase
+(S_LAST_T, S_RATES, S_TH4, S_W4, S_A4, S_RATE, S_FLANK, S_FLANK_T, S_CROSS_T, S_FLANK_M,
+ S_HOLD_UNTIL, S_W_MAX, S_A_MAX, S_FIRST_T, S_USED, S_SKIPPED,
+ S_INERTIA, S_LOAD0, S_DRAG0, S_PLAY0, S_C_POS, S_C_NEG, S_WINDOW, S_MEMORY, S_NOISE2,
+ S_MAX_GAP, S_ACCEL_TC, S_HOLD_OFF, S_HUBER, S_NOISE, S_MODEL_FLANK_T, S_APPLIED_T,
+ N_ST) = range(33)
+# Adapter._lay: the layout's indices
+L_LOAD, L_DRAG, L_PLAY, L_WORM0, L_NW, L_GEAR0, L_NG, N_LAY = range(8)
+
+
+@njit(cache=True)
+def _regressor(phi, i_load, i_drag, i_play, worm0, nw, gear0, ng, th2, th3, w4, flank,
+               compliance):
+    phi[:] = 0.0
+    if i_load >= 0:
+        phi[i_load] = -compliance
+    if i_drag >= 0:
+        phi[i_drag] = -compliance * w4
+    if i_play >= 0:
+        phi[i_play] = -0.5 * flank
+    for k in range(nw):
+        phi[worm0 + 2 * k] = math.sin((k + 1) * th2)
+        phi[worm0 + 2 * k + 1] = math.cos((k + 1) * th2)
+    for m in range(ng):
+        phi[gear0 + 2 * m] = math.sin((m + 1) * th3)
+        phi[gear0 + 2 * m + 1] = math.cos((m + 1) * th3)
+
+
+@njit(cache=True)
+def _kalman_step(theta, P, q, p_max, phi, y, r_var, huber):
+    """Random walk (P += q, each variance capped at its prior) then the measurement
+    y = phi^T theta + noise(r_var).  An innovation beyond ``huber`` times its predicted
+    standard deviation sqrt(phi^T P phi + r_var) is down-weighted (its noise variance
+    inflated by |nu| / huber, Huber's weight): mean and covariance stay consistent.  Returns
+    the normalised innovation nu."""
+    n = theta.size
+    for i in range(n):
+        P[i, i] += q[i]
+    for i in range(n):
+        if P[i, i] > p_max[i]:
+            s = math.sqrt(p_max[i] / P[i, i])
+            for j in range(n):
+                P[i, j] *= s
+                P[j, i] *= s
+    Pphi = P @ phi
+    pp = 0.0
+    innov = y
+    for i in range(n):
+        pp += phi[i] * Pphi[i]
+        innov -= phi[i] * theta[i]
+    nu = innov / math.sqrt(pp + r_var)
+    r_eff = r_var
+    if abs(nu) > huber:
+        r_eff = (pp + r_var) * abs(nu) / huber - pp
+        if r_eff < r_var:
+            r_eff = r_var
+    s = pp + r_eff
+    for i in range(n):
+        theta[i] += Pphi[i] / s * innov
+    for i in range(n):
+        for j in range(i, n):
+            v = P[i, j] - Pphi[i] * Pphi[j] / s
+            P[i, j] = v
+            P[j, i] = v
+    return nu
+
+
+@njit(cache=True)
+def _sample_step(th, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play, worm0, nw,
+                 gear0, ng, th2, th3, w4, flank, flank_m, torque, compliance, resid, forget,
+                 lam, r_var, huber, sure):
+    """One encoder sample into the estimate and the window (module docstring): the soft
+    flank from the estimate's covariance, the regressors, y = r + phi^T theta_model (the
+    model's play on its own flank), forgetting, the Kalman step; the windowed sums with the
+    estimate's hard flank (where it agrees with the model's, the model in use's linearised
+    residual is the residual itself)."""
+    soft = flank
+    if i_play >= 0 and not sure:
+        var = 0.0
+        if i_load >= 0:
+            var += P[i_load, i_load]
+        if i_drag >= 0:
+            var += w4 * w4 * P[i_drag, i_drag]
+            if i_load >= 0:
+                var += 2.0 * w4 * P[i_load, i_drag]
+        if var > 0.0:
+            soft = math.erf(torque / math.sqrt(2.0 * var))
+            bp = th[i_play]
+            r_var += 0.25 * (1.0 - soft * soft) * (bp * bp + P[i_play, i_play])
+    _regressor(phi, i_load, i_drag, i_play, worm0, nw, gear0, ng, th2, th3, w4, soft,
+               compliance)
+    y = resid
+    for i in range(phi.size):
+        y += phi[i] * applied[i]
+    if i_play >= 0:
+        y += (0.5 * soft - 0.5 * flank_m) * applied[i_play]
+    q = np.empty(phi.size)
+    for i in range(phi.size):
+        q[i] = P[i, i] * forget
+    _kalman_step(th, P, q, std2, phi, y, r_var, huber)
+    if i_play >= 0:
+        phi[i_play] = -0.5 * flank     # the window judges sets by the hard flank: for the
+    _window_step(S, b, sc, phi, y, lam)  # model in use (same flank) y - phi x is r itself
+
+
+@njit(cache=True)
+def _window_step(S, b, sc, phi, y, lam):
+    """Exponentially weighted sums: S = sum w phi phi^T, b = sum w phi y, sc = [sum w y^2,
+    sum w]."""
+    n = phi.size
+    for i in range(n):
+        b[i] = lam * b[i] + phi[i] * y
+        for j in range(n):
+            S[i, j] = lam * S[i, j] + phi[i] * phi[j]
+    sc[0] = lam * sc[0] + y * y
+    sc[1] = lam * sc[1] + 1.0
+
+
+@njit(cache=True)
+def sample_fast(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3,
+                th4):
+    """One encoder sample at ``t`` (measured theta4 ``meas``, the prediction theta2..theta4
+    of that instant) as :meth:`.estimator.Adapter.update` does it: 1 used, 0 skipped; -1 it
+    needs the Python path (module docstring), nothing changed."""
+    i_load, i_drag, i_play = lay[L_LOAD], lay[L_DRAG], lay[L_PLAY]
+    dt = t - st[S_LAST_T]
+    rates = st[S_RATES]
+    if not dt <= st[S_MAX_GAP]:                  # first sample, or after a pause
+        rates = 0.0
+    if rates == 0.0:
+        w4 = 0.0
+        a4 = 0.0
+    else:
+        w4 = (th4 - st[S_TH4]) / dt
+        a_raw = (w4 - st[S_W4]) / dt if rates > 1.0 else 0.0
+        g = dt / (st[S_ACCEL_TC] + dt)
+        a4 = st[S_A4] + g * (a_raw - st[S_A4])
+    inertia = st[S_INERTIA]
+    load = drag = torque = flank = drag_m = torque_m = flank_m = 0.0
+    if rates >= 2.0:                            # the sample goes past the rates' start
+        if t >= ts[T_EVENT_DUE] or ts[T_N] == ta.shape[0]:
+            return -1
+        load = theta[i_load] if i_load >= 0 else st[S_LOAD0]
+        drag = theta[i_drag] if i_drag >= 0 else st[S_DRAG0]
+        torque = inertia * a4 + drag * w4 + load
+        flank = 1.0 if torque > 0.0 else -1.0 if torque < 0.0 else st[S_FLANK]
+        drag_m = applied[i_drag] if i_drag >= 0 else st[S_DRAG0]
+        torque_m = inertia * a4 + drag_m * w4 + (applied[i_load] if i_load >= 0
+                                                 else st[S_LOAD0])
+        flank_m = 1.0 if torque_m > 0.0 else -1.0 if torque_m < 0.0 else st[S_FLANK_M]
+        if flank_m != st[S_FLANK_M] and (i_play < 0 and st[S_PLAY0] > 0.0
+                                         or i_play >= 0 and applied[i_play] > 0.0):
+            return -1                           # the model crosses its play: an event
+        n = int(ts[T_N])
+        ta[n, 0] = t                            # (the row past the record's end: in use
+        ta[n, 1] = meas - th4                   # once the sample is committed below)
+        ta[n, 2] = w4
+        ta[n, 3] = a4
+        if t >= ts[T_NEXT_LOOK]:                # the step detector's look (Adapter._step_update)
+            least = 0.0
+            if i_play >= 0:
+                bp = theta[i_play]
+                if bp * bp > 9.0 * P[i_play, i_play]:     # the play is known: half of it
+                    least = 0.5 * bp
+            elif st[S_PLAY0] > 0.0:
+                least = 0.5 * st[S_PLAY0]
+            found = detect_core(ta, n + 1, t, st[S_NOISE],
+                                max(st[S_MODEL_FLANK_T], st[S_APPLIED_T]), ts[T_LAST_STEP],
+                                least)[0]
+            if found:
+                return -1
+            ts[T_NEXT_LOOK] = t + STEP_STRIDE
+    st[S_LAST_T] = t
+    st[S_TH4] = th4
+    st[S_W4] = w4
+    st[S_A4] = a4
+    if rates > 0.0:
+        st[S_RATE] = 1.0 / dt
+    rates += 1.0
+    st[S_RATES] = rates
+    if rates < 3.0:
+        st[S_SKIPPED] += 1.0
+        return 0
+    if flank != st[S_FLANK]:
+        st[S_FLANK] = flank
+        st[S_FLANK_T] = t
+        st[S_CROSS_T] = max(st[S_CROSS_T], t)
+    ts[T_N] = ts[T_N] + 1.0                     # the row written above
+    if flank_m != st[S_FLANK_M]:
+        st[S_FLANK_M] = flank_m
+        st[S_FLANK_T] = max(st[S_FLANK_T], t)
+    hold = st[S_HOLD_OFF]
+    ahead = hold * a4
+    soon = torque * (torque + drag * ahead) < 0.0 or \
+        torque_m * (torque_m + drag_m * ahead) < 0.0
+    if soon or t - st[S_FLANK_T] < hold or t < st[S_HOLD_UNTIL]:
+        st[S_SKIPPED] += 1.0
+        return 0
+    c_pos, c_neg = st[S_C_POS], st[S_C_NEG]
+    compliance = c_pos if w4 > 0.0 else c_neg if w4 < 0.0 else 0.5 * (c_pos + c_neg)
+    window = st[S_WINDOW]
+    lam = math.exp(-dt / window)
+    sure = i_play >= 0 and t - st[S_CROSS_T] > window and abs(load) > 2.0 * (
+        max(drag, 0.0) * st[S_W_MAX] + inertia * st[S_A_MAX])
+    _sample_step(theta, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play,
+                 lay[L_WORM0], lay[L_NW], lay[L_GEAR0], lay[L_NG], th2, th3, w4, flank,
+                 flank_m, torque, compliance, meas - th4, dt / st[S_MEMORY], lam,
+                 st[S_NOISE2], st[S_HUBER], sure)
+    st[S_W_MAX] = max(abs(w4), st[S_W_MAX] * lam)
+    st[S_A_MAX] = max(abs(a4), st[S_A_MAX] * lam)
+    if math.isnan(st[S_FIRST_T]):
+        st[S_FIRST_T] = t
+    st[S_USED] += 1.0
+    return 1
