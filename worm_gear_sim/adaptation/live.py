@@ -63,6 +63,7 @@ and returned once per new reason (the node logs it, throttled).
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -205,7 +206,7 @@ class LiveAdaptation:
         if pred is None:
             return self._reject('outside_prediction')
         self._last_ns = stamp_ns
-        theta2, theta3, theta4 = pred.tolist()
+        theta2, theta3, theta4 = pred
         entry = stamp_ns + self._delay_ns
         if entry > self._step_ns:
             self.waiting.append((entry, t, meas, theta2, theta3, theta4))
@@ -389,13 +390,14 @@ def _as_config(p: Parameters) -> Config:
 
 
 class _Predictions:
-    """The last ``capacity`` predictions (t, theta2..theta4) in time order, contiguous
-    (compacted when full), interpolated linearly at a time inside their span."""
+    """The last ``capacity`` predictions (t, (theta2, theta3, theta4)) in time order (up to
+    twice as many kept between trims), interpolated linearly at a time inside their span.
+    Python lists: the newest is appended and read back at its own stamp, the usual case,
+    without numpy's per-call cost."""
 
     def __init__(self, capacity: int) -> None:
-        self._t = np.zeros(2 * capacity)
-        self._x = np.zeros((2 * capacity, 3))
-        self._n = 0
+        self._t: list[float] = []
+        self._x: list[tuple[float, float, float]] = []
         self._cap = capacity
 
     @property
@@ -403,33 +405,33 @@ class _Predictions:
         return self._cap
 
     def push(self, t: float, theta: Sequence[float]) -> None:
-        n = self._n
-        if n and t <= self._t[n - 1]:
-            if t == self._t[n - 1]:
-                self._x[n - 1] = theta
-                return
-            n = 0                              # the clock went back: start over
-        if n == self._t.size:
-            keep = self._cap
-            self._t[:keep] = self._t[n - keep:n]
-            self._x[:keep] = self._x[n - keep:n]
-            n = keep
-        self._t[n] = t
-        self._x[n] = theta
-        self._n = n + 1
-
-    def at(self, t: float) -> np.ndarray | None:
-        n = self._n
         ts = self._t
-        if n and t == ts[n - 1]:               # the usual case: the newest prediction's stamp
-            return self._x[n - 1]
-        if not n or t > ts[n - 1] or t < ts[max(n - self._cap, 0)]:
+        if ts and t <= ts[-1]:
+            if t == ts[-1]:
+                self._x[-1] = tuple(theta)    # type: ignore[assignment]
+                return
+            ts.clear()                        # the clock went back: start over
+            self._x.clear()
+        if len(ts) == 2 * self._cap:
+            del ts[:self._cap]
+            del self._x[:self._cap]
+        ts.append(t)
+        self._x.append(tuple(theta))          # type: ignore[arg-type]
+
+    def at(self, t: float) -> tuple[float, float, float] | None:
+        ts = self._t
+        if ts and t == ts[-1]:                # the usual case: the newest prediction's stamp
+            return self._x[-1]
+        n = len(ts)
+        if not n or t > ts[-1] or t < ts[max(n - self._cap, 0)]:
             return None
-        k = int(np.searchsorted(ts[:n], t))
+        k = bisect.bisect_left(ts, t)
         if ts[k] == t:
             return self._x[k]
         w = (t - ts[k - 1]) / (ts[k] - ts[k - 1])
-        return (1.0 - w) * self._x[k - 1] + w * self._x[k]
+        x0, x1 = self._x[k - 1], self._x[k]
+        return ((1.0 - w) * x0[0] + w * x1[0], (1.0 - w) * x0[1] + w * x1[1],
+                (1.0 - w) * x0[2] + w * x1[2])
 
 
 def _fmt(v: Any) -> str:
