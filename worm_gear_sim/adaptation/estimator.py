@@ -89,7 +89,7 @@ from ..params import Config
 from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS, Parameters
 from . import per_sample as ps
 from .flank_timing import WINDOW, FlankTiming
-from .per_sample import _kalman_step, _sample_step, sample_fast
+from .per_sample import _kalman_step, sample_head, sample_tail
 from .slots import Slot
 
 __all__ = ['PRIOR_STD', 'FLANK_HOLD_OFF', 'Layout', 'output_compliance',
@@ -334,93 +334,30 @@ class Adapter:
                theta4_pred: float) -> bool:
         """One encoder sample at ``t`` [s] (measured theta4) with the prediction of that
         instant (theta2, theta3, theta4); True when it entered the estimate.  Compiled
-        (:func:`.per_sample.sample_fast`) unless the sample needs the Python path."""
+        (:mod:`.per_sample`): the rates, the flanks, the record and the step detector's look
+        in :func:`~.per_sample.sample_head`, the hold-offs and the filter in
+        :func:`~.per_sample.sample_tail`; in between, only when the sample needs it, the
+        flank-change events and a step found, here."""
         timing = self._timing
-        used = sample_fast(self._st, timing._ts, timing._a, self.theta, self.P, self._std2,
-                           self._phi, self.applied_x, self._S, self._b, self._sc, self._lay,
-                           t, theta4_meas, theta2, theta3, theta4_pred)
-        if used >= 0:
-            return used == 1
-        return self._update(t, theta4_meas, theta2, theta3, theta4_pred)
-
-    def _update(self, t: float, theta4_meas: float, theta2: float, theta3: float,
-                theta4_pred: float) -> bool:
-        """:meth:`update` in Python: every case (the compiled path's twin)."""
-        dt = t - self._last_t
-        self._last_t = t
-        if not dt <= MAX_GAP:                       # first sample, or after a pause
-            self._rates = 0
-        if self._rates == 0:
-            w4 = 0.0
-            a4 = 0.0
-        else:
-            w4 = (theta4_pred - self._th4) / dt
-            a_raw = (w4 - self._w4) / dt if self._rates > 1 else 0.0
-            g = dt / (ACCEL_TIME_CONSTANT + dt)
-            a4 = self._a4 + g * (a_raw - self._a4)
-        self._th4, self._w4, self._a4 = theta4_pred, w4, a4
-        if self._rates > 0:
-            self._rate = 1.0 / dt
-        self._rates += 1
-        if self._rates < 3:
-            self.samples_skipped += 1
-            return False
-        lay = self.layout
-        th = self.theta
-        # (item(): Python floats, the same numbers, cheaper arithmetic than numpy scalars)
-        load = th.item(lay.i_load) if lay.i_load >= 0 else self._load0
-        drag = th.item(lay.i_drag) if lay.i_drag >= 0 else self._drag0
-        torque = self._inertia * a4 + drag * w4 + load
-        flank = 1.0 if torque > 0.0 else -1.0 if torque < 0.0 else self._flank
-        if flank != self._flank:
-            self._flank, self._flank_t = flank, t
-            self._cross_t = max(self._cross_t, t)          # (the estimate's crossing)
-        # the flank of the model in use: where it differs, one of the two is wrong and the
-        # residual holds a flank error the linear picture does not have
-        ax = self.applied_x
-        drag_m = ax.item(lay.i_drag) if lay.i_drag >= 0 else self._drag0
-        torque_m = self._inertia * a4 + drag_m * w4 + \
-            (ax.item(lay.i_load) if lay.i_load >= 0 else self._load0)
-        flank_m = 1.0 if torque_m > 0.0 else -1.0 if torque_m < 0.0 else self._flank_m
-        timing = self._timing
-        timing.push(t, theta4_meas - theta4_pred, w4, a4)
-        if flank_m != self._flank_m:
-            if lay.i_play < 0 and self._play0 > 0.0 or lay.i_play >= 0 and \
-                    self.applied_x[lay.i_play] > 0.0:   # the model crosses its play here
-                timing.model_flank_changed(t, self._flank_m, flank_m)
-                self._model_flank_t = t
-            self._flank_m, self._flank_t = flank_m, max(self._flank_t, t)
+        got = sample_head(self._st, timing._ts, timing._a, self.theta, self.P, self._std2,
+                          self._phi, self.applied_x, self._S, self._b, self._sc, self._lay,
+                          t, theta4_meas, theta2, theta3, theta4_pred)
+        if got == ps.NEED_ROOM:                     # the record is full: room, then again
+            timing.make_room(t)
+            got = sample_head(self._st, timing._ts, timing._a, self.theta, self.P,
+                              self._std2, self._phi, self.applied_x, self._S, self._b,
+                              self._sc, self._lay, t, theta4_meas, theta2, theta3,
+                              theta4_pred)
+        if got <= ps.USED:
+            return got == ps.USED
+        if got == ps.CROSSED:                       # the model crosses its play here
+            timing.model_flank_changed(t, self._st.item(ps.X_OLD_FLANK_M), self._flank_m)
+        drag = self._st.item(ps.X_DRAG)             # the estimate's, before this sample
         self._flank_time_update(t, drag)
         self._step_update(t, drag)
-        # a flank change within the hold-off ahead (the torques' rates: c alpha4)
-        ahead = FLANK_HOLD_OFF * a4
-        soon = torque * (torque + drag * ahead) < 0.0 or \
-            torque_m * (torque_m + drag_m * ahead) < 0.0
-        if soon or t - self._flank_t < FLANK_HOLD_OFF or t < self._hold_until:
-            self.samples_skipped += 1
-            return False
-        c_pos, c_neg = self._compliance
-        compliance = c_pos if w4 > 0.0 else c_neg if w4 < 0.0 else 0.5 * (c_pos + c_neg)
-        s = self.settings
-        lam = math.exp(-dt / s.window)
-        _sample_step(th, self.P, self._std2, self._phi, ax, self._S, self._b,
-                     self._sc, lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
-                     lay.gear0, lay.gear_orders, theta2, theta3, w4, flank, flank_m, torque,
-                     compliance, theta4_meas - theta4_pred, dt / s.memory,
-                     lam, s.measurement_noise ** 2, HUBER_SIGMAS,
-                     # the flank is sure when the drive stays on one: no crossing measured
-                     # or estimated for a window (the model in use's do not count) and the
-                     # load outweighs twice the recent drag and inertia torques.  Else
-                     # load and play, one offset on such a drive, leave the load's own
-                     # uncertainty wide and the soft flank the play a noise for ever
-                     lay.i_play >= 0 and t - self._cross_t > s.window and abs(load) > 2.0
-                     * (max(drag, 0.0) * self._w_max + self._inertia * self._a_max))
-        self._w_max = max(abs(w4), self._w_max * lam)
-        self._a_max = max(abs(a4), self._a_max * lam)
-        if math.isnan(self._first_t):
-            self._first_t = t
-        self.samples_used += 1
-        return True
+        return sample_tail(self._st, self.theta, self.P, self._std2, self._phi,
+                           self.applied_x, self._S, self._b, self._sc, self._lay, t,
+                           theta4_meas, theta2, theta3, theta4_pred) == ps.USED
 
     def _step_update(self, t: float, drag: float) -> None:
         """A crossing of the drive's own, seen as a step of the residual while the model

@@ -164,18 +164,26 @@ class FlankTiming:
         self._last_step = -math.inf
 
     def push(self, t: float, r: float, w4: float, a4: float) -> None:
-        a, n = self._a, self._n
-        if n == a.shape[0]:                    # full: drop what is older than needed
-            keep = max(2.0 * (WINDOW + LEVEL_WINDOW), 2 * STEP_SIDE + STEP_GAP) + 0.05
-            k = int(np.searchsorted(a[:n, 0], t - keep))
-            if k == 0:
-                self._a = a = np.concatenate([a, np.zeros_like(a)])
-            else:
-                a[:n - k] = a[k:n]
-                n -= k
-        row = a[n]
+        """A sample (t, residual, omega4, alpha4) into the record (the adapter's compiled
+        sample writes its rows itself, after :meth:`make_room` when full)."""
+        if self._n == self._a.shape[0]:
+            self.make_room(t)
+        n = self._n
+        row = self._a[n]
         row[0], row[1], row[2], row[3] = t, r, w4, a4
         self._n = n + 1
+
+    def make_room(self, t: float) -> None:
+        """The record is full: drop what is older than any look at ``t`` needs (or, if
+        nothing is, double it)."""
+        a, n = self._a, self._n
+        keep = max(2.0 * (WINDOW + LEVEL_WINDOW), 2 * STEP_SIDE + STEP_GAP) + 0.05
+        k = int(np.searchsorted(a[:n, 0], t - keep))
+        if k == 0:
+            self._a = np.concatenate([a, np.zeros_like(a)])
+        else:
+            a[:n - k] = a[k:n]
+            self._n = n - k
 
     @property
     def _event(self) -> tuple[float, float] | None:

@@ -1,19 +1,16 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""The adapter's per-sample work, compiled (:class:`~.estimator.Adapter`, :mod:`.estimator`'s
-docstring for what it computes): the regressors, the Kalman step, the windowed sums, and
-:func:`sample_fast`, one encoder sample in one call when nothing rare happens in it.
+"""The adapter's per-sample work, compiled (:class:`~.estimator.Adapter`; :mod:`.estimator`'s
+docstring for what it computes): the regressors, the Kalman step, the windowed sums, and an
+encoder sample in one call (:func:`sample_head`, which ends with :func:`sample_tail`), or in
+two with the adapter's Python between them when the sample needs it (a flank-change event
+to measure, a step the detector found: a few per scan period).
 
 The adapter's per-sample scalars (the rates, the flanks, the hold-offs, the counts) live in
-one float array (``Adapter._st``, indices ``S_*``) and those of its
-:class:`~.flank_timing.FlankTiming` in another (``_ts``, indices ``T_*``), read and written
-as attributes by :class:`Slot`: the Python path of a sample (:meth:`.estimator.Adapter.
-update`) and the compiled one work on the same numbers.  :func:`sample_fast` does the
-sample exactly as the Python path does (the same operations in the same order: the same
-floats; the step detector's look is :func:`~.flank_timing.detect_core` in both), or, when
-the sample needs the Python path (the detector finds a step, a flank-change event is due,
-the model in use changes flank with a play, the record is full), returns -1 having changed
-nothing.
+one float array (``Adapter._st``, indices ``S_*``; ``X_*``: the head's values for the tail)
+and those of its :class:`~.flank_timing.FlankTiming` in another (``_ts``, indices ``T_*``),
+read and written as attributes by :class:`~.slots.Slot`: the compiled sample and the
+adapter's Python work on the same numbers.
 """
 
 from __future__ import annotations
@@ -30,7 +27,10 @@ from .flank_timing import STEP_STRIDE, T_EVENT_DUE, T_LAST_STEP, T_N, T_NEXT_LOO
  S_HOLD_UNTIL, S_W_MAX, S_A_MAX, S_FIRST_T, S_USED, S_SKIPPED,
  S_INERTIA, S_LOAD0, S_DRAG0, S_PLAY0, S_C_POS, S_C_NEG, S_WINDOW, S_MEMORY, S_NOISE2,
  S_MAX_GAP, S_ACCEL_TC, S_HOLD_OFF, S_HUBER, S_NOISE, S_MODEL_FLANK_T, S_APPLIED_T,
- N_ST) = range(33)
+ # the head's values for the tail
+ X_DT, X_LOAD, X_DRAG, X_TORQUE, X_DRAG_M, X_TORQUE_M, X_OLD_FLANK_M, N_ST) = range(40)
+# what sample_head asks of its caller
+SKIPPED, USED, NEED_ROOM, PYTHON, CROSSED = range(5)
 # Adapter._lay: the layout's indices
 L_LOAD, L_DRAG, L_PLAY, L_WORM0, L_NW, L_GEAR0, L_NG, N_LAY = range(8)
 
@@ -144,11 +144,15 @@ def _window_step(S, b, sc, phi, y, lam):
 
 
 @njit(cache=True)
-def sample_fast(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3,
+def sample_head(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3,
                 th4):
-    """One encoder sample at ``t`` (measured theta4 ``meas``, the prediction theta2..theta4
-    of that instant) as :meth:`.estimator.Adapter.update` does it: 1 used, 0 skipped; -1 it
-    needs the Python path (module docstring), nothing changed."""
+    """An encoder sample at ``t`` (measured theta4 ``meas``, the prediction theta2..theta4
+    of that instant), up to the flank-change events: the rates (alpha4 low-passed), the
+    flanks of the estimate and of the model in use, the sample into the record, the step
+    detector's look.  Returns SKIPPED or USED (the sample is done: :func:`sample_tail` ran),
+    NEED_ROOM (the record is full: nothing changed), or PYTHON / CROSSED (the caller's
+    Python work first: a flank-change event is due or the detector found a step; CROSSED:
+    the model in use crossed its play, from ``st[X_OLD_FLANK_M]``; then the tail)."""
     i_load, i_drag, i_play = lay[L_LOAD], lay[L_DRAG], lay[L_PLAY]
     dt = t - st[S_LAST_T]
     rates = st[S_RATES]
@@ -162,41 +166,8 @@ def sample_fast(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas
         a_raw = (w4 - st[S_W4]) / dt if rates > 1.0 else 0.0
         g = dt / (st[S_ACCEL_TC] + dt)
         a4 = st[S_A4] + g * (a_raw - st[S_A4])
-    inertia = st[S_INERTIA]
-    load = drag = torque = flank = drag_m = torque_m = flank_m = 0.0
-    if rates >= 2.0:                            # the sample goes past the rates' start
-        if t >= ts[T_EVENT_DUE] or ts[T_N] == ta.shape[0]:
-            return -1
-        load = theta[i_load] if i_load >= 0 else st[S_LOAD0]
-        drag = theta[i_drag] if i_drag >= 0 else st[S_DRAG0]
-        torque = inertia * a4 + drag * w4 + load
-        flank = 1.0 if torque > 0.0 else -1.0 if torque < 0.0 else st[S_FLANK]
-        drag_m = applied[i_drag] if i_drag >= 0 else st[S_DRAG0]
-        torque_m = inertia * a4 + drag_m * w4 + (applied[i_load] if i_load >= 0
-                                                 else st[S_LOAD0])
-        flank_m = 1.0 if torque_m > 0.0 else -1.0 if torque_m < 0.0 else st[S_FLANK_M]
-        if flank_m != st[S_FLANK_M] and (i_play < 0 and st[S_PLAY0] > 0.0
-                                         or i_play >= 0 and applied[i_play] > 0.0):
-            return -1                           # the model crosses its play: an event
-        n = int(ts[T_N])
-        ta[n, 0] = t                            # (the row past the record's end: in use
-        ta[n, 1] = meas - th4                   # once the sample is committed below)
-        ta[n, 2] = w4
-        ta[n, 3] = a4
-        if t >= ts[T_NEXT_LOOK]:                # the step detector's look (Adapter._step_update)
-            least = 0.0
-            if i_play >= 0:
-                bp = theta[i_play]
-                if bp * bp > 9.0 * P[i_play, i_play]:     # the play is known: half of it
-                    least = 0.5 * bp
-            elif st[S_PLAY0] > 0.0:
-                least = 0.5 * st[S_PLAY0]
-            found = detect_core(ta, n + 1, t, st[S_NOISE],
-                                max(st[S_MODEL_FLANK_T], st[S_APPLIED_T]), ts[T_LAST_STEP],
-                                least)[0]
-            if found:
-                return -1
-            ts[T_NEXT_LOOK] = t + STEP_STRIDE
+    if rates >= 2.0 and ts[T_N] == ta.shape[0]:
+        return NEED_ROOM
     st[S_LAST_T] = t
     st[S_TH4] = th4
     st[S_W4] = w4
@@ -207,35 +178,98 @@ def sample_fast(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas
     st[S_RATES] = rates
     if rates < 3.0:
         st[S_SKIPPED] += 1.0
-        return 0
+        return SKIPPED
+    inertia = st[S_INERTIA]
+    load = theta[i_load] if i_load >= 0 else st[S_LOAD0]
+    drag = theta[i_drag] if i_drag >= 0 else st[S_DRAG0]
+    torque = inertia * a4 + drag * w4 + load
+    flank = 1.0 if torque > 0.0 else -1.0 if torque < 0.0 else st[S_FLANK]
     if flank != st[S_FLANK]:
         st[S_FLANK] = flank
         st[S_FLANK_T] = t
-        st[S_CROSS_T] = max(st[S_CROSS_T], t)
-    ts[T_N] = ts[T_N] + 1.0                     # the row written above
+        st[S_CROSS_T] = max(st[S_CROSS_T], t)     # (the estimate's crossing)
+    # the flank of the model in use: where it differs, one of the two is wrong and the
+    # residual holds a flank error the linear picture does not have
+    drag_m = applied[i_drag] if i_drag >= 0 else st[S_DRAG0]
+    torque_m = inertia * a4 + drag_m * w4 + (applied[i_load] if i_load >= 0
+                                             else st[S_LOAD0])
+    flank_m = 1.0 if torque_m > 0.0 else -1.0 if torque_m < 0.0 else st[S_FLANK_M]
+    n = int(ts[T_N])
+    ta[n, 0] = t
+    ta[n, 1] = meas - th4
+    ta[n, 2] = w4
+    ta[n, 3] = a4
+    ts[T_N] = n + 1.0
+    crossed = False
     if flank_m != st[S_FLANK_M]:
+        if i_play < 0 and st[S_PLAY0] > 0.0 or i_play >= 0 and applied[i_play] > 0.0:
+            crossed = True                      # the model crosses its play here
+            st[X_OLD_FLANK_M] = st[S_FLANK_M]
+            st[S_MODEL_FLANK_T] = t
         st[S_FLANK_M] = flank_m
         st[S_FLANK_T] = max(st[S_FLANK_T], t)
+    st[X_DT] = dt
+    st[X_LOAD] = load
+    st[X_DRAG] = drag
+    st[X_TORQUE] = torque
+    st[X_DRAG_M] = drag_m
+    st[X_TORQUE_M] = torque_m
+    if crossed:
+        return CROSSED
+    if t >= ts[T_EVENT_DUE]:                    # a flank-change event to measure
+        return PYTHON
+    if t >= ts[T_NEXT_LOOK]:                    # the step detector's look
+        least = 0.0
+        if i_play >= 0:
+            bp = theta[i_play]
+            if bp * bp > 9.0 * P[i_play, i_play]:     # the play is known: half of it at least
+                least = 0.5 * bp
+        elif st[S_PLAY0] > 0.0:
+            least = 0.5 * st[S_PLAY0]
+        # (a step applied to the model steps the residual too: not the drive's crossing)
+        if detect_core(ta, n + 1, t, st[S_NOISE], max(st[S_MODEL_FLANK_T], st[S_APPLIED_T]),
+                       ts[T_LAST_STEP], least)[0]:
+            return PYTHON                       # found: the caller measures with it
+        ts[T_NEXT_LOOK] = t + STEP_STRIDE
+    return sample_tail(st, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3,
+                       th4)
+
+
+@njit(cache=True)
+def sample_tail(st, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3, th4):
+    """The rest of :func:`sample_head`'s sample (its values in ``st[X_*]``): skipped near a
+    flank change (past, ahead, or a step of the model's hold-off), else into the filter
+    and the window.  Returns USED or SKIPPED."""
+    i_load, i_drag, i_play = lay[L_LOAD], lay[L_DRAG], lay[L_PLAY]
+    w4, a4 = st[S_W4], st[S_A4]
+    load, drag, torque = st[X_LOAD], st[X_DRAG], st[X_TORQUE]
+    drag_m, torque_m = st[X_DRAG_M], st[X_TORQUE_M]
+    # a flank change within the hold-off ahead (the torques' rates: c alpha4)
     hold = st[S_HOLD_OFF]
     ahead = hold * a4
     soon = torque * (torque + drag * ahead) < 0.0 or \
         torque_m * (torque_m + drag_m * ahead) < 0.0
     if soon or t - st[S_FLANK_T] < hold or t < st[S_HOLD_UNTIL]:
         st[S_SKIPPED] += 1.0
-        return 0
+        return SKIPPED
     c_pos, c_neg = st[S_C_POS], st[S_C_NEG]
     compliance = c_pos if w4 > 0.0 else c_neg if w4 < 0.0 else 0.5 * (c_pos + c_neg)
     window = st[S_WINDOW]
+    dt = st[X_DT]
     lam = math.exp(-dt / window)
+    # the flank is sure when the drive stays on one: no crossing measured or estimated for
+    # a window (the model in use's do not count) and the load outweighs twice the recent
+    # drag and inertia torques.  Else load and play, one offset on such a drive, leave the
+    # load's own uncertainty wide and the soft flank the play a noise for ever
     sure = i_play >= 0 and t - st[S_CROSS_T] > window and abs(load) > 2.0 * (
-        max(drag, 0.0) * st[S_W_MAX] + inertia * st[S_A_MAX])
+        max(drag, 0.0) * st[S_W_MAX] + st[S_INERTIA] * st[S_A_MAX])
     _sample_step(theta, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play,
-                 lay[L_WORM0], lay[L_NW], lay[L_GEAR0], lay[L_NG], th2, th3, w4, flank,
-                 flank_m, torque, compliance, meas - th4, dt / st[S_MEMORY], lam,
-                 st[S_NOISE2], st[S_HUBER], sure)
+                 lay[L_WORM0], lay[L_NW], lay[L_GEAR0], lay[L_NG], th2, th3, w4,
+                 st[S_FLANK], st[S_FLANK_M], torque, compliance, meas - th4,
+                 dt / st[S_MEMORY], lam, st[S_NOISE2], st[S_HUBER], sure)
     st[S_W_MAX] = max(abs(w4), st[S_W_MAX] * lam)
     st[S_A_MAX] = max(abs(a4), st[S_A_MAX] * lam)
     if math.isnan(st[S_FIRST_T]):
         st[S_FIRST_T] = t
     st[S_USED] += 1.0
-    return 1
+    return USED
