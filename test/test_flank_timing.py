@@ -9,9 +9,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from worm_gear_sim.adaptation.flank_timing import arch_top, float_onset
+from worm_gear_sim.adaptation.flank_timing import FlankTiming, arch_top, float_onset
 
 NOISE = 4e-6
+PLAY = 4e-4
 ALPHA = 0.2                      # rad/s^2, the sector scan's antenna acceleration
 
 
@@ -46,3 +47,34 @@ def test_the_arch_tops_at_the_drives_crossing(dt):
     assert arch_top(ts, dev, 5 * NOISE) == pytest.approx(dt, abs=2e-3)
     assert arch_top(ts, -dev, 5 * NOISE) is None          # the other sign: no arch
     assert arch_top(ts, 1e-3 * dev, 5 * NOISE) is None    # below the noise
+
+
+def _event(r: np.ndarray, ts: np.ndarray, t_m: float) -> tuple | None:
+    """The flank-change event at t_m (drive to coast flank, s = +1) over the residual r."""
+    ft = FlankTiming()
+    for t, x in zip(ts, r):
+        ft.push(float(t), float(x), 0.1, ALPHA)
+        if abs(t - t_m) < 0.5e-3:
+            ft.model_flank_changed(float(t), 1.0, -1.0)
+    return ft.ready(float(ts[-1]), PLAY, 10 * NOISE, PLAY, NOISE, 0.0)
+
+
+@pytest.mark.parametrize('how, shift', [('onset', -0.040), ('arch', 0.040), ('area', 0.040)])
+def test_each_method_names_itself(how, shift):
+    """The event's measurement says how it was made (the estimator weighs the area formula's
+    far less): a float's rise before the model's crossing (the drive crossed first), the
+    arch after it (the model first), or a plain pulse of the play, neither: the area."""
+    rng = np.random.default_rng(4)
+    t_m = 1.0
+    ts = np.arange(0.5, 1.45, 1e-3)
+    if how == 'onset':          # the gear floats from t_p on, until the worm moves at t_m
+        rise = 0.5 * ALPHA * np.clip(ts - (t_m + shift), 0.0, None) ** 2
+        r = np.where(ts < t_m, rise, 0.0)
+    elif how == 'arch':         # the worm left the gear early: the arch back onto the flank
+        inside = (ts > t_m) & (ts < t_m + 2 * shift)
+        r = -np.where(inside, 0.5 * ALPHA * (shift ** 2 - (ts - t_m - shift) ** 2), 0.0)
+    else:                       # the prediction steps at t_m, the drive at t_m + shift
+        r = np.where((ts >= t_m) & (ts < t_m + shift), -PLAY, 0.0)
+    got = _event(r + 1e-6 * rng.standard_normal(ts.size), ts, t_m)
+    assert got is not None and got[3] == how
+    assert got[0] == pytest.approx(t_m + shift, abs=3e-3)

@@ -112,6 +112,10 @@ BOUND_SIGMAS = 3.0
 #: of the flank-change measurement is SWITCH_TIME_SD |c alpha4| + SWITCH_TORQUE_SD.
 SWITCH_TIME_SD = 2e-3
 SWITCH_TORQUE_SD = 2e-3
+#: Timing uncertainty of a flank change measured by the area formula [s] (neither the
+#: float's onset nor the arch seen): the formula holds only when the model crosses first,
+#: and off that case it was measured 12-330 ms off (docs/adaptation.md)
+AREA_TIME_SD = 0.05
 #: A play smaller than this many measurement noises is not seen in a flank change.
 MIN_PLAY_NOISES = 10.0
 #: A sample gap longer than this restarts the rate estimates [s].
@@ -391,7 +395,8 @@ class Adapter:
                          sd * sd, HUBER_SIGMAS)
         self._hold_until = max(self._hold_until, t_p + FLANK_HOLD_OFF)
 
-    def _torque_zero(self, t_p: float, w_p: float, a_p: float, drag: float) -> None:
+    def _torque_zero(self, t_p: float, w_p: float, a_p: float, drag: float,
+                     time_sd: float = SWITCH_TIME_SD) -> None:
         """The drive's mesh torque was zero at t_p: T + c omega4 = -J alpha4 there."""
         lay = self.layout
         if lay.i_load < 0 and lay.i_drag < 0:
@@ -408,7 +413,7 @@ class Adapter:
             y -= self._load0
         if lay.i_drag < 0:
             y -= self._drag0 * w_p
-        sd = SWITCH_TIME_SD * abs(drag * a_p) + SWITCH_TORQUE_SD
+        sd = time_sd * abs(drag * a_p) + SWITCH_TORQUE_SD
         _kalman_step(self.theta, self.P, np.zeros(lay.n), self._std ** 2, phi, y, sd * sd,
                      HUBER_SIGMAS)
         self.flank_times += 1
@@ -429,7 +434,8 @@ class Adapter:
                                  self._inertia / drag if drag > 0.0 else 0.0)
         if got is None:
             return
-        self._torque_zero(*got, drag)
+        t_p, w_p, a_p, how = got
+        self._torque_zero(t_p, w_p, a_p, drag, AREA_TIME_SD if how == 'area' else SWITCH_TIME_SD)
 
     # ---- switching -------------------------------------------------------------------------
     def window_rms(self) -> dict[str, float]:

@@ -254,8 +254,9 @@ class FlankTiming:
 
     def ready(self, t: float, play: float, min_play: float, model_play: float,
               noise: float = 0.0, float_lag: float = 0.0
-              ) -> tuple[float, float, float] | None:
-        """The event's measurement once ``t`` is past its window; ``play``: the drive's
+              ) -> tuple[float, float, float, str] | None:
+        """The event's measurement (t_p, omega4, alpha4, how: 'onset', 'arch' or 'area')
+        once ``t`` is past its window; ``play``: the drive's
         play (the estimate) [rad], at least ``min_play`` to be seen; ``model_play``: the
         model's.  The residual's net step must be the drive's crossing less the model's,
         s (play - model_play), within a third of the play (else the drive did not cross
@@ -290,13 +291,15 @@ class FlankTiming:
                 return None
             self.measured += 1
             self.onsets += 1
-            return (t_p, float(np.interp(t_p, ts, a[:, 2])), float(np.interp(t_p, ts, a[:, 3])))
+            return (t_p, float(np.interp(t_p, ts, a[:, 2])), float(np.interp(t_p, ts, a[:, 3])),
+                    'onset')
         after = (ts >= t_m - 0.5 * LEVEL_WINDOW) & (ts < t_m + WINDOW)
         top = arch_top(ts[after], -s * (r[after] - r_pre), ONSET_NOISES * noise)
         if top is not None and t_m - 0.5 * LEVEL_WINDOW < top < t_m + WINDOW:
             self.measured += 1                # the model crossed first: the gear's arch
             self.arches += 1
-            return (top, float(np.interp(top, ts, a[:, 2])), float(np.interp(top, ts, a[:, 3])))
+            return (top, float(np.interp(top, ts, a[:, 2])), float(np.interp(top, ts, a[:, 3])),
+                    'arch')
         tm, rm = ts[mid], r[mid] - r_pre
         integral = float(np.sum(0.5 * (rm[1:] + rm[:-1]) * np.diff(tm)))
         integral += float(rm[-1]) * (t_m + WINDOW - float(tm[-1]))
@@ -305,7 +308,8 @@ class FlankTiming:
             return None
         t_p = t_m + shift
         self.measured += 1
-        return (t_p, float(np.interp(t_p, ts, a[:, 2])), float(np.interp(t_p, ts, a[:, 3])))
+        return (t_p, float(np.interp(t_p, ts, a[:, 2])), float(np.interp(t_p, ts, a[:, 3])),
+                'area')
 
 
 @njit(cache=True)
