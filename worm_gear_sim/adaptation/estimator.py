@@ -420,7 +420,8 @@ class Adapter:
 
     def _flank_time_update(self, t: float, drag: float) -> None:
         """The real drive's flank change as a measurement of (T, c) (:mod:`.flank_timing`):
-        T + c omega4(t_p) = -J alpha4(t_p), its noise a timing error of SWITCH_TIME_SD."""
+        T + c omega4(t_p) = -J alpha4(t_p), its noise a timing error of SWITCH_TIME_SD
+        (AREA_TIME_SD when the area formula measured it)."""
         lay = self.layout
         if lay.i_load < 0 and lay.i_drag < 0 or not self._timing.event_due(t):
             return
