@@ -5,15 +5,30 @@
     python benchmarks/bench_adaptation.py [--drives 4] [--seed 1] [--duration 60]
         [--scenario sector] [--stiffness-spread 0.0] [--drag-max 60] [--cost-samples 3000]
         [--no-drives]
-        [--latency-seconds 8]
+        [--latency-seconds 8] [--load-min 0.5] [--load-max 5] [--load-sign positive]
+        [--play-max 5] [--error-max 30] [--gear-orders 1]
 
 Each drive: the default set with a random play (0.5-5 arcmin), load torque (0.5-5 N m),
 antenna drag (0-60 N m s/rad, capped at ``--drag-max``; 0: the same drives without drag,
 the other draws unchanged), worm error orders 1-3 and gear order 1 (each coefficient
 2-30 urad, random sign) and, with ``--stiffness-spread s``, teeth and bearing stiffness
-multiplied by 1 +- s (not adapted).  The offline twin (``worm-gear-sim adapt``, the node's
-loop) runs the scenario from the NOMINAL model; printed per drive (figures, never
-asserted):
+multiplied by 1 +- s (not adapted).
+
+Drive families beyond these draws (defaults: the draws above; each option changes a range,
+never the number of draws, so a drive's other values stay as in the default draws):
+
+* ``--load-min a --load-max b``: the load's magnitude from [a, b] N m (e.g. 0.05-0.5: a
+  small load, which the drag torque outweighs over most of the scan, so the teeth cross the
+  play twice per scan period; without drag only a load below the inertia torque, 0.017 N m
+  on the sector scan, lets them cross);
+* ``--load-sign both``: each load negative with probability 1/2 (the sign from a generator
+  of its own, seeded by ``--seed``);
+* ``--play-max p``: the play from 0.5-p arcmin;
+* ``--error-max e``: each periodic error coefficient from 2-e urad;
+* ``--gear-orders 0``: no gear error order (worm orders 1-3 only).
+
+The offline twin (``worm-gear-sim adapt``, the node's loop) runs the scenario from the
+NOMINAL model; printed per drive (figures, never asserted):
 
 * RMS antenna error uncompensated / with the adapting feed-forward over 10-20 s (target
   >= 10x) and 50-60 s (target >= 30x), and the whole run;
@@ -71,16 +86,30 @@ from worm_gear_sim.realtime.predictor import RealtimePredictor  # noqa: E402
 ARCMIN = math.pi / 180.0 / 60.0
 
 
-def drive(base: Config, rng: np.random.Generator, spread: float, drag_max: float = 60.0
+def drive(base: Config, rng: np.random.Generator, spread: float, drag_max: float = 60.0,
+          family: argparse.Namespace | None = None, sign_rng: np.random.Generator | None = None
           ) -> tuple[dict, Config]:
-    def coef() -> float:
-        return float(rng.uniform(2e-6, 30e-6) * rng.choice([-1.0, 1.0]))
+    """One drawn drive. ``family`` (the options --load-min ... --gear-orders) changes the
+    ranges but never the number of draws from ``rng``, so each drive's other values stay
+    those of the default draws; the load's sign, with --load-sign both, comes from
+    ``sign_rng``, a generator of its own."""
+    f = family if family is not None else argparse.Namespace(
+        load_min=0.5, load_max=5.0, load_sign='positive', play_max=5.0, error_max=30.0,
+        gear_orders=1)
+    err_max = f.error_max * 1e-6
 
-    v = {'mesh.backlash': rng.uniform(0.5, 5.0) * ARCMIN,
-         'load.output_torque': rng.uniform(0.5, 5.0),
+    def coef() -> float:
+        return float(rng.uniform(2e-6, err_max) * rng.choice([-1.0, 1.0]))
+
+    v = {'mesh.backlash': rng.uniform(0.5, f.play_max) * ARCMIN,
+         'load.output_torque': rng.uniform(f.load_min, f.load_max),
          'load.output_viscous_coefficient': min(rng.uniform(0.0, 60.0), drag_max),
          'mesh.worm_error_harmonics': [coef() for _ in range(6)],
          'mesh.gear_error_harmonics': [coef() for _ in range(2)]}
+    if f.gear_orders == 0:
+        v['mesh.gear_error_harmonics'] = []
+    if f.load_sign == 'both' and sign_rng is not None and sign_rng.random() < 0.5:
+        v['load.output_torque'] = -v['load.output_torque']
     if spread > 0:
         flat = base.to_flat_dict()
         k_t, k_b = rng.uniform(1 - spread, 1 + spread, 2)
@@ -106,9 +135,10 @@ def two_revolutions(t: np.ndarray, theta1: np.ndarray) -> float:
 
 def run_drives(args: argparse.Namespace, base: Config) -> None:
     rng = np.random.default_rng(args.seed)
+    sign_rng = np.random.default_rng([args.seed, 1])
     rows = []
     for i in range(args.drives):
-        v, plant = drive(base, rng, args.stiffness_spread, args.drag_max)
+        v, plant = drive(base, rng, args.stiffness_spread, args.drag_max, args, sign_rng)
         t0 = time.perf_counter()
         run = run_twin(plant, base, args.scenario, args.duration, seed=args.seed + i)
         wall = time.perf_counter() - t0
@@ -288,6 +318,18 @@ def main() -> int:
     ap.add_argument('--stiffness-spread', type=float, default=0.0)
     ap.add_argument('--drag-max', type=float, default=60.0,
                     help='cap on the antenna drag drawn in [0, 60] N m s/rad (0: no drag)')
+    ap.add_argument('--load-min', type=float, default=0.5,
+                    help='smallest load torque magnitude drawn [N m]')
+    ap.add_argument('--load-max', type=float, default=5.0,
+                    help='largest load torque magnitude drawn [N m]')
+    ap.add_argument('--load-sign', choices=('positive', 'both'), default='positive',
+                    help='both: each load negative with probability 1/2')
+    ap.add_argument('--play-max', type=float, default=5.0,
+                    help='largest play drawn (from 0.5) [arcmin]')
+    ap.add_argument('--error-max', type=float, default=30.0,
+                    help='largest periodic error coefficient drawn (from 2) [urad]')
+    ap.add_argument('--gear-orders', type=int, choices=(0, 1), default=1,
+                    help='0: no gear error order (worm orders 1-3 only)')
     ap.add_argument('--cost-samples', type=int, default=3000)
     ap.add_argument('--no-drives', action='store_true')
     ap.add_argument('--latency-seconds', type=float, default=8.0)
