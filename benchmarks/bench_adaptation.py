@@ -82,6 +82,7 @@ from worm_gear_sim.adaptation.twin import (  # noqa: E402
 from worm_gear_sim.dynamics.simulation import Simulator  # noqa: E402
 from worm_gear_sim.params import Config  # noqa: E402
 from worm_gear_sim.realtime.predictor import RealtimePredictor  # noqa: E402
+from worm_gear_sim.validation import ConfigError  # noqa: E402
 
 ARCMIN = math.pi / 180.0 / 60.0
 
@@ -138,7 +139,11 @@ def run_drives(args: argparse.Namespace, base: Config) -> None:
     sign_rng = np.random.default_rng([args.seed, 1])
     rows = []
     for i in range(args.drives):
-        v, plant = drive(base, rng, args.stiffness_spread, args.drag_max, args, sign_rng)
+        try:
+            v, plant = drive(base, rng, args.stiffness_spread, args.drag_max, args, sign_rng)
+        except ConfigError as exc:          # (a drawn set the model cannot use: say so)
+            print(f'drive {i}: not usable, skipped ({exc})', flush=True)
+            continue
         t0 = time.perf_counter()
         run = run_twin(plant, base, args.scenario, args.duration, seed=args.seed + i)
         wall = time.perf_counter() - t0
