@@ -24,7 +24,7 @@ from worm_gear_sim.adaptation.estimator import (
     MAX_GAP,
     Adapter,
 )
-from worm_gear_sim.adaptation.flank_timing import STEP_GAP, STEP_SIDE, FlankTiming, detect_core
+from worm_gear_sim.adaptation.flank_timing import STEP_GAP, STEP_SIDE, FlankTiming
 from worm_gear_sim.adaptation.per_sample import _sample_step
 from worm_gear_sim.dynamics.model import DriveModel
 from worm_gear_sim.params import Config
@@ -76,7 +76,7 @@ class PythonAdapter(Adapter):
             (ax.item(lay.i_load) if lay.i_load >= 0 else self._load0)
         flank_m = 1.0 if torque_m > 0.0 else -1.0 if torque_m < 0.0 else self._flank_m
         timing = self._timing
-        timing.push(t, theta4_meas - theta4_pred, w4, a4)
+        timing.push(t, theta4_meas - theta4_pred, w4, a4, theta2, theta3)
         if flank_m != self._flank_m:
             if lay.i_play < 0 and self._play0 > 0.0 or lay.i_play >= 0 and \
                     self.applied_x[lay.i_play] > 0.0:   # the model crosses its play here
@@ -196,13 +196,13 @@ def test_the_compiled_look_finds_the_step_a_line_fit_finds(size):
     for k in range(t.size):
         ft.push(float(t[k]), float(r[k]), 0.1 * t[k], 0.0)
     at = float(t[200])
-    got = detect_core(ft._a, ft._n, at, 1e-6, -math.inf, -math.inf, 0.0)
+    got = ft.detect(at, 1e-6, -math.inf)          # (the compiled detect_core)
     ref = _numpy_look(ft._a[:ft._n], at, 1e-6)
     if size == 0.0:
-        assert ref is None and not got[0]
+        assert ref is None and got is None
         return
-    assert ref is not None and got[0]
-    assert got[1] == pytest.approx(ref[0], abs=1e-9)
-    assert got[4] == pytest.approx(ref[1], rel=1e-9)
-    assert got[1] == pytest.approx(t_step, abs=1.5e-3)
-    assert got[2] == pytest.approx(0.1 * got[1], rel=1e-6)     # omega4 interpolated there
+    assert ref is not None and got is not None
+    assert got[0] == pytest.approx(ref[0], abs=1e-9)
+    assert got[3] == pytest.approx(ref[1], rel=1e-9)
+    assert got[0] == pytest.approx(t_step, abs=1.5e-3)
+    assert got[1] == pytest.approx(0.1 * got[0], rel=1e-6)     # omega4 interpolated there

@@ -380,8 +380,8 @@ class Adapter:
             least = 0.5 * self._play0
         # (a step applied to the model steps the residual too: not the drive's crossing)
         got = self._timing.detect(t, self.settings.measurement_noise,
-                                  max(self._model_flank_t, self._applied_t),
-                                  least)
+                                  max(self._model_flank_t, self._applied_t), least,
+                                  self.theta, self.applied_x, self.P, self._lay)
         if got is None:
             return
         t_p, w_p, a_p, step = got

@@ -199,6 +199,8 @@ def sample_head(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas
     ta[n, 1] = meas - th4
     ta[n, 2] = w4
     ta[n, 3] = a4
+    ta[n, 4] = th2
+    ta[n, 5] = th3
     ts[T_N] = n + 1.0
     crossed = False
     if flank_m != st[S_FLANK_M]:
@@ -228,7 +230,7 @@ def sample_head(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas
             least = 0.5 * st[S_PLAY0]
         # (a step applied to the model steps the residual too: not the drive's crossing)
         if detect_core(ta, n + 1, t, st[S_NOISE], max(st[S_MODEL_FLANK_T], st[S_APPLIED_T]),
-                       ts[T_LAST_STEP], least)[0]:
+                       ts[T_LAST_STEP], least, theta, applied, P, lay)[0]:
             return PYTHON                       # found: the caller measures with it
         ts[T_NEXT_LOOK] = t + STEP_STRIDE
     return sample_tail(st, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3,
