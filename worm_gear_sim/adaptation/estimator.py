@@ -504,15 +504,22 @@ class Adapter:
     def _bounded(self, x: np.ndarray) -> tuple[np.ndarray, str]:
         """The candidate of estimate ``x``: a play or drag below zero by less than
         ``BOUND_SIGMAS`` standard deviations is set to zero (zero is within its
-        uncertainty); one further below is refused (the reason)."""
+        uncertainty), the other values conditioned on it (x - P[:, i] x_i / P_ii: those it
+        is correlated with take what it gave, e.g. the load the play's share of one offset
+        on a drive that keeps one flank); one further below is refused (the reason)."""
         cand = x.copy()
+        P = self.P.copy()
         for i, key in ((self.layout.i_play, PLAY_KEY), (self.layout.i_drag, DRAG_KEY)):
             if i >= 0 and cand[i] < 0.0:
-                sd = math.sqrt(max(self.P[i, i], 0.0))
+                sd = math.sqrt(max(P[i, i], 0.0))
                 if cand[i] < -BOUND_SIGMAS * sd:
                     return cand, (f'{key} estimate {cand[i]:.3g} is negative (beyond '
                                   f'{BOUND_SIGMAS:g} standard deviations, {sd:.2g}): not '
                                   'applied')
+                if P[i, i] > 0.0:
+                    gain = P[:, i] / P[i, i]
+                    cand -= gain * cand[i]
+                    P -= np.outer(gain, P[i, :])
                 cand[i] = 0.0
         return cand, ''
 
