@@ -119,3 +119,29 @@ def test_a_blended_step_of_the_correction_leaves_the_antenna_still():
         assert blend.blending == (how == 'at once')   # unused, or done by the end
     assert out['at once'] > 1e-5
     assert out['blended'] < 0.03 * out['at once']
+
+
+def test_a_play_below_zero_taken_as_zero_keeps_the_offset(cfg):
+    """On a drive that keeps one flank, load and play make one offset, which the estimate
+    knows far better than either (their covariance is a ridge).  A play estimate a little
+    below zero is applied as zero; the load takes the play's share (the candidate is
+    conditioned on play = 0 with the covariance), so the offset the model applies stays the
+    estimate's.  Zeroing the play alone would move it by half the play estimate."""
+    ad = Adapter(cfg, cfg.adaptation)
+    model = DriveModel(cfg)
+    c = 0.5 * sum(output_compliance(model))
+    t = np.arange(0.0, 8.0, 1.0 / RATE)
+    extra = -c * 3.0 + np.random.default_rng(6).normal(0.0, 2e-6, t.size)
+    feed(ad, t, extra, model.output_per_input)
+    lay = ad.layout
+
+    def offset(x: np.ndarray) -> float:
+        return -c * x[lay.i_load] - 0.5 * x[lay.i_play]
+
+    x = ad.theta.copy()
+    x[lay.i_play] = -0.5 * math.sqrt(ad.P[lay.i_play, lay.i_play])    # within the bound
+    x[lay.i_load] -= 0.5 * x[lay.i_play] / c                             # the same offset
+    cand, why = ad._bounded(x)
+    assert not why and cand[lay.i_play] == 0.0
+    moved = abs(offset(cand) - offset(x))
+    assert moved < 0.05 * 0.5 * abs(x[lay.i_play])       # zeroing alone: 0.5 |play|
