@@ -89,7 +89,7 @@ from ..params import Config
 from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS, Parameters
 from . import per_sample as ps
 from .flank_timing import WINDOW, FlankTiming
-from .per_sample import _kalman_step, sample_head, sample_tail
+from .per_sample import _kalman_step, least_step, sample_head, sample_tail
 from .slots import Slot
 
 __all__ = ['PRIOR_STD', 'FLANK_HOLD_OFF', 'Layout', 'output_compliance',
@@ -371,13 +371,7 @@ class Adapter:
         if not self._timing.due(t):
             return
         lay = self.layout
-        least = 0.0
-        if lay.i_play >= 0:
-            b, var = self.theta[lay.i_play], self.P[lay.i_play, lay.i_play]
-            if b * b > 9.0 * var:                  # the play is known: half of it at least
-                least = 0.5 * b
-        elif self._play0 > 0.0:
-            least = 0.5 * self._play0
+        least = least_step(self.theta, self.P, self._lay, self._play0)
         # (a step applied to the model steps the residual too: not the drive's crossing)
         got = self._timing.detect(t, self.settings.measurement_noise,
                                   max(self._model_flank_t, self._applied_t), least,

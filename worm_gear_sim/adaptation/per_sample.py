@@ -144,6 +144,19 @@ def _window_step(S, b, sc, phi, y, lam):
 
 
 @njit(cache=True)
+def least_step(theta, P, lay, play0):
+    """The smallest step the detector takes for the drive's crossing [rad]: half the play
+    once it is known (the estimate's, beyond 3 sd; or the model's fixed play), else 0."""
+    i_play = lay[L_PLAY]
+    if i_play >= 0:
+        bp = theta[i_play]
+        if bp * bp > 9.0 * P[i_play, i_play]:
+            return 0.5 * bp
+        return 0.0
+    return 0.5 * play0 if play0 > 0.0 else 0.0
+
+
+@njit(cache=True)
 def sample_head(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3,
                 th4):
     """An encoder sample at ``t`` (measured theta4 ``meas``, the prediction theta2..theta4
@@ -221,13 +234,7 @@ def sample_head(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas
     if t >= ts[T_EVENT_DUE]:                    # a flank-change event to measure
         return PYTHON
     if t >= ts[T_NEXT_LOOK]:                    # the step detector's look
-        least = 0.0
-        if i_play >= 0:
-            bp = theta[i_play]
-            if bp * bp > 9.0 * P[i_play, i_play]:     # the play is known: half of it at least
-                least = 0.5 * bp
-        elif st[S_PLAY0] > 0.0:
-            least = 0.5 * st[S_PLAY0]
+        least = least_step(theta, P, lay, st[S_PLAY0])
         # (a step applied to the model steps the residual too: not the drive's crossing)
         if detect_core(ta, n + 1, t, st[S_NOISE], max(st[S_MODEL_FLANK_T], st[S_APPLIED_T]),
                        ts[T_LAST_STEP], least, theta, applied, P, lay)[0]:
