@@ -16,6 +16,7 @@ from worm_gear_sim import Config, make_profile, simulate
 from worm_gear_sim.dynamics.modal import static_equilibrium
 from worm_gear_sim.dynamics.model import (
     DriveModel,
+    forces,
     mesh_approach,
     pack_parameters,
     transmission_error,
@@ -130,6 +131,39 @@ def test_rest_with_play_keeps_the_flank():
         h = 0.5 * cfg.geometry.gear_pitch_radius * cfg.mesh.backlash
         assert mesh_approach(p, u[0], u[1]) == pytest.approx(sign * h, abs=1e-15)
 
+
+
+# a drawn drive that Config.replace refused as "not computable" (LinAlgError: singular):
+# play 2.8', a load of 1.7 mN m, no drag, worm and gear harmonics of ~25 urad
+LIGHT_WORM = [-2.374712720158434e-05, 2.7684335734145273e-05, 3.10860054659768e-06,
+              1.4861404720791301e-05, -3.7457882161965165e-06, 2.5873719477458386e-05]
+LIGHT_GEAR = [1.860234850691995e-05, -2.5516682588879443e-05]
+
+
+@pytest.mark.parametrize('load', [0.0017379841870615548, -0.0017379841870615548, 1e-4, 2e-6,
+                                  0.5])
+@pytest.mark.parametrize('theta1', [0.0, 0.7, -2.3])
+def test_a_light_load_with_play_and_gear_error_rests_on_its_flank(load, theta1):
+    """Under a load the rest is the drive without play shifted onto the loaded flank; the
+    gear error moves with the shifted gear, and under a load of a few mN m its change put the
+    start back inside the clearance (zero mesh stiffness: a singular Newton matrix, the set
+    refused). The rest is now a root of Q on the loaded flank, q beyond the half clearance
+    by the deflection under that load (the force balance: the mesh carries the load)."""
+    cfg = Config().replace(**{'mesh.backlash': 0.0008209763031268989,
+                              'load.output_torque': load,
+                              'load.output_viscous_coefficient': 0.0,
+                              'mesh.worm_error_harmonics': LIGHT_WORM,
+                              'mesh.gear_error_harmonics': LIGHT_GEAR})
+    m = DriveModel(cfg)
+    u = static_equilibrium(m, theta1)
+    Q, dQdu, _, _ = forces(m.p, u, np.zeros(3), theta1)
+    floor = 64 * np.finfo(float).eps * (np.abs(dQdu) @ np.abs(u))   # the terms' round-off
+    assert np.all(np.abs(Q) <= floor), (Q, floor)
+    h = 0.5 * cfg.geometry.gear_pitch_radius * cfg.mesh.backlash
+    q = mesh_approach(m.p, u[0], u[1])
+    flank = math.copysign(1.0, load)
+    assert flank * q > h                          # in contact on the loaded flank
+    assert np.linalg.cond(dQdu) < 1e14            # not in the clearance
 
 # ---- an independent Radau solution of the same equations, written out ----------------------
 def _written_out_rhs(cfg: Config, prof):

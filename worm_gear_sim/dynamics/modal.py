@@ -12,12 +12,14 @@ import scipy.linalg as sla
 
 from ..schema import ANGLE_LIMIT, Parameters
 from .model import (
+    P_RG,
     DriveModel,
     forces,
     has_periodic_error,
     has_play,
     linear_stiffness,
     mass_matrix,
+    mesh_approach,
     play_rest_shift,
     rigid_motion_vector,
     transmission_error,
@@ -70,7 +72,23 @@ def _rest_with_play(p: np.ndarray, theta1: float, tol: float, max_iter: int) -> 
             u[2] += d
         return u
     # the drive without play at rest, shifted onto the loaded flank: the same region
-    u = static_equilibrium(without_play(p), theta1, None, tol, max_iter) - shift
+    rest = static_equilibrium(without_play(p), theta1, None, tol, max_iter)
+    u = rest - shift
+    if has_periodic_error(p):
+        # the gear error moves with the shifted gear: its change (~1e-10 m) can put a lightly
+        # loaded drive back inside the clearance, where the stiffness is singular. Shift
+        # the gear (and the antenna) by d more so that the approach is the unshifted one
+        # plus the clearance: q(theta2, theta3 + d) = q_target, a contraction as above
+        q_target = mesh_approach(p, rest[0], rest[1]) + p[P_RG] * shift[1]
+        d = 0.0
+        for _ in range(60):
+            d_new = d + (mesh_approach(p, u[0], u[1] + d) - q_target) / p[P_RG]
+            if abs(d_new - d) <= 1e-16 * (1.0 + abs(u[1])):
+                d = d_new
+                break
+            d = d_new
+        u[1] += d
+        u[2] += d
     return static_equilibrium(p, theta1, u, tol, max_iter)
 
 
