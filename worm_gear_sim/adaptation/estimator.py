@@ -257,6 +257,7 @@ class Adapter:
     _inertia, _load0, _drag0, _play0 = (Slot('_st', i) for i in (
         ps.S_INERTIA, ps.S_LOAD0, ps.S_DRAG0, ps.S_PLAY0))
     _model_flank_t, _applied_t = Slot('_st', ps.S_MODEL_FLANK_T), Slot('_st', ps.S_APPLIED_T)
+    _applied_bound = Slot('_st', ps.S_APPLIED_BOUND)
 
     def __init__(self, model: DriveModel | Config, settings: Any) -> None:
         model = DriveModel.of(model)
@@ -320,6 +321,7 @@ class Adapter:
         self._timing = FlankTiming()
         self._model_flank_t = -math.inf
         self._applied_t = -math.inf       # the last step applied (when its samples start)
+        self._applied_bound = 0.0         # and the change of the correction it made [rad]
         self._cross_t = -math.inf         # the drive's last crossing, measured or estimated
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
@@ -372,15 +374,16 @@ class Adapter:
             return
         lay = self.layout
         least = least_step(self.theta, self.P, self._lay, self._play0)
-        # (a step applied to the model steps the residual too: not the drive's crossing)
-        got = self._timing.detect(t, self.settings.measurement_noise,
-                                  max(self._model_flank_t, self._applied_t), least,
-                                  self.theta, self.applied_x, self.P, self._lay)
+        # (a step applied to the model steps the residual too, by up to its bound)
+        got = self._timing.detect(t, self.settings.measurement_noise, self._model_flank_t,
+                                  least, self.theta, self.applied_x, self.P, self._lay,
+                                  self._applied_t, self._applied_bound)
         if got is None:
             return
-        t_p, w_p, a_p, step = got
+        t_p, w_p, a_p, step, wide = got
         self.steps_seen += 1
-        self._torque_zero(t_p, w_p, a_p, drag)
+        # (a wide step's onset is as uncertain as the area formula's crossing)
+        self._torque_zero(t_p, w_p, a_p, drag, AREA_TIME_SD if wide else SWITCH_TIME_SD)
         if lay.i_play >= 0:
             phi = np.zeros(lay.n)
             phi[lay.i_play] = 1.0
@@ -537,7 +540,9 @@ class Adapter:
     def applied(self, step: np.ndarray, model: DriveModel, at: float | None = None) -> None:
         """The caller applied ``step`` (a Decision's) to the model in use; ``at``: the time
         of the first sample it predicts [s] (None: the last sample's)."""
-        self.applied_x = np.array(step, float)
+        step = np.array(step, float)
+        self._applied_bound = self._correction_bound(step - self.applied_x)
+        self.applied_x = step
         self.model = model
         self._applied_t = self._last_t if at is None else float(at)
         self._hold_until = self._last_t + FLANK_HOLD_OFF   # the prediction's transient

@@ -59,7 +59,7 @@ from numba import njit
 from .slots import Slot
 
 __all__ = ['FlankTiming', 'WINDOW', 'LEVEL_WINDOW', 'STEP_SIDE', 'STEP_GAP', 'STEP_STRIDE',
-           'STEP_NOISES', 'SMOOTH_SIGMAS', 'ONSET_NOISES', 'ONSET_SAMPLES', 'RATE_WINDOW',
+           'STEP_NOISES', 'STEP_SIDE_WIDE', 'STEP_GAP_WIDE', 'ONSET_SHARE', 'SMOOTH_SIGMAS', 'ONSET_NOISES', 'ONSET_SAMPLES', 'RATE_WINDOW',
            'float_onset', 'arch_top', 'path_rates', 'detect_core']
 
 #: Half-width of the window over which the steps are integrated [s].
@@ -74,6 +74,12 @@ STEP_SIDE = 0.04
 STEP_GAP = 0.06
 STEP_STRIDE = 0.01
 STEP_NOISES = 15.0
+#: The wide scale, for crossings that take longer than STEP_GAP (near the top speed the
+#: gear floats across its play for ~0.1 s; measured 0.12-0.14 s on a drawn drive), and the
+#: share of the step at which its float is taken to start.
+STEP_SIDE_WIDE = 0.08
+STEP_GAP_WIDE = 0.2
+ONSET_SHARE = 0.1
 #: A step within this many standard deviations of the periodic error not yet learnt is none.
 SMOOTH_SIGMAS = 3.0
 #: Half-width of the fit that gives the path's rates at a measured crossing [s].
@@ -207,7 +213,7 @@ class FlankTiming:
         """The record is full: drop what is older than any look at ``t`` needs (or, if
         nothing is, double it)."""
         a, n = self._a, self._n
-        keep = max(2.0 * (WINDOW + LEVEL_WINDOW), 2 * STEP_SIDE + STEP_GAP) + 0.05
+        keep = max(2.0 * (WINDOW + LEVEL_WINDOW), 2 * STEP_SIDE_WIDE + STEP_GAP_WIDE) + 0.05
         k = int(np.searchsorted(a[:n, 0], t - keep))
         if k == 0:
             self._a = np.concatenate([a, np.zeros_like(a)])
@@ -242,28 +248,34 @@ class FlankTiming:
 
     def detect(self, t: float, noise: float, t_model: float, least: float = 0.0,
                theta: np.ndarray = _NONE, applied: np.ndarray = _NONE, P: np.ndarray = _NONE2,
-               lay: np.ndarray = _NO_LAYOUT) -> tuple[float, float, float, float] | None:
+               lay: np.ndarray = _NO_LAYOUT, t_applied: float = -math.inf,
+               applied_bound: float = 0.0
+               ) -> tuple[float, float, float, float, bool] | None:
         """A step of the drive's own in the residual (its crossing of the play while the
         model did not cross: no model crossing at ``t_model`` within the window): lines
         fitted to STEP_SIDE s of the residual each side of a STEP_GAP s gap, their values at
         the centre differ by more than STEP_NOISES ``noise``, than ``least`` (half the play
-        once it is known) and than twice the lines' own change over the gap; with the
+        once it is known) and than twice the lines' own change over the gap; a step
+        applied to the model at ``t_applied`` within the window steps the residual too, by
+        at most ``applied_bound`` [rad] (the change of the static correction it made): the
+        step must then exceed those thresholds by that much; with the
         estimate (``theta``, its covariance ``P``, the model in use's ``applied``, the
         adapter's layout ``lay``: :mod:`.per_sample`'s L_* indices) the share of the step
         the periodic error not yet learnt makes is taken off, and the step must exceed
         SMOOTH_SIGMAS of its sd (module docstring).  Returns (t_p, omega4, alpha4, step
-        [rad]), t_p where the residual crosses the middle of the step, or None.  Looks every
-        STEP_STRIDE s."""
+        [rad], wide), t_p where the residual crosses the middle of the step (or, ``wide``:
+        found on the wide scale, where it starts: :func:`detect_core`), or None.  Looks
+        every STEP_STRIDE s."""
         if t < self._next_look:
             return None
         self._next_look = t + STEP_STRIDE
-        found, t_p, w_p, a_p, step = detect_core(self._a, self._n, t, noise, t_model,
-                                                 self._last_step, least, theta, applied, P,
-                                                 lay)
+        found, t_p, w_p, a_p, step, wide = detect_core(
+            self._a, self._n, t, noise, t_model, self._last_step, least, theta, applied, P,
+            lay, t_applied, applied_bound)
         if not found:
             return None
         self._last_step = t_p
-        return t_p, w_p, a_p, step
+        return t_p, w_p, a_p, step, wide
 
     def model_flank_changed(self, t: float, old: float, new: float) -> None:
         """The model's flank changed at ``t`` from ``old`` to ``new`` (+1 / -1; 0 unknown)."""
@@ -413,41 +425,68 @@ def _side_line(a, k0, n, centre, lo, hi):
 
 
 @njit(cache=True)
-def detect_core(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay):
+def detect_core(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay,
+                t_applied, applied_bound):
     """:meth:`FlankTiming.detect`'s look at ``t`` over the record's rows a[:n] (the
     estimate ``theta``, ``P``, ``applied`` and ``lay`` for the harmonics' share; empty:
-    none): (found, t_p, omega4, alpha4, step)."""
+    none; the last step applied to the model at ``t_applied``, its bound ``applied_bound``):
+    (found, t_p, omega4, alpha4, step, wide).  The steep scale (STEP_SIDE, STEP_GAP) first,
+    t_p where the residual crosses the step's middle; else the wide one (STEP_SIDE_WIDE,
+    STEP_GAP_WIDE: a drive that crosses near its top speed floats across its play for
+    ~0.1 s), t_p where the residual leaves the line before it by ONSET_SHARE of the step
+    (the float starts where the mesh torque passes zero)."""
+    found, t_p, w_p, a_p, step = _look(a, n, t, noise, t_model, last_step, least, theta,
+                                       applied, P, lay, t_applied, applied_bound,
+                                       STEP_SIDE, STEP_GAP, False)
+    if found:
+        return True, t_p, w_p, a_p, step, False
+    found, t_p, w_p, a_p, step = _look(a, n, t, noise, t_model, last_step, least, theta,
+                                       applied, P, lay, t_applied, applied_bound,
+                                       STEP_SIDE_WIDE, STEP_GAP_WIDE, True)
+    return found, t_p, w_p, a_p, step, found
+
+
+@njit(cache=True)
+def _look(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay, t_applied,
+          applied_bound, side, gap, onset):
+    """One scale of :func:`detect_core`: lines over ``side`` s each side of a ``gap`` s gap
+    ending at ``t``; t_p at the step's middle, or (``onset``) where it starts."""
     nothing = (False, 0.0, 0.0, 0.0, 0.0)
-    span = 2 * STEP_SIDE + STEP_GAP
+    span = 2 * side + gap
     centre = t - 0.5 * span
     if t_model > centre - span or centre - last_step < span:
         return nothing
+    # a step applied inside the window moved the prediction by up to applied_bound
+    extra = applied_bound if t_applied > centre - span else 0.0
     t0 = t - span
     if n == 0 or a[0, 0] > t0 + 1e-9:
         return nothing
     k0 = np.searchsorted(a[:n, 0], t0)
-    half = 0.5 * STEP_GAP
+    half = 0.5 * gap
     ml, kl, dl, xl, sxxl = _side_line(a, k0, n, centre, -np.inf, -half)
     mr, kr, dr, xr, sxxr = _side_line(a, k0, n, centre, half, np.inf)
     if ml < 4 or mr < 4:
         return nothing
     step = dr - dl
-    drift = max(abs(kl), abs(kr)) * STEP_GAP
-    if not (abs(step) > max(STEP_NOISES * noise, least) and abs(step) > 2.0 * drift):
+    drift = max(abs(kl), abs(kr)) * gap
+    if not (abs(step) > max(STEP_NOISES * noise, least) + extra
+            and abs(step) > 2.0 * drift + extra):
         return nothing
     share, sd = _harmonic_share(a, k0, n, centre, half, ml, mr, xl, xr, sxxl, sxxr, theta,
                                 applied, P, lay)
     step -= share
-    if not (abs(step) > max(STEP_NOISES * noise, least, SMOOTH_SIGMAS * sd)
-            and abs(step) > 2.0 * drift):
+    if not (abs(step) > max(STEP_NOISES * noise, least, SMOOTH_SIGMAS * sd) + extra
+            and abs(step) > 2.0 * drift + extra):
         return nothing
+    # the middle (0) or the onset (ONSET_SHARE of the step from the line before it)
+    at = (ONSET_SHARE - 0.5) * step if onset else 0.0
     t_c = 0.0
     prev_t = prev_l = 0.0
     seen = 0
     for i in range(k0, n):                    # the rows in the gap: where the residual
-        x = a[i, 0] - centre                  # crosses the step's middle
+        x = a[i, 0] - centre                  # crosses that level
         if -half <= x <= half:
-            level = a[i, 1] - (dl + kl * x + 0.5 * step)      # 0 at the middle
+            level = a[i, 1] - (dl + kl * x + 0.5 * step) - at
             if seen and _sign(level) != _sign(prev_l):
                 t_c = prev_t - prev_l * (x - prev_t) / (level - prev_l)
                 break

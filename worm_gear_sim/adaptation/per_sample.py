@@ -27,8 +27,9 @@ from .flank_timing import STEP_STRIDE, T_EVENT_DUE, T_LAST_STEP, T_N, T_NEXT_LOO
  S_HOLD_UNTIL, S_W_MAX, S_A_MAX, S_FIRST_T, S_USED, S_SKIPPED,
  S_INERTIA, S_LOAD0, S_DRAG0, S_PLAY0, S_C_POS, S_C_NEG, S_WINDOW, S_MEMORY, S_NOISE2,
  S_MAX_GAP, S_ACCEL_TC, S_HOLD_OFF, S_HUBER, S_NOISE, S_MODEL_FLANK_T, S_APPLIED_T,
+ S_APPLIED_BOUND,
  # the head's values for the tail
- X_DT, X_LOAD, X_DRAG, X_TORQUE, X_DRAG_M, X_TORQUE_M, X_OLD_FLANK_M, N_ST) = range(40)
+ X_DT, X_LOAD, X_DRAG, X_TORQUE, X_DRAG_M, X_TORQUE_M, X_OLD_FLANK_M, N_ST) = range(41)
 # what sample_head asks of its caller
 SKIPPED, USED, NEED_ROOM, PYTHON, CROSSED = range(5)
 # Adapter._lay: the layout's indices
@@ -235,9 +236,9 @@ def sample_head(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas
         return PYTHON
     if t >= ts[T_NEXT_LOOK]:                    # the step detector's look
         least = least_step(theta, P, lay, st[S_PLAY0])
-        # (a step applied to the model steps the residual too: not the drive's crossing)
-        if detect_core(ta, n + 1, t, st[S_NOISE], max(st[S_MODEL_FLANK_T], st[S_APPLIED_T]),
-                       ts[T_LAST_STEP], least, theta, applied, P, lay)[0]:
+        if detect_core(ta, n + 1, t, st[S_NOISE], st[S_MODEL_FLANK_T], ts[T_LAST_STEP],
+                       least, theta, applied, P, lay, st[S_APPLIED_T],
+                       st[S_APPLIED_BOUND])[0]:
             return PYTHON                       # found: the caller measures with it
         ts[T_NEXT_LOOK] = t + STEP_STRIDE
     return sample_tail(st, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3,
