@@ -78,3 +78,49 @@ def test_each_method_names_itself(how, shift):
     got = _event(r + 1e-6 * rng.standard_normal(ts.size), ts, t_m)
     assert got is not None and got[3] == how
     assert got[0] == pytest.approx(t_m + shift, abs=3e-3)
+
+
+def _looks(r: np.ndarray, t: np.ndarray, noise: float = 1e-6) -> list[tuple]:
+    """Every look of the step detector over the residual r(t) (omega4 = t, alpha4 = 1)."""
+    ft = FlankTiming()
+    found = []
+    for k in range(t.size):
+        ft.push(float(t[k]), float(r[k]), float(t[k]), 1.0)
+        got = ft.detect(float(t[k]), noise, -np.inf)
+        if got is not None:
+            found.append(got)
+    return found
+
+
+@pytest.mark.parametrize('size', [1e-3, -6e-4])
+def test_a_slow_crossing_is_found_on_the_wide_scale_at_its_onset(size):
+    """A drive crossing near its top speed floats across the play in ~0.13 s (measured on a
+    drawn drive, play 1 mrad): a smooth S of the residual that the steep scale (a 60 ms gap)
+    reads as drift. The wide scale finds it once, its size within 2 %, its time where the
+    float starts (ONSET_SHARE of the way: within the S's first quarter, where the middle
+    would be 65 ms late; on the drawn drive the mesh torque passed zero 15-20 ms before
+    the residual visibly left its line)."""
+    t = np.arange(1.0, 2.5, 1e-3)
+    t0, dur = 1.6, 0.13
+    x = np.clip((t - t0) / dur, 0.0, 1.0)
+    r = size * x * x * (3.0 - 2.0 * x) + np.random.default_rng(7).normal(0.0, 1e-6, t.size)
+    found = _looks(r, t)
+    assert len(found) == 1
+    t_p, w_p, _, step, wide = found[0]
+    assert wide
+    assert step == pytest.approx(size, rel=0.02)
+    assert t0 <= t_p <= t0 + 0.25 * dur
+    assert w_p == pytest.approx(t_p, abs=1e-3)
+
+
+def test_a_quick_step_stays_on_the_steep_scale_and_a_smooth_path_is_no_step():
+    """A crossing within the 60 ms gap is found on the steep scale at its middle, as
+    before; the residual of a scan not yet learnt (a sine of the scan's period, 0.5 mrad)
+    is no step on either scale."""
+    t = np.arange(1.0, 2.5, 1e-3)
+    x = np.clip((t - 1.6) / 0.02, 0.0, 1.0)
+    noise = np.random.default_rng(8).normal(0.0, 1e-6, t.size)
+    found = _looks(8e-4 * x + noise, t)
+    assert len(found) == 1 and not found[0][4]
+    assert found[0][0] == pytest.approx(1.61, abs=2e-3)
+    assert _looks(5e-4 * np.sin(2 * np.pi * t / 4.0) + noise, t) == []

@@ -59,8 +59,9 @@ from numba import njit
 from .slots import Slot
 
 __all__ = ['FlankTiming', 'WINDOW', 'LEVEL_WINDOW', 'STEP_SIDE', 'STEP_GAP', 'STEP_STRIDE',
-           'STEP_NOISES', 'STEP_SIDE_WIDE', 'STEP_GAP_WIDE', 'ONSET_SHARE', 'SMOOTH_SIGMAS', 'ONSET_NOISES', 'ONSET_SAMPLES', 'RATE_WINDOW',
-           'float_onset', 'arch_top', 'path_rates', 'detect_core']
+           'STEP_NOISES', 'STEP_SIDE_WIDE', 'STEP_GAP_WIDE', 'ONSET_SHARE', 'SMOOTH_SIGMAS',
+           'ONSET_NOISES', 'ONSET_SAMPLES', 'RATE_WINDOW', 'float_onset', 'arch_top',
+           'path_rates', 'detect_core']
 
 #: Half-width of the window over which the steps are integrated [s].
 WINDOW = 0.3
@@ -79,7 +80,7 @@ STEP_NOISES = 15.0
 #: share of the step at which its float is taken to start.
 STEP_SIDE_WIDE = 0.08
 STEP_GAP_WIDE = 0.2
-ONSET_SHARE = 0.1
+ONSET_SHARE = 0.05
 #: A step within this many standard deviations of the periodic error not yet learnt is none.
 SMOOTH_SIGMAS = 3.0
 #: Half-width of the fit that gives the path's rates at a measured crossing [s].
@@ -358,6 +359,23 @@ class FlankTiming:
 
 
 @njit(cache=True)
+def _crossing_at(a, k0, n, centre, half, dl, kl, level0):
+    """Where the residual first crosses the left line + ``level0`` in the gap (time from
+    ``centre``; 0 if it does not)."""
+    prev_t = prev_l = 0.0
+    seen = 0
+    for i in range(k0, n):
+        x = a[i, 0] - centre
+        if -half <= x <= half:
+            level = a[i, 1] - (dl + kl * x + level0)
+            if seen and _sign(level) != _sign(prev_l):
+                return prev_t - prev_l * (x - prev_t) / (level - prev_l)
+            prev_t, prev_l = x, level
+            seen += 1
+    return 0.0
+
+
+@njit(cache=True)
 def _sign(x):
     return 1.0 if x > 0.0 else -1.0 if x < 0.0 else 0.0
 
@@ -478,20 +496,13 @@ def _look(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay, t_a
     if not (abs(step) > max(STEP_NOISES * noise, least, SMOOTH_SIGMAS * sd) + extra
             and abs(step) > 2.0 * drift + extra):
         return nothing
-    # the middle (0) or the onset (ONSET_SHARE of the step from the line before it)
-    at = (ONSET_SHARE - 0.5) * step if onset else 0.0
-    t_c = 0.0
-    prev_t = prev_l = 0.0
-    seen = 0
-    for i in range(k0, n):                    # the rows in the gap: where the residual
-        x = a[i, 0] - centre                  # crosses that level
-        if -half <= x <= half:
-            level = a[i, 1] - (dl + kl * x + 0.5 * step) - at
-            if seen and _sign(level) != _sign(prev_l):
-                t_c = prev_t - prev_l * (x - prev_t) / (level - prev_l)
-                break
-            prev_t, prev_l = x, level
-            seen += 1
+    t_c = _crossing_at(a, k0, n, centre, half, dl, kl, 0.5 * step)    # the middle
+    if onset:
+        # the whole float inside the gap (the look that has the step's middle at or just
+        # before its centre), then where it starts: ONSET_SHARE of the step from the line
+        if not -0.25 * gap <= t_c <= 0.0:
+            return nothing
+        t_c = _crossing_at(a, k0, n, centre, half, dl, kl, ONSET_SHARE * step)
     ts = a[k0:n, 0] - centre
     return (True, centre + t_c, np.interp(t_c, ts, a[k0:n, 2]),
             np.interp(t_c, ts, a[k0:n, 3]), step)
