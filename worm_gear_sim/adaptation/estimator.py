@@ -472,7 +472,8 @@ class Adapter:
 
     def poll(self, t: float) -> Decision:
         """Every ``step_interval``: maybe take the estimate as the target (module
-        docstring), then the next bounded step towards the target."""
+        docstring), then the next bounded step towards the target (not while a crossing of
+        the model's play is being measured)."""
         s = self.settings
         if t < self._next_poll:
             return _NOTHING
@@ -490,6 +491,11 @@ class Adapter:
                     note = (f'adapted set accepted: windowed residual RMS {est:.3g} rad '
                             f'against {cur:.3g} rad (model in use), {nom:.3g} rad (nominal)')
         if self.target is None or np.array_equal(self.target, self.applied_x):
+            return Decision(note=note)
+        if self._timing.event_spans(t):
+            # the model crossed its play within a window: a step now would step the residual
+            # inside the window that measures the drive's crossing against it (the event
+            # would be dropped); the step waits for the measurement (at most 0.35 s)
             return Decision(note=note)
         delta = self.target - self.applied_x
         bound = self._correction_bound(delta)
