@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from worm_gear_sim.adaptation import per_sample as ps
 from worm_gear_sim.adaptation.estimator import Adapter, output_compliance
 from worm_gear_sim.compensation import Compensator
 from worm_gear_sim.dynamics.modal import modes
@@ -187,3 +188,13 @@ def test_no_step_is_applied_while_a_crossing_of_the_model_is_measured(cfg):
     fresh = Adapter(cfg, cfg.adaptation)             # without a crossing: at once
     fresh.target = ad.target.copy()
     assert fresh.poll(5.1).step is not None
+    # a model with play whose torque demand (0.1 N m, falling at c alpha4 = 1 N m/s) will
+    # pass zero within the window: the step waits for that crossing too
+    ahead = Adapter(cfg, cfg.adaptation)
+    ahead.applied_x[ahead.layout.i_play] = 5e-4
+    ahead.target = ad.target.copy()
+    ahead.target[ahead.layout.i_play] = 5e-4
+    ahead._st[ps.X_TORQUE_M], ahead._st[ps.X_DRAG_M], ahead._st[ps.S_A4] = 0.1, 10.0, -0.1
+    assert ahead.poll(5.1).step is None
+    ahead._st[ps.X_TORQUE_M] = 0.5                    # 0.5 s away: not waited for
+    assert ahead.poll(5.36).step is not None
