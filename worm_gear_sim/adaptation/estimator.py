@@ -88,7 +88,7 @@ from ..dynamics.model import DriveModel, with_load_torque
 from ..params import Config
 from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS, Parameters
 from . import per_sample as ps
-from .flank_timing import LEVEL_WINDOW, WINDOW, FlankTiming
+from .flank_timing import LEVEL_WINDOW, STEP_GAP_WIDE, STEP_SIDE_WIDE, WINDOW, FlankTiming
 from .per_sample import _kalman_step, least_step, sample_head, sample_tail
 from .slots import Slot
 
@@ -116,6 +116,13 @@ SWITCH_TORQUE_SD = 2e-3
 #: float's onset nor the arch seen): the formula holds only when the model crosses first,
 #: and off that case it was measured 12-330 ms off (docs/adaptation.md)
 AREA_TIME_SD = 0.05
+#: A step found on the detector's wide scale is the drive's crossing only where the
+#: estimate's torque demand T + c omega4 + J alpha4 is within this many of its standard
+#: deviations of zero (the drive crosses only there; a smooth residual not yet learnt can
+#: look like a slow step: measured on a drive without drag that never crosses)
+PLAUSIBLE_SIGMAS = 3.0
+#: The step detector's widest window [s]
+DETECT_SPAN = 2.0 * STEP_SIDE_WIDE + STEP_GAP_WIDE
 #: A play smaller than this many measurement noises is not seen in a flank change.
 MIN_PLAY_NOISES = 10.0
 #: A sample gap longer than this restarts the rate estimates [s].
@@ -381,6 +388,8 @@ class Adapter:
         if got is None:
             return
         t_p, w_p, a_p, step, wide = got
+        if wide and not self._may_cross(w_p, a_p):
+            return
         self.steps_seen += 1
         # (a wide step's onset is as uncertain as the area formula's crossing)
         self._torque_zero(t_p, w_p, a_p, drag, AREA_TIME_SD if wide else SWITCH_TIME_SD)
@@ -391,6 +400,24 @@ class Adapter:
             _kalman_step(self.theta, self.P, np.zeros(lay.n), self._std ** 2, phi, abs(step),
                          sd * sd, HUBER_SIGMAS)
         self._hold_until = max(self._hold_until, t_p + FLANK_HOLD_OFF)
+
+    def _may_cross(self, w_p: float, a_p: float) -> bool:
+        """Whether the estimate's torque demand T + c omega4 + J alpha4 at (w_p, a_p) is
+        within PLAUSIBLE_SIGMAS of its standard deviation (and the torque floor) of zero."""
+        lay = self.layout
+        phi = np.zeros(lay.n)
+        demand = self._inertia * a_p
+        if lay.i_load >= 0:
+            phi[lay.i_load] = 1.0
+        else:
+            demand += self._load0
+        if lay.i_drag >= 0:
+            phi[lay.i_drag] = w_p
+        else:
+            demand += self._drag0 * w_p
+        demand += float(phi @ self.theta)
+        sd = math.sqrt(max(float(phi @ self.P @ phi), 0.0)) + SWITCH_TORQUE_SD
+        return abs(demand) <= PLAUSIBLE_SIGMAS * sd
 
     def _torque_zero(self, t_p: float, w_p: float, a_p: float, drag: float,
                      time_sd: float = SWITCH_TIME_SD) -> None:
@@ -562,10 +589,13 @@ class Adapter:
         """The caller applied ``step`` (a Decision's) to the model in use; ``at``: the time
         of the first sample it predicts [s] (None: the last sample's)."""
         step = np.array(step, float)
-        self._applied_bound = self._correction_bound(step - self.applied_x)
+        at = self._last_t if at is None else float(at)
+        # the steps applied within the detector's widest window add up in its residual
+        prev = self._applied_bound if at - self._applied_t < DETECT_SPAN else 0.0
+        self._applied_bound = self._correction_bound(step - self.applied_x) + prev
         self.applied_x = step
         self.model = model
-        self._applied_t = self._last_t if at is None else float(at)
+        self._applied_t = at
         self._hold_until = self._last_t + FLANK_HOLD_OFF   # the prediction's transient
         self.switches += 1
         if self.target is not None and np.array_equal(self.target, self.applied_x):
