@@ -11,7 +11,6 @@ import math
 import numpy as np
 import pytest
 
-from worm_gear_sim.adaptation import per_sample as ps
 from worm_gear_sim.adaptation.estimator import Adapter, output_compliance
 from worm_gear_sim.compensation import Compensator
 from worm_gear_sim.dynamics.modal import modes
@@ -171,33 +170,6 @@ def test_a_play_below_zero_taken_as_zero_keeps_the_offset(cfg):
     assert not why and cand[lay.i_play] == 0.0
     moved = abs(offset(cand) - offset(x))
     assert moved < 0.05 * 0.5 * abs(x[lay.i_play])       # zeroing alone: 0.5 |play|
-
-
-def test_no_step_is_applied_while_a_crossing_of_the_model_is_measured(cfg):
-    """A step of the model inside the window that measures the drive's crossing against
-    the model's (0.35 s each side) would drop that measurement: while it is open the
-    adapter waits, then steps (measured on drawn drives: every crossing of the model while
-    it was moved to its target, one step every 0.25 s, was lost that way)."""
-    ad = Adapter(cfg, cfg.adaptation)
-    ad.target = ad.applied_x.copy()
-    ad.target[ad.layout.i_load] += 1.0
-    ad._timing.model_flank_changed(5.0, 1.0, -1.0)
-    assert ad.poll(4.8).step is None                 # (the window is 0.35 s each side)
-    assert ad.poll(5.1).step is None
-    assert ad.poll(5.36).step is not None            # past the window: the step comes
-    fresh = Adapter(cfg, cfg.adaptation)             # without a crossing: at once
-    fresh.target = ad.target.copy()
-    assert fresh.poll(5.1).step is not None
-    # a model with play whose torque demand (0.1 N m, falling at c alpha4 = 1 N m/s) will
-    # pass zero within the window: the step waits for that crossing too
-    ahead = Adapter(cfg, cfg.adaptation)
-    ahead.applied_x[ahead.layout.i_play] = 5e-4
-    ahead.target = ad.target.copy()
-    ahead.target[ahead.layout.i_play] = 5e-4
-    ahead._st[ps.X_TORQUE_M], ahead._st[ps.X_DRAG_M], ahead._st[ps.S_A4] = 0.1, 10.0, -0.1
-    assert ahead.poll(5.1).step is None
-    ahead._st[ps.X_TORQUE_M] = 0.5                    # 0.5 s away: not waited for
-    assert ahead.poll(5.36).step is not None
 
 
 def test_a_slow_step_is_a_crossing_only_where_the_estimate_lets_the_drive_cross(cfg):

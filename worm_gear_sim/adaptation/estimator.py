@@ -88,7 +88,7 @@ from ..dynamics.model import DriveModel, with_load_torque
 from ..params import Config
 from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS, Parameters
 from . import per_sample as ps
-from .flank_timing import LEVEL_WINDOW, STEP_GAP_WIDE, STEP_SIDE_WIDE, WINDOW, FlankTiming
+from .flank_timing import STEP_GAP_WIDE, STEP_SIDE_WIDE, WINDOW, FlankTiming
 from .per_sample import _kalman_step, least_step, sample_head, sample_tail
 from .slots import Slot
 
@@ -499,8 +499,7 @@ class Adapter:
 
     def poll(self, t: float) -> Decision:
         """Every ``step_interval``: maybe take the estimate as the target (module
-        docstring), then the next bounded step towards the target (not while a crossing of
-        the model's play is being measured)."""
+        docstring), then the next bounded step towards the target."""
         s = self.settings
         if t < self._next_poll:
             return _NOTHING
@@ -519,32 +518,12 @@ class Adapter:
                             f'against {cur:.3g} rad (model in use), {nom:.3g} rad (nominal)')
         if self.target is None or np.array_equal(self.target, self.applied_x):
             return Decision(note=note)
-        if self._model_crossing_near(t):
-            # the model crossed its play within a window, or will: a step now would step the
-            # residual inside the window that measures the drive's crossing against it (the
-            # event would be dropped); the step waits for the measurement (at most 0.7 s)
-            return Decision(note=note)
         delta = self.target - self.applied_x
         bound = self._correction_bound(delta)
         limit = s.max_step * self._ratio          # max_step at the worm -> antenna
         share = 1.0 if bound <= limit else limit / bound
         step = self.target.copy() if share >= 1.0 else self.applied_x + share * delta
         return Decision(step, self.layout.overrides(step), note)
-
-    def _model_crossing_near(self, t: float) -> bool:
-        """Whether the model in use crossed its play within the window of the event that
-        measures it (:meth:`.flank_timing.FlankTiming.event_spans`), or will within one:
-        its torque demand at the last sample, run ahead at its rate (c alpha4), changes
-        sign (as the hold-off's look ahead)."""
-        if self._timing.event_spans(t):
-            return True
-        lay, st = self.layout, self._st
-        play = self.applied_x[lay.i_play] if lay.i_play >= 0 else self._play0
-        if not play > 0.0:
-            return False
-        torque_m = st.item(ps.X_TORQUE_M)
-        ahead = (WINDOW + LEVEL_WINDOW) * st.item(ps.S_A4)
-        return torque_m * (torque_m + st.item(ps.X_DRAG_M) * ahead) < 0.0
 
     def _bounded(self, x: np.ndarray) -> tuple[np.ndarray, str]:
         """The candidate of estimate ``x``: a play or drag below zero by less than
