@@ -12,17 +12,15 @@ import scipy.linalg as sla
 
 from ..schema import ANGLE_LIMIT, Parameters
 from .model import (
-    P_LW,
-    P_RG,
     DriveModel,
     forces,
     has_periodic_error,
     has_play,
     linear_stiffness,
     mass_matrix,
-    mesh_approach,
     play_rest_shift,
     rigid_motion_vector,
+    transmission_error,
     without_play,
 )
 
@@ -59,7 +57,7 @@ def _rest_with_play(p: np.ndarray, theta1: float, tol: float, max_iter: int) -> 
         u = rigid_motion_vector(p) * theta1 - shift
         if has_periodic_error(p):
             # the approach keeps its flank value: that of the rigid rest without the error
-            _keep_approach(p, u, p[P_LW] * u[0] - p[P_RG] * u[1])
+            _keep_approach(p, u, 0.0)
         return u
     # the drive without play at rest, shifted onto the loaded flank: the same region
     rest = static_equilibrium(without_play(p), theta1, None, tol, max_iter)
@@ -67,18 +65,19 @@ def _rest_with_play(p: np.ndarray, theta1: float, tol: float, max_iter: int) -> 
     if has_periodic_error(p):
         # the gear error moves with the shifted gear: its change (~1e-10 m) can put a lightly
         # loaded drive back inside the clearance, where the stiffness is singular; the
-        # approach is kept at the rest's plus the clearance
-        _keep_approach(p, u, mesh_approach(p, rest[0], rest[1]) + p[P_RG] * shift[1])
+        # approach is kept at the rest's plus the clearance (the error as at the rest)
+        _keep_approach(p, u, transmission_error(p, rest[0], rest[1])[0])
     return static_equilibrium(p, theta1, u, tol, max_iter)
 
 
-def _keep_approach(p: np.ndarray, u: np.ndarray, q_target: float) -> None:
-    """Shift the gear (and the antenna with it) in ``u`` by d such that the approach with
-    the periodic error is ``q_target``: q(theta2, theta3 + d) = q_target, a contraction
-    (|de/dtheta3| <= 0.1, schema), converged to round-off in a few iterations."""
+def _keep_approach(p: np.ndarray, u: np.ndarray, e_ref: float) -> None:
+    """Shift the gear (and the antenna with it) in ``u`` by d such that the approach
+    q = l_w theta2 - r_g theta3 + r_g e keeps the value it has with the error ``e_ref``:
+    r_g e(theta2, theta3 + d) - r_g d = r_g e_ref, a contraction (|de/dtheta3| <= 0.1,
+    schema), converged to round-off in a few iterations."""
     d = 0.0
     for _ in range(60):
-        d_new = d + (mesh_approach(p, u[0], u[1] + d) - q_target) / p[P_RG]
+        d_new = transmission_error(p, u[0], u[1] + d)[0] - e_ref
         if abs(d_new - d) <= 1e-16 * (1.0 + abs(u[1])):
             d = d_new
             break
