@@ -87,3 +87,15 @@ def test_a_running_node_is_calibrated_against_its_drive_and_updated_atomically(
     rel_after = float(held[0].split('->')[1].split('%')[0])
     assert rel_after < 3.0, held                     # % of the held-out move's amplitude
     assert (tmp_path / 'fitted.yaml').is_file() and (tmp_path / 'fitted.json').is_file()
+
+
+def test_measured_samples_out_of_order_or_repeated_are_dropped_not_fatal():
+    """A record holds the encoder samples whose stamps increase strictly: one delivered
+    late or twice (seen once in CI: the sample stamped at the move's first instant came
+    again as the 17th, and the calibration stopped on "decreasing time") is dropped, the
+    rest kept in arrival order."""
+    from worm_gear_sim.ros.calibrate import _increasing
+    v = {'theta4': 0.0}
+    got = _increasing([(10, v), (11, v), (12, v), (10, v), (13, v), (13, v), (12, v), (14, v)])
+    assert [s for s, _ in got] == [10, 11, 12, 13, 14]
+    assert _increasing([]) == []

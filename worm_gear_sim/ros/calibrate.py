@@ -187,7 +187,10 @@ class RosDrive:
             self._wait_for(last, 5.0)
         except CalibrationAborted:
             pass                                 # the core names a record that stops
-        got = [(s, v) for s, v in self.samples if first <= s <= last]
+        got = _increasing([(s, v) for s, v in self.samples if first <= s <= last])
+        if len(got) < sum(first <= s <= last for s, _ in self.samples):
+            self.node.get_logger().warning(
+                f'{move.name}: measured samples out of order or repeated dropped')
         stamps = np.array([s for s, _ in got], dtype=np.int64)
         cmd_t = first + np.arange(n, dtype=np.int64) * int(round(1e9 / self.rate))
         measured = {o: np.array([v.get(o, np.nan) for _, v in got]) for o in self.measure}
@@ -196,6 +199,17 @@ class RosDrive:
         return Record(move.name, t, theta1, measured, t0_ns=int(first),
                       source={'servo_topic': self.servo_topic,
                               'measured_topic': self.measured_topic})
+
+
+def _increasing(samples: list[tuple[int, dict[str, float]]]
+                ) -> list[tuple[int, dict[str, float]]]:
+    """The samples whose stamps increase strictly, in arrival order (a sample stamped at or
+    before the last one kept is dropped: delivered late, or sent twice)."""
+    out: list[tuple[int, dict[str, float]]] = []
+    for s, v in samples:
+        if not out or s > out[-1][0]:
+            out.append((s, v))
+    return out
 
 
 def _node_config(node: Any, executor: Any, target: str) -> Any:
