@@ -401,21 +401,28 @@ class Adapter:
                          sd * sd, HUBER_SIGMAS)
         self._hold_until = max(self._hold_until, t_p + FLANK_HOLD_OFF)
 
-    def _may_cross(self, w_p: float, a_p: float) -> bool:
-        """Whether the estimate's torque demand T + c omega4 + J alpha4 at (w_p, a_p) is
-        within PLAUSIBLE_SIGMAS of its standard deviation (and the torque floor) of zero."""
+    def _demand_row(self, w_p: float, a_p: float) -> tuple[np.ndarray, float]:
+        """The mesh torque demand T + c omega4 + J alpha4 at (w_p, a_p) as phi^T theta +
+        known: the row of the estimated load and drag, and the rest (J alpha4, and the
+        model's load and drag where they are not adapted)."""
         lay = self.layout
         phi = np.zeros(lay.n)
-        demand = self._inertia * a_p
+        known = self._inertia * a_p
         if lay.i_load >= 0:
             phi[lay.i_load] = 1.0
         else:
-            demand += self._load0
+            known += self._load0
         if lay.i_drag >= 0:
             phi[lay.i_drag] = w_p
         else:
-            demand += self._drag0 * w_p
-        demand += float(phi @ self.theta)
+            known += self._drag0 * w_p
+        return phi, known
+
+    def _may_cross(self, w_p: float, a_p: float) -> bool:
+        """Whether the estimate's torque demand at (w_p, a_p) is within PLAUSIBLE_SIGMAS of
+        its standard deviation (and the torque floor) of zero."""
+        phi, known = self._demand_row(w_p, a_p)
+        demand = known + float(phi @ self.theta)
         sd = math.sqrt(max(float(phi @ self.P @ phi), 0.0)) + SWITCH_TORQUE_SD
         return abs(demand) <= PLAUSIBLE_SIGMAS * sd
 
@@ -427,16 +434,8 @@ class Adapter:
             return
         self._switches.append((t_p, w_p, a_p))
         self._cross_t = max(self._cross_t, t_p)
-        phi = np.zeros(lay.n)
-        if lay.i_load >= 0:
-            phi[lay.i_load] = 1.0
-        if lay.i_drag >= 0:
-            phi[lay.i_drag] = w_p
-        y = -self._inertia * a_p
-        if lay.i_load < 0:
-            y -= self._load0
-        if lay.i_drag < 0:
-            y -= self._drag0 * w_p
+        phi, known = self._demand_row(w_p, a_p)
+        y = -known                          # the demand is zero: phi^T theta = -known
         sd = time_sd * abs(drag * a_p) + SWITCH_TORQUE_SD
         _kalman_step(self.theta, self.P, np.zeros(lay.n), self._std ** 2, phi, y, sd * sd,
                      HUBER_SIGMAS)

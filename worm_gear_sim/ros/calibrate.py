@@ -187,8 +187,9 @@ class RosDrive:
             self._wait_for(last, 5.0)
         except CalibrationAborted:
             pass                                 # the core names a record that stops
-        got = _increasing([(s, v) for s, v in self.samples if first <= s <= last])
-        if len(got) < sum(first <= s <= last for s, _ in self.samples):
+        window = [(s, v) for s, v in self.samples if first <= s <= last]
+        got = _increasing(window)
+        if len(got) < len(window):
             self.node.get_logger().warning(
                 f'{move.name}: measured samples out of order or repeated dropped')
         stamps = np.array([s for s, _ in got], dtype=np.int64)
