@@ -379,18 +379,19 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
                                  f'{(node.preview + node.lead) * 1e3:g} ms ahead'
                                  if opts.interface == 'stamped' else '')), file=out,
                           flush=True)
-            if node.started() and node.elapsed() >= opts.duration:
-                break
-            if tty and now - last_print >= 0.1:
+            ending = node.started() and node.elapsed() >= opts.duration
+            if tty and now - last_print >= 0.1 and not ending:
                 out.write('\r' + node.status_line(width) + '\x1b[K')
                 out.flush()
                 last_print = now
-            elif not tty:
+            elif not tty:   # before the end test: a move completed in the last spin is listed
                 for m in node.new_moves:
                     if m is node.tracker.moves[0]:
                         print(MOVE_HEADER, file=out, flush=True)
                     print(format_move(m), file=out, flush=True)
             node.new_moves.clear()
+            if ending:
+                break
         if tty:
             out.write('\r' + node.status_line(width) + '\x1b[K\n')
         ex.shutdown(1.0)
