@@ -9,7 +9,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from worm_gear_sim.adaptation.flank_timing import FlankTiming, arch_top, float_onset
+from worm_gear_sim.adaptation.flank_timing import (
+    STEP_GAP,
+    STEP_SIDE,
+    FlankTiming,
+    arch_top,
+    float_onset,
+)
 
 NOISE = 4e-6
 PLAY = 4e-4
@@ -124,3 +130,25 @@ def test_a_quick_step_stays_on_the_steep_scale_and_a_smooth_path_is_no_step():
     assert len(found) == 1 and not found[0][4]
     assert found[0][0] == pytest.approx(1.61, abs=2e-3)
     assert _looks(5e-4 * np.sin(2 * np.pi * t / 4.0) + noise, t) == []
+
+
+@pytest.mark.parametrize('lag', [0.0005, 0.002])
+def test_a_step_at_the_gaps_edge_is_timed_where_it_is_not_at_the_centre(lag):
+    """A look whose left line ends just after the step (the first look after the detector
+    was held, e.g. by a crossing of the model's) sees the step but no crossing of its middle
+    in the gap; it was timed at the window's centre, 31 ms late with a 2 ms sd. Now that
+    look finds nothing, and the next one, with the step in its gap, times it."""
+    t = np.arange(1.0, 2.0, 1e-3)
+    t_step = 1.5
+    r = np.where(t >= t_step, 8e-4, 0.0) + np.random.default_rng(3).normal(0.0, 1e-6, t.size)
+    first = t_step + STEP_SIDE + STEP_GAP + lag     # the step at -STEP_GAP / 2 - lag
+    ft = FlankTiming()
+    found = []
+    for k in range(t.size):
+        ft.push(float(t[k]), float(r[k]), float(t[k]), 1.0)
+        if t[k] >= first - 1e-9:
+            got = ft.detect(float(t[k]), 1e-6, -np.inf)
+            if got is not None:
+                found.append(got)
+    assert len(found) == 1
+    assert found[0][0] == pytest.approx(t_step, abs=1.5e-3)

@@ -361,7 +361,7 @@ class FlankTiming:
 @njit(cache=True)
 def _crossing_at(a, k0, n, centre, half, dl, kl, level0):
     """Where the residual first crosses the left line + ``level0`` in the gap (time from
-    ``centre``; 0 if it does not)."""
+    ``centre``; NaN if it does not: the step was not made in the gap)."""
     prev_t = prev_l = 0.0
     seen = 0
     for i in range(k0, n):
@@ -372,7 +372,7 @@ def _crossing_at(a, k0, n, centre, half, dl, kl, level0):
                 return prev_t - prev_l * (x - prev_t) / (level - prev_l)
             prev_t, prev_l = x, level
             seen += 1
-    return 0.0
+    return np.nan
 
 
 @njit(cache=True)
@@ -503,6 +503,8 @@ def _look(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay, t_a
         if not -0.25 * gap <= t_c <= 0.0:
             return nothing
         t_c = _crossing_at(a, k0, n, centre, half, dl, kl, ONSET_SHARE * step)
+    if math.isnan(t_c):         # the residual crosses no such level in the gap: the step
+        return nothing          # the lines see was made outside it (timed at the centre before)
     ts = a[k0:n, 0] - centre
     return (True, centre + t_c, np.interp(t_c, ts, a[k0:n, 2]),
             np.interp(t_c, ts, a[k0:n, 3]), step)
