@@ -6,7 +6,7 @@
         [--scenario sector] [--stiffness-spread 0.0] [--drag-max 60] [--cost-samples 3000]
         [--no-drives]
         [--latency-seconds 8] [--load-min 0.5] [--load-max 5] [--load-sign positive]
-        [--play-max 5] [--error-max 30] [--gear-orders 1] [--known-drive]
+        [--play-max 5] [--error-max 30] [--gear-orders 1] [--known-drive] [--crossing-times]
 
 Each drive: the default set with a random play (0.5-5 arcmin), load torque (0.5-5 N m),
 antenna drag (0-60 N m s/rad, capped at ``--drag-max``; 0: the same drives without drag,
@@ -26,6 +26,11 @@ never the number of draws, so a drive's other values stay as in the default draw
 * ``--play-max p``: the play from 0.5-p arcmin;
 * ``--error-max e``: each periodic error coefficient from 2-e urad;
 * ``--gear-orders 0``: no gear error order (worm orders 1-3 only).
+
+``--crossing-times`` prints every crossing of the play the adapter measured (by the step
+detector or at a flank event) against the drive's own: where its torque demand
+T + c omega4 + J alpha4 passes zero along the commanded path, in ms and in the time sd the
+measurement was weighed with; then a summary per method.
 
 ``--known-drive`` also runs each drive with the feed-forward of its own values, never
 adapted, and prints the same three figures: what the compensation reaches when the model is
@@ -83,6 +88,7 @@ from worm_gear_sim.adaptation.twin import (  # noqa: E402
     run_twin,
     scenario,
 )
+from worm_gear_sim.dynamics.model import DriveModel  # noqa: E402
 from worm_gear_sim.dynamics.simulation import Simulator  # noqa: E402
 from worm_gear_sim.params import Config  # noqa: E402
 from worm_gear_sim.realtime.predictor import RealtimePredictor  # noqa: E402
@@ -138,10 +144,33 @@ def two_revolutions(t: np.ndarray, theta1: np.ndarray) -> float:
     return float(t[min(k, t.size - 1)])
 
 
+def crossing_times(plant: Config, run: Any) -> list[tuple[str, float, float]]:
+    """Each crossing the adapter measured (``run.crossings``) against the drive's own: the
+    zero of its torque demand T + c omega4 + J alpha4 (its load, drag and J_g + J_4) along
+    the commanded antenna path theta1_ref l_w / r_g nearest to it (within 0.5 s). Prints
+    one line per crossing; returns (how, error [s], time sd [s])."""
+    m = DriveModel.of(plant)
+    path = m.output_per_input * run.theta1_ref
+    w4 = np.gradient(path, run.t)
+    demand = (plant.load.output_torque + plant.load.output_viscous_coefficient * w4
+              + (m.derived.J_g + m.derived.J_4) * np.gradient(w4, run.t))
+    k = np.nonzero(np.sign(demand[1:]) != np.sign(demand[:-1]))[0]
+    zeros = run.t[k] - demand[k] * (run.t[k + 1] - run.t[k]) / (demand[k + 1] - demand[k])
+    out = []
+    for t_p, _, _, sd, how in run.crossings:
+        near = zeros[np.abs(zeros - t_p) < 0.5] if zeros.size else zeros
+        err = float(t_p - near[np.argmin(np.abs(near - t_p))]) if near.size else math.nan
+        out.append((how, err, sd))
+        print(f'   crossing {how:9s} at {t_p:8.3f} s: {err * 1e3:7.1f} ms from the drive\'s '
+              f'torque zero, time sd {sd * 1e3:5.1f} ms ({err / sd:6.2f} sd)', flush=True)
+    return out
+
+
 def run_drives(args: argparse.Namespace, base: Config) -> None:
     rng = np.random.default_rng(args.seed)
     sign_rng = np.random.default_rng([args.seed, 1])
     rows = []
+    timing: list[tuple[str, float, float]] = []
     for i in range(args.drives):
         try:
             v, plant = drive(base, rng, args.stiffness_spread, args.drag_max, args, sign_rng)
@@ -177,6 +206,8 @@ def run_drives(args: argparse.Namespace, base: Config) -> None:
                   f"{rms(kt, ku, end - 10, end) / rms(kt, kc, end - 10, end):.1f}x"
                   f" | worst 1 s {kw:.4f}x", flush=True)
         rows.append(r)
+        if args.crossing_times:
+            timing += crossing_times(plant, run)
         fit = run.in_use
         print(f"drive {i}: play {r['play_arcmin']:.2f}' load {r['load']:.2f} N m drag "
               f"{r['drag']:.1f} | raw {r['raw_rms_urad']:.0f} urad | 10-20 s "
@@ -189,6 +220,15 @@ def run_drives(args: argparse.Namespace, base: Config) -> None:
               f"{np.round(np.array(fit.get('mesh.worm_error_harmonics', [])) * 1e6, 1)} (true "
               f"{np.round(np.array(v['mesh.worm_error_harmonics']) * 1e6, 1)}) urad",
               flush=True)
+    if timing:
+        print('crossing times against the drive\'s torque zero, per method: n, median |error|,'
+              ' RMS and max of |error| / its time sd')
+        for how in sorted({h for h, _, _ in timing}):
+            err = np.array([e for h, e, _ in timing if h == how and math.isfinite(e)])
+            z = np.array([e / sd for h, e, sd in timing if h == how and math.isfinite(e)])
+            if err.size:
+                print(f'   {how:10s} {err.size:4d} | {np.median(np.abs(err)) * 1e3:6.1f} ms | '
+                      f'{np.sqrt(np.mean(z ** 2)):6.2f} | {np.max(np.abs(z)):6.2f}')
     targets = (('x_10_20', 10.0), ('x_50_60', 30.0), ('worst_1s', 1.0)) if rows else ()
     for key, target in targets:
         vals = np.array([r[key] for r in rows])
@@ -353,6 +393,9 @@ def main() -> int:
                     help='0: no gear error order (worm orders 1-3 only)')
     ap.add_argument('--known-drive', action='store_true',
                     help="also run each drive's own values as the feed-forward, not adapted")
+    ap.add_argument('--crossing-times', action='store_true',
+                    help="print each crossing the adapter measured against the drive's own "
+                         "torque zero, and a summary per method")
     ap.add_argument('--cost-samples', type=int, default=3000)
     ap.add_argument('--no-drives', action='store_true')
     ap.add_argument('--latency-seconds', type=float, default=8.0)

@@ -121,6 +121,8 @@ AREA_TIME_SD = 0.05
 #: deviations of zero (the drive crosses only there; a smooth residual not yet learnt can
 #: look like a slow step: measured on a drive without drag that never crosses)
 PLAUSIBLE_SIGMAS = 3.0
+#: How many of the drive's measured crossings :attr:`Adapter.crossings` keeps
+CROSSING_LOG = 4096
 #: The step detector's widest window [s]
 DETECT_SPAN = 2.0 * STEP_SIDE_WIDE + STEP_GAP_WIDE
 #: A play smaller than this many measurement noises is not seen in a flank change.
@@ -288,6 +290,9 @@ class Adapter:
         self.samples_skipped = 0
         self.flank_times = 0
         self.steps_seen = 0
+        #: The drive's crossings measured, the latest CROSSING_LOG: (t_p [s], omega4, alpha4,
+        #: time sd [s], how: 'step', 'wide step', 'onset', 'arch' or 'area'), for diagnostics
+        self.crossings: collections.deque = collections.deque(maxlen=CROSSING_LOG)
         self.switches = 0
         self.refusals = 0
         self.last_refusal = ''
@@ -392,7 +397,8 @@ class Adapter:
             return
         self.steps_seen += 1
         # (a wide step's onset is as uncertain as the area formula's crossing)
-        self._torque_zero(t_p, w_p, a_p, drag, AREA_TIME_SD if wide else SWITCH_TIME_SD)
+        self._torque_zero(t_p, w_p, a_p, drag, AREA_TIME_SD if wide else SWITCH_TIME_SD,
+                          'wide step' if wide else 'step')
         if lay.i_play >= 0:
             phi = np.zeros(lay.n)
             phi[lay.i_play] = 1.0
@@ -427,11 +433,13 @@ class Adapter:
         return abs(demand) <= PLAUSIBLE_SIGMAS * sd
 
     def _torque_zero(self, t_p: float, w_p: float, a_p: float, drag: float,
-                     time_sd: float = SWITCH_TIME_SD) -> None:
-        """The drive's mesh torque was zero at t_p: T + c omega4 = -J alpha4 there."""
+                     time_sd: float = SWITCH_TIME_SD, how: str = 'step') -> None:
+        """The drive's mesh torque was zero at t_p: T + c omega4 = -J alpha4 there
+        (measured ``how``, its timing uncertain by ``time_sd``)."""
         lay = self.layout
         if lay.i_load < 0 and lay.i_drag < 0:
             return
+        self.crossings.append((t_p, w_p, a_p, time_sd, how))
         self._switches.append((t_p, w_p, a_p))
         self._cross_t = max(self._cross_t, t_p)
         phi, known = self._demand_row(w_p, a_p)
@@ -459,7 +467,8 @@ class Adapter:
         if got is None:
             return
         t_p, w_p, a_p, how = got
-        self._torque_zero(t_p, w_p, a_p, drag, AREA_TIME_SD if how == 'area' else SWITCH_TIME_SD)
+        self._torque_zero(t_p, w_p, a_p, drag, AREA_TIME_SD if how == 'area' else SWITCH_TIME_SD,
+                          how)
 
     # ---- switching -------------------------------------------------------------------------
     def window_rms(self) -> dict[str, float]:

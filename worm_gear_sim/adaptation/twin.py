@@ -75,8 +75,8 @@ def scenario(cfg: Config, name: str, duration: float) -> tuple[np.ndarray, np.nd
 @dataclass
 class TwinRun:
     """The twin's record: per sample t, theta1_ref, antenna error uncompensated and with the
-    adapting feed-forward [rad]; the steps applied (time, values), the final estimate and
-    the counters."""
+    adapting feed-forward [rad]; the steps applied (time, values), the final estimate, the
+    counters and the drive's crossings the adapter measured (:attr:`.Adapter.crossings`)."""
 
     t: np.ndarray
     theta1_ref: np.ndarray
@@ -89,6 +89,7 @@ class TwinRun:
     messages: list[str] = field(default_factory=list)
     record: list[tuple[int, float, list[tuple[int, float, float]]]] = field(
         default_factory=list)
+    crossings: list[tuple[float, float, float, float, str]] = field(default_factory=list)
 
 
 def prepare_start(start: Config, preview: float | None = None) -> Config:
@@ -208,6 +209,7 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
                                                                   run.theta1_ref, theta4)
     run.estimates = live.estimates()
     run.in_use = live.adapter.applied_values()
+    run.crossings = list(live.adapter.crossings)
     run.counters = {**live.counters, **{f'predictor_{k}': v for k, v in
                                          pred.counters.items() if v}}
     return run
