@@ -72,3 +72,29 @@ def test_a_measured_crossing_has_the_paths_acceleration():
     assert abs(float(np.interp(got[0], t, a4)) - alpha) > 0.1     # the shaking, there
     assert got[2] == pytest.approx(alpha, rel=0.05)
     assert got[1] == pytest.approx(w0 + alpha * t_p, abs=2e-3)
+
+
+def test_the_twin_lists_the_crossings_it_measured():
+    """A drive with a negative load crosses its play where its torque demand T + c omega4
+    + J alpha4 passes zero (0.516 s on the sector scan, the demand computed here along the
+    commanded path); the adapter lists the crossing it measured there (time, rates, the
+    time sd it weighed it with, how), and the twin hands the list over (what
+    ``bench_adaptation.py --crossing-times`` weighs against the drive's own zeros)."""
+    from worm_gear_sim.adaptation.twin import run_twin
+    plant = Config().replace({'mesh.backlash': 5.8e-4, 'load.output_torque': -2.0,
+                              'load.output_viscous_coefficient': 20.0})
+    start = Config().replace({'adaptation.keys': ['load.output_torque',
+                                                  'load.output_viscous_coefficient',
+                                                  'mesh.backlash'],
+                              'adaptation.window': 0.5, 'adaptation.step_interval': 0.1})
+    run = run_twin(plant, start, 'sector', 1.2, seed=3)
+    m = DriveModel.of(plant)
+    w4 = np.gradient(m.output_per_input * run.theta1_ref, run.t)
+    demand = -2.0 + 20.0 * w4 + (m.derived.J_g + m.derived.J_4) * np.gradient(w4, run.t)
+    k = int(np.nonzero(np.diff(np.sign(demand)))[0][0])
+    assert run.t[k] == pytest.approx(0.516, abs=2e-3)
+    assert len(run.crossings) == 1
+    t_p, w_p, a_p, sd, how = run.crossings[0]
+    assert how in ('step', 'wide step', 'onset', 'arch', 'area') and sd > 0.0
+    assert abs(t_p - run.t[k]) < 0.1                # (the step detector's lateness: docs)
+    assert w_p == pytest.approx(w4[np.searchsorted(run.t, t_p)], abs=5e-3)
