@@ -24,7 +24,7 @@ from worm_gear_sim.adaptation.estimator import (
     MAX_GAP,
     Adapter,
 )
-from worm_gear_sim.adaptation.flank_timing import STEP_GAP, STEP_SIDE, FlankTiming
+from worm_gear_sim.adaptation.flank_timing import ONSET_SHARE, STEP_GAP, STEP_SIDE, FlankTiming
 from worm_gear_sim.adaptation.per_sample import _sample_step
 from worm_gear_sim.dynamics.model import DriveModel
 from worm_gear_sim.params import Config
@@ -183,7 +183,15 @@ def _numpy_look(a: np.ndarray, t: float, noise: float) -> tuple[float, float] | 
     level = r[mid] - (dl + kl * x[mid] + 0.5 * step)
     k = int(np.nonzero(np.sign(level[1:]) != np.sign(level[:-1]))[0][0])
     xm = x[mid]
-    return centre + xm[k] - level[k] * (xm[k + 1] - xm[k]) / (level[k + 1] - level[k]), step
+    t_mid = xm[k] - level[k] * (xm[k + 1] - xm[k]) / (level[k + 1] - level[k])
+    # back from the middle to the rise's ONSET_SHARE, then to where a cube would start
+    low = r - (dl + kl * x + ONSET_SHARE * step)
+    up = np.sign(low) == np.sign(step)
+    last = int(np.searchsorted(x, t_mid))
+    i = max(j for j in range(1, last + 1) if up[j] and not up[j - 1])
+    t_s = x[i - 1] - low[i - 1] * (x[i] - x[i - 1]) / (low[i] - low[i - 1])
+    t_0 = t_s - (t_mid - t_s) / ((0.5 / ONSET_SHARE) ** (1 / 3) - 1)
+    return centre + t_0, step
 
 
 @pytest.mark.parametrize('size', [0.0, 2e-5, -3e-4])

@@ -116,6 +116,10 @@ SWITCH_TORQUE_SD = 2e-3
 #: float's onset nor the arch seen): the formula holds only when the model crosses first,
 #: and off that case it was measured 12-330 ms off (docs/adaptation.md)
 AREA_TIME_SD = 0.05
+#: Timing uncertainty of a crossing the steep scale of the step detector found, as a share
+#: of the time from the rise's extrapolated start to the step's middle (the start measured
+#: 4-33 ms off on 11 drives drawn with drag, the rise 53-144 ms: docs/adaptation.md)
+RISE_TIME_SHARE = 0.2
 #: A step found on the detector's wide scale is the drive's crossing only where the
 #: estimate's torque demand T + c omega4 + J alpha4 is within this many of its standard
 #: deviations of zero (the drive crosses only there; a smooth residual not yet learnt can
@@ -380,8 +384,8 @@ class Adapter:
     def _step_update(self, t: float, drag: float) -> None:
         """A crossing of the drive's own, seen as a step of the residual while the model
         did not cross (:meth:`.flank_timing.FlankTiming.detect`): the torque measurement of
-        :meth:`_flank_time_update` at its middle and, with play adapted, the step's size as
-        a measurement of the play (10 % uncertain)."""
+        :meth:`_flank_time_update` where the step's float starts and, with play adapted, the
+        step's size as a measurement of the play (10 % uncertain)."""
         if not self._timing.due(t):
             return
         lay = self.layout
@@ -392,12 +396,14 @@ class Adapter:
                                   self._applied_t, self._applied_bound)
         if got is None:
             return
-        t_p, w_p, a_p, step, wide = got
+        t_p, w_p, a_p, step, wide, rise = got
         if wide and not self._may_cross(w_p, a_p):
             return
         self.steps_seen += 1
-        # (a wide step's onset is as uncertain as the area formula's crossing)
-        self._torque_zero(t_p, w_p, a_p, drag, AREA_TIME_SD if wide else SWITCH_TIME_SD,
+        # (a steep step's start is extrapolated from its rise: uncertain in proportion; a
+        # wide step's onset as the area formula's crossing)
+        self._torque_zero(t_p, w_p, a_p, drag,
+                          AREA_TIME_SD if wide else max(SWITCH_TIME_SD, RISE_TIME_SHARE * rise),
                           'wide step' if wide else 'step')
         if lay.i_play >= 0:
             phi = np.zeros(lay.n)

@@ -251,7 +251,7 @@ class FlankTiming:
                theta: np.ndarray = _NONE, applied: np.ndarray = _NONE, P: np.ndarray = _NONE2,
                lay: np.ndarray = _NO_LAYOUT, t_applied: float = -math.inf,
                applied_bound: float = 0.0
-               ) -> tuple[float, float, float, float, bool] | None:
+               ) -> tuple[float, float, float, float, bool, float] | None:
         """A step of the drive's own in the residual (its crossing of the play while the
         model did not cross: no model crossing at ``t_model`` within the window): lines
         fitted to STEP_SIDE s of the residual each side of a STEP_GAP s gap, their values at
@@ -264,19 +264,18 @@ class FlankTiming:
         adapter's layout ``lay``: :mod:`.per_sample`'s L_* indices) the share of the step
         the periodic error not yet learnt makes is taken off, and the step must exceed
         SMOOTH_SIGMAS of its sd (module docstring).  Returns (t_p, omega4, alpha4, step
-        [rad], wide), t_p where the residual crosses the middle of the step (or, ``wide``:
-        found on the wide scale, where it starts: :func:`detect_core`), or None.  Looks
-        every STEP_STRIDE s."""
+        [rad], wide, rise [s]), t_p where the step's float starts (:func:`detect_core`),
+        rise the time from there to the step's middle, or None.  Looks every STEP_STRIDE s."""
         if t < self._next_look:
             return None
         self._next_look = t + STEP_STRIDE
-        found, t_p, w_p, a_p, step, wide = detect_core(
+        found, t_p, w_p, a_p, step, wide, rise = detect_core(
             self._a, self._n, t, noise, t_model, self._last_step, least, theta, applied, P,
             lay, t_applied, applied_bound)
         if not found:
             return None
-        self._last_step = t_p
-        return t_p, w_p, a_p, step, wide
+        self._last_step = t_p + rise         # (the step's middle: the next looks pass it)
+        return t_p, w_p, a_p, step, wide, rise
 
     def model_flank_changed(self, t: float, old: float, new: float) -> None:
         """The model's flank changed at ``t`` from ``old`` to ``new`` (+1 / -1; 0 unknown)."""
@@ -448,28 +447,31 @@ def detect_core(a, n, t, noise, t_model, last_step, least, theta, applied, P, la
     """:meth:`FlankTiming.detect`'s look at ``t`` over the record's rows a[:n] (the
     estimate ``theta``, ``P``, ``applied`` and ``lay`` for the harmonics' share; empty:
     none; the last step applied to the model at ``t_applied``, its bound ``applied_bound``):
-    (found, t_p, omega4, alpha4, step, wide).  The steep scale (STEP_SIDE, STEP_GAP) first,
-    t_p where the residual crosses the step's middle; else the wide one (STEP_SIDE_WIDE,
-    STEP_GAP_WIDE: a drive that crosses near its top speed floats across its play for
-    ~0.1 s), t_p where the residual leaves the line before it by ONSET_SHARE of the step
-    (the float starts where the mesh torque passes zero)."""
-    found, t_p, w_p, a_p, step = _look(a, n, t, noise, t_model, last_step, least, theta,
-                                       applied, P, lay, t_applied, applied_bound,
-                                       STEP_SIDE, STEP_GAP, False)
+    (found, t_p, omega4, alpha4, step, wide, rise).  The steep scale (STEP_SIDE, STEP_GAP)
+    first, t_p where a cube through the residual's ONSET_SHARE and middle crossings starts
+    (the float starts where the mesh torque passes zero); else the wide one
+    (STEP_SIDE_WIDE, STEP_GAP_WIDE: a drive that crosses near its top speed floats across
+    its play for ~0.1 s, no cube), t_p where the residual leaves the line before it by
+    ONSET_SHARE of the step.  ``rise``: from t_p to the step's middle."""
+    found, t_p, w_p, a_p, step, rise = _look(a, n, t, noise, t_model, last_step, least,
+                                             theta, applied, P, lay, t_applied,
+                                             applied_bound, STEP_SIDE, STEP_GAP, False)
     if found:
-        return True, t_p, w_p, a_p, step, False
-    found, t_p, w_p, a_p, step = _look(a, n, t, noise, t_model, last_step, least, theta,
-                                       applied, P, lay, t_applied, applied_bound,
-                                       STEP_SIDE_WIDE, STEP_GAP_WIDE, True)
-    return found, t_p, w_p, a_p, step, found
+        return True, t_p, w_p, a_p, step, False, rise
+    found, t_p, w_p, a_p, step, rise = _look(a, n, t, noise, t_model, last_step, least,
+                                             theta, applied, P, lay, t_applied,
+                                             applied_bound, STEP_SIDE_WIDE, STEP_GAP_WIDE,
+                                             True)
+    return found, t_p, w_p, a_p, step, found, rise
 
 
 @njit(cache=True)
 def _look(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay, t_applied,
           applied_bound, side, gap, onset):
     """One scale of :func:`detect_core`: lines over ``side`` s each side of a ``gap`` s gap
-    ending at ``t``; t_p at the step's middle, or (``onset``) where it starts."""
-    nothing = (False, 0.0, 0.0, 0.0, 0.0)
+    ending at ``t``; t_p where a cube through the step's rise starts, or (``onset``) where
+    the rise leaves the line before it."""
+    nothing = (False, 0.0, 0.0, 0.0, 0.0, 0.0)
     span = 2 * side + gap
     centre = t - 0.5 * span
     if t_model > centre - span or centre - last_step < span:
@@ -497,14 +499,47 @@ def _look(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay, t_a
             and abs(step) > 2.0 * drift + extra):
         return nothing
     t_c = _crossing_at(a, k0, n, centre, half, dl, kl, 0.5 * step)    # the middle
+    # the whole float inside the gap on the wide scale (the look that has the step's
+    # middle at or just before its centre)
+    if math.isnan(t_c) or onset and not -0.25 * gap <= t_c <= 0.0:
+        return nothing          # (NaN: the residual crosses no such level in the gap)
     if onset:
-        # the whole float inside the gap (the look that has the step's middle at or just
-        # before its centre), then where it starts: ONSET_SHARE of the step from the line
-        if not -0.25 * gap <= t_c <= 0.0:
+        # near the top speed the torque demand hardly passes zero, the float is no cube:
+        # where the residual leaves the line before it by ONSET_SHARE of the step
+        t_0 = _crossing_at(a, k0, n, centre, half, dl, kl, ONSET_SHARE * step)
+        if math.isnan(t_0):
             return nothing
-        t_c = _crossing_at(a, k0, n, centre, half, dl, kl, ONSET_SHARE * step)
-    if math.isnan(t_c):         # the residual crosses no such level in the gap: the step
-        return nothing          # the lines see was made outside it (timed at the centre before)
+    else:
+        # the float starts where the mesh torque passes zero, and the residual rises as the
+        # cube of the time since (the gear's acceleration off the worm's grows linearly
+        # from zero): from its ONSET_SHARE and middle crossings, back to where a cube starts
+        t_s = _rise_before(a, k0, n, centre, t_c, dl, kl, ONSET_SHARE * step)
+        t_0 = t_s - (t_c - t_s) / _CUBE_SPAN if t_s > -np.inf else t_c
+        t_0 = max(t_0, a[k0, 0] - centre)
     ts = a[k0:n, 0] - centre
-    return (True, centre + t_c, np.interp(t_c, ts, a[k0:n, 2]),
-            np.interp(t_c, ts, a[k0:n, 3]), step)
+    return (True, centre + t_0, np.interp(t_0, ts, a[k0:n, 2]),
+            np.interp(t_0, ts, a[k0:n, 3]), step, t_c - t_0)
+
+
+#: A cubic rise from t_0: (t_mid - t_0) / (t_s - t_0) - 1, t_s at ONSET_SHARE of the step and
+#: t_mid at its middle: (0.5 / ONSET_SHARE)^(1/3) - 1
+_CUBE_SPAN = (0.5 / ONSET_SHARE) ** (1.0 / 3.0) - 1.0
+
+
+@njit(cache=True)
+def _rise_before(a, k0, n, centre, t_mid, dl, kl, level0):
+    """Where the residual, going back from ``t_mid`` (time from ``centre``), last crossed
+    the left line + ``level0`` (time from ``centre``; -inf if it does not in the rows)."""
+    i = k0 + np.searchsorted(a[k0:n, 0], centre + t_mid)
+    if i >= n:
+        i = n - 1
+    s = _sign(level0)
+    while i > k0:
+        x1 = a[i, 0] - centre
+        l1 = a[i, 1] - (dl + kl * x1 + level0)
+        x0 = a[i - 1, 0] - centre
+        l0 = a[i - 1, 1] - (dl + kl * x0 + level0)
+        if _sign(l0) != s and _sign(l1) == s:
+            return x0 - l0 * (x1 - x0) / (l1 - l0)
+        i -= 1
+    return -np.inf
