@@ -88,6 +88,7 @@ from worm_gear_sim.adaptation.twin import (  # noqa: E402
     run_twin,
     scenario,
 )
+from worm_gear_sim.dynamics.inverse import gear_torque_demand  # noqa: E402
 from worm_gear_sim.dynamics.model import DriveModel  # noqa: E402
 from worm_gear_sim.dynamics.simulation import Simulator  # noqa: E402
 from worm_gear_sim.params import Config  # noqa: E402
@@ -150,10 +151,9 @@ def crossing_times(plant: Config, run: Any) -> list[tuple[str, float, float]]:
     the commanded antenna path theta1_ref l_w / r_g nearest to it (within 0.5 s). Prints
     one line per crossing; returns (how, error [s], time sd [s])."""
     m = DriveModel.of(plant)
-    path = m.output_per_input * run.theta1_ref
-    w4 = np.gradient(path, run.t)
-    demand = (plant.load.output_torque + plant.load.output_viscous_coefficient * w4
-              + (m.derived.J_g + m.derived.J_4) * np.gradient(w4, run.t))
+    w4 = np.gradient(m.output_per_input * run.theta1_ref, run.t)
+    demand = np.array([gear_torque_demand(m.p, w, a, 0.0, 0.0, False)
+                       for w, a in zip(w4, np.gradient(w4, run.t))])
     k = np.nonzero(np.sign(demand[1:]) != np.sign(demand[:-1]))[0]
     zeros = run.t[k] - demand[k] * (run.t[k + 1] - run.t[k]) / (demand[k + 1] - demand[k])
     out = []

@@ -78,9 +78,12 @@ def test_the_twin_lists_the_crossings_it_measured():
     """A drive with a negative load crosses its play where its torque demand T + c omega4
     + J alpha4 passes zero (0.516 s on the sector scan, the demand computed here along the
     commanded path); the adapter lists the crossing it measured there (time, rates, the
-    time sd it weighed it with, how), and the twin hands the list over (what
-    ``bench_adaptation.py --crossing-times`` weighs against the drive's own zeros)."""
+    time sd it weighed it with, how), within that sd (the step detector found it 61 ms
+    late and weighed it as 2 ms before it timed a step where its rise starts), and the twin
+    hands the list over (what ``bench_adaptation.py --crossing-times`` weighs against the
+    drive's own zeros)."""
     from worm_gear_sim.adaptation.twin import run_twin
+    from worm_gear_sim.dynamics.inverse import gear_torque_demand
     plant = Config().replace({'mesh.backlash': 5.8e-4, 'load.output_torque': -2.0,
                               'load.output_viscous_coefficient': 20.0})
     start = Config().replace({'adaptation.keys': ['load.output_torque',
@@ -90,11 +93,12 @@ def test_the_twin_lists_the_crossings_it_measured():
     run = run_twin(plant, start, 'sector', 1.2, seed=3)
     m = DriveModel.of(plant)
     w4 = np.gradient(m.output_per_input * run.theta1_ref, run.t)
-    demand = -2.0 + 20.0 * w4 + (m.derived.J_g + m.derived.J_4) * np.gradient(w4, run.t)
+    demand = np.array([gear_torque_demand(m.p, w, a, 0.0, 0.0, False)
+                       for w, a in zip(w4, np.gradient(w4, run.t))])
     k = int(np.nonzero(np.diff(np.sign(demand)))[0][0])
     assert run.t[k] == pytest.approx(0.516, abs=2e-3)
     assert len(run.crossings) == 1
     t_p, w_p, a_p, sd, how = run.crossings[0]
     assert how in ('step', 'wide step', 'onset', 'arch', 'area') and sd > 0.0
-    assert abs(t_p - run.t[k]) < 0.1                # (the step detector's lateness: docs)
+    assert abs(t_p - run.t[k]) <= sd
     assert w_p == pytest.approx(w4[np.searchsorted(run.t, t_p)], abs=5e-3)
