@@ -51,6 +51,7 @@ EXIT_INTERRUPTED = 130    # 128 + SIGINT, as a shell reports it
 LEAD_S = 0.05             # references are sent this far ahead of their instant
 SETTLE_WINDOW_S = 0.05    # at rest: the measured antenna angle moves less than
 SETTLE_TOL_RAD = 1e-6     # this over that window
+MEASURED_DEPTH = 2000     # encoder samples queued (2 s at 1 kHz)
 OUTPUTS = {'theta2': 1, 'theta3': 2, 'theta4': 3}     # index in node.joint_names
 
 
@@ -89,7 +90,7 @@ class RosDrive:
     def __init__(self, node: Any, executor: Any, servo_topic: str, measured_topic: str,
                  joint_names: list[str], measure: list[str], rate: float,
                  settle_timeout: float) -> None:
-        from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import JointState
         self.node, self.ex = node, executor
         self.rate, self.settle_timeout = rate, settle_timeout
@@ -98,8 +99,12 @@ class RosDrive:
         self.pub = node.create_publisher(JointState, servo_topic, QoSProfile(
             depth=1000, reliability=ReliabilityPolicy.RELIABLE))
         self.samples: list[tuple[int, dict[str, float]]] = []
-        node.create_subscription(JointState, measured_topic, self._on_measured,
-                                 qos_profile_sensor_data)
+        # best effort (takes a reliable or a best-effort encoder topic), and deep: while this
+        # process streams a move it takes one sample per spin, and a queue of 5 (the sensor
+        # QoS) lost up to a fifth of a move's samples on a loaded machine
+        node.create_subscription(JointState, measured_topic, self._on_measured, QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=MEASURED_DEPTH,
+            reliability=ReliabilityPolicy.BEST_EFFORT))
         self.msg = JointState(name=[joint_names[0]], position=[0.0])
         self.position = 0.0        # the last commanded worm angle
         self.next_ns = 0           # the next sample's stamp
