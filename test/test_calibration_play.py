@@ -165,6 +165,9 @@ def test_a_record_without_constant_rate_segments_names_the_keys():
     recs = _train(plant, moves[:1])
     lines = key_visibility(plant, recs, KEYS)
     assert 'slow reversal' in lines[LOAD] and 'two rates' in lines[DRAG]
+    # the drag fitted without the load: nothing to confuse its wind-up with, it is seen
+    assert DRAG not in key_visibility(plant, recs, [DRAG])
+    assert DRAG in key_visibility(plant, recs, [LOAD, DRAG])
 
 
 @pytest.mark.parametrize('argv', [['--max-angle', '0.05'], ['--max-angle', '0.1']])

@@ -11,8 +11,11 @@ the key and the move to record.
   unless a record lifts the gear off its flank (the unloading dither, :mod:`.unload`): the
   torque at which it lifts gives T, and b follows from b / 2 + T C.
 * ``load.output_torque`` and ``load.output_viscous_coefficient`` need constant-rate
-  segments (:func:`.direct.steady_segments`): the drag at two rates or both ways, the load
-  both ways (or at a known play).
+  segments (:func:`.direct.steady_segments`): the load both ways (or at a known play), and
+  with it the drag at two rates or both ways (one rate one way cannot tell the drag's
+  wind-up from the load's).  The drag fitted without the load is seen in any motion of the
+  antenna (the steps' trapezoids cruise 16 ms at the default limits, too short for a
+  segment, and the node's calibration test finds a drag of 5 N m s/rad within 2 %).
 * A key whose Jacobian column is (numerically) zero on the records is not seen either (the
   report's singular-Jacobian check names it).
 
@@ -117,7 +120,9 @@ def key_visibility(cfg: Any, records: Sequence[Record], keys: Sequence[str],
             out[LOAD] = (f'{LOAD}: not separable from the play: with one flank throughout, '
                          'the records show only the sum of the load wind-up and half the '
                          'play; record the move named for mesh.backlash')
-    if DRAG in keys:
+    if DRAG in keys and LOAD in keys:
+        # one rate one way cannot tell the drag's wind-up from the load's; fitted without
+        # the load, the drag shows in any motion (a zero column is the report's check)
         distinct = {round(math.copysign(abs(r), r), 6) for r in rates}
         if len(distinct) < 2:
             out[DRAG] = (f'{DRAG}: not seen: the records hold {len(distinct)} constant-rate '
