@@ -18,7 +18,7 @@ import pytest
 from worm_gear_sim import Config, load_config
 from worm_gear_sim.cli import main
 from worm_gear_sim.cli.identify import write_params_yaml
-from worm_gear_sim.identification import IdentificationError, Record
+from worm_gear_sim.identification import FitOptions, IdentificationError, Record
 from worm_gear_sim.identification.calibrate import calibrate, excitation_series, plant_runner
 from worm_gear_sim.identification.excitation import Limits, design_excitation
 from worm_gear_sim.records import read_csv
@@ -87,14 +87,17 @@ def test_calibrate_on_a_plant_with_five_parameters_changed(tmp_path, capsys):
 
 def test_calibrate_on_a_drive_with_another_friction_law():
     """Structural mismatch: the plant has the Stribeck friction law (regularised) and four
-    parameters changed; the base has the set-valued Eq. 18 law.  Accepted within 3 %."""
+    parameters changed; the base has the set-valued Eq. 18 law.  Accepted within 3 %.  The
+    default strategy's four starts in this process (serial: the same numbers as on Dask,
+    test_identification.py; a LocalCluster's start cost 5-15 s of the suite's time)."""
     base = Config()
     flat = base.to_flat_dict()
     plant = base.replace({'friction.model': 'stribeck', 'friction.direction': 'regularized',
                           KG: flat[KG] * 0.8, RHO: flat[RHO] * 1.1,
                           'damping.modal_damping_ratios': [0.02, 0, 0], COUT: 1.5})
     res = calibrate(base, [KG, ZETA, COUT], Limits(0.12, 6.0, 1500.0),
-                    plant_runner(plant, 1e4, ('theta4',), 1e-6, 2 * math.pi / 2 ** 20))
+                    plant_runner(plant, 1e4, ('theta4',), 1e-6, 2 * math.pi / 2 ** 20),
+                    options=FitOptions(serial=True))
     assert res.accepted, res.reasons
     assert res.worst_held_out() <= 0.03, res.worst_held_out()
     # the 95 % bound on the held-out prediction error holds under the structural mismatch
