@@ -59,6 +59,10 @@ def big_trajectory(stamp_ns: int, n: int = 100_000, period: float = 1e-3,
         (JOINT,), t, (0.3 + 0.2 * np.sin((t + phase) / 10)).reshape(-1, 1)), header)
 
 
+#: The probe's queue of the node's answers (~/compensated_command): more than a stream sends.
+ANSWER_DEPTH = 20_000
+
+
 class Probe:
     """The probe node, spun by hand (:meth:`spin_until`, :meth:`stream`)."""
 
@@ -82,8 +86,12 @@ class Probe:
             lambda m: self.out.append((time.monotonic(), m)), 100, raw=True)
         self.answers = 0
         self.sent = 0                                # stamped samples, every stream
+        # a deep queue: this probe takes one message per spin while it also publishes at
+        # 1 kHz, and a loaded machine (CI's two workers, the node's worker process) starved it
+        # long enough that a queue of 1000 overflowed and ~500 answers were lost on the way
+        # back, although the node had answered every sample
         self.node.create_subscription(JointState, '/worm_gear_sim/compensated_command',
-                                      self._answer, 1000)
+                                      self._answer, ANSWER_DEPTH)
         self.diag: dict[str, dict[str, str]] = {}
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 10)
 
