@@ -132,12 +132,12 @@ def _share_kernel_cache(installed: Path) -> int:
     """Copy the source tree's numba cache (``__pycache__/*.nbi, *.nbc``) next to the installed
     copy of the same modules, so the installed node loads the kernels instead of compiling
     them again (30-70 s of CPU under the suite; what this test checks is the layout and the
-    executable, not the compiler).  numba validates each entry against its source file's
-    mtime and size (colcon's install keeps both) and the CPU: an entry that does not match is
-    simply compiled again.  The package's stamp of its sources goes along
-    (:mod:`worm_gear_sim.kernel_cache`): without it the installed package's first import
-    took the copied cache for a stale one and deleted it, and every kernel was compiled
-    again (the test took 46-53 s).  Returns the number of files copied."""
+    executable, not the compiler).  numba validates each entry against its source file
+    (numba 0.68: a SHA-256 of its contents; the install copies the files unchanged) and the
+    CPU: an entry that does not match is simply compiled again.  The package's stamp of its
+    sources goes along (:mod:`worm_gear_sim.kernel_cache`): without it the installed
+    package's first import took the copied cache for a stale one and deleted it, and every
+    kernel was compiled again (the test took 46-53 s).  Returns the number of files copied."""
     from worm_gear_sim.kernel_cache import STAMP
     if (ROOT / PKG / STAMP).is_file():
         (installed / STAMP).parent.mkdir(exist_ok=True)
