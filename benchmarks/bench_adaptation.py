@@ -166,7 +166,19 @@ def crossing_times(plant: Config, run: Any) -> list[tuple[str, float, float]]:
     return out
 
 
+def _setting(text: str) -> tuple[str, Any]:
+    """KEY=VALUE (the value read as YAML) -> (key, value)."""
+    import yaml
+    key, sep, value = text.partition('=')
+    if not sep or not key.strip():
+        raise SystemExit(f'--start {text!r}: KEY=VALUE, e.g. adaptation.max_step=0.01')
+    return key.strip(), yaml.safe_load(value)
+
+
 def run_drives(args: argparse.Namespace, base: Config) -> None:
+    # the start (the nominal model the adaptation begins from), --start KEY=VALUE applied;
+    # the drives are drawn around the defaults either way
+    start = base.replace(dict(_setting(s) for s in args.start)) if args.start else base
     rng = np.random.default_rng(args.seed)
     sign_rng = np.random.default_rng([args.seed, 1])
     rows = []
@@ -178,7 +190,7 @@ def run_drives(args: argparse.Namespace, base: Config) -> None:
             print(f'drive {i}: not usable, skipped ({exc})', flush=True)
             continue
         t0 = time.perf_counter()
-        run = run_twin(plant, base, args.scenario, args.duration, seed=args.seed + i)
+        run = run_twin(plant, start, args.scenario, args.duration, seed=args.seed + i)
         wall = time.perf_counter() - t0
         t, u, c = run.t, run.error_uncompensated, run.error_compensated
         t2 = two_revolutions(t, run.theta1_ref)
@@ -396,6 +408,9 @@ def main() -> int:
     ap.add_argument('--crossing-times', action='store_true',
                     help="print each crossing the adapter measured against the drive's own "
                          "torque zero, and a summary per method")
+    ap.add_argument('--start', action='append', default=[], metavar='KEY=VALUE',
+                    help='a parameter of the start (nominal) model, e.g. '
+                         'adaptation.max_step=0.01 (repeatable; the drives are unchanged)')
     ap.add_argument('--cost-samples', type=int, default=3000)
     ap.add_argument('--no-drives', action='store_true')
     ap.add_argument('--latency-seconds', type=float, default=8.0)
