@@ -83,6 +83,18 @@ __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_fil
 SHAPERS = ('none', 'zv', 'zvd', 'ei')
 NODES_PER_KNOT = 24      # quadrature nodes per B-spline knot interval
 FLANK_TORQUE = 1e-6      # N m: |mesh torque demand| above which the flank in contact changes
+#: The streaming soft crossing (``compensation.soft_crossing``): at most this many antenna-mode
+#: periods long, at least SOFT_SHORTEST command periods, the antenna's stray while coasting
+#: within SOFT_TOLERANCE of half the play (as :mod:`worm_gear_sim.play_crossing` plans them)
+SOFT_PERIODS = 1.0
+SOFT_SHORTEST = 3.0
+SOFT_TOLERANCE = 1e-2
+# the kernel's flank state: [flank in contact, backlash inverse on, soft crossing on, longest
+# crossing [s], shortest [s], 12 J tol [N m s^3... rad], previous demand, its time, crossing
+# start, end, from flank, to flank]
+_F_ON, _F_SOFT, _F_LONG, _F_SHORT, _F_COEF, _F_DPREV, _F_TPREV = 1, 2, 3, 4, 5, 6, 7
+_F_START, _F_END, _F_FROM, _F_TO = 8, 9, 10, 11
+_F_STATE = slice(6, 12)          # what a redesign carries over (with the flank in contact)
 MIN_DEGREE = 4           # >= 5-fold spectral zeros at the command rate (anti-aliasing)
 
 
@@ -289,19 +301,52 @@ def compensation_kernel(te, tau, W, ht, hx, lo, hi, p, out_per_in, quasi_static,
         return r[0] - ref, ref          # shaping (filtering) only
     c = out_per_in
     f = flank[0]
-    if flank[1] > 0.0:                  # the backlash inverse: which flank must carry the load
+    if flank[_F_ON] > 0.0:              # the backlash inverse: which flank must carry the load
         nd -= 2
         demand = gear_torque_demand(p, r[nd] * c, r[nd + 1] * c, 0.0, 0.0, False)
-        if demand > FLANK_TORQUE:
-            f = 1.0
-        elif demand < -FLANK_TORQUE:
-            f = -1.0
-        flank[0] = f
+        f = _flank_at(te, demand, flank)
     if nd == 5:
         th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, r[3] * c, r[4] * c, dynamic, f)
     else:
         th1 = inverse_theta1(p, r[0] * c, r[1] * c, r[2] * c, 0.0, 0.0, np.bool_(False), f)
     return th1 - ref, ref
+
+
+@njit(cache=True, error_model='numpy')
+def _flank_at(te, demand, flank):
+    """The flank term at ``te`` from the mesh torque ``demand`` (updates ``flank``, the
+    state described at _F_*): the sign of a demand beyond FLANK_TORQUE (a change is a step),
+    or, with the soft crossing on, a smooth step across the play planned when the demand,
+    extrapolated from its last two values, will change sign within half a crossing:
+    centred on that zero, as long as the antenna's stray while it coasts (a linear demand
+    missed over a window W strays |D'| W^3 / (12 J)) stays within tolerance."""
+    start, end = flank[_F_START], flank[_F_END]
+    if end > start:
+        if te < end:                    # crossing: the degree-7 smooth step (play_crossing)
+            v = min(max((te - start) / (end - start), 0.0), 1.0)
+            s = v ** 4 * (35.0 + v * (-84.0 + v * (70.0 - 20.0 * v)))
+            flank[_F_DPREV], flank[_F_TPREV] = demand, te
+            return flank[_F_FROM] + (flank[_F_TO] - flank[_F_FROM]) * s
+        flank[0] = flank[_F_TO]         # crossed
+        flank[_F_START] = flank[_F_END] = 0.0
+    f = flank[0]
+    if demand > FLANK_TORQUE:
+        f = 1.0
+    elif demand < -FLANK_TORQUE:
+        f = -1.0
+    flank[0] = f
+    t_prev, d_prev = flank[_F_TPREV], flank[_F_DPREV]
+    flank[_F_DPREV], flank[_F_TPREV] = demand, te
+    if flank[_F_SOFT] > 0.0 and te > t_prev and abs(demand) > FLANK_TORQUE \
+            and demand * f > 0.0:
+        rate = (demand - d_prev) / (te - t_prev)
+        if demand * rate < 0.0:         # heading for zero
+            tau = -demand / rate
+            w = min(flank[_F_LONG], (flank[_F_COEF] / abs(rate)) ** (1.0 / 3.0))
+            if tau <= 0.5 * w and 2.0 * tau >= flank[_F_SHORT]:
+                flank[_F_START], flank[_F_END] = te, te + 2.0 * tau
+                flank[_F_FROM], flank[_F_TO] = f, -f
+    return f
 
 
 # ---- the streaming compensator -------------------------------------------------------------
@@ -318,7 +363,7 @@ class Compensator:
 
     def __init__(self, model: DriveModel | Config) -> None:
         self._derivs = np.zeros(0)       # r, r', ... of the filtered reference (reset fills it)
-        self._flank = np.zeros(2)        # [flank in contact, backlash inverse on]
+        self._flank = np.zeros(12)       # the kernel's flank state (_F_*)
         self.reconfigure(model)
         self.reset(0.0, 0.0)
 
@@ -372,8 +417,15 @@ class Compensator:
         self._W = np.ascontiguousarray(W)
         if self._derivs.size != W.shape[0]:
             self._derivs = np.zeros(W.shape[0])
-        self._flank[1] = 1.0 if self.backlash_inverse else 0.0
+        self._flank[_F_ON] = 1.0 if self.backlash_inverse else 0.0
         self._rest_flank = rest_flank(model.p) if self.backlash_inverse else 0.0
+        self.soft_crossing = bool(cs.soft_crossing)
+        self._flank[_F_LONG] = SOFT_PERIODS / self.mode_frequency_hz \
+            if self.mode_frequency_hz > 0.0 else 0.0
+        self._flank[_F_SHORT] = SOFT_SHORTEST / config.node.publish_rate_hz
+        d = model.derived
+        self._flank[_F_COEF] = 12.0 * (d.J_g + d.J_4) * SOFT_TOLERANCE * 0.5 * \
+            config.mesh.backlash
         self._n_deriv = n_deriv
         self._span = self.filter.lag_span + self.preview
         self._p, self._output_per_input = model.p, model.output_per_input   # per-sample use
@@ -392,6 +444,8 @@ class Compensator:
         self._derivs = np.zeros(self._W.shape[0])
         self._derivs[0] = float(theta1_ref)
         self._flank[0] = self._rest_flank
+        self._flank[_F_STATE] = 0.0
+        self._flank[_F_TPREV] = -math.inf
 
     def update(self, t: float, theta1_ref: float) -> float:
         """Add the sample (t, theta1_ref) and return the correction delta [rad] for time
@@ -456,6 +510,8 @@ class Compensator:
         self._last_delta, self._reference = other._last_delta, other._reference
         if self.backlash_inverse:    # the teeth stay where they are (none: the rest flank)
             self._flank[0] = other._flank[0] if other.backlash_inverse else self._rest_flank
+            if other.backlash_inverse:          # and a crossing under way goes on
+                self._flank[_F_STATE] = other._flank[_F_STATE]
 
     # ---- introspection ---------------------------------------------------------------------
     @property
@@ -471,6 +527,16 @@ class Compensator:
     def filtered_reference(self) -> np.ndarray:
         """Last filtered worm reference and its derivatives (r, r', r'' [, r''', r''''])."""
         return np.array(self._derivs[:self._n_deriv], float)
+
+    @property
+    def soft_crossing(self) -> bool:
+        """Cross the play along a smooth step planned ahead (``compensation.soft_crossing``)
+        rather than in one command period."""
+        return bool(self._flank[_F_SOFT] > 0.0)
+
+    @soft_crossing.setter
+    def soft_crossing(self, on: bool) -> None:
+        self._flank[_F_SOFT] = 1.0 if on else 0.0
 
     @property
     def flank(self) -> float:

@@ -159,6 +159,7 @@ def flank_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
         raise ValueError('times must be strictly increasing (to the nanosecond)')
     ts = rel * 1e-9
     comp = Compensator(m)
+    comp.soft_crossing = False            # the crossings are planned here, on the whole path
     comp.reset(float(x[0]), float(ts[0]))
     rest = comp.flank
     n = ts.size

@@ -389,6 +389,10 @@ class CompensationSettings:
     backlash_inverse: bool = _f(True, 'With mesh.backlash > 0: move the worm across the play '
                                 'to the flank the motion needs, in one command period when '
                                 'the mesh torque demand changes sign (docs/compensation.md)')
+    soft_crossing: bool = _f(True, 'With the backlash inverse: where the demand, extrapolated, '
+                             'will change sign within half an antenna-mode period, cross the '
+                             'play along a smooth step centred on that zero instead of in one '
+                             'command period (docs/compensation.md)')
 
 
 #: The keys live adaptation may estimate (``adaptation.keys``), in the order of its state.
