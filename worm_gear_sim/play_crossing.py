@@ -139,9 +139,10 @@ def flank_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
                  ) -> FlankSeries:
     """Run :class:`Compensator` on the samples as the real-time pipeline does (each sample's
     correction evaluated once the samples up to its time plus ``preview_time`` are in; the
-    reference rests at its ends): its corrections (those of
-    :func:`~worm_gear_sim.realtime.feedforward_series`, bit for bit), flanks and torque
-    demands.  ``t``: float seconds, or integer nanoseconds (then ``FlankSeries.t`` is in
+    reference rests at its ends) with the step crossings (``compensation.soft_crossing``
+    off: the crossings are planned on the whole path from these): its corrections (those
+    of :func:`~worm_gear_sim.realtime.feedforward_series` with the soft crossing off, bit
+    for bit), flanks and torque demands.  ``t``: float seconds, or integer nanoseconds (then ``FlankSeries.t`` is in
     seconds from the first sample)."""
     m = DriveModel.of(model)
     t_in = np.asarray(t).reshape(-1)

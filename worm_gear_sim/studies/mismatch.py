@@ -109,15 +109,16 @@ def benefit(plant: Config, model: Config | None, move: Move,
     """Antenna error RMS [rad] of ``plant`` on ``move``, raw and compensated with a
     feed-forward designed on ``model`` (None: the plant's own values); ``how``:
     ``trajectory`` (the known-trajectory path: centring preview, soft crossing),
-    ``step`` (centring preview, the play crossed in one command period) or ``causal``
-    (the streaming compensator as configured: a live stream).  ``raw_rms``: the
+    ``step`` (centring preview, the play crossed in one command period: the soft crossing
+    off) or ``causal`` (the streaming compensator as configured: a live stream).  ``raw_rms``: the
     uncompensated RMS if already known."""
     m = DriveModel(plant if model is None else model)
     t, x = move.t, move.theta1
     if how == 'trajectory':
         delta = trajectory_feedforward(trajectory_model(m), t, x)
     elif how == 'step':
-        delta = feedforward_series(trajectory_model(m), t, x)
+        step = trajectory_model(m).config.replace({'compensation.soft_crossing': False})
+        delta = feedforward_series(step, t, x)
     elif how == 'causal':
         delta = feedforward_series(m, t, x)
     else:
