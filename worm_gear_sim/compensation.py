@@ -41,9 +41,13 @@ Design (computed from the NOMINAL model at construction / :meth:`Compensator.rec
    flip the flank back and forth).  A change of flank steps the correction by the whole
    play, so the worm crosses it in one command period; it is timely only with a preview
    (:func:`centring_preview`).  Measured in docs/compensation.md, "Across the mesh play".
-   A known trajectory crosses the play softly instead (:mod:`worm_gear_sim.play_crossing`:
-   the crossing planned around the demand's sign change, the new flank reached with the
-   gear's velocity); the streaming path here is the one for live commands.
+   With ``compensation.soft_crossing`` (the default) a zero of the demand predicted from
+   its trend (its last two values) within half a crossing starts a smooth step across the
+   play centred on that zero (:func:`_flank_at`): the sign changes in the middle of a move
+   (a drag that outgrows a load), where the demand passes zero slowly; a fast reversal
+   still takes the step.  A known trajectory plans its crossings on the whole path
+   (:mod:`worm_gear_sim.play_crossing`: the new flank reached with the gear's velocity);
+   the streaming path here is the one for live commands.
 
 ``delta = theta1_inverse(t) - theta1_ref(t)``.  Per call: one compiled kernel
 (:func:`compensation_kernel`: an interpolation walk over the history at ~120 quadrature

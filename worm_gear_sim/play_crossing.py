@@ -142,8 +142,8 @@ def flank_series(model: DriveModel | Config, t: ArrayLike, theta1_ref: ArrayLike
     reference rests at its ends) with the step crossings (``compensation.soft_crossing``
     off: the crossings are planned on the whole path from these): its corrections (those
     of :func:`~worm_gear_sim.realtime.feedforward_series` with the soft crossing off, bit
-    for bit), flanks and torque demands.  ``t``: float seconds, or integer nanoseconds (then ``FlankSeries.t`` is in
-    seconds from the first sample)."""
+    for bit), flanks and torque demands.  ``t``: float seconds, or integer nanoseconds
+    (then ``FlankSeries.t`` is in seconds from the first sample)."""
     m = DriveModel.of(model)
     t_in = np.asarray(t).reshape(-1)
     x = np.asarray(theta1_ref, float).reshape(-1)

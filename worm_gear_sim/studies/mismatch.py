@@ -32,6 +32,7 @@ Studies:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -117,8 +118,10 @@ def benefit(plant: Config, model: Config | None, move: Move,
     if how == 'trajectory':
         delta = trajectory_feedforward(trajectory_model(m), t, x)
     elif how == 'step':
-        step = trajectory_model(m).config.replace({'compensation.soft_crossing': False})
-        delta = feedforward_series(step, t, x)
+        step = trajectory_model(m).config
+        delta = feedforward_series(DriveModel(dataclasses.replace(
+            step, compensation=dataclasses.replace(step.compensation, soft_crossing=False))),
+            t, x)
     elif how == 'causal':
         delta = feedforward_series(m, t, x)
     else:
