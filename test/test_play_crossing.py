@@ -348,5 +348,6 @@ def test_sweep_crossing_runs_from_the_command_line(tmp_path, capsys):
     (row,) = list(csv.DictReader(open(tmp_path / 'crossing.csv')))
     assert int(row['crossings']) == 2
     assert float(row['soft_x']) >= 100.0 > float(row['step_x'])
+    assert float(row['stream_x']) >= 100.0 and 'stream:' in out
     assert (tmp_path / 'crossing.png').stat().st_size > 10_000
     assert main(['sweep', 'crossing', '-o', str(tmp_path), '--plays', '0']) == 2

@@ -23,7 +23,8 @@ def _figure(ncols: int, width: float = 6.0, height: float = 4.2) -> tuple[Any, A
 def plot_crossing_study(rows: Sequence[Mapping[str, Any]], path: str | Path,
                         title: str) -> None:
     """Improvement against the play, one panel per drag, a line per load: the step
-    crossing (dashed) and the soft crossing (solid); the 100x target dotted."""
+    crossing (dashed), the streaming soft crossing (dotted) and the planned soft crossing
+    (solid); the 100x target dotted in black."""
     drags = sorted({float(r['drag']) for r in rows})
     loads = sorted({float(r['load_torque']) for r in rows})
     fig, axes = _figure(len(drags), 4.6)
@@ -37,6 +38,8 @@ def plot_crossing_study(rows: Sequence[Mapping[str, Any]], path: str | Path,
             x = [float(r['play_arcmin']) for r in sel]
             c = colors[k % len(colors)]
             ax.plot(x, [float(r['step_x']) for r in sel], '--', color=c, alpha=0.6)
+            if sel and 'stream_x' in sel[0]:
+                ax.plot(x, [float(r['stream_x']) for r in sel], ':', color=c, alpha=0.8)
             ax.plot(x, [float(r['soft_x']) for r in sel], 'o-', color=c,
                     label=f'{load:g} N m')
         ax.axhline(100.0, color='k', ls=':', lw=1)

@@ -260,8 +260,9 @@ def _crossing_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None
         ('play_arcmin', 'play [arcmin]', '.3g'), ('load_torque', 'load [N m]', '.3g'),
         ('drag', 'drag [N m s/rad]', '.3g'), ('raw_rms', 'raw RMS [rad]', '.3e'),
         ('causal_x', 'causal', '.3g'), ('step_x', 'step', '.3g'),
-        ('soft_x', 'soft', '.3g'), ('crossing_ms', 'crossings [ms]', '')]))
-    for col in ('causal_x', 'step_x', 'soft_x'):
+        ('stream_x', 'stream', '.3g'), ('soft_x', 'soft', '.3g'),
+        ('crossing_ms', 'crossings [ms]', '')]))
+    for col in ('causal_x', 'step_x', 'stream_x', 'soft_x'):
         sm = summary(rows, col)
         say(args, f'{col[:-2]}: {sm["min"]:.3g}x .. {sm["max"]:.3g}x (median '
              f'{sm["median"]:.3g}x)')

@@ -109,14 +109,18 @@ def benefit(plant: Config, model: Config | None, move: Move,
             raw_rms: float | None = None, how: str = 'trajectory') -> dict[str, float]:
     """Antenna error RMS [rad] of ``plant`` on ``move``, raw and compensated with a
     feed-forward designed on ``model`` (None: the plant's own values); ``how``:
-    ``trajectory`` (the known-trajectory path: centring preview, soft crossing),
-    ``step`` (centring preview, the play crossed in one command period: the soft crossing
-    off) or ``causal`` (the streaming compensator as configured: a live stream).  ``raw_rms``: the
+    ``trajectory`` (the known-trajectory path: centring preview, crossings planned on the
+    whole path), ``stream`` (centring preview, the streaming compensator as configured:
+    by default its soft crossing, predicted from the demand's trend), ``step`` (centring
+    preview, the play crossed in one command period: the soft crossing off) or ``causal``
+    (the streaming compensator as configured: a live stream without preview).  ``raw_rms``: the
     uncompensated RMS if already known."""
     m = DriveModel(plant if model is None else model)
     t, x = move.t, move.theta1
     if how == 'trajectory':
         delta = trajectory_feedforward(trajectory_model(m), t, x)
+    elif how == 'stream':
+        delta = feedforward_series(trajectory_model(m), t, x)
     elif how == 'step':
         step = trajectory_model(m).config
         delta = feedforward_series(DriveModel(dataclasses.replace(
@@ -125,7 +129,7 @@ def benefit(plant: Config, model: Config | None, move: Move,
     elif how == 'causal':
         delta = feedforward_series(m, t, x)
     else:
-        raise ValueError(f'how = {how!r}: trajectory, step or causal')
+        raise ValueError(f'how = {how!r}: trajectory, stream, step or causal')
     off = _rms(antenna_error(plant, t, x, x)) if raw_rms is None else raw_rms
     on = _rms(antenna_error(plant, t, x + delta, x))
     return {'raw_rms': off, 'compensated_rms': on, 'improvement': off / on}
@@ -133,8 +137,8 @@ def benefit(plant: Config, model: Config | None, move: Move,
 
 # ---- perfect knowledge: the soft crossing on a grid ----------------------------------------
 CROSSING_COLUMNS = ['study', 'play_arcmin', 'load_torque', 'drag', 'damping', 'raw_rms',
-                    'causal_rms', 'step_rms', 'soft_rms', 'causal_x', 'step_x', 'soft_x',
-                    'crossings', 'crossing_ms']
+                    'causal_rms', 'step_rms', 'stream_rms', 'soft_rms', 'causal_x', 'step_x',
+                    'stream_x', 'soft_x', 'crossings', 'crossing_ms']
 CROSSING_PLAYS = (0.5, 1.0, 2.0, 5.0)
 CROSSING_LOADS = (0.0, 0.5, 1.0, 2.0, 5.0)
 CROSSING_DRAGS = (0.0, 10.0, 50.0)
@@ -166,7 +170,8 @@ def _crossing_case(base: Config, play: float, load: float, drag: float, damping:
     raw = _rms(antenna_error(plant, move.t, move.theta1, move.theta1))
     r = {'study': 'crossing', 'play_arcmin': play, 'load_torque': load, 'drag': drag,
          'damping': damping, 'raw_rms': raw}
-    for how, key in (('causal', 'causal'), ('step', 'step'), ('trajectory', 'soft')):
+    for how, key in (('causal', 'causal'), ('step', 'step'), ('stream', 'stream'),
+                     ('trajectory', 'soft')):
         b = benefit(plant, None, move, raw, how)
         r[f'{key}_rms'] = b['compensated_rms']
         r[f'{key}_x'] = b['improvement']
