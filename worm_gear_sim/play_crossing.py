@@ -27,7 +27,9 @@ The correction is the streaming compensator's (the same history, the centring pr
 known trajectory) with its flank term flank(t) h / l_w replaced by the planned one; away
 from the crossings both are bit for bit the same, and at rest the worm still takes up
 exactly half the play.  The causal path for live streams (the node's ``worm_angle_command``)
-is unchanged: it cannot know a reversal before it happens.  Measured in docs/compensation.md,
+cannot know a reversal before it happens; where the demand passes zero slowly it predicts
+the zero from the demand's trend and crosses softly itself (``compensation.soft_crossing``;
+:func:`flank_series` runs it with the step crossing, which the plans here replace).  Measured in docs/compensation.md,
 "A soft crossing of the play".
 
 The crossing's step reaches the drive sampled and joined by straight lines: while the mesh
