@@ -29,8 +29,8 @@ from the crossings both are bit for bit the same, and at rest the worm still tak
 exactly half the play.  The causal path for live streams (the node's ``worm_angle_command``)
 cannot know a reversal before it happens; where the demand passes zero slowly it predicts
 the zero from the demand's trend and crosses softly itself (``compensation.soft_crossing``;
-:func:`flank_series` runs it with the step crossing, which the plans here replace).  Measured in docs/compensation.md,
-"A soft crossing of the play".
+:func:`flank_series` runs it with the step crossing, which the plans here replace).
+Measured in docs/compensation.md, "A soft crossing of the play".
 
 The crossing's step reaches the drive sampled and joined by straight lines: while the mesh
 is open the worm rings on its shaft with the kinks, so two samples of each crossing are
