@@ -94,8 +94,8 @@ SOFT_PERIODS = 1.0
 SOFT_SHORTEST = 3.0
 SOFT_TOLERANCE = 1e-2
 # the kernel's flank state: [flank in contact, backlash inverse on, soft crossing on, longest
-# crossing [s], shortest [s], 12 J tol [N m s^3... rad], previous demand, its time, crossing
-# start, end, from flank, to flank]
+# crossing [s], shortest [s], 12 J tol [kg m^2 rad] (J = J_g + J_4, tol: the stray allowed),
+# previous demand [N m], its time [s], crossing start [s], end [s], from flank, to flank]
 _F_ON, _F_SOFT, _F_LONG, _F_SHORT, _F_COEF, _F_DPREV, _F_TPREV = 1, 2, 3, 4, 5, 6, 7
 _F_START, _F_END, _F_FROM, _F_TO = 8, 9, 10, 11
 _F_STATE = slice(6, 12)          # what a redesign carries over (with the flank in contact)
