@@ -120,3 +120,44 @@ def test_a_redesign_in_the_middle_of_a_crossing_carries_it_on(scan):
     _, m, move, steps, soft = scan
     a, b = _runs(soft != steps.delta)[0]
     assert np.array_equal(_direct(m, steps.t, move.theta1, cut=(a + b) // 2), soft)
+
+
+def _state(longest: float = 0.0106, shortest: float = 0.003, coef: float = 1e9) -> np.ndarray:
+    """A flank state (compensation._F_*) on the drive flank, soft crossing on; ``coef``
+    large: the stray never shortens the crossing."""
+    from worm_gear_sim import compensation as c
+    f = np.zeros(12)
+    f[0], f[c._F_ON], f[c._F_SOFT] = 1.0, 1.0, 1.0
+    f[c._F_LONG], f[c._F_SHORT], f[c._F_COEF] = longest, shortest, coef
+    f[c._F_TPREV] = -math.inf
+    return f
+
+
+def test_a_linear_demand_is_crossed_centred_on_its_zero():
+    """D = 2 N m/s x (1 s - t), sampled at 1 kHz: the crossing starts at the first sample
+    with the zero within half the longest crossing (5.3 ms), is centred on the zero (1 s:
+    the flank term half-way, 0) and ends as far after it; the flank term falls from +1 to
+    -1 along the smooth step, -1 after."""
+    from worm_gear_sim.compensation import _flank_at
+    state = _state()
+    t = np.arange(0.98, 1.02, 1e-3)
+    out = np.array([_flank_at(tk, 2.0 * (1.0 - tk), state) for tk in t])
+    first = int(np.argmax(out < 1.0))                   # the first sample inside it
+    start = t[first - 1]
+    assert 1.0 - start <= 0.5 * 0.0106 + 1e-12 < 1.0 - t[first - 2]
+    assert np.all(out[:first] == 1.0) and np.all(np.diff(out) <= 1e-15)
+    assert abs(out[np.argmin(np.abs(t - 1.0))]) < 1e-9          # the zero: half-way
+    end = 1.0 + (1.0 - start)
+    assert np.all(out[t >= end + 1e-9] == -1.0) and np.all(out[t < end - 1e-9] > -1.0)
+
+
+def test_a_zero_that_does_not_come_ends_on_the_flank_the_demand_needs():
+    """The demand heads for zero, then turns back before it (a grazing that stays on the
+    drive flank): the crossing that was planned ends, and the worm returns to +1."""
+    from worm_gear_sim.compensation import _flank_at
+    state = _state()
+    t = np.arange(0.99, 1.03, 1e-3)
+    d = 2.0 * np.abs(t - 1.0) + 1e-3                    # least at 1 s, never zero
+    out = np.array([_flank_at(tk, dk, state) for tk, dk in zip(t, d)])
+    assert out.min() < 1.0                              # a crossing was planned ...
+    assert out[-1] == 1.0                               # ... and the drive flank is back
