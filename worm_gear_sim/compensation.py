@@ -317,6 +317,14 @@ def compensation_kernel(te, tau, W, ht, hx, lo, hi, p, out_per_in, quasi_static,
 
 
 @njit(cache=True, error_model='numpy')
+def smootherstep(v):
+    """The degree-7 smooth step on v in [0, 1] (a float or an array, not clipped): 0 -> 1
+    with zero first, second and third derivatives at both ends; the crossings of the play
+    follow it (:func:`_flank_at`, :func:`worm_gear_sim.play_crossing.smooth_step`)."""
+    return v ** 4 * (35.0 + v * (-84.0 + v * (70.0 - 20.0 * v)))
+
+
+@njit(cache=True, error_model='numpy')
 def _flank_at(te, demand, flank):
     """The flank term at ``te`` from the mesh torque ``demand`` (updates ``flank``, the
     state described at _F_*): the sign of a demand beyond FLANK_TORQUE (a change is a step),
@@ -327,8 +335,7 @@ def _flank_at(te, demand, flank):
     start, end = flank[_F_START], flank[_F_END]
     if end > start:
         if te < end:                    # crossing: the degree-7 smooth step (play_crossing)
-            v = min(max((te - start) / (end - start), 0.0), 1.0)
-            s = v ** 4 * (35.0 + v * (-84.0 + v * (70.0 - 20.0 * v)))
+            s = smootherstep(min(max((te - start) / (end - start), 0.0), 1.0))
             flank[_F_DPREV], flank[_F_TPREV] = demand, te
             return flank[_F_FROM] + (flank[_F_TO] - flank[_F_FROM]) * s
         flank[0] = flank[_F_TO]         # crossed

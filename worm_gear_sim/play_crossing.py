@@ -60,7 +60,7 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
-from .compensation import Compensator
+from .compensation import Compensator, smootherstep
 from .dynamics.inverse import gear_torque_demand
 from .dynamics.modal import modes, open_mesh_damping_matrix, static_equilibrium
 from .dynamics.model import (
@@ -108,7 +108,7 @@ def smooth_step(u: ArrayLike) -> np.ndarray:
     """0 -> 1 on u in [0, 1] with zero first, second and third derivatives at both ends
     (the degree-7 'smootherstep'); 0 before, 1 after."""
     v: np.ndarray = np.clip(np.asarray(u, float), 0.0, 1.0)
-    return v ** 4 * (35.0 + v * (-84.0 + v * (70.0 - 20.0 * v)))
+    return np.asarray(smootherstep(v)) if v.ndim else np.asarray(smootherstep(float(v)))
 
 
 @dataclass(frozen=True)
