@@ -89,7 +89,8 @@ NODES_PER_KNOT = 24      # quadrature nodes per B-spline knot interval
 FLANK_TORQUE = 1e-6      # N m: |mesh torque demand| above which the flank in contact changes
 #: The streaming soft crossing (``compensation.soft_crossing``): at most this many antenna-mode
 #: periods long, at least SOFT_SHORTEST command periods, the antenna's stray while coasting
-#: within SOFT_TOLERANCE of half the play (as :mod:`worm_gear_sim.play_crossing` plans them)
+#: within SOFT_TOLERANCE of half the play (:mod:`worm_gear_sim.play_crossing` plans the
+#: known trajectory's crossings within the same bounds)
 SOFT_PERIODS = 1.0
 SOFT_SHORTEST = 3.0
 SOFT_TOLERANCE = 1e-2

@@ -60,7 +60,13 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike
 
-from .compensation import Compensator, smootherstep
+from .compensation import (
+    SOFT_PERIODS,
+    SOFT_SHORTEST,
+    SOFT_TOLERANCE,
+    Compensator,
+    smootherstep,
+)
 from .dynamics.inverse import gear_torque_demand
 from .dynamics.modal import modes, open_mesh_damping_matrix, static_equilibrium
 from .dynamics.model import (
@@ -82,12 +88,13 @@ __all__ = ['trajectory_feedforward', 'CrossingPlan', 'FlankSeries', 'smooth_step
            'open_worm_rate', 'worm_ringing_cancel', 'rest_starts', 'REST_TOLERANCE',
            'START_MODE_DECAY']
 
-#: The longest crossing in antenna-mode periods (:func:`crossing_time`).
-CROSSING_PERIODS = 1.0
+#: The longest crossing in antenna-mode periods (:func:`crossing_time`); the same bounds as
+#: the streaming soft crossing's (one rule: :mod:`worm_gear_sim.compensation`).
+CROSSING_PERIODS = SOFT_PERIODS
 #: The shortest crossing in command periods (a gentler approach needs more samples).
-SHORTEST_PERIODS = 3.0
+SHORTEST_PERIODS = SOFT_SHORTEST
 #: The antenna's stray while the mesh is free, as a share of half the play.
-CROSSING_TOLERANCE = 1e-2
+CROSSING_TOLERANCE = SOFT_TOLERANCE
 #: The start transient whose free vibration :func:`start_ringing_cancel` cancels, in
 #: antenna-mode periods (the cancelling pulse lasts one period within it).
 START_WINDOW_PERIODS = 3.0
