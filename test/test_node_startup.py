@@ -207,3 +207,45 @@ def test_a_signal_at_each_point_of_the_start_up_ends_it_quietly(where, ros_subpr
         assert run.returncode == 0, f'{where} {signame}: rc {run.returncode}\n{text}'
         assert 'Traceback' not in text and 'FATAL' not in text and 'free(' not in text, text
         assert 'spinning with' not in text, f'{where} {signame}: the node went on\n{text}'
+
+
+# The context shut down at the worst moment of the events executor's first update: while it
+# registers the nodes' waitables (a waitable's get_num_entities is where it asks them).  Until
+# the fix this left callbacks the executor no longer tracked, and destroying it aborted the
+# process ("Destroying callback manager with callbacks remaining", rc -6).  'signal' sends
+# SIGTERM there (the node is in phase 'init': recorded only); 'shutdown' shuts the context
+# down directly, as rclpy's signal thread does, which nothing in the start-up can prevent.
+_MID_REGISTRATION = r'''
+import os, signal, sys
+import rclpy
+from worm_gear_sim.ros import run
+how = sys.argv[1]
+real_build = run._build
+def build(*a, **k):
+    nodes = real_build(*a, **k)
+    waitables = list(nodes[0].waitables)
+    w = waitables[len(waitables) // 2]
+    real = w.get_num_entities
+    def hooked():
+        if how == 'signal':
+            os.kill(os.getpid(), signal.SIGTERM)
+        else:
+            rclpy.get_default_context().try_shutdown()
+        return real()
+    w.get_num_entities = hooked
+    return nodes
+run._build = build
+from worm_gear_sim.ros.startup import node_main
+sys.argv = ['worm_gear_sim_node', '--ros-args', '--params-file', sys.argv[2]]
+sys.exit(node_main())
+'''
+
+
+@pytest.mark.parametrize('how', ['signal', 'shutdown'])
+def test_a_shutdown_while_the_executor_registers_the_node_ends_quietly(how, ros_subprocess_env):
+    run = subprocess.run([sys.executable, '-c', _MID_REGISTRATION, how, str(CONFIG)],
+                         cwd=ROOT, env=ros_subprocess_env, capture_output=True, text=True,
+                         timeout=60)
+    text = run.stdout + run.stderr
+    assert run.returncode == 0, f'{how}: rc {run.returncode}\n{text}'
+    assert 'Traceback' not in text and 'Fatal' not in text and 'Destroying' not in text, text

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import gc
+import os
 import sys
 from typing import Any
 
@@ -114,12 +115,17 @@ def main(args: list[str] | None = None, pedestal: bool = False) -> int:
             return 0
         return config_error(clean_rcl_message(exc))
     try:
-        return _run(opts, pedestal)
+        rc = _run(opts, pedestal)
     except (KeyboardInterrupt, ExternalShutdownException):
-        return 0
+        rc = 0
     finally:
         signals.set_phase('stopping')
         _quietly(rclpy.try_shutdown)
+    if _UNSAFE_TO_DESTROY:      # see _keep: ending now is the only exit that cannot abort
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(rc)
+    return rc
 
 
 def _build(opts: argparse.Namespace, pedestal: bool) -> list[Any]:
@@ -138,15 +144,7 @@ def _run(opts: argparse.Namespace, pedestal: bool = False) -> int:
         if signals.signalled():     # Ctrl-C / SIGTERM came first: a quiet exit
             return 0
         return config_error(f'invalid parameters: {exc}')
-    # rclpy's handlers from now on (they chain to .signals, which ignores the 'ros' phase):
-    # installed first, checked second, so that no signal falls between the two.
-    signals.set_phase('ros')
-    install_rclpy_signal_handlers(SignalHandlerOptions.ALL)
     node = nodes[0]
-    if signals.signalled() or not context.ok():   # Ctrl-C / SIGTERM during the build
-        for n in nodes:
-            _quietly(n.destroy_node)
-        return 0
     kind = opts.executor or node.config.node.executor
     executor = make_executor(kind)
     # Move everything allocated so far (numba, scipy, rclpy: a large heap) out of the
@@ -156,22 +154,52 @@ def _run(opts: argparse.Namespace, pedestal: bool = False) -> int:
     gc.freeze()
     for n in nodes:
         executor.add_node(n)
-    node.get_logger().info(f'spinning with the {kind} executor')
     try:
+        _register(executor, kind)
+        # rclpy's handlers from now on (they chain to .signals, which ignores the 'ros'
+        # phase): installed first, checked second, so that no signal falls between the two.
+        signals.set_phase('ros')
+        install_rclpy_signal_handlers(SignalHandlerOptions.ALL)
+        if signals.signalled() or not context.ok():   # Ctrl-C / SIGTERM during the build
+            return 0
+        node.get_logger().info(f'spinning with the {kind} executor')
         spin_until_shutdown(executor, context)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
         if context.ok():
             raise
-        # The signal handler shut the context down while a callback was running (e.g. a
-        # publish on a context being torn down): a normal shutdown.
+        # The context went down while the executor was working: a callback publishing on
+        # a context being torn down, or the events executor half-way through registering
+        # the nodes' entities, which it cannot undo (_keep).
+        _keep(executor, kind)
     finally:
         signals.set_phase('stopping')
         _quietly(executor.shutdown, 1.0)
         for n in nodes:
             _quietly(n.destroy_node)
     return 0
+
+
+def _register(executor: Any, kind: str) -> None:
+    """Let the events executor register the nodes' subscriptions, timers, services and
+    waitables (the update ``add_node`` posts, run by one ``spin_once``) while a signal is
+    only recorded (phase 'init').  rclpy's signal handler shuts the context down from its
+    own thread: in the middle of that registration it left callbacks the executor no
+    longer tracks, and destroying the executor then aborted the process ("Destroying
+    callback manager with callbacks remaining", rclpy 9.1.2)."""
+    if kind == 'events':
+        executor.spin_once(timeout_sec=1.0)
+
+
+#: Executors whose destruction would abort the process (rclpy's EventsExecutor after a
+#: registration interrupted by a shutdown): kept alive; ``main`` then ends with os._exit.
+_UNSAFE_TO_DESTROY: list[Any] = []
+
+
+def _keep(executor: Any, kind: str) -> None:
+    if kind == 'events':
+        _UNSAFE_TO_DESTROY.append(executor)
 
 
 def _quietly(fn: Any, *args: Any) -> None:
