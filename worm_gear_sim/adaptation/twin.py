@@ -34,7 +34,6 @@ from ..params import Config
 from ..realtime.predictor import RealtimePredictor
 from ..studies.mismatch import sector_scan, slew_reversals
 from ..studies.tracking_pass import pass_window
-from ..trajectory_compensation import antenna_error
 from .live import LiveAdaptation
 from .plant import EncoderPlant
 
@@ -126,12 +125,19 @@ def _handshake(pred: RealtimePredictor, live: LiveAdaptation, drive: EncoderPlan
 
 
 def plant_errors(plant: Config, start: Config, t: np.ndarray, theta1_ref: np.ndarray,
-                 theta4: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                 theta4: np.ndarray, theta4_raw: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """(uncompensated, compensated) antenna error [rad] at the uniform times ``t``: the
-    plant driven by the raw reference (simulated here), and ``theta4`` (the plant driven by
-    the adapting feed-forward) - theta1_ref l_w / r_g (the start set's ratio); nan where
-    ``theta4`` is."""
-    unc = antenna_error(plant, t, theta1_ref, theta1_ref)
+    plant driven by the raw reference, and ``theta4`` (the plant driven by the adapting
+    feed-forward) - theta1_ref l_w / r_g (the start set's ratio); nan where ``theta4`` is.
+    ``theta4_raw``: the raw-driven plant's theta4 at ``t`` if the caller stepped it;
+    otherwise stepped here as :class:`EncoderPlant` steps the plant (the same path as the
+    compensated one, so a correction of zero gives the same error)."""
+    if theta4_raw is None:
+        raw = EncoderPlant(plant, float(theta1_ref[0]), noise=0.0, encoder_bits=0)
+        theta4_raw = np.array([raw.command(float(tk), float(xk))[0]
+                               for tk, xk in zip(t, theta1_ref)])
+    unc = theta4_raw - theta1_ref * DriveModel(plant).output_per_input
     return unc, theta4 - theta1_ref * DriveModel(start).output_per_input
 
 
@@ -167,8 +173,10 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
     names = cfg.node.joint_names[1:]
     live = LiveAdaptation(pred, names)
     drive = EncoderPlant(plant, float(x[0]), noise=noise, encoder_bits=encoder_bits, seed=seed)
+    raw = EncoderPlant(plant, float(x[0]), noise=0.0, encoder_bits=0)   # the raw reference
     n_keep = int(np.count_nonzero(keep))
     theta4 = np.full(n_keep, np.nan)
+    theta4_raw = np.full(n_keep, np.nan)
     index = {base_ns + int(round(tk * 1e9)): k for k, tk in enumerate(t[:n_keep])}
     run = TwinRun(t[keep], x[keep], np.zeros(0), np.zeros(0))
     stamps = [first_ns + j * period_ns for j in range(int(hold))] + \
@@ -194,10 +202,12 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
         for c in out.corrections:
             if c.stamp_ns < plant_ns:
                 continue
-            th4, meas = drive.command((c.stamp_ns - plant_ns) * 1e-9, c.theta1_ref + c.delta)
+            tc = (c.stamp_ns - plant_ns) * 1e-9
+            th4, meas = drive.command(tc, c.theta1_ref + c.delta)
+            th4_raw = raw.command(tc, c.theta1_ref)[0]
             j = index.get(c.stamp_ns)
             if j is not None:
-                theta4[j] = th4
+                theta4[j], theta4_raw[j] = th4, th4_raw
             got.append((c.stamp_ns, meas, c.delta))
             if adapt:
                 live.measured(c.stamp_ns, names[2:], [meas])
@@ -205,8 +215,9 @@ def run_twin(plant: Config, start: Config, name: str, duration: float, *,
             run.record.append((ns, float(refs[k]), got))
         if on_sample is not None and k >= hold:
             on_sample(t[k - hold])
-    run.error_uncompensated, run.error_compensated = plant_errors(plant, cfg, run.t,
-                                                                  run.theta1_ref, theta4)
+    run.error_uncompensated, run.error_compensated = plant_errors(
+        plant, cfg, run.t, run.theta1_ref, theta4,
+        None if np.isnan(theta4_raw).any() else theta4_raw)
     run.estimates = live.estimates()
     run.in_use = live.adapter.applied_values()
     run.crossings = list(live.adapter.crossings)
