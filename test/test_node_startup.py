@@ -249,3 +249,37 @@ def test_a_shutdown_while_the_executor_registers_the_node_ends_quietly(how, ros_
     text = run.stdout + run.stderr
     assert run.returncode == 0, f'{how}: rc {run.returncode}\n{text}'
     assert 'Traceback' not in text and 'Fatal' not in text and 'Destroying' not in text, text
+
+
+# The same cut-short registration in the package's helper processes (the plant node of the
+# live adaptation harness; the demo commander shares the code path: run.keep_alive, leave).
+_PLANT_MID_REGISTRATION = r'''
+import sys
+import rclpy
+from worm_gear_sim.ros import plant
+Real = plant.PlantNode
+class Hooked(Real):
+    def __init__(self, *a, **k):
+        super().__init__(*a, **k)
+        waitables = list(self.waitables)
+        w = waitables[len(waitables) // 2]
+        real = w.get_num_entities
+        def hooked():
+            rclpy.get_default_context().try_shutdown()
+            return real()
+        w.get_num_entities = hooked
+plant.PlantNode = Hooked
+sys.exit(plant.main(['plant', '--plant', sys.argv[1], '--record', sys.argv[2]]))
+'''
+
+
+def test_the_plant_node_ends_quietly_when_a_shutdown_cuts_its_registration(
+        ros_subprocess_env, tmp_path):
+    record = tmp_path / 'plant.npz'
+    run = subprocess.run([sys.executable, '-c', _PLANT_MID_REGISTRATION, str(CONFIG),
+                          str(record)], cwd=ROOT, env=ros_subprocess_env,
+                         capture_output=True, text=True, timeout=60)
+    text = run.stdout + run.stderr
+    assert run.returncode == 0, f'rc {run.returncode}\n{text}'
+    assert 'Fatal' not in text and 'Destroying' not in text, text
+    assert 'plant: ' in text and record.exists()      # its exit work done before it left

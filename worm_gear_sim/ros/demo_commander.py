@@ -330,12 +330,12 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
     tty = out.isatty()
     width = min(LINE_WIDTH, shutil.get_terminal_size((LINE_WIDTH, 24)).columns) if tty \
         else LINE_WIDTH
-    from .run import make_executor
+    from .run import keep_alive, leave, make_executor
     cfg = load_config(opts.config) if opts.config else load_config()
     # rclpy.init() as a context manager exists only from Kilted (rclpy 9) on: on Jazzy
     # (rclpy 7.1) it returns None, so init, then try_shutdown in a finally.
     rclpy.init(args=argv)
-    node = None
+    node = ex = None
     try:
         node = DemoCommander(opts.pattern, opts.rate, opts.node_name, opts.move_period,
                              opts.slew_rate, opts.slew_period, opts.interface,
@@ -398,11 +398,15 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
         summary(node, opts, compensated, out)
     except (KeyboardInterrupt, ExternalShutdownException):
         print('', file=out)
+    except Exception:
+        if ex is None or rclpy.ok():
+            raise
+        keep_alive(ex)      # a shutdown cut the executor's registration short (run.py)
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return leave(0)
 
 
 if __name__ == '__main__':

@@ -206,9 +206,9 @@ def main(args: list[str] | None = None) -> int:
     argv = sys.argv if args is None else args
     opts = _parse(remove_ros_args(args=argv)[1:])
     plant = load_config(opts.plant)
-    from .run import make_executor, spin_until_shutdown
+    from .run import keep_alive, leave, make_executor, spin_until_shutdown
     rclpy.init(args=argv)
-    node = None
+    node = ex = None
     try:
         node = PlantNode(plant, noise=opts.noise, encoder_bits=opts.encoder_bits,
                          seed=opts.seed, node_under_test=opts.node_name,
@@ -219,6 +219,10 @@ def main(args: list[str] | None = None) -> int:
         spin_until_shutdown(ex, slice_s=0.2)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if ex is None or rclpy.ok():
+            raise
+        keep_alive(ex)      # a shutdown cut the executor's registration short (run.py)
     finally:
         if node is not None:
             if opts.record:
@@ -226,7 +230,7 @@ def main(args: list[str] | None = None) -> int:
             print(f'plant: {node.counters}', flush=True)
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return leave(0)
 
 
 if __name__ == '__main__':

@@ -32,7 +32,8 @@ from .config_errors import check_params_files, clean_rcl_message, config_error
 
 RCLError = _rclpy_impl.RCLError          # RCLInvalidROSArgsError derives from it
 
-__all__ = ['main', 'make_executor', 'spin_until_shutdown', 'STARTUP_CONFIG_ERRORS']
+__all__ = ['main', 'make_executor', 'spin_until_shutdown', 'keep_alive', 'leave',
+           'STARTUP_CONFIG_ERRORS']
 
 #: Errors of the parameters given at start-up: one line and exit code 2 (``config_errors``).
 #: ValueError covers numerically unusable values (LinAlgError is one) until the core proves
@@ -121,11 +122,7 @@ def main(args: list[str] | None = None, pedestal: bool = False) -> int:
     finally:
         signals.set_phase('stopping')
         _quietly(rclpy.try_shutdown)
-    if _UNSAFE_TO_DESTROY:      # see _keep: ending now is the only exit that cannot abort
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(rc)
-    return rc
+    return leave(rc)
 
 
 def _build(opts: argparse.Namespace, pedestal: bool) -> list[Any]:
@@ -171,8 +168,9 @@ def _run(opts: argparse.Namespace, pedestal: bool = False) -> int:
             raise
         # The context went down while the executor was working: a callback publishing on
         # a context being torn down, or the events executor half-way through registering
-        # the nodes' entities, which it cannot undo (_keep).
-        _keep(executor, kind)
+        # the nodes' entities, which it cannot undo (keep_alive).
+        if kind == 'events':
+            keep_alive(executor)
     finally:
         signals.set_phase('stopping')
         _quietly(executor.shutdown, 1.0)
@@ -193,13 +191,26 @@ def _register(executor: Any, kind: str) -> None:
 
 
 #: Executors whose destruction would abort the process (rclpy's EventsExecutor after a
-#: registration interrupted by a shutdown): kept alive; ``main`` then ends with os._exit.
+#: registration interrupted by a shutdown): kept alive; the process then ends by ``leave``.
 _UNSAFE_TO_DESTROY: list[Any] = []
 
 
-def _keep(executor: Any, kind: str) -> None:
-    if kind == 'events':
-        _UNSAFE_TO_DESTROY.append(executor)
+def keep_alive(executor: Any) -> None:
+    """An events executor whose spin raised while the context went down may hold callbacks
+    it no longer tracks (a registration cut short): destroying it would abort the process.
+    It is kept alive; the entry point ends through :func:`leave`."""
+    _UNSAFE_TO_DESTROY.append(executor)
+
+
+def leave(rc: int) -> int:
+    """``rc``, or, after :func:`keep_alive`, the process ended now with ``rc`` (os._exit
+    after flushing stdout and stderr: the interpreter's own exit would destroy the kept
+    executor and abort)."""
+    if _UNSAFE_TO_DESTROY:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(rc)
+    return rc
 
 
 def _quietly(fn: Any, *args: Any) -> None:
