@@ -79,10 +79,17 @@ def test_3000_replacements_at_1khz_the_last_out_within_1s_and_all_counted(node_p
     assert p.spin_until(lambda: p.out and abs(p.last().positions[-1, 0] - last_value)
                         < 1e-9, 10.0)
     arrival = p.out[-1][0]
+    def accounted(v: dict[str, str]) -> int:
+        return sum(int(v[k]) for k in ('trajectories_compensated', 'trajectories_superseded',
+                                       'rejected_trajectories'))
+
+    # every one received and accounted for: one can be in the worker, not queued, when a
+    # status is published (seen once in CI: received 3004, accounted 3003), so the wait is
+    # for the counts to meet, within the 10 s of fresh_status, not for the queue alone
     vals = p.fresh_status('trajectories', lambda v: int(v['trajectories_received']) >=
-                          n0 + 3000 and v['queued'] == '0')
-    done = sum(int(vals[k]) for k in ('trajectories_compensated', 'trajectories_superseded',
-                                      'rejected_trajectories'))
+                          n0 + 3000 and v['queued'] == '0'
+                          and accounted(v) == int(v['trajectories_received']))
+    done = accounted(vals)
     assert int(vals['trajectories_received']) == n0 + 3000, vals
     assert done == int(vals['trajectories_received']), vals
     assert vals['trajectory_messages_lost'] == '0'
