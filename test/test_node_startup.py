@@ -252,7 +252,7 @@ def test_a_shutdown_while_the_executor_registers_the_node_ends_quietly(how, ros_
 
 
 # The same cut-short registration in the package's helper processes (the plant node of the
-# live adaptation harness; the demo commander shares the code path: run.keep_alive, leave).
+# live adaptation harness; the demo commander shares the code path: run.after_shutdown, leave).
 _PLANT_MID_REGISTRATION = r'''
 import sys
 import rclpy

@@ -330,7 +330,7 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
     tty = out.isatty()
     width = min(LINE_WIDTH, shutil.get_terminal_size((LINE_WIDTH, 24)).columns) if tty \
         else LINE_WIDTH
-    from .run import keep_alive, leave, make_executor
+    from .run import after_shutdown, leave, make_executor
     cfg = load_config(opts.config) if opts.config else load_config()
     # rclpy.init() as a context manager exists only from Kilted (rclpy 9) on: on Jazzy
     # (rclpy 7.1) it returns None, so init, then try_shutdown in a finally.
@@ -399,9 +399,8 @@ def main(args: list[str] | None = None, out: TextIO | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         print('', file=out)
     except Exception:
-        if ex is None or rclpy.ok():
+        if not after_shutdown(ex):      # e.g. the executor's registration cut short
             raise
-        keep_alive(ex)      # a shutdown cut the executor's registration short (run.py)
     finally:
         if node is not None:
             node.destroy_node()

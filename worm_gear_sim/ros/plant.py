@@ -206,7 +206,7 @@ def main(args: list[str] | None = None) -> int:
     argv = sys.argv if args is None else args
     opts = _parse(remove_ros_args(args=argv)[1:])
     plant = load_config(opts.plant)
-    from .run import keep_alive, leave, make_executor, spin_until_shutdown
+    from .run import after_shutdown, leave, make_executor, spin_until_shutdown
     rclpy.init(args=argv)
     node = ex = None
     try:
@@ -220,9 +220,8 @@ def main(args: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
-        if ex is None or rclpy.ok():
+        if not after_shutdown(ex):      # e.g. the executor's registration cut short
             raise
-        keep_alive(ex)      # a shutdown cut the executor's registration short (run.py)
     finally:
         if node is not None:
             if opts.record:

@@ -32,7 +32,7 @@ from .config_errors import check_params_files, clean_rcl_message, config_error
 
 RCLError = _rclpy_impl.RCLError          # RCLInvalidROSArgsError derives from it
 
-__all__ = ['main', 'make_executor', 'spin_until_shutdown', 'keep_alive', 'leave',
+__all__ = ['main', 'make_executor', 'spin_until_shutdown', 'after_shutdown', 'leave',
            'STARTUP_CONFIG_ERRORS']
 
 #: Errors of the parameters given at start-up: one line and exit code 2 (``config_errors``).
@@ -164,13 +164,11 @@ def _run(opts: argparse.Namespace, pedestal: bool = False) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:
-        if context.ok():
-            raise
         # The context went down while the executor was working: a callback publishing on
         # a context being torn down, or the events executor half-way through registering
-        # the nodes' entities, which it cannot undo (keep_alive).
-        if kind == 'events':
-            keep_alive(executor)
+        # the nodes' entities, which it cannot undo (after_shutdown).
+        if not after_shutdown(executor, context):
+            raise
     finally:
         signals.set_phase('stopping')
         _quietly(executor.shutdown, 1.0)
@@ -191,21 +189,28 @@ def _register(executor: Any, kind: str) -> None:
 
 
 #: Executors whose destruction would abort the process (rclpy's EventsExecutor after a
-#: registration interrupted by a shutdown): kept alive; the process then ends by ``leave``.
+#: registration interrupted by a shutdown, :func:`after_shutdown`): kept alive; the process
+#: then ends by ``leave``.
 _UNSAFE_TO_DESTROY: list[Any] = []
 
 
-def keep_alive(executor: Any) -> None:
-    """An events executor whose spin raised while the context went down may hold callbacks
-    it no longer tracks (a registration cut short): destroying it would abort the process.
-    It is kept alive; the entry point ends through :func:`leave`."""
-    _UNSAFE_TO_DESTROY.append(executor)
+def after_shutdown(executor: Any, context: Any = None) -> bool:
+    """Whether an exception out of the executor came with the context going down (a
+    shutdown, not an error: True).  An events executor that raised so may hold callbacks it
+    no longer tracks (a registration cut short): destroying it would abort the process, so
+    it is kept alive, and the entry point ends through :func:`leave`."""
+    ctx = context if context is not None else rclpy.get_default_context()
+    if ctx.ok():
+        return False
+    if executor is not None and not isinstance(executor, SingleThreadedExecutor):
+        _UNSAFE_TO_DESTROY.append(executor)
+    return True
 
 
 def leave(rc: int) -> int:
-    """``rc``, or, after :func:`keep_alive`, the process ended now with ``rc`` (os._exit
-    after flushing stdout and stderr: the interpreter's own exit would destroy the kept
-    executor and abort)."""
+    """``rc``, or, after :func:`after_shutdown` kept an executor, the process ended now
+    with ``rc`` (os._exit after flushing stdout and stderr: the interpreter's own exit
+    would destroy the kept executor and abort)."""
     if _UNSAFE_TO_DESTROY:
         sys.stdout.flush()
         sys.stderr.flush()
