@@ -12,6 +12,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scalar_command import piecewise_quadratic
 from scipy.integrate import solve_ivp
 
 from worm_gear_sim import Config, make_profile, simulate
@@ -31,11 +32,7 @@ BREAKS = (0.0, 0.004, 0.016, 0.020, T_END)      # kinks of the trapezoidal comma
 def radau_reference(cfg: Config, times: np.ndarray) -> np.ndarray:
     p = pack_parameters(cfg)
     M = np.array([p[P_JW], p[P_JG], p[P_J4]])
-    prof = make_profile(cfg.input)
-
-    def theta1(t):
-        return float(prof.theta1(np.array([t]))[0])
-
+    theta1 = piecewise_quadratic(make_profile(cfg.input).theta1, BREAKS)
     if M[2] == 0.0:
         return _radau_free_shaft_end(p, M, theta1, times)
 
@@ -167,35 +164,30 @@ def _radau_set_valued_segments(cfg: Config, t_end: float):
     Minv = np.array([1.0 / m if m > 0.0 else 0.0 for m in M])
     k = np.array([p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL], 0.0])
     mu_s = p[P_MU_STATIC]
-    prof = make_profile(cfg.input)
+    th1 = piecewise_quadratic(make_profile(cfg.input).theta1, BREAKS)
     lw, rg = p[P_LW], p[P_RG]
-
-    def th1(t):
-        return float(prof.theta1(np.array([t]))[0])
 
     def sq(y):
         return 1.0 if lw * y[0] - rg * y[1] >= 0.0 else -1.0
 
-    def q_of(y, t, mu):
-        f = mesh_forces_mu(p, y[0], y[1], y[2], y[5], th1(t), mu)
-        return np.array(f[:3]), np.array([f[7], f[8], 0.0])
+    k0, k1 = float(k[0]), float(k[1])
+    m0, m1, m2 = (float(m) for m in Minv)
 
     def stick_lambda(t, y):
-        Q0, ql = q_of(y, t, 0.0)
-        den = k @ (ql * Minv)
-        return -(k @ (Q0 * Minv)) / den if den != 0.0 else np.inf
+        # Q is linear in mu_eff: Q = Q(0) + mu_eff dQ/dmu (the 8th and 9th values)
+        f = mesh_forces_mu(p, y[0], y[1], y[2], y[5], th1(t), 0.0)
+        den = k0 * f[7] * m0 + k1 * f[8] * m1
+        return -(k0 * f[0] * m0 + k1 * f[1] * m1) / den if den != 0.0 else np.inf
 
     def rhs(t, y, mode):
         if mode == 0:
             mu = stick_lambda(t, y)
         else:
-            mag, _ = slip_coefficient(p, mode * (k @ y[3:]))
+            mag, _ = slip_coefficient(p, mode * (k0 * y[3] + k1 * y[4]))
             mu = sq(y) * mode * mag
-        Q, _ = q_of(y, t, mu)
-        a = Q * Minv
-        if free_end:
-            a[2] = a[1]
-        return np.r_[y[3:], a]
+        f = mesh_forces_mu(p, y[0], y[1], y[2], y[5], th1(t), mu)
+        a1 = f[1] * m1
+        return np.array([y[3], y[4], y[5], f[0] * m0, a1, a1 if free_end else f[2] * m2])
 
     def ev_speed(t, y, mode):
         return k @ y[3:]

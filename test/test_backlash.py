@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scalar_command import piecewise_quadratic
 from scipy.integrate import solve_ivp
 
 from worm_gear_sim import Config, SampledProfile, simulate
@@ -161,9 +162,11 @@ def _radau_with_play(cfg: Config, prof: SampledProfile, breaks, times, load=None
 
     rigid = np.array([1.0, lw / rg, lw / rg])
     leg = {'open': False}          # the damping of a leg: fixed from its start (below)
+    theta1 = piecewise_quadratic(prof.theta1, breaks)
+    theta1_dot = piecewise_quadratic(prof.theta1_dot, breaks)
 
     def rhs(t, y):
-        th1 = float(prof.theta1(np.array([t]))[0])
+        th1 = theta1(t)
         q = lw * y[0] - rg * y[1]
         pen = q - h if q > h else q + h if q < -h else 0.0
         wn = pen * cl / kgws
@@ -174,7 +177,7 @@ def _radau_with_play(cfg: Config, prof: SampledProfile, breaks, times, load=None
         Q = np.array([Q2, Q3, Q4])
         if damping is not None:
             C = damping[1] if leg['open'] else damping[0]
-            Q -= C @ (y[3:] - rigid * float(prof.theta1_dot(np.array([t]))[0]))
+            Q -= C @ (y[3:] - rigid * theta1_dot(t))
         return np.r_[y[3:], Q / M]
 
     def edge(sign):

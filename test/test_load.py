@@ -8,8 +8,11 @@ prediction and the CLI."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
+from scalar_command import piecewise_quadratic
 from scipy.integrate import solve_ivp
 from scipy.signal import welch
 
@@ -40,6 +43,11 @@ class _SmoothLoad(LoadSignal):
         w = 2 * np.pi * self.f * np.asarray(t, float)
         return self.mean + self.a * np.sin(w) + self.b * np.sin(3.7 * w)
 
+    def torque_at(self, t: float) -> float:
+        """The same at one instant (Radau's right-hand side)."""
+        w = 2 * math.pi * self.f * t
+        return self.mean + self.a * math.sin(w) + self.b * math.sin(3.7 * w)
+
 
 @pytest.mark.parametrize('over', [
     {},                                                        # set-valued friction
@@ -61,23 +69,22 @@ def test_a_constant_load_signal_equals_the_constant_key_bit_for_bit(over):
 RTOL = 1e-9
 
 
-def _radau(cfg: Config, load: LoadSignal, times: np.ndarray, breaks) -> np.ndarray:
+def _radau(cfg: Config, load: _SmoothLoad, times: np.ndarray, breaks) -> np.ndarray:
     """The model's equations (mesh_forces with no constant load) with -T(t) added to the
     antenna's equation, integrated by Radau from rest under T(0)."""
     p = pack_parameters(cfg)
     assert p[P_TLOAD] == 0.0
     M = np.array([p[P_JW], p[P_JG], p[P_J4]])
     prof = SampledProfile(np.array(breaks), np.array([0.0, 0.0, 0.08, 0.08]), 'linear')
+    theta1 = piecewise_quadratic(prof.theta1, breaks)
 
     def rhs(t, y):
-        th1 = float(prof.theta1(np.array([t]))[0])
-        f = mesh_forces(p, y[0], y[1], y[2], y[3], y[4], y[5], th1)
-        q4 = f[2] - float(load.torque(np.array([t]))[0])
+        f = mesh_forces(p, y[0], y[1], y[2], y[3], y[4], y[5], theta1(t))
+        q4 = f[2] - load.torque_at(t)
         return np.array([y[3], y[4], y[5], f[0] / M[0], f[1] / M[1], q4 / M[2]])
 
     def jac(t, y):
-        th1 = float(prof.theta1(np.array([t]))[0])
-        f = mesh_forces(p, y[0], y[1], y[2], y[3], y[4], y[5], th1)
+        f = mesh_forces(p, y[0], y[1], y[2], y[3], y[4], y[5], theta1(t))
         kg = p[P_KG]
         J = np.zeros((6, 6))
         J[0, 3] = J[1, 4] = J[2, 5] = 1.0
