@@ -325,6 +325,8 @@ def test_the_initial_state_rests_on_the_loaded_or_the_chosen_flank(load, flank, 
     assert np.max(np.abs(tr.omega)) <= 1e-9
 
 
+# theta4 only: the worm's theta2 at 10 us is what the warning is about
+@pytest.mark.filterwarnings('ignore::worm_gear_sim.dynamics.modal.StepResolutionWarning')
 @pytest.mark.parametrize('arcmin, variant', [
     (0.5, {'friction.mu_kinetic': 0.055}),                    # friction off by 17 %
     (5.0, {'shafts.gear_bearing_axial_stiffness': 3.0e8}),    # other bearings
@@ -342,7 +344,9 @@ def test_identify_fits_the_play_and_predicts_a_held_out_reversal(arcmin, variant
         prediction_errors,
         record_from_model,
     )
-    drag = {'load.output_viscous_coefficient': 2.0}
+    # the fit, not the step, is under test: 10 us (frequency-matched worm) resolves theta4
+    # to 1e-4 of its oscillation (docs/performance.md) at 2.5x fewer steps than the default
+    drag = {'load.output_viscous_coefficient': 2.0, 'integrator.time_step': 1e-5}
     truth = Config().replace({'mesh.backlash': arcmin * ARCMIN, **drag, **variant})
     # worm rate: the gear at 2e-3 rad/s, 2e-3 rad out and back (> the 5 arcmin play); the
     # former 1e-3 rad/s over 4 s fitted the same play, at twice the cost
@@ -365,7 +369,9 @@ def test_identify_fits_the_play_and_predicts_a_held_out_reversal(arcmin, variant
     print(f'\n{arcmin} arcmin: fitted {res.values[0] / ARCMIN:.4f} arcmin, held-out rel '
           f'{err["rel"]:.4f}')
     assert err['rel'] <= 0.05, err
-    # one way only: the play cannot be seen
+    if arcmin != 5.0:
+        return
+    # one way only: the play cannot be seen (whatever its size: checked once)
     one_way = record_from_model(truth, SampledProfile(np.array([0.0, 1.0]),
                                                       np.array([0.0, 0.1]), 'linear'),
                                 1.0, sample_rate=1000, outputs=('theta4',))
