@@ -116,15 +116,17 @@ def held_out(cfg, hold: Record, clean: Record) -> tuple[float, float]:
     return 100 * e['rel'], 100 * c['rms_rad'] / e['amplitude_rad']
 
 
-def approaches(args) -> list[tuple[str, str, float, bool]]:
-    """(label, strategy, finite-difference step, fit on the tanh surrogate) per table row."""
+def approaches(args) -> list[tuple[str, str, float, bool, float]]:
+    """(label, strategy, finite-difference step, fit on the tanh surrogate, window_tol) per
+    table row."""
     out = []
-    for s in args.strategies or list(STRATEGIES):
-        for h in args.diff_steps:
-            tag = '' if len(args.diff_steps) == 1 else f' h={h:g}'
-            out.append((s + tag, s, h, False))
-            if args.surrogate:
-                out.append((s + tag + ' tanh', s, h, True))
+    for s, h, wt in itertools.product(args.strategies or list(STRATEGIES), args.diff_steps,
+                                      args.window_tols):
+        tag = '' if len(args.diff_steps) == 1 else f' h={h:g}'
+        tag += '' if len(args.window_tols) == 1 else f' wtol={wt:g}'
+        out.append((s + tag, s, h, False, wt))
+        if args.surrogate:
+            out.append((s + tag + ' tanh', s, h, True, wt))
     return out
 
 
@@ -149,9 +151,9 @@ def compare(args) -> None:
         h0, c0 = held_out(base, hold, clean)
         print(f'{dname + f" {f_true:.1f} Hz, {duration:g} s":<38} {"(default config)":<24} '
               f'{h0:>7.1f} {c0:>10.1f}')
-        for label, s, step, surrogate in rows:
+        for label, s, step, surrogate, wtol in rows:
             opt = FitOptions(strategy=s, serial=args.serial, workers=args.workers,
-                             method=args.method, diff_step=step)
+                             method=args.method, diff_step=step, window_tol=wtol)
             t0 = time.perf_counter()
             res = identify(smooth if surrogate else base, [train], KEYS, options=opt)
             wall = time.perf_counter() - t0
@@ -223,7 +225,7 @@ def timing(args) -> None:
     train, hold, clean = records(truth, seed=7)
     n = args.threads
     print(f'4-parameter fit, {train.t.size} samples ({DURATION} s at {RATE:g} Hz), '
-          f'strategy robust; {_load()}')
+          f'strategy robust, window_tol {args.window_tols[0]:g}; {_load()}')
     first = None
     ways = {'1 thread': (1, 0), f'{n} threads': (n, 0),
             f'{n} worker processes': (n, n)}
@@ -233,7 +235,8 @@ def timing(args) -> None:
         for way, (th, proc) in ways.items():
             t0, c0, p0 = time.perf_counter(), _cpu(), time.process_time()
             res = identify(base, [train], KEYS,
-                           options=FitOptions(serial=True, threads=th, processes=proc))
+                           options=FitOptions(serial=True, threads=th, processes=proc,
+                                              window_tol=args.window_tols[0]))
             wall, cpu = time.perf_counter() - t0, _cpu() - c0
             parent = time.process_time() - p0
             walls[way].append(wall)
@@ -341,6 +344,11 @@ def main() -> None:
     ap.add_argument('--method', default='dogbox', help='least_squares method (--compare)')
     ap.add_argument('--diff-steps', type=float, nargs='*', default=[DIFF_STEP],
                     help='finite-difference steps in the fitted coordinate (--compare)')
+    ap.add_argument('--window-tols', type=float, nargs='*',
+                    default=[FitOptions().window_tol],
+                    help='ftol/xtol of the growing windows before the last (FitOptions.'
+                    'window_tol; 0: the final tolerances throughout); --compare takes several, '
+                    'the timing run the first')
     ap.add_argument('--surrogate', action='store_true', help='also fit on the tanh friction '
                     'law and predict with the base law (--compare)')
     ap.add_argument('--drives', nargs='*', help='substrings of drive names in --compare')
