@@ -338,6 +338,7 @@ class Adapter:
         self._model_flank_t = -math.inf
         self._applied_t = -math.inf       # the last step applied (when its samples start)
         self._applied_bound = 0.0         # and the change of the correction it made [rad]
+        self._recent_bounds: collections.deque = collections.deque()  # (t, bound) of steps
         self._cross_t = -math.inf         # the drive's last crossing, measured or estimated
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
@@ -583,9 +584,16 @@ class Adapter:
         of the first sample it predicts [s] (None: the last sample's)."""
         step = np.array(step, float)
         at = self._last_t if at is None else float(at)
-        # the steps applied within the detector's widest window add up in its residual
-        prev = self._applied_bound if at - self._applied_t < DETECT_SPAN else 0.0
-        self._applied_bound = self._correction_bound(step - self.applied_x) + prev
+        # the steps applied within the detector's widest window add up in its residual:
+        # those within DETECT_SPAN of this one (a window holding this step holds no older
+        # one).  Chaining each step's bound onto the previous one's whenever the two were
+        # closer than DETECT_SPAN summed every step of a run of steps (one per
+        # step_interval < DETECT_SPAN), so the detector went blind while the model moved
+        recent = self._recent_bounds
+        while recent and at - recent[0][0] >= DETECT_SPAN:
+            recent.popleft()
+        recent.append((at, self._correction_bound(step - self.applied_x)))
+        self._applied_bound = sum(b for _, b in recent)
         self.applied_x = step
         self.model = model
         self._applied_t = at
