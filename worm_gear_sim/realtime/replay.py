@@ -31,8 +31,14 @@ __all__ = ['Replay', 'replay', 'compare_with_recorded', 'REPLAY_CSV_COLUMNS']
 #: receive time and stamp further apart than this (median): the stamps are on another
 #: clock (sim time, a servo's clock), so the pipeline's stamp window is not applied
 CLOCK_AGREEMENT_NS = 1_000_000_000
-#: how much earlier than the node the recorder may have received a sample
-RECEIVE_SKEW_NS = 1_000_000
+#: how much earlier than the node the recorder may have received a sample: a recorded held
+#: prediction stamped up to this long after a sample's receive time still came before the
+#: node took that sample.  Safe up to the node's stale margin (0.1 s): after taking a sample
+#: the node publishes no held prediction for at least G + that margin of its clock, so a held
+#: prediction this close after a sample's receive time cannot have followed the sample.  (It
+#: was 1 ms: live, under load, the recorder got a burst 4+ ms before the node, whose timer
+#: published held predictions meanwhile, and the replay put them after the burst.)
+RECEIVE_SKEW_NS = 50_000_000
 
 REPLAY_CSV_COLUMNS = (
     ('t', 's'), ('theta1', 'rad'), ('theta2', 'rad'), ('theta3', 'rad'), ('theta4', 'rad'),
@@ -187,7 +193,9 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
             while k < len(holds) and holds[k] <= rx + skew:
                 collect(pred.hold(holds[k]))
                 k += 1
-            collect(pred.push(s, x, now_ns=rx if use_now else None))
+            # (the node took the sample after the held prediction it published before it)
+            now = max(rx, holds[k - 1]) if k else rx
+            collect(pred.push(s, x, now_ns=now if use_now else None))
             last_rx = max(last_rx, rx)
         # after the last sample: the node's timer keeps publishing the held prediction,
         # stamped with its clock (the receive clock when it agrees with the stamps)
