@@ -42,9 +42,10 @@ def servo_stream(seed=3, n=80):
     return stamps, x, rx
 
 
-def live_node(cfg, stamps, x, rx):
-    """What the node's callbacks do: push each sample at reception, a 1 kHz hold timer."""
-    p = RealtimePredictor(cfg)
+def live_node(cfg, stamps, x, rx, stale_margin=0.02, hold_until=None):
+    """What the node's callbacks do: push each sample at reception, a 1 kHz hold timer
+    (firing on up to ``hold_until`` after the last sample, if given)."""
+    p = RealtimePredictor(cfg, stale_margin=stale_margin)
     preds = []
     timer = int(rx[0])
     for s, v, r in zip(stamps.tolist(), x.tolist(), rx.tolist()):
@@ -52,6 +53,9 @@ def live_node(cfg, stamps, x, rx):
             preds += p.hold(timer).predictions
             timer += 1_000_000
         preds += p.push(s, v, now_ns=r).predictions
+    while hold_until is not None and timer <= hold_until:
+        preds += p.hold(timer).predictions
+        timer += 1_000_000
     return preds
 
 
@@ -209,18 +213,9 @@ def test_a_pause_replays_when_the_recorder_got_the_samples_before_the_node(
         stamps += [base + k * 1_000_000 for k in range(60)]
         rx_node += [t_node + arrive + 3_000_000 + k * 20_000 for k in range(60)]
     stamps, rx_node = np.array(stamps), np.array(rx_node)
-    p = RealtimePredictor(cfg, stale_margin=0.1)       # (ros/node.py STALE_MARGIN)
-    preds = []
-    timer = int(rx_node[0])
-    for s, v, r in zip(stamps.tolist(), x.tolist(), rx_node.tolist()):
-        while timer <= r:
-            preds += p.hold(timer).predictions
-            timer += 1_000_000
-        preds += p.push(s, v, now_ns=r).predictions
-    end = int(rx_node[-1]) + 600_000_000                  # the second pause, held too
-    while timer <= end:
-        preds += p.hold(timer).predictions
-        timer += 1_000_000
+    # (the node's stale margin, ros/node.py STALE_MARGIN; the second pause held too)
+    preds = live_node(cfg, stamps, x, rx_node, stale_margin=0.1,
+                      hold_until=int(rx_node[-1]) + 600_000_000)
     held = [q.stamp_ns for q in preds if q.stamp_ns not in set(stamps.tolist())]
     second = int(rx_node[60])
     assert sum(second - 3_000_000 <= h < second for h in held) == 3   # in the last 3 ms
