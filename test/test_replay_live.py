@@ -93,10 +93,14 @@ def test_live_node_bag_replays_to_its_prediction(ros_harness, tmp_path, capsys, 
     assert float(line.split('= ')[1].split()[0]) <= 1e-9
 
 
-def test_live_node_pause_replays_with_its_held_predictions(ros_harness, tmp_path, capsys):
+@pytest.mark.parametrize('lead_ms', [400, -50])
+def test_live_node_pause_replays_with_its_held_predictions(ros_harness, tmp_path, capsys,
+                                                           lead_ms):
     """Wall clock, a pause of the stream: the node goes stale and publishes held
     predictions at its timer's instants; the replay fires the pipeline's hold at the
-    recorded ones and matches every stamp."""
+    recorded ones and matches every stamp.  ``lead_ms`` -50: the stamps lag their arrival
+    (a servo's transport delay): the node stamps its held predictions with the stream's
+    time, its clock less the lag, and the recorder's lag is not the node's."""
     h = ros_harness(sim_time=False)
     recorded: list[tuple[int, object]] = []
     clock = h.probe.get_clock()
@@ -106,11 +110,10 @@ def test_live_node_pause_replays_with_its_held_predictions(ros_harness, tmp_path
     move = TrapezoidalProfile(0.1130973, 0.02, 0.004, 0.005)
     n = 60
     x = move.theta1(np.arange(2 * n) * 1e-3)
-    # two bursts of 1 kHz stamps, 0.4 s ahead of the node's clock: a loaded machine must
-    # not let the clock overtake a burst (the node would go stale inside it, and which of
-    # its timer and the sample came first is what a recorder cannot see)
+    # two bursts of 1 kHz stamps, 0.4 s ahead of the node's clock (a loaded machine must
+    # not let the clock overtake a burst), or 50 ms behind it (the stream's time lags)
     for part in (x[:n], x[n:]):
-        base = h.node.get_clock().now().nanoseconds + 400_000_000
+        base = h.node.get_clock().now().nanoseconds + lead_ms * 1_000_000
         pairs = [(base + k * 1_000_000, float(v)) for k, v in enumerate(part)]
         assert h.references(pairs)
         h.spin_for(0.6)              # past the last stamp: stale, held predictions

@@ -208,6 +208,11 @@ class RealtimePredictor:
         return self._last_real_ns
 
     @property
+    def stream_lag_ns(self) -> int:
+        """How much the last sample's arrival [caller's clock] lagged its stamp, or 0."""
+        return max(0, self._last_arrival_ns - self._last_real_ns)
+
+    @property
     def stale_after_ns(self) -> int:
         """G: a stamp gap longer than this is a pause (module doc)."""
         return self._gap_ns
@@ -332,22 +337,17 @@ class RealtimePredictor:
 
     def hold(self, now_ns: int) -> Output:
         """Stamped path, from a slow timer: if the stream is stale (no sample has arrived
-        for G + ``stale_margin``, and the stream's time passed its last stamp by as much),
-        insert the rest samples due, release the corrections waiting for them, advance the
-        simulator holding the last command up to the stream's time and return that held
-        prediction.  Otherwise nothing.  The stream's time is ``now_ns``, less the lag of
-        the last sample's stamp behind its arrival when it lagged."""
+        for G + ``stale_margin``, and the stream's time, ``now_ns - stream_lag_ns``, passed its
+        last stamp by as much: a lagging stream is stale only when samples stop), insert the
+        rest samples due, release the corrections waiting for them, advance the simulator
+        holding the last command up to the stream's time and return that held prediction."""
         out = Output()
         now_ns = int(now_ns)
         self._check_clock(now_ns, out, 'stamped')
         if not self._started or self._mode != 'stamped':
             out.stale = self._stale
             return out
-        # the stream's time now: ``now_ns`` less the lag of its last sample's stamp behind
-        # its arrival (transport and scheduling delay are no pause: a stream whose stamps
-        # lag is stale only when samples stop arriving)
-        lag = self._last_arrival_ns - self._last_real_ns
-        stream_ns = now_ns - lag if lag > 0 else now_ns
+        stream_ns = now_ns - self.stream_lag_ns    # the stream's time now
         if stream_ns - self._last_real_ns > self._gap_ns + self.stale_margin_ns:
             if not self._stale:     # a late sample may retract it: the state copied
                 self._before_stale_counts = {k: self.counters[k] for k in RETRACTED_COUNTS}

@@ -31,13 +31,12 @@ __all__ = ['Replay', 'replay', 'compare_with_recorded', 'REPLAY_CSV_COLUMNS']
 #: receive time and stamp further apart than this (median): the stamps are on another
 #: clock (sim time, a servo's clock), so the pipeline's stamp window is not applied
 CLOCK_AGREEMENT_NS = 1_000_000_000
-#: how much earlier than the node the recorder may have received a sample: a recorded held
-#: prediction stamped up to this long after a sample's receive time still came before the
-#: node took that sample.  Safe up to the node's stale margin (0.1 s): after taking a sample
-#: the node publishes no held prediction for at least G + that margin of its clock, so a held
-#: prediction this close after a sample's receive time cannot have followed the sample.  (It
-#: was 1 ms: live, under load, the recorder got a burst 4+ ms before the node, whose timer
-#: published held predictions meanwhile, and the replay put them after the burst.)
+#: the order of a recorded held prediction and a sample where the stamps cannot tell it (a
+#: sample after a gap, stamped before the held prediction: a resumed stream whose stamps lag
+#: more than before): the hold came first if the node's clock at it was at most this much
+#: after the recorder received the sample.  The recorder, a second subscriber, may get a
+#: burst several ms before the node; after taking a sample, the node publishes no held
+#: prediction for G + its stale margin (0.1 s).
 RECEIVE_SKEW_NS = 50_000_000
 
 REPLAY_CSV_COLUMNS = (
@@ -172,12 +171,8 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
         use_now = same if use_receive_clock is None else bool(use_receive_clock)
         info['stamp_window'] = use_now
         holds: list[int] = []
-        skew = 0
-        if hold_stamps_ns is not None:
-            # a recorded held prediction proves the stream was still stale in the node: it
-            # came before the node took the next sample, even if the recorder received
-            # that sample a little earlier (two subscribers, one executor)
-            skew = RECEIVE_SKEW_NS
+        given = hold_stamps_ns is not None
+        if given:
             holds = np.unique(np.asarray(hold_stamps_ns, dtype=np.int64)).tolist()
             info['holds'] = f'{len(holds)} given instants'
         elif use_now:
@@ -185,16 +180,37 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
             info['holds'] = f'every {period} ns on the receive clock'
         else:
             info['holds'] = 'none (stamps and receive times on different clocks)'
+
+        def fire_at(h: int) -> int:
+            # a given hold is a held prediction's stamp, the stream's time: the node's
+            # clock then was later by the stream's lag (the stamps lagged their arrival)
+            return h + pred.stream_lag_ns if given else h
+
+        def hold_first(h: int, s: int, rx: int) -> bool:
+            """Did the node fire the hold at ``h`` before it took the sample stamped ``s``,
+            received at ``rx``?  A recorded held prediction proves the stream was stale in
+            the node; the recorder (a second subscriber) may have received ``s`` earlier."""
+            if not given:
+                return h <= rx
+            if s > h:       # taken first, it would have left no stream stale at h
+                return True
+            if s < pred.last_stamp_ns + pred.stale_after_ns:
+                return False    # no gap: after the hold it would have been a late sample
+            # a resumed stream whose stamps lag more than before: the receive clock decides
+            return not use_now or fire_at(h) <= rx + RECEIVE_SKEW_NS
+
         k = 0
         last_rx = int(receive[0])
+        fired = None
         for s, x, rx in zip(stamps.tolist(), values.tolist(), receive.tolist()):
             if stop_ns is not None and s > stop_ns:
                 continue
-            while k < len(holds) and holds[k] <= rx + skew:
-                collect(pred.hold(holds[k]))
+            while k < len(holds) and hold_first(holds[k], s, rx):
+                fired = fire_at(holds[k])
+                collect(pred.hold(fired))
                 k += 1
             # (the node took the sample after the held prediction it published before it)
-            now = max(rx, holds[k - 1]) if k else rx
+            now = rx if fired is None else max(rx, fired)
             collect(pred.push(s, x, now_ns=now if use_now else None))
             last_rx = max(last_rx, rx)
         # after the last sample: the node's timer keeps publishing the held prediction,
@@ -203,7 +219,7 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
         until = None if stop_ns is None else stop_ns + offset
         for h in holds[k:]:
             if until is None or h <= until:
-                collect(pred.hold(h))
+                collect(pred.hold(fire_at(h)))
         if until is not None and pred.started:
             h = max(pred.last_stamp_ns + offset, holds[-1] if holds else 0) + period
             while h <= until:
