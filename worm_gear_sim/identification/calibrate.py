@@ -43,7 +43,7 @@ from ..records import Record
 from .data import IdentificationError, record_from_model
 from .direct import LOAD, PLAY
 from .excitation import Limits, Move, design_excitation, uses_sweeps
-from .fit import FitOptions, identify
+from .fit import FitOptions, identify, wind_up_only
 from .report import FitResult, prediction_errors
 from .unload import split_refit
 
@@ -163,9 +163,12 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
         after_free = prediction_errors(free.config, held)
         reasons_free = _reasons(free, after_free, accept_rel)
         if not reasons_free:
+            held_keys = res.strategy['priors']
             res, after, reasons = free, after_free, reasons_free
             res.warnings.append('refused with the teeth prior; refitted with every key free '
                                 '(the held-out moves chose between the two fits)')
+            for k in held_keys:     # free now, but no better seen than with the prior
+                wind_up_only(res, k, 'fitted free after the fit with its prior was refused')
     reserve = [r for r, m in zip(records, moves) if m.role == 'reserve']
     if reserve and PLAY in res.not_seen and LOAD in res.keys:
         # one flank in every sweep: the dither (.unload) tells the play from the load; its

@@ -435,14 +435,22 @@ def identify(base: Config, records: Sequence[Record], keys: Sequence[str], *,
                   'windows_s': windows, 'priors': prior_sigma},
         starts=results, frequency_info=freq_info, seconds=time.perf_counter() - t_begin)
     for k, sg in prior_sigma.items():    # a held key is not measured: say so, and how
-        line = (f'{k}: not seen: held near its base value by a prior ({100 * sg:.3g} % in '
-                'log) because the records show it only through the wind-up compliance, '
-                'which trades with the load torque and the drag; to measure it, record the '
-                'sweeps again with a known extra load torque on the axis (the change of the '
-                'wind-up gives the compliance)')
-        result.not_seen.setdefault(k, line)
-        result.warnings.append(line)
+        wind_up_only(result, k, f'held near its base value by a prior ({100 * sg:.3g} % in '
+                     'log)')
     return result
+
+
+def wind_up_only(result: FitResult, key: str, how: str) -> None:
+    """``key`` (a key of :data:`PRIORS`) is not seen in ``result``: one line naming ``how``
+    it was set, why the records cannot show it and the move that would, in ``not_seen``
+    and the warnings.  The one rule for the three fits that set it (held by the prior;
+    fitted free after the prior was refused; fitted free after the dither's split)."""
+    line = (f'{key}: not seen: {how}, because the records show it only through the wind-up '
+            'compliance, which trades with the load torque and the drag; to measure it, '
+            'record the sweeps again with a known extra load torque on the axis (the change '
+            'of the wind-up gives the compliance)')
+    result.not_seen.setdefault(key, line)
+    result.warnings.append(line)
 
 
 def _run_starts(problem: Problem, starts: Sequence[np.ndarray],

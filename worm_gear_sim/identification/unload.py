@@ -31,7 +31,7 @@ from collections.abc import Sequence
 from ..params import Config
 from ..records import Record
 from .direct import LOAD, PLAY, best_on_family, compliance
-from .fit import FitOptions, identify
+from .fit import PRIORS, FitOptions, identify, wind_up_only
 from .parameters import fit_parameters
 from .problem import Problem
 from .report import FitResult, residual_rms
@@ -61,14 +61,9 @@ def split_refit(base: Config, records: Sequence[Record], keys: Sequence[str],
     opt = dataclasses.replace(options, global_stage=False, priors={}, n_starts=1)
     res = identify(cfg.replace(best), records, keys, options=opt, outputs=outputs)
     res.frequency_info['split_scan'] = rows
-    teeth = 'mesh.gear_tooth_stiffness_multiplier'
-    if teeth in keys:      # free here (no prior), but no better seen than with the prior
-        line = (f'{teeth}: not seen: fitted free after the dither split the play from the '
-                'load, but the records show it only through the wind-up compliance, which '
-                'trades with the load torque and the drag; to measure it, record the sweeps '
-                'again with a known extra load torque on the axis')
-        res.not_seen.setdefault(teeth, line)
-        res.warnings.append(line)
+    for key in PRIORS:     # free here (no prior), but no better seen than with the prior
+        if key in keys:
+            wind_up_only(res, key, 'fitted free after the dither split the play from the load')
     res.base_config = base
     res.base_values = [p.base for p in fit_parameters(base, keys)]
     res.rms_before = residual_rms(Problem(base, fit_parameters(base, keys), records, outputs),
