@@ -56,8 +56,7 @@ def main(argv: list[str] | None = None) -> int:
             big = big_trajectory(stamp, opts.points, phase=(stamp - first) / 1e9)
             p.stream(lambda: False, 0.5)            # building it paused the stream
             base = p.counters(COUNTED)
-            p.spin_until(lambda: p.answers >= p.sent, 0.05)      # all answered so far
-            answers0, sent0, n_out = p.answers, p.sent, len(p.out)
+            sent0, n_out = p.sent, len(p.out)
             t0 = time.monotonic()
             r = p.stream(lambda n=n_out: len(p.out) > n, 60.0, extra=big)
             out_after = p.out[-1][0] - t0 - 0.1 if len(p.out) > n_out else float('nan')
@@ -65,8 +64,8 @@ def main(argv: list[str] | None = None) -> int:
             now = p.counters(COUNTED)
             sent = p.sent - sent0
             d = {k: now[k] - base[k] for k in COUNTED}
-            p.spin_until(lambda a=answers0 + sent: p.answers >= a, 5.0)
-            print(f'{run:3d}  {sent:5d}  {p.answers - answers0:8d}  '
+            missing, _ = p.wait_answered(sent0, 5.0)        # answers matched by stamp
+            print(f'{run:3d}  {sent:5d}  {sent - missing:8d}  '
                   f'{d["rejected_too_old"]:7d}  {d["rejected_out_of_order"]:12d}  '
                   f'{d["overruns"]:8d}  {d["dropped_time_ns"] / 1e6:10.1f}  '
                   f'{d["stale_events"]:12d}  {d["stale_retractions"]:9d}  '

@@ -7,6 +7,7 @@ benchmarks/bench_trajectory_node.py (the overrun figures)."""
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import math
 import os
@@ -86,6 +87,8 @@ class Probe:
             lambda m: self.out.append((time.monotonic(), m)), 100, raw=True)
         self.answers = 0
         self.sent = 0                                # stamped samples, every stream
+        self.sent_stamps: list[int] = []             # their stamps [ns], in order
+        self.answered: collections.Counter[int] = collections.Counter()   # answers per stamp
         # a deep queue: this probe takes one message per spin while it also publishes at
         # 1 kHz, and a loaded machine (CI's two workers, the node's worker process) starved it
         # long enough that a queue of 1000 overflowed and ~500 answers were lost on the way
@@ -95,8 +98,27 @@ class Probe:
         self.diag: dict[str, dict[str, str]] = {}
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 10)
 
-    def _answer(self, _msg: Any) -> None:
+    def _answer(self, msg: Any) -> None:
         self.answers += 1
+        self.answered[msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec] += 1
+
+    def unanswered(self, since: int) -> tuple[int, int]:
+        """Of the samples sent since the ``since``-th: how many have no answer, how many
+        more than one (answers are matched by stamp: a backlog of earlier samples answered
+        meanwhile counts for neither)."""
+        stamps = self.sent_stamps[since:]
+        return (sum(self.answered[s] == 0 for s in stamps),
+                sum(self.answered[s] > 1 for s in stamps))
+
+    def wait_answered(self, since: int, timeout: float) -> tuple[int, int]:
+        """Spin until every sample sent since the ``since``-th is answered (or ``timeout``
+        s); :meth:`unanswered` then."""
+        left = set(self.sent_stamps[since:])
+        t0 = time.monotonic()
+        while left and time.monotonic() - t0 < timeout and self.proc.poll() is None:
+            self.ex.spin_once(timeout_sec=0.01)
+            left = {s for s in left if self.answered[s] == 0}
+        return self.unanswered(since)
 
     def _diag(self, msg: Any) -> None:
         for s in msg.status:
@@ -162,6 +184,7 @@ class Probe:
                 self.ref.publish(msg)
                 k += 1
                 self.sent += 1
+                self.sent_stamps.append(ns)
             self.ex.spin_once(timeout_sec=0.0)
         return {'sent': k, 'probe_gaps': gaps, 'widest_gap_ms': widest / 1e6}
 
