@@ -95,6 +95,28 @@ def test_filter_reproduces_polynomials():
             assert r[m] == pytest.approx(exact[m], rel=1e-9, abs=atol)
 
 
+@pytest.mark.parametrize('degree', [1, 2, 4, 7, 12])
+def test_the_spline_and_its_derivatives_equal_scipys_bspline(degree):
+    """The kernel's B-spline is evaluated piecewise from exact integer coefficients (no scipy
+    at the node's start-up); it equals scipy's BSpline.basis_element to round-off for every
+    derivative the filter may use, at the knots too (a piecewise-constant derivative takes
+    the interval to the right of a knot, the left one at the end) and zero outside."""
+    from scipy.interpolate import BSpline
+
+    from worm_gear_sim.compensation import _spline_derivs
+    width = 0.0123 * (degree + 1)
+    knots = np.linspace(0.0, width, degree + 2)
+    x = np.concatenate([np.linspace(-0.3 * width, 1.3 * width, 4001), knots,
+                        np.random.default_rng(degree).uniform(0.0, width, 500)])
+    ref = BSpline.basis_element(knots, extrapolate=False)
+    area = width / (degree + 1)
+    for m, f in enumerate(_spline_derivs(width, degree, degree)):
+        want = np.nan_to_num((ref if m == 0 else ref.derivative(m))(x), nan=0.0) / area
+        got = f(x)
+        assert np.max(np.abs(got - want)) <= 1e-13 * np.max(np.abs(want)), m
+        assert np.all(got[(x < 0.0) | (x > width)] == 0.0)
+
+
 @pytest.mark.parametrize('kind', ['zv', 'zvd', 'ei'])
 def test_shapers_cancel_their_mode(kind):
     f, zeta = 94.5, 0.02

@@ -69,11 +69,11 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import Any
 
 import numpy as np
 from numba import njit
-from scipy.interpolate import BSpline
 
 from .dynamics.inverse import gear_torque_demand, inverse_theta1
 from .dynamics.modal import modes
@@ -178,16 +178,44 @@ class FilterDesign:
         return float(self.tau[-1])
 
 
-def _spline_derivs(width: float, degree: int, orders: int):
-    """Cardinal B-spline on [0, width] (unit area) and its derivatives as callables."""
-    knots = np.linspace(0.0, width, degree + 2)
-    b = BSpline.basis_element(knots, extrapolate=False)
-    area = width / (degree + 1)      # integral of a basis element with uniform knots
-    out = []
-    for m in range(orders + 1):
-        bm = b if m == 0 else b.derivative(m)
-        out.append(lambda tt, f=bm: np.nan_to_num(f(tt), nan=0.0) / area)
+def _cardinal_pieces(degree: int, order: int) -> np.ndarray:
+    """Coefficients c[i, p] of u**p of the ``order``-th derivative of the cardinal B-spline of
+    ``degree`` (knots 0, 1, ..., degree + 1; unit area) on its piece i, x = i + u, 0 <= u < 1:
+    the truncated powers M(x) = sum_k (-1)^k C(n+1, k) (x - k)_+^n / n!, expanded exactly in
+    integers (no cancellation left for the floats: each piece is evaluated by Horner in u)."""
+    n, m = degree, order
+    out = np.zeros((n + 1, n - m + 1))
+    for i in range(n + 1):
+        acc = [Fraction(0)] * (n - m + 1)
+        for k in range(i + 1):
+            w = Fraction((-1) ** k * math.comb(n + 1, k), math.factorial(n - m))
+            for p in range(n - m + 1):         # (u + i - k)^(n-m), binomial in u
+                acc[p] += w * math.comb(n - m, p) * (i - k) ** (n - m - p)
+        out[i] = [float(a) for a in acc]
     return out
+
+
+def _spline_derivs(width: float, degree: int, orders: int):
+    """Cardinal B-spline on [0, width] (unit area) and its derivatives as callables, zero
+    outside [0, width]; a piecewise-constant derivative takes the value of the interval to
+    the right of a knot (of the left one at ``width``), as scipy's BSpline does."""
+    knots = np.linspace(0.0, width, degree + 2)
+    hk = width / (degree + 1)
+
+    def make(m: int):
+        coef = _cardinal_pieces(degree, m) / hk ** (m + 1)     # B = M(x/hk)/hk: unit area
+
+        def f(tt: np.ndarray) -> np.ndarray:
+            x = np.asarray(tt, dtype=float)
+            i = np.clip(np.searchsorted(knots, x, side='right') - 1, 0, degree)
+            u = (x - knots[i]) / hk
+            c = coef[i]
+            val = c[..., -1]
+            for p in range(c.shape[-1] - 2, -1, -1):
+                val = val * u + c[..., p]
+            return np.where((x >= 0.0) & (x <= knots[-1]), val, 0.0)
+        return f
+    return [make(m) for m in range(orders + 1)]
 
 
 def design_filter(shaper: Shaper, knot_spacing: float, degree: int = 4, lag_order: int = 2,
