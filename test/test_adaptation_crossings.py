@@ -102,3 +102,43 @@ def test_the_twin_lists_the_crossings_it_measured():
     assert how in ('step', 'wide step', 'onset', 'arch', 'area') and sd > 0.0
     assert abs(t_p - run.t[k]) <= sd
     assert w_p == pytest.approx(w4[np.searchsorted(run.t, t_p)], abs=5e-3)
+
+
+def _event(r: np.ndarray, t: np.ndarray, t_m: float, noise: float, play: float = 8e-4):
+    """The model crossed at t_m (flank +1 -> -1, s = +1: the arch is below the level)."""
+    ft = FlankTiming()
+    w4 = -0.06 + 0.2 * (t - t_m)
+    got = None
+    for k in range(t.size):
+        if abs(t[k] - t_m) < 0.5 / RATE:
+            ft.model_flank_changed(float(t[k]), 1.0, -1.0)
+        ft.push(float(t[k]), float(r[k]), float(w4[k]), 0.2)
+        if ft.event_due(float(t[k])):
+            got = ft.ready(float(t[k]), play, 1e-5, play, noise)
+    return got
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_the_impact_on_the_new_flank_is_no_arch_a_real_arch_still_is(seed):
+    """With the model equal to the drive (the adapter started at a drawn drive's own values:
+    play 2.80', load 0.48 N m, drag 8.65), the residual after the common crossing held a
+    transient of 56 urad, 33 ms at its base (the impact on the new flank, timed slightly apart by
+    the plant and the prediction), over ~2.5 urad of noise. Read as an arch it put the
+    drive's crossing 20.9 ms after its torque zero, weighed as 2 ms, and the window then
+    charged the drive's own values for that mistiming and stepped the model away from them.
+    Its curvature is ~2.5x the float's (|alpha4| / 2): no arch.  A real arch as small (the
+    model crossing 20 ms early at 0.2 rad/s^2: 40 urad) still is one, at its top."""
+    rng = np.random.default_rng(seed)
+    t_m, noise = 0.5, 4e-6                      # (the default adaptation.measurement_noise)
+    t = np.arange(0.0, t_m + WINDOW + LEVEL_WINDOW + 0.01, 1.0 / RATE)
+    jitter = rng.normal(0.0, 2.5e-6, t.size)
+    u = (t - t_m - 0.004) / 0.033               # (as measured: 56 urad, 33 ms at its base)
+    impact = np.where((u > 0.0) & (u < 1.0), -56e-6 * np.sin(math.pi * np.clip(u, 0, 1)), 0.0)
+    got = _event(impact + jitter, t, t_m, noise)
+    assert got is None or got[3] != 'arch', got
+    dt = 0.02
+    t_p = t_m + dt
+    arch = np.where(np.abs(t - t_p) < dt, -0.5 * 0.2 * (dt ** 2 - (t - t_p) ** 2), 0.0)
+    got = _event(arch + jitter, t, t_m, noise)
+    assert got is not None and got[3] == 'arch', got
+    assert got[0] == pytest.approx(t_p, abs=3e-3)

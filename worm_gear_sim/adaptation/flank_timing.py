@@ -95,6 +95,9 @@ T_N, T_NEXT_LOOK, T_LAST_STEP, T_EVENT_DUE, N_TS = range(5)
 #: noises, over at least this many samples.
 ONSET_NOISES = 5.0
 ONSET_SAMPLES = 5
+#: An arch's fitted curvature must be within this factor of the float's, |alpha4| / 2 (the
+#: impact on the new flank leaves a transient ~3x as curved)
+ARCH_CURVATURE = 2.0
 
 
 def float_onset(ts: np.ndarray, dev: np.ndarray, threshold: float) -> float | None:
@@ -122,7 +125,8 @@ def float_onset(ts: np.ndarray, dev: np.ndarray, threshold: float) -> float | No
     return -icpt / slope
 
 
-def arch_top(ts: np.ndarray, dev: np.ndarray, threshold: float) -> float | None:
+def arch_top(ts: np.ndarray, dev: np.ndarray, threshold: float,
+             alpha: float = 0.0) -> float | None:
     """The top of an arch dev (>= 0 inside it): the vertex of the parabola fitted to the
     samples above half its peak, provided the peak exceeds twice ``threshold`` and the arch
     falls below half its peak on both sides inside the samples; else None."""
@@ -144,6 +148,8 @@ def arch_top(ts: np.ndarray, dev: np.ndarray, threshold: float) -> float | None:
     c2, c1, _ = np.polyfit(x, dev[i:j + 1], 2)
     if not c2 < 0.0:
         return None
+    if alpha > 0.0 and not alpha / ARCH_CURVATURE <= -2.0 * c2 <= alpha * ARCH_CURVATURE:
+        return None                       # not the gear's float: its curvature is |alpha4|/2
     vertex = -c1 / (2.0 * c2)
     return float(ts[k] + vertex) if abs(vertex) <= x[-1] - x[0] else None
 
@@ -341,7 +347,8 @@ class FlankTiming:
             self.onsets += 1
             return (t_p, *path_rates(ts, a[:, 2], t_p), 'onset')
         after = (ts >= t_m - 0.5 * LEVEL_WINDOW) & (ts < t_m + WINDOW)
-        top = arch_top(ts[after], -s * (r[after] - r_pre), ONSET_NOISES * noise)
+        top = arch_top(ts[after], -s * (r[after] - r_pre), ONSET_NOISES * noise,
+                       abs(float(np.mean(a[after, 3]))))
         if top is not None and t_m - 0.5 * LEVEL_WINDOW < top < t_m + WINDOW:
             self.measured += 1                # the model crossed first: the gear's arch
             self.arches += 1
