@@ -96,7 +96,7 @@ T_N, T_NEXT_LOOK, T_LAST_STEP, T_EVENT_DUE, N_TS = range(5)
 ONSET_NOISES = 5.0
 ONSET_SAMPLES = 5
 #: An arch's fitted curvature must be within this factor of the float's, |alpha4| / 2 (the
-#: impact on the new flank leaves a transient ~3x as curved)
+#: impact on the new flank leaves a transient ~2.5x as curved: docs/adaptation.md)
 ARCH_CURVATURE = 2.0
 
 
@@ -129,7 +129,9 @@ def arch_top(ts: np.ndarray, dev: np.ndarray, threshold: float,
              alpha: float = 0.0) -> float | None:
     """The top of an arch dev (>= 0 inside it): the vertex of the parabola fitted to the
     samples above half its peak, provided the peak exceeds twice ``threshold`` and the arch
-    falls below half its peak on both sides inside the samples; else None."""
+    falls below half its peak on both sides inside the samples, and (``alpha`` > 0, the
+    path's |alpha4|) its curvature is within ARCH_CURVATURE of the float's, alpha / 2;
+    else None."""
     if ts.size < 2 * ONSET_SAMPLES:
         return None
     k = int(np.argmax(dev))
