@@ -131,6 +131,12 @@ CROSSING_LOG = 4096
 DETECT_SPAN = 2.0 * STEP_SIDE_WIDE + STEP_GAP_WIDE
 #: A play smaller than this many measurement noises is not seen in a flank change.
 MIN_PLAY_NOISES = 10.0
+#: The estimate is kept every SNAP_EVERY s for SNAP_SPAN s: a crossing the step detector
+#: finds late rolls it back to before the crossing [s].
+SNAP_EVERY = 0.01
+SNAP_SPAN = 0.6
+#: A flank change of the model this soon after a step applied is the step's [s].
+STEP_FLIP_TIME = 0.005
 #: A sample gap longer than this restarts the rate estimates [s].
 MAX_GAP = 0.05
 
@@ -298,6 +304,7 @@ class Adapter:
         #: time sd [s], how: 'step', 'wide step', 'onset', 'arch' or 'area'), for diagnostics
         self.crossings: collections.deque = collections.deque(maxlen=CROSSING_LOG)
         self.switches = 0
+        self.rollbacks = 0
         self.refusals = 0
         self.last_refusal = ''
         self.target: np.ndarray | None = None
@@ -342,6 +349,16 @@ class Adapter:
         self._cross_t = -math.inf         # the drive's last crossing, measured or estimated
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
+        self._snaps: collections.deque = collections.deque()   # (t, theta, P, S, b, sc)
+        self._next_snap = -math.inf
+        self._theta_d, self._P_d = self.theta.copy(), self.P.copy()   # the detector's
+        self._prev_x = self.applied_x.copy()
+        lay = self.layout
+        parts = [[i for i in (lay.i_load, lay.i_drag) if i >= 0],
+                 [i for i0, k in ((lay.worm0, lay.worm_orders), (lay.gear0, lay.gear_orders))
+                  if i0 >= 0 for i in range(i0, i0 + 2 * k)],
+                 [lay.i_play] if lay.i_play >= 0 else []]
+        self._step_order = [np.array(p, np.int64) for p in parts if p]
         self._play0 = float(model.config.mesh.backlash)
         st, s, lay = self._st, self.settings, self.layout
         st[ps.S_C_POS], st[ps.S_C_NEG] = self._compliance
@@ -362,19 +379,24 @@ class Adapter:
         :func:`~.per_sample.sample_tail`; in between, only when the sample needs it, the
         flank-change events and a step found, here."""
         timing = self._timing
-        got = sample_head(self._st, timing._ts, timing._a, self.theta, self.P, self._std2,
-                          self._phi, self.applied_x, self._S, self._b, self._sc, self._lay,
-                          t, theta4_meas, theta2, theta3, theta4_pred)
+        if t >= self._next_snap:
+            self._snapshot(t)
+        model_flank_t = self._model_flank_t
+        args = (self._st, timing._ts, timing._a, self.theta, self.P, self._theta_d, self._P_d,
+                self._std2, self._phi, self.applied_x, self._S, self._b, self._sc, self._lay,
+                t, theta4_meas, theta2, theta3, theta4_pred)
+        got = sample_head(*args)
         if got == ps.NEED_ROOM:                     # the record is full: room, then again
             timing.make_room(t)
-            got = sample_head(self._st, timing._ts, timing._a, self.theta, self.P,
-                              self._std2, self._phi, self.applied_x, self._S, self._b,
-                              self._sc, self._lay, t, theta4_meas, theta2, theta3,
-                              theta4_pred)
+            got = sample_head(*args)
         if got <= ps.USED:
             return got == ps.USED
         if got == ps.CROSSED:                       # the model crosses its play here
-            timing.model_flank_changed(t, self._st.item(ps.X_OLD_FLANK_M), self._flank_m)
+            if self._flipped_by_step(t):
+                self._model_flank_t = model_flank_t
+                self._applied_bound += self.applied_x[self.layout.i_play]
+            else:
+                timing.model_flank_changed(t, self._st.item(ps.X_OLD_FLANK_M), self._flank_m)
         drag = self._st.item(ps.X_DRAG)             # the estimate's, before this sample
         self._flank_time_update(t, drag)
         self._step_update(t, drag)
@@ -390,16 +412,25 @@ class Adapter:
         if not self._timing.due(t):
             return
         lay = self.layout
-        least = least_step(self.theta, self.P, self._lay, self._play0)
+        least = least_step(self._theta_d, self._P_d, self._lay, self._play0)
         # (a step applied to the model steps the residual too, by up to its bound)
         got = self._timing.detect(t, self.settings.measurement_noise, self._model_flank_t,
-                                  least, self.theta, self.applied_x, self.P, self._lay,
+                                  least, self._theta_d, self.applied_x, self._P_d, self._lay,
                                   self._applied_t, self._applied_bound)
         if got is None:
             return
         t_p, w_p, a_p, step, wide, rise = got
-        if wide and not self._may_cross(w_p, a_p):
+        snap = self._snap_before(t_p)
+        if snap is not None:
+            theta, P = snap[1], snap[2]
+            drag = theta[lay.i_drag] if lay.i_drag >= 0 else drag
+        else:
+            theta, P = self.theta, self.P
+        if wide and not self._may_cross(w_p, a_p, theta, P):
             return
+        if snap is not None:               # the samples since t_p took the wrong flank
+            self.theta[:], self.P[:], self._S[:], self._b[:], self._sc[:] = snap[1:]
+            self.rollbacks += 1
         self.steps_seen += 1
         # (a steep step's start is extrapolated from its rise: uncertain in proportion; a
         # wide step's onset as the area formula's crossing)
@@ -431,12 +462,53 @@ class Adapter:
             known += self._drag0 * w_p
         return phi, known
 
-    def _may_cross(self, w_p: float, a_p: float) -> bool:
+    def _snapshot(self, t: float) -> None:
+        """Keep the estimate and the window's sums as of ``t`` (every SNAP_EVERY s, for
+        SNAP_SPAN s)."""
+        snaps = self._snaps
+        while snaps and t - snaps[0][0] > SNAP_SPAN:
+            snaps.popleft()
+        snaps.append((t, self.theta.copy(), self.P.copy(), self._S.copy(), self._b.copy(),
+                      self._sc.copy()))
+        self._next_snap = t + SNAP_EVERY
+        # the step detector judges a window by the estimate from before it: one that has
+        # not taken in the window's own step
+        lag = snaps[0]
+        for snap in snaps:
+            if snap[0] > t - DETECT_SPAN:
+                break
+            lag = snap
+        self._theta_d, self._P_d = lag[1], lag[2]
+
+    def _snap_before(self, t_p: float) -> tuple | None:
+        """The latest snapshot taken before ``t_p``, if one is kept."""
+        out = None
+        for snap in self._snaps:
+            if snap[0] > t_p:
+                break
+            out = snap
+        return out
+
+    def _flipped_by_step(self, t: float) -> bool:
+        """Whether the model's flank change at ``t`` is the set's (a step applied just
+        now), not the motion's: the set before the step keeps the old flank here."""
+        if not t - self._applied_t <= STEP_FLIP_TIME:
+            return False
+        lay, x = self.layout, self._prev_x
+        load = x[lay.i_load] if lay.i_load >= 0 else self._load0
+        drag = x[lay.i_drag] if lay.i_drag >= 0 else self._drag0
+        torque = self._inertia * self._a4 + drag * self._w4 + load
+        return torque * self._st.item(ps.X_OLD_FLANK_M) > 0.0
+
+    def _may_cross(self, w_p: float, a_p: float, theta: np.ndarray | None = None,
+                   P: np.ndarray | None = None) -> bool:
         """Whether the estimate's torque demand at (w_p, a_p) is within PLAUSIBLE_SIGMAS of
         its standard deviation (and the torque floor) of zero."""
+        theta = self.theta if theta is None else theta
+        P = self.P if P is None else P
         phi, known = self._demand_row(w_p, a_p)
-        demand = known + float(phi @ self.theta)
-        sd = math.sqrt(max(float(phi @ self.P @ phi), 0.0)) + SWITCH_TORQUE_SD
+        demand = known + float(phi @ theta)
+        sd = math.sqrt(max(float(phi @ P @ phi), 0.0)) + SWITCH_TORQUE_SD
         return abs(demand) <= PLAUSIBLE_SIGMAS * sd
 
     def _torque_zero(self, t_p: float, w_p: float, a_p: float, drag: float,
@@ -534,10 +606,21 @@ class Adapter:
         if self.target is None or np.array_equal(self.target, self.applied_x):
             return Decision(note=note)
         delta = self.target - self.applied_x
-        bound = self._correction_bound(delta)
-        limit = s.max_step * self._ratio          # max_step at the worm -> antenna
-        share = 1.0 if bound <= limit else limit / bound
-        step = self.target.copy() if share >= 1.0 else self.applied_x + share * delta
+        budget = s.max_step * self._ratio         # max_step at the worm -> antenna
+        step = self.applied_x.copy()
+        # the load and drag first (they decide when the model crosses its play), then the
+        # harmonics, the play last: a straight line from a set that keeps one flank to one
+        # that crosses passes through sets that hold the play on the wrong flank
+        for part in self._step_order:
+            d = np.zeros_like(delta)
+            d[part] = delta[part]
+            bound = self._correction_bound(d)
+            if bound <= budget:
+                step[part] = self.target[part]
+                budget -= bound
+            else:
+                step[part] += budget / bound * d[part]
+                break
         return Decision(step, self.layout.overrides(step), note)
 
     def _bounded(self, x: np.ndarray) -> tuple[np.ndarray, str]:
@@ -594,6 +677,7 @@ class Adapter:
             recent.popleft()
         recent.append((at, self._correction_bound(step - self.applied_x)))
         self._applied_bound = sum(b for _, b in recent)
+        self._prev_x = self.applied_x
         self.applied_x = step
         self.model = model
         self._applied_t = at

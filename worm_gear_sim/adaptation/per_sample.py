@@ -158,8 +158,8 @@ def least_step(theta, P, lay, play0):
 
 
 @njit(cache=True)
-def sample_head(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3,
-                th4):
+def sample_head(st, ts, ta, theta, P, theta_d, P_d, std2, phi, applied, S, b, sc, lay, t, meas,
+                th2, th3, th4):
     """An encoder sample at ``t`` (measured theta4 ``meas``, the prediction theta2..theta4
     of that instant), up to the flank-change events: the rates (alpha4 low-passed), the
     flanks of the estimate and of the model in use, the sample into the record, the step
@@ -235,9 +235,9 @@ def sample_head(st, ts, ta, theta, P, std2, phi, applied, S, b, sc, lay, t, meas
     if t >= ts[T_EVENT_DUE]:                    # a flank-change event to measure
         return PYTHON
     if t >= ts[T_NEXT_LOOK]:                    # the step detector's look
-        least = least_step(theta, P, lay, st[S_PLAY0])
+        least = least_step(theta_d, P_d, lay, st[S_PLAY0])
         if detect_core(ta, n + 1, t, st[S_NOISE], st[S_MODEL_FLANK_T], ts[T_LAST_STEP],
-                       least, theta, applied, P, lay, st[S_APPLIED_T],
+                       least, theta_d, applied, P_d, lay, st[S_APPLIED_T],
                        st[S_APPLIED_BOUND])[0]:
             return PYTHON                       # found: the caller measures with it
         ts[T_NEXT_LOOK] = t + STEP_STRIDE
