@@ -394,7 +394,8 @@ class Adapter:
         if got == ps.CROSSED:                       # the model crosses its play here
             if self._flipped_by_step(t):
                 self._model_flank_t = model_flank_t
-                self._applied_bound += self.applied_x[self.layout.i_play]
+                i_play = self.layout.i_play         # (its prediction moved by the play)
+                self._applied_bound += self.applied_x[i_play] if i_play >= 0 else self._play0
             else:
                 timing.model_flank_changed(t, self._st.item(ps.X_OLD_FLANK_M), self._flank_m)
         drag = self._st.item(ps.X_DRAG)             # the estimate's, before this sample
