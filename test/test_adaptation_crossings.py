@@ -142,3 +142,66 @@ def test_the_impact_on_the_new_flank_is_no_arch_a_real_arch_still_is(seed):
     got = _event(arch + jitter, t, t_m, noise)
     assert got is not None and got[3] == 'arch', got
     assert got[0] == pytest.approx(t_p, abs=3e-3)
+
+
+def test_a_crossing_found_late_is_measured_and_its_samples_do_not_teach_the_estimate():
+    """A drive whose first crossing (its torque demand's zero, 2.457 s on the sector scan)
+    comes while the model in use, a step or two from nominal, keeps one flank.  The step
+    detector finds it ~0.15 s later; meanwhile the samples after it entered the estimate
+    as if on the old flank and moved it (before: load -2.1 N m, play 4.2e-4 against the
+    drive's 2.0 N m and 8.5e-4), and the detector judged the step with that estimate's
+    periodic error, which had taken the step in (before: no crossing measured at all).
+    Now the detector judges a window by the estimate from before it, and a crossing found
+    rolls the estimate back to before the crossing: the play is within 10 % of the drive's
+    and the load over the drag (the zero's rate) within 10 %.  The model in use moves its
+    load and drag first (they decide when it crosses), its play last."""
+    from worm_gear_sim.adaptation.twin import run_twin
+    from worm_gear_sim.dynamics.inverse import gear_torque_demand
+    plant = Config().replace({'mesh.backlash': 8.5e-4, 'load.output_torque': 2.0,
+                              'load.output_viscous_coefficient': 22.0})
+    run = run_twin(plant, Config(), 'sector', 3.3, seed=6)
+    m = DriveModel.of(plant)
+    w4 = np.gradient(m.output_per_input * run.theta1_ref, run.t)
+    demand = np.array([gear_torque_demand(m.p, w, a, 0.0, 0.0, False)
+                       for w, a in zip(w4, np.gradient(w4, run.t))])
+    zeros = run.t[np.nonzero(np.diff(np.sign(demand)))[0]]
+    assert zeros.size == 1 and zeros[0] == pytest.approx(2.457, abs=2e-3)
+    assert len(run.crossings) == 1
+    t_p, w_p, _, sd, _ = run.crossings[0]
+    assert abs(t_p - zeros[0]) <= sd
+    est = run.estimates
+    assert est['mesh.backlash'] == pytest.approx(8.5e-4, rel=0.1)
+    assert est['load.output_torque'] / est['load.output_viscous_coefficient'] == \
+        pytest.approx(2.0 / 22.0, rel=0.1)
+    assert len(run.steps) >= 3
+    first = run.steps[0][1]
+    assert first['mesh.backlash'] == 0.0 and first['load.output_torque'] > 0.0
+
+
+def test_a_step_that_flips_the_models_flank_is_no_crossing_of_the_model():
+    """A step applied to the model in use (play 3e-4, load 0 -> 3 N m at rest) turns its
+    torque demand positive at once: the flank changes because the set changed, not the
+    motion.  That is no model crossing: no flank-change event is opened, the step detector
+    is not blocked by it, and the residual's step the flip makes (the model's play) is added
+    to what the detector allows for the step."""
+    cfg = Config().replace({'mesh.backlash': 3e-4,
+                            'adaptation.keys': ['load.output_torque', 'mesh.backlash']})
+    ad = Adapter(cfg, cfg.adaptation)
+    ratio = DriveModel(cfg).output_per_input
+    t = np.arange(0.0, 0.6, 1.0 / RATE)
+    th4 = -1e-3 * t * t                  # a slow start the other way: demand below zero
+    flips = []
+    for k in range(t.size):
+        if k == 300:
+            step = ad.applied_x.copy()
+            step[ad.layout.i_load] = 3.0
+            ad.applied(step, ad.model, at=float(t[k]))
+            bound, model_flank_t = ad._applied_bound, ad._model_flank_t
+        before = ad._flank_m
+        ad.update(float(t[k]), float(th4[k]), float(th4[k] / ratio), float(th4[k]),
+                  float(th4[k]))
+        if ad._flank_m != before and before != 0.0:
+            flips.append(float(t[k]))
+    assert flips == [pytest.approx(0.3)]
+    assert ad._timing.events == 0 and ad._model_flank_t == model_flank_t < 0.3
+    assert ad._applied_bound == pytest.approx(bound + 3e-4)
