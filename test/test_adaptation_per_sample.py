@@ -39,6 +39,8 @@ class PythonAdapter(Adapter):
 
     def update(self, t: float, theta4_meas: float, theta2: float, theta3: float,
                theta4_pred: float) -> bool:
+        if t >= self._history.next:
+            self._history.keep(t)
         dt = t - self._last_t
         self._last_t = t
         if not dt <= MAX_GAP:                       # first sample, or after a pause
@@ -80,8 +82,12 @@ class PythonAdapter(Adapter):
         if flank_m != self._flank_m:
             if lay.i_play < 0 and self._play0 > 0.0 or lay.i_play >= 0 and \
                     self.applied_x[lay.i_play] > 0.0:   # the model crosses its play here
-                timing.model_flank_changed(t, self._flank_m, flank_m)
-                self._model_flank_t = t
+                if self._flipped_by_step(t, self._flank_m):   # (the set's change: none)
+                    self._applied_bound += self.applied_x[lay.i_play] if lay.i_play >= 0 \
+                        else self._play0
+                else:
+                    timing.model_flank_changed(t, self._flank_m, flank_m)
+                    self._model_flank_t = t
             self._flank_m, self._flank_t = flank_m, max(self._flank_t, t)
         self._flank_time_update(t, drag)
         self._step_update(t, drag)

@@ -41,7 +41,15 @@ is off by the whole play), and the wind-up alone cannot pin the load that finely
 :mod:`.flank_timing` measures it from the residual (around the model's own crossing, or
 as a step of the residual while the model does not cross) and the filter takes "the
 drive's torque demand was zero then" as one more linear measurement of load and drag (and
-a step's size as one of the play).
+a step's size as one of the play).  The detector finds a step 0.1-0.3 s after the drive
+crossed; the samples in between entered as if on the old flank and the step went into the
+estimate (measured: a play estimate from 0.9' to -5' within 0.3 s).  So the detector judges
+its window by the estimate from before the window, and a crossing found rolls the estimate
+and the window's sums back to a copy from before the crossing (:mod:`.history`) before its
+measurements go in.  A model flank
+change that a step applied to the model makes at once (its load or drag changed, not the
+motion) is no crossing of the model: no event, no block of the detector, which allows for
+the model's play in the residual's step instead.
 
 **Why a Kalman filter with random-walk parameters, not RLS with a forgetting factor.**  The
 problem is linear in the parameters (the flank aside, above), so both are the same
@@ -70,7 +78,10 @@ estimate below zero within ``BOUND_SIGMAS`` standard deviations is taken as zero
 below, the target is refused (the reason is kept).  The model then moves to the target in
 steps: each step changes the static correction of the command by at most ``max_step`` [rad
 at the worm] (bounded with the sensitivities above), one step per ``step_interval``: no
-jump in the command.
+jump in the command.  A step spends that bound on the load and the drag first (they decide
+when the model crosses its play), then the harmonics, the play last: on the straight line
+from a set that keeps one flank to one that crosses, the sets between hold a growing play
+on the wrong flank.
 """
 
 from __future__ import annotations
@@ -89,6 +100,7 @@ from ..params import Config
 from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS, Parameters
 from . import per_sample as ps
 from .flank_timing import STEP_GAP_WIDE, STEP_SIDE_WIDE, WINDOW, FlankTiming
+from .history import EstimateHistory
 from .per_sample import _kalman_step, least_step, sample_head, sample_tail
 from .slots import Slot
 
@@ -131,10 +143,6 @@ CROSSING_LOG = 4096
 DETECT_SPAN = 2.0 * STEP_SIDE_WIDE + STEP_GAP_WIDE
 #: A play smaller than this many measurement noises is not seen in a flank change.
 MIN_PLAY_NOISES = 10.0
-#: The estimate is kept every SNAP_EVERY s for SNAP_SPAN s: a crossing the step detector
-#: finds late rolls it back to before the crossing [s].
-SNAP_EVERY = 0.01
-SNAP_SPAN = 0.6
 #: A flank change of the model this soon after a step applied is the step's [s].
 STEP_FLIP_TIME = 0.005
 #: A sample gap longer than this restarts the rate estimates [s].
@@ -349,9 +357,8 @@ class Adapter:
         self._cross_t = -math.inf         # the drive's last crossing, measured or estimated
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
-        self._snaps: collections.deque = collections.deque()   # (t, theta, P, S, b, sc)
-        self._next_snap = -math.inf
-        self._theta_d, self._P_d = self.theta.copy(), self.P.copy()   # the detector's
+        self._history = EstimateHistory((self.theta, self.P, self._S, self._b, self._sc),
+                                        DETECT_SPAN)
         self._prev_x = self.applied_x.copy()
         lay = self.layout
         parts = [[i for i in (lay.i_load, lay.i_drag) if i >= 0],
@@ -379,11 +386,12 @@ class Adapter:
         :func:`~.per_sample.sample_tail`; in between, only when the sample needs it, the
         flank-change events and a step found, here."""
         timing = self._timing
-        if t >= self._next_snap:
-            self._snapshot(t)
+        if t >= self._history.next:
+            self._history.keep(t)
         model_flank_t = self._model_flank_t
-        args = (self._st, timing._ts, timing._a, self.theta, self.P, self._theta_d, self._P_d,
-                self._std2, self._phi, self.applied_x, self._S, self._b, self._sc, self._lay,
+        theta_d, P_d = self._history.lagged[:2]    # the detector's: from before its window
+        args = (self._st, timing._ts, timing._a, self.theta, self.P, theta_d, P_d, self._std2,
+                self._phi, self.applied_x, self._S, self._b, self._sc, self._lay,
                 t, theta4_meas, theta2, theta3, theta4_pred)
         got = sample_head(*args)
         if got == ps.NEED_ROOM:                     # the record is full: room, then again
@@ -392,7 +400,7 @@ class Adapter:
         if got <= ps.USED:
             return got == ps.USED
         if got == ps.CROSSED:                       # the model crosses its play here
-            if self._flipped_by_step(t):
+            if self._flipped_by_step(t, self._st.item(ps.X_OLD_FLANK_M)):
                 self._model_flank_t = model_flank_t
                 i_play = self.layout.i_play         # (its prediction moved by the play)
                 self._applied_bound += self.applied_x[i_play] if i_play >= 0 else self._play0
@@ -413,24 +421,23 @@ class Adapter:
         if not self._timing.due(t):
             return
         lay = self.layout
-        least = least_step(self._theta_d, self._P_d, self._lay, self._play0)
+        theta_d, P_d = self._history.lagged[:2]
+        least = least_step(theta_d, P_d, self._lay, self._play0)
         # (a step applied to the model steps the residual too, by up to its bound)
         got = self._timing.detect(t, self.settings.measurement_noise, self._model_flank_t,
-                                  least, self._theta_d, self.applied_x, self._P_d, self._lay,
+                                  least, theta_d, self.applied_x, P_d, self._lay,
                                   self._applied_t, self._applied_bound)
         if got is None:
             return
         t_p, w_p, a_p, step, wide, rise = got
-        snap = self._snap_before(t_p)
-        if snap is not None:
-            theta, P = snap[1], snap[2]
-            drag = theta[lay.i_drag] if lay.i_drag >= 0 else drag
-        else:
-            theta, P = self.theta, self.P
+        old = self._history.before(t_p)     # the estimate before the samples since t_p,
+        theta, P = (self.theta, self.P) if old is None else old[:2]   # on the wrong flank
+        if lay.i_drag >= 0:
+            drag = theta[lay.i_drag]
         if wide and not self._may_cross(w_p, a_p, theta, P):
             return
-        if snap is not None:               # the samples since t_p took the wrong flank
-            self.theta[:], self.P[:], self._S[:], self._b[:], self._sc[:] = snap[1:]
+        if old is not None:
+            self._history.restore(old)
             self.rollbacks += 1
         self.steps_seen += 1
         # (a steep step's start is extrapolated from its rise: uncertain in proportion; a
@@ -463,43 +470,17 @@ class Adapter:
             known += self._drag0 * w_p
         return phi, known
 
-    def _snapshot(self, t: float) -> None:
-        """Keep the estimate and the window's sums as of ``t`` (every SNAP_EVERY s, for
-        SNAP_SPAN s)."""
-        snaps = self._snaps
-        while snaps and t - snaps[0][0] > SNAP_SPAN:
-            snaps.popleft()
-        snaps.append((t, self.theta.copy(), self.P.copy(), self._S.copy(), self._b.copy(),
-                      self._sc.copy()))
-        self._next_snap = t + SNAP_EVERY
-        # the step detector judges a window by the estimate from before it: one that has
-        # not taken in the window's own step
-        lag = snaps[0]
-        for snap in snaps:
-            if snap[0] > t - DETECT_SPAN:
-                break
-            lag = snap
-        self._theta_d, self._P_d = lag[1], lag[2]
-
-    def _snap_before(self, t_p: float) -> tuple | None:
-        """The latest snapshot taken before ``t_p``, if one is kept."""
-        out = None
-        for snap in self._snaps:
-            if snap[0] > t_p:
-                break
-            out = snap
-        return out
-
-    def _flipped_by_step(self, t: float) -> bool:
-        """Whether the model's flank change at ``t`` is the set's (a step applied just
-        now), not the motion's: the set before the step keeps the old flank here."""
+    def _flipped_by_step(self, t: float, old: float) -> bool:
+        """Whether the model's flank change at ``t`` from ``old`` is the set's (a step
+        applied just now), not the motion's: the set before the step keeps the old flank
+        at these rates."""
         if not t - self._applied_t <= STEP_FLIP_TIME:
             return False
         lay, x = self.layout, self._prev_x
         load = x[lay.i_load] if lay.i_load >= 0 else self._load0
         drag = x[lay.i_drag] if lay.i_drag >= 0 else self._drag0
         torque = self._inertia * self._a4 + drag * self._w4 + load
-        return torque * self._st.item(ps.X_OLD_FLANK_M) > 0.0
+        return torque * old > 0.0
 
     def _may_cross(self, w_p: float, a_p: float, theta: np.ndarray | None = None,
                    P: np.ndarray | None = None) -> bool:
