@@ -385,13 +385,13 @@ class Adapter:
         in :func:`~.per_sample.sample_head`, the hold-offs and the filter in
         :func:`~.per_sample.sample_tail`; in between, only when the sample needs it, the
         flank-change events and a step found, here."""
-        timing = self._timing
-        if t >= self._history.next:
-            self._history.keep(t)
+        timing, hist = self._timing, self._history
+        if t >= hist.next:
+            hist.keep(t)
         model_flank_t = self._model_flank_t
-        theta_d, P_d = self._history.lagged[:2]    # the detector's: from before its window
-        args = (self._st, timing._ts, timing._a, self.theta, self.P, theta_d, P_d, self._std2,
-                self._phi, self.applied_x, self._S, self._b, self._sc, self._lay,
+        # (hist.theta, hist.P: the step detector's estimate, from before its window)
+        args = (self._st, timing._ts, timing._a, self.theta, self.P, hist.theta, hist.P,
+                self._std2, self._phi, self.applied_x, self._S, self._b, self._sc, self._lay,
                 t, theta4_meas, theta2, theta3, theta4_pred)
         got = sample_head(*args)
         if got == ps.NEED_ROOM:                     # the record is full: room, then again
@@ -421,7 +421,7 @@ class Adapter:
         if not self._timing.due(t):
             return
         lay = self.layout
-        theta_d, P_d = self._history.lagged[:2]
+        theta_d, P_d = self._history.theta, self._history.P
         least = least_step(theta_d, P_d, self._lay, self._play0)
         # (a step applied to the model steps the residual too, by up to its bound)
         got = self._timing.detect(t, self.settings.measurement_noise, self._model_flank_t,

@@ -22,7 +22,7 @@ SPAN = 0.6
 class EstimateHistory:
     """Copies of ``arrays`` (the estimate, its covariance, the window's sums: the live arrays,
     restored in place) taken by :meth:`keep`; :attr:`lagged`: the latest copy at least ``lag``
-    s old (the oldest one while none is)."""
+    s old (the oldest one while none is), its first two as :attr:`theta` and :attr:`P`."""
 
     def __init__(self, arrays: Sequence[np.ndarray], lag: float) -> None:
         self._arrays = tuple(arrays)
@@ -30,6 +30,7 @@ class EstimateHistory:
         self._copies: collections.deque = collections.deque()
         self.next = -math.inf
         self.lagged: tuple[np.ndarray, ...] = tuple(a.copy() for a in self._arrays)
+        self.theta, self.P = self.lagged[0], self.lagged[1]
 
     def keep(self, t: float) -> None:
         """Copy the arrays as of ``t`` (call when ``t >= next``)."""
@@ -44,6 +45,7 @@ class EstimateHistory:
                 break
             lagged = c
         self.lagged = lagged[1]
+        self.theta, self.P = self.lagged[0], self.lagged[1]
 
     def before(self, t: float) -> tuple[np.ndarray, ...] | None:
         """The latest copy taken at or before ``t``, if one is kept."""
