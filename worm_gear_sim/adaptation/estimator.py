@@ -145,6 +145,8 @@ DETECT_SPAN = 2.0 * STEP_SIDE_WIDE + STEP_GAP_WIDE
 MIN_PLAY_NOISES = 10.0
 #: A flank change of the model this soon after a step applied is the step's [s].
 STEP_FLIP_TIME = 0.005
+#: How many of the latest steps' times an event's window is checked against.
+STEP_TIMES = 8
 #: A sample gap longer than this restarts the rate estimates [s].
 MAX_GAP = 0.05
 
@@ -354,6 +356,7 @@ class Adapter:
         self._applied_t = -math.inf       # the last step applied (when its samples start)
         self._applied_bound = 0.0         # and the change of the correction it made [rad]
         self._recent_bounds: collections.deque = collections.deque()  # (t, bound) of steps
+        self._step_times: collections.deque = collections.deque(maxlen=STEP_TIMES)
         self._cross_t = -math.inf         # the drive's last crossing, measured or estimated
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
@@ -517,8 +520,10 @@ class Adapter:
         lay = self.layout
         if lay.i_load < 0 and lay.i_drag < 0 or not self._timing.event_due(t):
             return
-        if self._timing.event_spans(self._applied_t):    # the model changed inside the
-            self._timing.drop_event()                     # window: its residual steps
+        # a step applied inside the event's window steps its residual: no measurement (any
+        # step, not only the last: a step applied since, after the window, hid the one in it)
+        if any(self._timing.event_spans(at) for at in self._step_times):
+            self._timing.drop_event()
             return
         play = self.theta[lay.i_play] if lay.i_play >= 0 else self._play0
         model_play = self.applied_x[lay.i_play] if lay.i_play >= 0 else self._play0
@@ -663,6 +668,7 @@ class Adapter:
         self.applied_x = step
         self.model = model
         self._applied_t = at
+        self._step_times.append(at)
         self._hold_until = self._last_t + FLANK_HOLD_OFF   # the prediction's transient
         self.switches += 1
         if self.target is not None and np.array_equal(self.target, self.applied_x):
