@@ -205,3 +205,25 @@ def test_a_step_that_flips_the_models_flank_is_no_crossing_of_the_model():
     assert flips == [pytest.approx(0.3)]
     assert ad._timing.events == 0 and ad._model_flank_t == model_flank_t < 0.3
     assert ad._applied_bound == pytest.approx(bound + 3e-4)
+
+
+def test_a_step_inside_a_flank_change_events_window_drops_it_even_after_a_later_step():
+    """A flank-change event of the model (its crossing at t_m, measured from the residual
+    over t_m +- WINDOW, levels included) is no measurement when a step applied to the model
+    falls inside that window: the step moves the residual too.  Any recent step counts,
+    not only the last: a step at t_m - 0.13 s followed by one at t_m + 0.37 s (after the
+    window, before the event is due) dropped nothing before (measured: a small-load drive
+    whose event so read a crossing 0.25 s early, at a rate 3x too small)."""
+    cfg = Config().replace({'mesh.backlash': 3e-4})
+    called = []
+    for steps, dropped in (([0.87, 1.37], True), ([0.5, 1.37], False), ([], False)):
+        ad = Adapter(cfg, cfg.adaptation)
+        ad._timing.ready = lambda *a, **k: called.append(a[0])     # (reached: measured)
+        for at in steps:
+            ad.applied(ad.applied_x.copy(), ad.model, at=at)
+        t_m = 1.0
+        ad._timing._event = (t_m, 1.0)
+        n = len(called)
+        ad._flank_time_update(t_m + WINDOW + LEVEL_WINDOW + 0.01, 20.0)
+        assert (len(called) == n) == dropped, steps
+        assert ad._timing._event is None or not dropped
