@@ -46,10 +46,9 @@ crossed; the samples in between entered as if on the old flank and the step went
 estimate (measured: a play estimate from 0.9' to -5' within 0.3 s).  So the detector judges
 its window by the estimate from before the window, and a crossing found rolls the estimate
 and the window's sums back to a copy from before the crossing (:mod:`.history`) before its
-measurements go in.  A model flank
-change that a step applied to the model makes at once (its load or drag changed, not the
-motion) is no crossing of the model: no event, no block of the detector, which allows for
-the model's play in the residual's step instead.
+measurements go in.  A model flank change that a step applied to the model makes at once
+(its load or drag changed, not the motion) is no crossing of the model: no event, no block
+of the detector, which allows for the model's play in the residual's step instead.
 
 **Why a Kalman filter with random-walk parameters, not RLS with a forgetting factor.**  The
 problem is linear in the parameters (the flank aside, above), so both are the same
