@@ -313,7 +313,6 @@ class Adapter:
         #: time sd [s], how: 'step', 'wide step', 'onset', 'arch' or 'area'), for diagnostics
         self.crossings: collections.deque = collections.deque(maxlen=CROSSING_LOG)
         self.switches = 0
-        self.rollbacks = 0
         self.refusals = 0
         self.last_refusal = ''
         self.target: np.ndarray | None = None
@@ -440,7 +439,6 @@ class Adapter:
             return
         if old is not None:
             self._history.restore(old)
-            self.rollbacks += 1
         self.steps_seen += 1
         # (a steep step's start is extrapolated from its rise: uncertain in proportion; a
         # wide step's onset as the area formula's crossing)

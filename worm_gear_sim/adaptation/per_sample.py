@@ -163,7 +163,8 @@ def sample_head(st, ts, ta, theta, P, theta_d, P_d, std2, phi, applied, S, b, sc
     """An encoder sample at ``t`` (measured theta4 ``meas``, the prediction theta2..theta4
     of that instant), up to the flank-change events: the rates (alpha4 low-passed), the
     flanks of the estimate and of the model in use, the sample into the record, the step
-    detector's look.  Returns SKIPPED or USED (the sample is done: :func:`sample_tail` ran),
+    detector's look (judged by ``theta_d``, ``P_d``: the estimate from before its window).
+    Returns SKIPPED or USED (the sample is done: :func:`sample_tail` ran),
     NEED_ROOM (the record is full: nothing changed), or PYTHON / CROSSED (the caller's
     Python work first: a flank-change event is due or the detector found a step; CROSSED:
     the model in use crossed its play, from ``st[X_OLD_FLANK_M]``; then the tail)."""
