@@ -25,9 +25,15 @@ time); the load average is printed because absolute figures depend on it.
   (already proven) parameter set, what the node does off and on its executor after a
   parameter update: one ``DriveModel`` shared by the simulator's trial, the compensator's
   design and the swap.
+* ``stale hold``: a pause of the stream (30 samples in time, then ``hold`` 2 ms past G:
+  the stream goes stale and is saved for a retraction) and the late sample that retracts
+  it, per call against a push in time (medians of ``--cycles``, thread CPU time: what the
+  call costs this process whatever else runs), corrections only and with the physics.
+  Public calls only: ``PYTHONPATH=<another tree> python benchmarks/bench_realtime.py``
+  times that tree's pipeline.
 
     python benchmarks/bench_realtime.py
-    python benchmarks/bench_realtime.py --samples 5000 --repeats 9
+    python benchmarks/bench_realtime.py --samples 5000 --repeats 9 --cycles 500
 """
 
 from __future__ import annotations
@@ -141,10 +147,46 @@ def interleaved(fa, fb, repeats: int) -> tuple[float, float]:
     return ta, tb
 
 
+def stale_hold(cfg: Config, simulate: bool, cycles: int) -> tuple[float, float, float]:
+    """Medians [us, thread CPU time] of a push in time, a stale hold and the retracting push
+    (module docstring) over ``cycles`` pauses of a 1 kHz stamped triangle."""
+    ms = 1_000_000
+    p = RealtimePredictor(cfg, simulate=simulate, stale_margin=0.0)
+    clock = time.thread_time_ns
+    k = 0
+    t_in, t_hold, t_retract = [], [], []
+
+    def push(now: int | None = None) -> float:
+        nonlocal k
+        s = EPOCH + k * ms
+        x = 2.0 * (0.25 - abs(((k * 1e-3) % 0.5) - 0.25))
+        k += 1
+        t0 = clock()
+        o = p.push(s, x, now_ns=s if now is None else now)
+        t1 = clock()
+        assert o.accepted
+        return (t1 - t0) * 1e-3
+
+    for _ in range(200):
+        push()
+    for _ in range(cycles):
+        t_in += [push() for _ in range(30)]
+        now = EPOCH + (k - 1) * ms + p.stale_after_ns + 2 * ms
+        t0 = clock()
+        p.hold(now)
+        t_hold.append((clock() - t0) * 1e-3)
+        assert p.stale
+        t_retract.append(push(now))
+        assert not p.stale
+    assert p.counters['stale_retractions'] == cycles
+    return statistics.median(t_in), statistics.median(t_hold), statistics.median(t_retract)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--samples', type=int, default=2000)
     ap.add_argument('--repeats', type=int, default=7)
+    ap.add_argument('--cycles', type=int, default=200, help='pauses of the stale hold case')
     args = ap.parse_args(argv)
     n, rep = args.samples, args.repeats
     cfg = Config().replace(LOAD)
@@ -195,6 +237,12 @@ def main(argv: list[str] | None = None) -> int:
                 p.push(s, v, now_ns=s)
         t_p = best(run, rep)
         print(f'{name:40s} {t_p / n * 1e6:7.1f} us per sample')
+
+    for simulate in (False, True):
+        t_in, t_hold, t_retract = stale_hold(cfg, simulate, args.cycles)
+        print(f'stale hold ({"with physics" if simulate else "corrections only"}): push in time '
+              f'{t_in:.1f} us, stale hold {t_hold:.1f} us ({t_hold / t_in:.2f}x), retracting '
+              f'push {t_retract:.1f} us ({t_retract / t_in:.2f}x); medians of {args.cycles}')
 
     rt = RealtimePredictor(cfg)
     changes = [cfg.replace({'load.output_torque': 5.0 + 0.01 * (i + 1)}) for i in range(50)]

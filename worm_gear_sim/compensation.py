@@ -553,6 +553,15 @@ class Compensator:
             if other.backlash_inverse:          # and a crossing under way goes on
                 self._flank[_F_STATE] = other._flank[_F_STATE]
 
+    def __copy__(self) -> Compensator:
+        """A copy that streams on its own: its history and kernel state are its own arrays
+        (the design is shared)."""
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new._ht, new._hx = self._ht.copy(), self._hx.copy()
+        new._derivs, new._flank = self._derivs.copy(), self._flank.copy()
+        return new
+
     # ---- introspection ---------------------------------------------------------------------
     @property
     def reference(self) -> float:

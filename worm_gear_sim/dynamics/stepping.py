@@ -215,14 +215,27 @@ class Stepper:
         self._ctl[C_RHO] = self._ctl[C_RHO2] = 1.0
         self._ctl[C_MODE] = self._slip_mode()
 
+    def __copy__(self) -> Self:
+        """A copy that integrates on its own: its state, step-control and statistics
+        arrays are its own (the model, and the load samples, which are replaced and never
+        written into, are shared)."""
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new._u, new._v, new._a = self._u.copy(), self._v.copy(), self._a.copy()
+        new._ctl, new._stats = self._ctl.copy(), self._stats.copy()
+        new.__dict__.pop('_aux_buf', None)
+        return new
+
     def trial_copy(self) -> Self:
         """A copy for a trial of :meth:`reconfigure` (a set's check off the sample path):
-        its state and step-control arrays are its own, so the trial never writes into this
-        simulator (a shallow copy shared the step control, which the trial resets)."""
-        trial = copy.copy(self)
-        trial._u, trial._v, trial._a = self._u.copy(), self._v.copy(), self._a.copy()
-        trial._ctl = self._ctl.copy()
-        return trial
+        :func:`copy.copy`, so the trial never writes into this simulator."""
+        return copy.copy(self)
+
+    def restore(self, earlier: Stepper) -> None:
+        """Go back to ``earlier``, a copy of this simulator taken before
+        (:func:`copy.copy`): its time, state, command, step control, statistics, load
+        samples and parameters."""
+        self.__dict__.update(copy.copy(earlier).__dict__)
 
     def _set_model(self, model: DriveModel, C: np.ndarray | None = None) -> None:
         self.model = model

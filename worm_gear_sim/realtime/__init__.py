@@ -123,10 +123,18 @@ Parameters are swapped with :meth:`RealtimePredictor.reconfigure`; the expensive
 (compensator design, the model's matrices) is :meth:`RealtimePredictor.prepare`, which the
 node can run off the real-time path.
 
-The package: :mod:`.predictor` (the state machine of these rules), :mod:`.admission` (the
-input checks and the confirmation of a jump, once for every input), :mod:`.drive` (the
-simulator side: advance, catch-up, predictions), :mod:`.outputs` (what a call returns, the
-counter names), :mod:`.offline` (``feedforward_series``, the offline twin); import from here.
+The package: :mod:`.predictor` (the public face: configuration, clocks, restarts), the two
+input paths :mod:`.stamped_path` (``push``, ``hold`` and its retraction, the resync) and
+:mod:`.command_path` (``push_command``, ``tick``) on the shared :mod:`.sample_path` (the
+samples through the compensator and the simulated drive, rest samples, the stale stream,
+load samples), :mod:`.stream_state` (the stream's declared state, :class:`StreamState`, and
+what a stale hold saves of it with copies of the compensator and the drive: a retraction
+takes back the stream and nothing else, neither the callers' clocks nor resync candidates
+nor queued commands), :mod:`.admission` (the input checks and the confirmation of a jump,
+once for every input), :mod:`.drive` (the simulator side: advance, catch-up, predictions),
+:mod:`.blend` (a swapped-in compensator handed over; the new one alone once it has ended),
+:mod:`.outputs` (what a call returns, the counter names), :mod:`.offline`
+(``feedforward_series``, the offline twin); import from here.
 Beside the pipeline: :mod:`.command_timing` (sample times of an unstamped command stream),
 :mod:`.replay` (a recorded bag through the same pipeline) and :mod:`.model_check` (the live
 residual check of the model), imported from their modules.
@@ -134,7 +142,8 @@ residual check of the model), imported from their modules.
 
 from .offline import feedforward_series
 from .outputs import COUNTER_NAMES, Correction, Event, Output, Prediction, Prepared, Reject
-from .predictor import CONFIRM_SAMPLES, STALE_MAX_INTERVAL, STALE_PERIODS, RealtimePredictor
+from .predictor import CONFIRM_SAMPLES, RealtimePredictor
+from .stream_state import STALE_MAX_INTERVAL, STALE_PERIODS
 
 __all__ = ['RealtimePredictor', 'feedforward_series', 'Correction', 'Prediction', 'Event',
            'Output', 'Reject', 'Prepared', 'STALE_PERIODS', 'STALE_MAX_INTERVAL',

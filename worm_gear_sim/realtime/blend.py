@@ -18,12 +18,12 @@ blend's samples); afterwards only the new one runs.
 
 from __future__ import annotations
 
+import copy
 import math
-from typing import Any
 
 from ..compensation import Compensator
 
-__all__ = ['BlendedCompensator', 'unwrap']
+__all__ = ['BlendedCompensator', 'unwrap', 'settled']
 
 
 def unwrap(comp: Compensator | BlendedCompensator | None) -> Compensator | None:
@@ -31,20 +31,34 @@ def unwrap(comp: Compensator | BlendedCompensator | None) -> Compensator | None:
     return comp.new if isinstance(comp, BlendedCompensator) else comp
 
 
-class BlendedCompensator:
-    """``old`` handing over to ``new`` over ``duration`` [s] (module docstring); every other
-    attribute is the new compensator's."""
+def settled(comp: Compensator | BlendedCompensator | None
+            ) -> Compensator | BlendedCompensator | None:
+    """``comp``, or the new compensator of a blend that has ended (it alone runs from then
+    on: the same corrections, no wrapper left)."""
+    if isinstance(comp, BlendedCompensator) and comp.old is None:
+        return comp.new
+    return comp
 
-    def __init__(self, old: Any, new: Compensator, duration: float) -> None:
+
+class BlendedCompensator:
+    """``old`` handing over to ``new`` over ``duration`` [s] (module docstring); it takes the
+    samples of both and evaluates the blended correction.  :func:`copy.copy` gives a copy
+    that runs on its own (of both compensators); it copies, deep-copies and pickles."""
+
+    def __init__(self, old: Compensator | BlendedCompensator | None, new: Compensator,
+                 duration: float) -> None:
         if not (math.isfinite(duration) and duration > 0.0):
             raise ValueError(f'blend duration {duration!r}: must be > 0 s')
-        self.old: Any = old
+        self.old = old
         self.new = new
         self.duration = float(duration)
         self._t0: float | None = None
 
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.__dict__['new'], name)
+    def __copy__(self) -> BlendedCompensator:
+        new = object.__new__(BlendedCompensator)
+        new.__dict__.update(self.__dict__)
+        new.old, new.new = copy.copy(self.old), copy.copy(self.new)
+        return new
 
     @property
     def blending(self) -> bool:
@@ -64,7 +78,7 @@ class BlendedCompensator:
         self.old = None                       # a restart: nothing to hand over
         self.new.reset(theta1_ref, t)
 
-    def copy_history(self, other: Any) -> None:
+    def copy_history(self, other: Compensator) -> None:
         self.new.copy_history(other)
 
     def evaluate(self, te: float) -> float:

@@ -8,6 +8,7 @@ The rules of when it is driven are the pipeline's (:mod:`.predictor`)."""
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable
 
@@ -45,11 +46,32 @@ class SimulatedDrive:
         self.held = 0.0                 # command the simulator holds [rad]
         self.held_ref = 0.0             # reference of that command [rad]
 
-    def start(self, cmd: float, ref: float, t: float) -> None:
-        """The first sample: the drive starts at rest at command ``cmd`` at ``t``."""
+    def __copy__(self) -> SimulatedDrive:
+        """A copy that drives its own copy of the simulator (:meth:`Stepper.__copy__
+        <worm_gear_sim.dynamics.stepping.Stepper.__copy__>`), counting into the same
+        counters and event log."""
+        new = object.__new__(SimulatedDrive)
+        new.__dict__.update(self.__dict__)
+        new.sim = copy.copy(self.sim)
+        return new
+
+    def restore(self, earlier: SimulatedDrive) -> None:
+        """Go back to ``earlier``, a copy of this drive taken before (:func:`copy.copy`):
+        its simulator's state and what it was driven with."""
+        if self.sim is not None and earlier.sim is not None:
+            self.sim.restore(earlier.sim)
+        self.drive_t, self.t_start = earlier.drive_t, earlier.t_start
+        self.held, self.held_ref = earlier.held, earlier.held_ref
+
+    def start(self, cmd: float, ref: float, t: float, load: float | None = None) -> None:
+        """The first sample: the drive starts at rest at command ``cmd`` at ``t``; ``load``
+        [N m]: under that load torque, held from ``t`` (the load samples pushed before
+        are dropped), None: the simulator's."""
         self.held, self.held_ref = cmd, ref
         if self.sim is not None:
-            self.sim.reset(cmd, t)
+            self.sim.reset(cmd, t, load_torque=load)
+            if load is not None:
+                self.sim.hold_load(load)
             self.drive_t = t
         self.t_start = t
 
