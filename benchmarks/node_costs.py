@@ -70,9 +70,10 @@ def breakdown(n_ticks: int = 2000) -> dict[str, float]:
                 f()
             return (time.perf_counter() - a) / n_ticks * 1e6
         out['  state + joint_torques'] = per(lambda: (sim.state, sim.joint_torques()))
+        pubs = node.publishing
         out['  4 publishes (JointState + 3 Float64)'] = per(lambda: (
-            node._pub_js.publish(node._js), node._pub_err.publish(node._f_err),
-            node._pub_worm.publish(node._f_worm), node._pub_ff.publish(node._f_ff)))
+            pubs._pub_js.publish(pubs._js), pubs._pub_err.publish(pubs._f_err),
+            pubs._pub_worm.publish(pubs._f_worm), pubs._pub_ff.publish(pubs._f_ff)))
         out['  clock.now()'] = per(lambda: node.get_clock().now())
     finally:
         node.destroy_node()

@@ -40,10 +40,8 @@ def twin():
 
 
 def test_node_adaptation_equals_the_twin(ros_harness, twin, tmp_path):
-    from worm_gear_sim.ros.adaptation import AdaptiveNode
     out_file = tmp_path / 'adapted.yaml'
-    h = ros_harness({**START, 'adaptation.params_file': str(out_file)},
-                    node_class=AdaptiveNode)
+    h = ros_harness({**START, 'adaptation.params_file': str(out_file)})
     assert h.wait_clock(NOW_NS)
     node = h.node
     from std_msgs.msg import String
@@ -53,7 +51,7 @@ def test_node_adaptation_equals_the_twin(ros_harness, twin, tmp_path):
     antenna = node.config.node.joint_names[3]
     deltas = []
     for ns, ref, got in twin.record:          # the twin's order: reference, then encoders
-        live = node.adaptation
+        live = node.adaptation.live
         if live is not None and live.pending is not None:   # the worker's time that real
             concurrent.futures.wait([live.pending.future], timeout=30)   # time gives it
         before = node.rt.counters['corrections']
@@ -64,7 +62,7 @@ def test_node_adaptation_equals_the_twin(ros_harness, twin, tmp_path):
             msg = h.JointState(name=[antenna], position=[meas])
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
             node._on_measured(msg)
-    live = node.adaptation
+    live = node.adaptation.live
     assert live is not None and live.counters['rejected'] == 0
     assert live.counters['late_steps'] == 0
     assert live.counters['switches'] == len(twin.steps) > 0
@@ -82,7 +80,7 @@ def test_node_adaptation_equals_the_twin(ros_harness, twin, tmp_path):
     # one message per applied step, one per diagnostics period: the last is the newest
     assert h.spin_until(lambda: len(adapted) >= len(twin.steps) + 1)
     assert adapted[-1]['in_use'] == pytest.approx(twin.in_use, rel=1e-9)
-    res = node._on_write(None, type('R', (), {'success': False, 'message': ''})())
+    res = node.adaptation._on_write(None, type('R', (), {'success': False, 'message': ''})())
     assert res.success, res.message
     cfg = load_config(out_file)
     assert cfg.load.output_torque == pytest.approx(twin.in_use['load.output_torque'],

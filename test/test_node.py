@@ -398,7 +398,7 @@ def test_diagnostics_follow_diagnostic_updater_conventions(ros_harness):
     names = [s.name for s in msg.status]
     assert names == ['worm_gear_sim: simulation', 'worm_gear_sim: inputs',
                      'worm_gear_sim: feedforward', 'worm_gear_sim: trajectories',
-                     'worm_gear_sim: model check',
+                     'worm_gear_sim: model check', 'worm_gear_sim: adaptation',
                      'worm_gear_sim: back-drive']
     for s in msg.status:
         assert s.hardware_id == 'worm_gear_sim'
@@ -738,14 +738,14 @@ def test_another_node_with_the_same_name_is_warned_about(ros_harness):
     logger = h.node.get_logger()
     warn = logger.warning
     logger.warning = lambda m, *a, **k: (lines.append(m), warn(m, *a, **k))  # type: ignore
-    h.node._check_same_name()
+    h.node.same_names.check()
     assert h.node.counters['same_name_nodes'] == 0 and not lines
     twin = WormGearSimNode(context=h.ctx)
     try:
         h.executor.add_node(twin)
         assert h.spin_until(lambda: sum(1 for n in h.node.get_node_names_and_namespaces()
                                         if n == ('worm_gear_sim', '/')) == 2, 10.0)
-        h.node._check_same_name()
+        h.node.same_names.check()
         assert h.node.counters['same_name_nodes'] == 1
         assert any('1 other node(s) named /worm_gear_sim' in ln for ln in lines), lines
         sim = h.node.diagnostic_statuses()[0]

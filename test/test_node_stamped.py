@@ -313,7 +313,8 @@ def test_a_failed_publish_is_counted_and_the_node_goes_on(ros_harness, which):
     the joint_states and worm_error publishers) is logged and counted, never ends the
     node; the pipeline's state and the later corrections are those of the offline twin."""
     h = make(ros_harness)
-    setattr(h.node, which, _FailingPublisher(getattr(h.node, which), 5))
+    pubs = h.node.publishing
+    setattr(pubs, which, _FailingPublisher(getattr(pubs, which), 5))
     stamps = NOW_NS - 100 * MS + np.arange(40, dtype=np.int64) * MS
     values = 0.01 + 1e-3 * np.arange(40)
     assert h.references(zip(stamps.tolist(), values.tolist()))   # no exception escapes

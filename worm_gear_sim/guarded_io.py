@@ -1,8 +1,11 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Reading untrusted text files with bounded memory: the one YAML loader of the package
-(no aliases, limited nesting) and a size-limited UTF-8 read.  Standard library and PyYAML
-only, so that the records' readers and the configuration use the same guard.
+"""Text files the guarded way: reading untrusted ones with bounded memory (the one YAML
+loader of the package: no aliases, limited nesting; a size-limited UTF-8 read) and writing
+one atomically and durably (:func:`write_text_durably`: a temporary file beside the target,
+fsync of the file and its directory, rename; only onto a regular file or a new path).
+Standard library and PyYAML only, so that the records' readers, the configuration and the
+node's written parameter files use the same guard.
 
 A parameter file is a few kB; the node's own params parser (rcl's) has no YAML aliases.
 A 1 kB alias bomb expands to gigabytes in ``yaml.safe_load``; a 5 000-deep nesting
@@ -11,14 +14,18 @@ overflows the parser's recursion.  Both are refused here with a message naming t
 
 from __future__ import annotations
 
+import errno
+import os
 import re
+import secrets
+import stat
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 __all__ = ['GuardedFileError', 'read_text_file', 'guarded_yaml_load', 'MAX_CONFIG_BYTES',
-           'MAX_CONFIG_DEPTH']
+           'MAX_CONFIG_DEPTH', 'check_write_target', 'write_text_durably']
 
 #: Largest parameter file (or bag metadata.yaml) read [bytes].
 MAX_CONFIG_BYTES = 1_000_000
@@ -102,3 +109,86 @@ def guarded_yaml_load(text: str, where: str) -> Any:
         raise GuardedFileError(f'{where}: broken YAML{where_in}: {problem}') from None
     except RecursionError:
         raise GuardedFileError(f'{where}: nested too deep') from None
+
+
+def check_write_target(path: str | Path) -> Path:
+    """The file :func:`write_text_durably` would write for ``path`` (``~`` expanded,
+    symbolic links followed: a link keeps pointing at the file); GuardedFileError naming the
+    reason if it is not a regular file or a new path in a writable directory (empty, a
+    directory, ``/``, a device, a FIFO, a socket, below a file).  Creates nothing."""
+    raw = os.fspath(path)
+    if not raw.strip():
+        raise GuardedFileError('empty path: name a file')
+    target = Path(os.path.realpath(Path(raw).expanduser()))
+    try:
+        mode = target.stat().st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as exc:
+        raise GuardedFileError(f'{target}: cannot be checked ({exc.strerror or exc})') from None
+    if mode is not None and not stat.S_ISREG(mode):
+        raise GuardedFileError(f'{target}: is {_kind(mode)}, not a regular file; name a file')
+    parent = target.parent
+    while not parent.exists():              # created by the write
+        parent = parent.parent
+    if not parent.is_dir():
+        raise GuardedFileError(f'{target}: {parent} is not a directory')
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise GuardedFileError(f'{target}: directory {parent} is not writable')
+    return target
+
+
+def _kind(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, 'a directory'), (stat.S_ISCHR, 'a character device'),
+                       (stat.S_ISBLK, 'a block device'), (stat.S_ISFIFO, 'a FIFO'),
+                       (stat.S_ISSOCK, 'a socket')):
+        if test(mode):
+            return name
+    return 'not a regular file'
+
+
+def write_text_durably(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically and durably, and return the file
+    written: checked first (:func:`check_write_target`: nothing is created for a refused
+    target), missing directories created, the text written to a temporary file in the
+    target's directory, fsync'd, renamed onto the target, the directory fsync'd (a crash
+    leaves the old file or the new one, never a part).  A new file gets the mode a file
+    created by ``open(path, 'w')`` gets (0666 without the umask's bits), a replaced one
+    keeps its mode.  GuardedFileError for a refused target; OSError from the system (the
+    temporary file is removed)."""
+    target = check_write_target(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        mode: int | None = stat.S_IMODE(target.stat().st_mode)
+    except FileNotFoundError:
+        mode = None
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, 'O_CLOEXEC', 0)
+    for _ in range(100):
+        tmp = target.parent / f'.{target.name}.{secrets.token_hex(4)}.tmp'
+        try:                        # (the kernel applies the umask to 0o666)
+            fd = os.open(tmp, flags, 0o666)
+            break
+        except FileExistsError:
+            continue
+    else:                                   # pragma: no cover - 100 random names taken
+        raise GuardedFileError(f'{target}: no free temporary name in {target.parent}')
+    try:
+        with os.fdopen(fd, 'w', encoding='utf-8') as fh:
+            if mode is not None:
+                os.fchmod(fh.fileno(), mode)
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    dir_fd = os.open(target.parent, os.O_RDONLY | getattr(os, 'O_DIRECTORY', 0))
+    try:
+        os.fsync(dir_fd)
+    except OSError as exc:      # a file system that cannot sync a directory: the rename
+        if exc.errno != errno.EINVAL:       # is as durable as it makes it
+            raise
+    finally:
+        os.close(dir_fd)
+    return target

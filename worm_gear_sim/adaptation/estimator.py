@@ -57,7 +57,7 @@ direction: a sector scan hardly separates the gear's first harmonic cos theta3 (
 +-5 deg) from the load torque, and a load that keeps the teeth on one flank makes the play a
 constant like the load.  With exponential forgetting the covariance of such a direction
 grows without bound (wind-up), and a burst of noise then moves the estimate anywhere.  The
-Kalman form states per parameter a prior (sigma_i, :data:`PRIOR_STD`) and how it may
+Kalman form states per parameter a prior (sigma_i, :data:`~.layout.PRIOR_STD`) and how it may
 drift: the process noise q_i = P_ii dt / ``memory`` makes each variance forget like RLS
 with the time constant ``memory`` (the estimate averages over that long, whatever the size
 of the regressor), and each variance is capped at its prior, so the covariance of an
@@ -87,7 +87,6 @@ from __future__ import annotations
 
 import collections
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -96,21 +95,15 @@ import numpy as np
 from ..dynamics.inverse import inverse_theta1
 from ..dynamics.model import DriveModel, with_load_torque
 from ..params import Config
-from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS, Parameters
 from . import per_sample as ps
 from .flank_timing import STEP_GAP_WIDE, STEP_SIDE_WIDE, WINDOW, FlankTiming
 from .history import EstimateHistory
+from .layout import DRAG_KEY, LOAD_KEY, PLAY_KEY, Layout
 from .per_sample import _kalman_step, least_step, sample_head, sample_tail
 from .slots import Slot
 
-__all__ = ['PRIOR_STD', 'FLANK_HOLD_OFF', 'Layout', 'output_compliance',
-           'Adapter', 'Decision']
+__all__ = ['FLANK_HOLD_OFF', 'output_compliance', 'Adapter', 'Decision']
 
-LOAD_KEY, DRAG_KEY, PLAY_KEY, WORM_KEY, GEAR_KEY = ADAPTABLE_KEYS
-#: Prior standard deviation of each key's estimate about its start value (per coefficient
-#: for the harmonics): rad at the gear, N m, N m s/rad, rad.
-PRIOR_STD: dict[str, float] = {WORM_KEY: 1e-4, GEAR_KEY: 3e-5, LOAD_KEY: 5.0,
-                               DRAG_KEY: 50.0, PLAY_KEY: 1e-3}
 #: Samples this long after a change of the flank in contact are not used [s].
 FLANK_HOLD_OFF = 0.15
 #: Time constant of the low-pass on the antenna acceleration (flank decision) [s].
@@ -148,79 +141,6 @@ STEP_FLIP_TIME = 0.005
 STEP_TIMES = 8
 #: A sample gap longer than this restarts the rate estimates [s].
 MAX_GAP = 0.05
-
-
-@dataclass(frozen=True)
-class Layout:
-    """Where each adapted key sits in the state vector (-1: not adapted)."""
-
-    keys: tuple[str, ...]
-    worm_orders: int
-    gear_orders: int
-    i_load: int
-    i_drag: int
-    i_play: int
-    worm0: int
-    gear0: int
-    n: int
-
-    @classmethod
-    def of(cls, keys: Sequence[str], worm_orders: int, gear_orders: int) -> Layout:
-        bad = [k for k in keys if k not in ADAPTABLE_KEYS]
-        if bad:
-            raise ValueError(f'adaptation.keys: {", ".join(bad)} cannot be adapted (choose '
-                             f'from {", ".join(ADAPTABLE_KEYS)})')
-        chosen = tuple(k for k in ADAPTABLE_KEYS if k in keys)
-        if not chosen:
-            raise ValueError('adaptation.keys: empty (nothing to adapt)')
-        idx: dict[str, int] = {}
-        n = 0
-        for k in chosen:
-            idx[k] = n
-            n += {WORM_KEY: 2 * worm_orders, GEAR_KEY: 2 * gear_orders}.get(k, 1)
-        return cls(chosen, int(worm_orders) if WORM_KEY in idx else 0,
-                   int(gear_orders) if GEAR_KEY in idx else 0, idx.get(LOAD_KEY, -1),
-                   idx.get(DRAG_KEY, -1), idx.get(PLAY_KEY, -1), idx.get(WORM_KEY, -1),
-                   idx.get(GEAR_KEY, -1), n)
-
-    def pack(self, cfg: Parameters) -> np.ndarray:
-        """The state vector of ``cfg``'s values (harmonics padded with zeros)."""
-        x = np.zeros(self.n)
-        for i, key in ((self.i_load, LOAD_KEY), (self.i_drag, DRAG_KEY),
-                       (self.i_play, PLAY_KEY)):
-            if i >= 0:
-                x[i] = float(cfg.to_flat_dict()[key])
-        for i0, orders, key in ((self.worm0, self.worm_orders, WORM_KEY),
-                                (self.gear0, self.gear_orders, GEAR_KEY)):
-            if i0 >= 0:
-                v = list(getattr(cfg.mesh, key.split('.')[1]))[:2 * orders]
-                x[i0:i0 + len(v)] = v
-        return x
-
-    def overrides(self, x: np.ndarray) -> dict[str, Any]:
-        """The parameter overrides (dotted keys) of a state vector."""
-        out: dict[str, Any] = {}
-        for i, key in ((self.i_load, LOAD_KEY), (self.i_drag, DRAG_KEY),
-                       (self.i_play, PLAY_KEY)):
-            if i >= 0:
-                out[key] = float(x[i])
-        for i0, orders, key in ((self.worm0, self.worm_orders, WORM_KEY),
-                                (self.gear0, self.gear_orders, GEAR_KEY)):
-            if i0 >= 0:
-                out[key] = [float(v) for v in x[i0:i0 + 2 * orders]]
-        return out
-
-    def prior_std(self) -> np.ndarray:
-        s = np.zeros(self.n)
-        for i, key in ((self.i_load, LOAD_KEY), (self.i_drag, DRAG_KEY),
-                       (self.i_play, PLAY_KEY)):
-            if i >= 0:
-                s[i] = PRIOR_STD[key]
-        for i0, orders, key in ((self.worm0, self.worm_orders, WORM_KEY),
-                                (self.gear0, self.gear_orders, GEAR_KEY)):
-            if i0 >= 0:
-                s[i0:i0 + 2 * orders] = PRIOR_STD[key]
-        return s
 
 
 def output_compliance(model: DriveModel, phases: int = 8) -> tuple[float, float]:
@@ -291,11 +211,7 @@ class Adapter:
         model = DriveModel.of(model)
         self.settings = settings
         self._st = np.zeros(ps.N_ST)
-        cfg = model.config
-        worm = max(int(settings.worm_error_orders), len(cfg.mesh.worm_error_harmonics) // 2)
-        gear = max(int(settings.gear_error_orders), len(cfg.mesh.gear_error_harmonics) // 2)
-        self.layout = Layout.of(settings.keys, min(worm, MAX_ERROR_ORDERS),
-                                min(gear, MAX_ERROR_ORDERS))
+        self.layout = Layout.for_set(model.config, settings)
         n = self.layout.n
         self._std = self.layout.prior_std()
         self._std2 = self._std ** 2

@@ -66,7 +66,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass
 from typing import Any
@@ -79,6 +79,7 @@ from ..realtime.predictor import Prepared, RealtimePredictor
 from ..realtime.switch_interval import short_switch_interval
 from ..schema import Parameters
 from .estimator import Adapter
+from .learnt import carried_adapter, carried_values, carry_notes, format_value, touches_estimator
 
 __all__ = ['LiveAdaptation', 'REJECT_REASONS', 'APPLY_LEAD', 'Submit', 'run_now',
            'in_worker']
@@ -115,12 +116,16 @@ class LiveAdaptation:
         if len(joint_names) != 3:
             raise ValueError('joint_names: the names of theta2, theta3 and theta4')
         self.predictor = predictor
+        #: the operator's set (the nominal one): the model in use is it with the adapted
+        #: values on top (:mod:`.learnt`)
+        self.declared = _as_config(predictor.config)
         self.joint_names = tuple(joint_names)
         self.history = _Predictions(history)
         self.adapter = Adapter(predictor.model, predictor.config.adaptation)
         self.counters: dict[str, int] = {'samples': 0, 'used': 0, 'rejected': 0,
                                          'switches': 0, 'refusals': 0, 'late_steps': 0,
-                                         'late_samples': 0, 'restarts': 0}
+                                         'late_samples': 0, 'restarts': 0, 'resets': 0,
+                                         'parameter_sets': 0}
         self.counters.update({f'rejected_{r}': 0 for r in REJECT_REASONS})
         self.last_refusal = ''
         self.last_note = ''
@@ -298,13 +303,63 @@ class LiveAdaptation:
         return [f'adapted set not applied, keeping the last good model: {reason}'] if new \
             else []
 
-    def rebase(self) -> None:
-        """The predictor's model was changed from outside (a parameter update): the adapter
-        restarts from it (a step being prepared is dropped, and the samples waiting: the
-        replaced model predicted them)."""
+    # ---- what an operator does (:mod:`.learnt`) -----------------------------------------
+    def carried_values(self, declared: Config, names: Collection[str]) -> dict[str, Any]:
+        """The adapted values in use that the operator's new set ``declared`` (a set of the
+        parameters ``names``) keeps: the pipeline is to run ``declared.replace(...)`` of
+        them (:func:`~.learnt.carried_values`)."""
+        return carried_values(self.adapter, declared, names)
+
+    def carry_over(self, declared: Config, names: Collection[str]) -> list[str]:
+        """The pipeline runs the operator's new set ``declared`` with
+        :meth:`carried_values` on top (swapped in by the caller): the adapter carries over
+        what was learnt (:mod:`.learnt`; a step being prepared is dropped, and, where the
+        estimator's inputs changed, the samples waiting: the replaced model predicted
+        them).  Returns the lines to log (what was restarted or dropped)."""
+        old = self.adapter
+        in_use = old.applied_values()
+        touched = touches_estimator(self.declared, declared, names) or not np.array_equal(
+            old.layout.pack(self.predictor.config), old.applied_x)
+        self.declared = declared
+        self._delay_ns = int(round(declared.adaptation.sample_delay * 1e9))
+        self.counters['parameter_sets'] += 1
+        self.pending = None
+        if not touched:
+            return []
+        self.waiting.clear()
+        self.adapter = carried_adapter(old, self.predictor.model, declared, names)
+        return carry_notes(old, in_use, self.adapter, names)
+
+    def forget(self) -> str:
+        """The explicit forgetting, once the pipeline runs the operator's set again
+        (swapped in by the caller): the estimate restarts from the prior about it, nothing
+        decided or waiting is kept; counted (``resets``).  Returns the line to log."""
+        dropped = ', '.join(f'{k} {format_value(v)}'
+                            for k, v in self.adapter.applied_values().items())
+        self.adapter = Adapter(self.predictor.model, self.declared.adaptation)
+        self.adapter.nominal_x = self.adapter.layout.pack(self.declared)
         self.pending = None
         self.waiting.clear()
-        self.adapter.rebase(self.predictor.model)
+        self.last_refusal = self.last_note = ''
+        self.counters['resets'] += 1
+        return (f'adaptation reset ({self.counters["resets"]} so far): the model in use is the '
+                f'declared set again, the estimate restarts from the prior (was in use: '
+                f'{dropped})')
+
+    def reconfigure(self, overrides: Mapping[str, Any]) -> list[str]:
+        """A parameter set of the operator applied at once (the node prepares the pipeline
+        in a worker instead, then :meth:`carry_over`): the operator's set becomes
+        ``declared.replace(overrides)``, the pipeline runs it with what was learnt on top.
+        ConfigError (nothing changed) if either is not a usable set."""
+        declared = self.declared.replace(overrides)
+        carried = self.carried_values(declared, overrides.keys())
+        self.predictor.reconfigure(declared.replace(carried) if carried else declared)
+        return self.carry_over(declared, overrides.keys())
+
+    def reset(self) -> str:
+        """:meth:`forget`, the pipeline returned to the operator's set at once."""
+        self.predictor.reconfigure(self.declared)
+        return self.forget()
 
     # ---- read-out ----------------------------------------------------------------------
     def estimates(self) -> dict[str, Any]:
@@ -320,12 +375,12 @@ class LiveAdaptation:
                                ('residual_rms_nominal [rad]', rms['nominal']))}
         values.update({k: str(v) for k, v in self.counters.items()})
         for k, v in ad.estimates().items():
-            values[f'estimate {k}'] = _fmt(v)
+            values[f'estimate {k}'] = format_value(v)
         for k, v in ad.applied_values().items():
-            values[f'in use {k}'] = _fmt(v)
+            values[f'in use {k}'] = format_value(v)
         if self.last_refusal:
             values['last_refusal'] = self.last_refusal
-        if ad.samples_used == 0:
+        if self.counters['used'] == 0:
             return 'OK', 'adaptation on: waiting for measured joint states', values
         level = 'WARN' if self.last_refusal and ad.target is None and \
             self.counters['refusals'] and not self.counters['switches'] else 'OK'
@@ -432,9 +487,3 @@ class _Predictions:
         x0, x1 = self._x[k - 1], self._x[k]
         return ((1.0 - w) * x0[0] + w * x1[0], (1.0 - w) * x0[1] + w * x1[1],
                 (1.0 - w) * x0[2] + w * x1[2])
-
-
-def _fmt(v: Any) -> str:
-    if isinstance(v, list):
-        return '[' + ', '.join(f'{x:.4g}' for x in v) + ']'
-    return f'{v:.6g}'

@@ -2,9 +2,10 @@
 # Licensed under the Apache License, Version 2.0
 """Live adaptation in the node (``adaptation.enabled``): the wiring, no algorithm.
 
-:class:`AdaptiveNode` is the node (:class:`~.node.WormGearSimNode`) plus the core's
-:class:`~worm_gear_sim.adaptation.live.LiveAdaptation` beside its real-time pipeline, the
-same object the offline twin (``worm-gear-sim adapt``) drives:
+:class:`NodeAdaptation` is a member of a drive node (:class:`~.node.WormGearSimNode`),
+there whatever ``adaptation.enabled`` says; once adaptation runs it holds the core's
+:class:`~worm_gear_sim.adaptation.live.LiveAdaptation` beside the node's real-time
+pipeline, the same object the offline twin (``worm-gear-sim adapt``) drives:
 
 * every prediction the pipeline makes goes to it (after the node has published it), then
   its decision is taken (bounded steps, no jump in the command): a step is prepared in a
@@ -23,77 +24,98 @@ same object the offline twin (``worm-gear-sim adapt``) drives:
   diagnostic_msgs/KeyValue would carry the same as strings without a header, and a message
   of our own would need an interface package;
 * ``~/write_adapted_parameters`` (std_srvs/Trigger): writes the model in use as a params
-  file (``adaptation.params_file``) that the node can start from (``--params-file``);
+  file (``adaptation.params_file``) that the node can start from (``--params-file``),
+  atomically and durably (:func:`~worm_gear_sim.guarded_io.write_text_durably`; a target
+  that is no regular file nor a new path is refused, nothing written);
+* ``~/reset_adaptation`` (std_srvs/Trigger): the explicit forgetting: the model in use
+  returns to the declared set (prepared in the parameter worker, swapped in between two
+  samples), the estimate restarts from the prior; counted (``resets``) and logged;
 * /diagnostics: a status ``adaptation`` (off, waiting, steps applied, refusals, the
   windowed residual of the estimate, the model in use and the nominal set).
 
-A parameter set from outside (the parameter service) replaces the model: the adaptation
-restarts from it (and stops when ``adaptation.enabled`` is set false).  The node's own
-parameters keep their declared values; the adapted ones are on the topic and in the file.
+What was learnt is the operator's data: a parameter set keeps it (the adapted values stay
+applied on the new set, :mod:`worm_gear_sim.adaptation.learnt` says what a set that changes
+the estimator keeps); ``adaptation.enabled`` false freezes the model in use as it is and
+stops learning, true again resumes from the estimate kept.  The node's own parameters
+keep their declared values (the nominal set); the adapted ones are on the topic and in the
+file.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
 import json
-import os
-import tempfile
-from pathlib import Path
+from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
+from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from ..adaptation.live import LiveAdaptation, in_worker
 from ..config_io import params_document, params_yaml_text
+from ..guarded_io import GuardedFileError, check_write_target, write_text_durably
+from ..params import Config
+from ..realtime import Output, RealtimePredictor
 from ..topics import MEASURED_TOPIC
+from ..validation import ConfigError
 from . import diagnostics as diag
-from .callbacks import stamp_ns
-from .node import WormGearSimNode
 from .statuses import HARDWARE_ID
 
-__all__ = ['AdaptiveNode', 'ADAPTED_TOPIC', 'WRITE_SERVICE']
+__all__ = ['NodeAdaptation', 'ADAPTED_TOPIC', 'WRITE_SERVICE', 'RESET_SERVICE']
 
 ADAPTED_TOPIC = '~/adapted_parameters'
 WRITE_SERVICE = '~/write_adapted_parameters'
+RESET_SERVICE = '~/reset_adaptation'
+PARAMS_FILE = 'adaptation.params_file'
 
 
-class AdaptiveNode(WormGearSimNode):
-    """The node with live adaptation (module docstring); off by default, then it only adds
-    the topic, the service and an ``adaptation: off`` status."""
+class NodeAdaptation:
+    """The live adaptation of the drive node ``node`` (module docstring) beside its
+    pipeline ``rt``; ``config``: the node's declared set at the start; ``warn(cause,
+    text)``: the node's throttled warning; ``publish(pub, msg)``: its counted publish;
+    ``rebuild()``: prepares the node's declared set again and swaps it in (through
+    :meth:`pipeline` and :meth:`swapped`, as a parameter set)."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        self.adaptation: LiveAdaptation | None = None
-        self._adapt_config: Any = None
-        self._adapt_builder = concurrent.futures.ThreadPoolExecutor(
+    def __init__(self, node: Node, rt: RealtimePredictor, config: Config,
+                 warn: Callable[[str, str], None], publish: Callable[[Any, Any], None],
+                 rebuild: Callable[[], None]) -> None:
+        self.node, self.rt = node, rt
+        self._warn, self._publish, self._rebuild = warn, publish, rebuild
+        self._log = node.get_logger()
+        self._clock = node.get_clock()
+        #: the core's adaptation, once it has run (kept while it is off: frozen)
+        self.live: LiveAdaptation | None = None
+        self.enabled = config.adaptation.enabled
+        self._reset_pending = False
+        self._builder = concurrent.futures.ThreadPoolExecutor(
             max_workers=1, thread_name_prefix='worm_gear_sim_adapt')
-        super().__init__(*args, **kwargs)
         qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self._pub_adapted = self.create_publisher(String, ADAPTED_TOPIC, qos)
-        self._srv_write = self.create_service(Trigger, WRITE_SERVICE, self._on_write)
-        self._sync_adaptation()
+        self._pub = node.create_publisher(String, ADAPTED_TOPIC, qos)
+        self._srv_write = node.create_service(Trigger, WRITE_SERVICE, self._on_write)
+        self._srv_reset = node.create_service(Trigger, RESET_SERVICE, self._on_reset)
+        if self.enabled:
+            self._start()
+            try:
+                check_write_target(config.adaptation.params_file)
+            except GuardedFileError as exc:
+                self._log.warning(f'{PARAMS_FILE}: {exc}; {WRITE_SERVICE} will refuse it')
+
+    def _start(self) -> None:
+        self.live = LiveAdaptation(self.rt, self.rt.config.node.joint_names[1:],
+                                   submit=in_worker(self._builder))
+
+    @property
+    def running(self) -> LiveAdaptation | None:
+        """The adaptation while it learns (``adaptation.enabled``), else None."""
+        return self.live if self.enabled else None
 
     # ---- the loop ----------------------------------------------------------------------
-    def _sync_adaptation(self) -> LiveAdaptation | None:
-        """The adaptation for the pipeline's current model (restarted when the model was
-        replaced from outside; None when off)."""
-        rt = getattr(self, 'rt', None)
-        if rt is None:                                # during the base constructor
-            return None
-        cfg = rt.config
-        if cfg is not self._adapt_config:
-            self._adapt_config = cfg
-            self.adaptation = LiveAdaptation(rt, cfg.node.joint_names[1:],
-                                             submit=in_worker(self._adapt_builder)) \
-                if cfg.adaptation.enabled else None
-        return self.adaptation
-
-    def _handle(self, out: Any, topic: str, stamp: int, value: float | None = None,
-                stamp_ns: int | None = None) -> None:
-        super()._handle(out, topic, stamp, value, stamp_ns)
-        live = self._sync_adaptation()
+    def predictions(self, out: Output, stamp_ns: int | None) -> None:
+        """The pipeline's predictions of one callback (already published; ``stamp_ns``:
+        the stamp they were published with, None: their own), then the decision."""
+        live = self.running
         if live is None or not out.predictions:
             return
         for p in out.predictions:
@@ -104,80 +126,129 @@ class AdaptiveNode(WormGearSimNode):
             if msg.startswith('adapted set not applied'):
                 self._warn('adaptation_refused', msg)
             else:
-                self.get_logger().info(msg)
+                self._log.info(msg)
         if live.counters['switches'] != switches:
-            self._adapt_config = self.rt.config       # our own step, not an outside set
-            self._publish_adapted()
+            self.publish()
         elif late == 0 and live.counters['late_steps']:
-            self._publish_adapted()                   # the first late step: at once
+            self.publish()                            # the first late step: at once
 
-    def _on_measured(self, msg: JointState) -> None:
-        super()._on_measured(msg)
-        live = self._sync_adaptation()
+    def measured(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]
+                 ) -> None:
+        """An encoder message (its stamp, or the reception time if unstamped)."""
+        live = self.running
         if live is None:
             return
-        stamp = stamp_ns(msg.header.stamp) or self._clock.now().nanoseconds
         late = live.counters['late_samples']
-        reason = live.measured(stamp, msg.name, msg.position)
+        reason = live.measured(stamp_ns, names, positions)
         if late == 0 and live.counters['late_samples']:
-            self._publish_adapted()     # the first late sample: the node no longer equals
-            #                             the twin, said at once (counters are cumulative)
+            self.publish()      # the first late sample: the node no longer equals the twin,
+            #                     said at once (counters are cumulative)
         if reason is not None:
             self._warn('adaptation_rejected', f'adaptation: rejected {MEASURED_TOPIC} sample '
                        f'({reason}); {live.counters["rejected"]} so far')
 
+    # ---- parameter sets (the node's ParameterUpdates) -----------------------------------
+    def pipeline(self, declared: Config, names: Collection[str]) -> Config:
+        """The set the pipeline is to run for the operator's set ``declared`` (a set of
+        ``names``): it with the adapted values it keeps on top; ConfigError if
+        ``adaptation.params_file`` is named and no file can be written there, or if the
+        set is not usable with them."""
+        if PARAMS_FILE in names:
+            try:
+                check_write_target(declared.adaptation.params_file)
+            except GuardedFileError as exc:
+                raise ConfigError(PARAMS_FILE, str(exc)) from None
+        if self.live is None or self._reset_pending:
+            return declared
+        carried = self.live.carried_values(declared, names)
+        if not carried:
+            return declared
+        try:
+            return declared.replace(carried)
+        except ConfigError as exc:
+            raise ConfigError(exc.key, f'{exc.reason} (with the adapted values in use: '
+                              f'{", ".join(carried)}; {RESET_SERVICE} returns to the '
+                              'declared set)', exc.keys) from None
+
+    def swapped(self, declared: Config, names: Collection[str]) -> None:
+        """The pipeline runs :meth:`pipeline`'s set for ``declared`` now: what was learnt
+        is carried over (or forgotten after a reset); adaptation switched on or off."""
+        live, was = self.live, self.enabled
+        self.enabled = declared.adaptation.enabled
+        if live is None:
+            if self.enabled:
+                self._start()
+            return
+        if self._reset_pending:
+            self._reset_pending = False
+            self._log.info(live.forget())
+        else:
+            for note in live.carry_over(declared, names):
+                self._log.info(f'adaptation: {note}')
+        if was and not self.enabled:
+            self._log.info(f'adaptation off: the model in use stays as it is '
+                           f'({live.counters["switches"]} adapted steps), learning stops')
+        elif self.enabled and not was:
+            self._log.info('adaptation on again: resumes from the estimate kept')
+        self.publish()
+
     # ---- outputs -----------------------------------------------------------------------
-    def _publish_adapted(self) -> None:
-        live = self.adaptation
+    def publish(self) -> None:
+        """~/adapted_parameters (once adaptation has run)."""
+        live = self.live
         if live is None:
             return
-        ad = live.adapter
-        doc = {'stamp_ns': self._clock.now().nanoseconds, 'estimate': live.estimates(),
-               'in_use': ad.applied_values(), 'counters': live.counters,
-               'last_refusal': live.last_refusal}
-        self._publish(self._pub_adapted, String(data=json.dumps(doc)))
+        doc = {'stamp_ns': self._clock.now().nanoseconds, 'enabled': self.enabled,
+               'estimate': live.estimates(), 'in_use': live.adapter.applied_values(),
+               'counters': live.counters, 'last_refusal': live.last_refusal}
+        self._publish(self._pub, String(data=json.dumps(doc)))
 
-    def publish_diagnostics(self) -> None:
-        super().publish_diagnostics()
-        if self._sync_adaptation() is not None:
-            self._publish_adapted()
-
-    def diagnostic_statuses(self) -> list[Any]:
-        statuses = super().diagnostic_statuses()
-        name, hardware_id = diag.identity(self)
-        live = self._sync_adaptation()
+    def status(self, name: str) -> Any:
+        """The ``adaptation`` status of /diagnostics."""
+        live = self.live
         if live is None:
-            st = diag.status(name, 'adaptation', diag.OK, 'off (adaptation.enabled false)', {},
-                             HARDWARE_ID)
-        else:
-            level, msg, values = live.status()
-            st = diag.status(name, 'adaptation', diag.WARN if level == 'WARN' else diag.OK,
-                             msg, values, HARDWARE_ID)
-        st.hardware_id = hardware_id
-        return statuses + [st]
+            return diag.status(name, 'adaptation', diag.OK, 'off (adaptation.enabled false)',
+                               {}, HARDWARE_ID)
+        level, msg, values = live.status()
+        if not self.enabled:
+            level, msg = 'OK', (f'off (adaptation.enabled false): the model in use keeps '
+                                f'{live.counters["switches"]} adapted steps, frozen')
+        return diag.status(name, 'adaptation', diag.WARN if level == 'WARN' else diag.OK,
+                           msg, values, HARDWARE_ID)
 
-    def destroy_node(self) -> None:
-        self._adapt_builder.shutdown(wait=False, cancel_futures=True)
-        super().destroy_node()
+    def shutdown(self) -> None:
+        self._builder.shutdown(wait=False, cancel_futures=True)
 
+    # ---- services ----------------------------------------------------------------------
     def _on_write(self, request: Any, response: Any) -> Any:
-        """Write the model in use as a params file (atomic: a temporary file renamed)."""
-        live = self._sync_adaptation()
-        path = Path(self.rt.config.adaptation.params_file).expanduser()
+        """Write the model in use as a params file (atomic and durable; refused targets:
+        nothing written)."""
+        live = self.live
+        cfg = live.params_config() if live is not None else self.rt.config
+        path = cfg.adaptation.params_file
+        header = '# worm_gear_sim: the model in use, written by ~/write_adapted_parameters\n'
         try:
-            cfg = live.params_config() if live is not None else self.rt.config
-            header = '# worm_gear_sim: the model in use, written by ~/write_adapted_parameters\n'
-            text = header + params_yaml_text(params_document(cfg))
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix='.tmp')
-            with os.fdopen(fd, 'w') as fh:
-                fh.write(text)
-            os.replace(tmp, path)
-        except (OSError, ValueError) as exc:
+            written = write_text_durably(path, header + params_yaml_text(params_document(cfg)))
+        except (OSError, ValueError) as exc:       # GuardedFileError is a ValueError
             response.success = False
             response.message = f'could not write {path}: {exc}'
+            self._warn('adaptation_write', response.message)
             return response
         response.success = True
         n = 0 if live is None else live.counters['switches']
-        response.message = f'wrote {path.resolve()} ({n} adapted steps in the model in use)'
+        response.message = f'wrote {written} ({n} adapted steps in the model in use)'
+        return response
+
+    def _on_reset(self, request: Any, response: Any) -> Any:
+        """Forget what was learnt (module docstring)."""
+        response.success = True
+        if self.live is None:
+            response.message = ('nothing to reset: adaptation has not run; the model in use '
+                                'is the declared set')
+            return response
+        self._reset_pending = True
+        self._rebuild()
+        self._log.info(f'{RESET_SERVICE}: the model in use returns to the declared set')
+        response.message = ('reset: the model in use returns to the declared set (swapped '
+                             'in between two samples), the estimate restarts from the prior')
         return response

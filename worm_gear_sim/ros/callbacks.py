@@ -13,7 +13,7 @@ from collections.abc import Callable
 from typing import Any
 
 __all__ = ['LogThrottle', 'guard_timer', 'guard_message', 'one_joint_sample', 'stamp_ns',
-           'same_name_nodes', 'NS']
+           'same_name_nodes', 'SameNameWatch', 'NS']
 
 NS = 1_000_000_000
 
@@ -93,3 +93,29 @@ def same_name_nodes(node: Any) -> int:
     """How many other nodes on the domain have ``node``'s name and namespace."""
     me = (node.get_name(), node.get_namespace())
     return sum(1 for nn in node.get_node_names_and_namespaces() if nn == me) - 1
+
+
+class SameNameWatch:
+    """Warns (and counts in ``counters['same_name_nodes']``, which /diagnostics reports)
+    when other nodes on the domain have ``node``'s fully qualified name: their topics,
+    parameters and services would mix with the node's, silently.  Looks ``checks`` times,
+    every ``period`` s after the start (discovery takes a moment); ``guard`` wraps the
+    timer's callback."""
+
+    def __init__(self, node: Any, counters: dict[str, Any], guard: Any,
+                 period: float = 1.0, checks: int = 5) -> None:
+        self._node, self._counters, self._checks = node, counters, checks
+        self._timer = node.create_timer(period, guard(self.check))
+
+    def check(self) -> None:
+        node = self._node
+        n = same_name_nodes(node)
+        if n > self._counters['same_name_nodes']:
+            self._counters['same_name_nodes'] = n
+            node.get_logger().warning(
+                f'{n} other node(s) named {node.get_fully_qualified_name()} on this domain: '
+                'their topics, parameters and services mix with this one\'s; give each '
+                'drive its own name or namespace (ROS_DOMAIN_ID apart for separate setups)')
+        self._checks -= 1
+        if self._checks <= 0:
+            self._timer.cancel()

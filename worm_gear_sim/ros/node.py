@@ -11,7 +11,9 @@ publishes comes from the core (the pipeline drives
 names), :mod:`.params_bridge` and :mod:`.param_updates` (parameters), :mod:`.statuses`
 (/diagnostics), :mod:`.publishers` (the answers' publishers and messages), :mod:`.callbacks`
 (guards, throttled logs, one-joint samples), :mod:`.run` (the process: executor, spin, exit
-codes).
+codes).  The node owns its parts as members: ``publishing`` (:mod:`.publishers`),
+``adaptation`` (:mod:`.adaptation`: live adaptation, ``~/adapted_parameters``, its
+services), ``trajectories`` (:mod:`.trajectory_bridge`) and the parameter updates.
 
 Interface (SI units, rad; relative, remappable names; docs/node.md):
 
@@ -77,20 +79,21 @@ from ..topics import (
     RESIDUAL_TOPIC,
 )
 from . import diagnostics as diag
+from .adaptation import NodeAdaptation
 from .callbacks import (
     NS,
     LogThrottle,
+    SameNameWatch,
     guard_message,
     guard_timer,
     one_joint_sample,
-    same_name_nodes,
     stamp_ns,
 )
 from .clock_guard import guard_clock_source
 from .interface import NODE_REJECT_REASONS, REFERENCE_DEPTH
 from .param_updates import ParameterUpdates
 from .params_bridge import check_overrides, declare_config, file_defaults, parameter_type
-from .publishers import PredictionPublishing
+from .publishers import PredictionPublishers
 from .statuses import CallbackLoad, backdrive_status, model_check_status, node_statuses
 from .trajectory_bridge import TrajectoryBridge, trajectory_status
 
@@ -101,21 +104,21 @@ WATCH_PERIOD = 0.02    # s: the slow timer that notices a paused stamped stream
 # s: lateness allowed to a stamped sample before the stream is declared stale (held output,
 # rest samples): scheduling stalls of a loaded sender shorter than this change nothing
 STALE_MARGIN = 0.1
-NAME_CHECK_PERIOD = 1.0  # s: look for other nodes of this name (discovery takes a moment)
-NAME_CHECKS = 5          # times after the start
 
 
-class WormGearSimNode(PredictionPublishing, Node):
+class WormGearSimNode(Node):
     """Real-time worm-gear prediction; see the module docstring for the interface.
 
     ``defaults`` sets the declaration defaults (``--params-file`` and ``parameter_overrides``
-    still win); other keyword arguments (``context``, ``parameter_overrides``, ``cli_args``,
-    ``namespace``) go to :class:`rclpy.node.Node`.  Raises :class:`ConfigError` when the
-    declared values do not form a usable configuration or name an unknown parameter.
+    still win); ``adaptation`` False: no live adaptation member (``adaptation.enabled`` is
+    ignored, said once); other keyword arguments (``context``, ``parameter_overrides``,
+    ``cli_args``, ``namespace``) go to :class:`rclpy.node.Node`.  Raises
+    :class:`ConfigError` when the declared values do not form a usable configuration or
+    name an unknown parameter.
     """
 
     def __init__(self, node_name: str = NODE_NAME, *, defaults: Config | None = None,
-                 **kwargs: Any):
+                 adaptation: bool = True, **kwargs: Any):
         super().__init__(node_name, **kwargs)
         self._clock = self.get_clock()
         self._monotonic_ns = time.monotonic_ns    # the wall time base (tests replace it)
@@ -140,13 +143,12 @@ class WormGearSimNode(PredictionPublishing, Node):
         self._mode = ''                          # 'stamped' | 'command' once input came
         self._last_mono_ns = 0
         self._last_watch_ns = 0
-        self._last_monitor_ns = -(1 << 62)       # stamp of the last monitoring message
         self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
         guard_clock_source(self, self._on_bad_clock)
         self._check = ModelCheck(cfg.node.joint_names[1:], cfg.node.residual_window,
                                  cfg.node.residual_warn_rms)
         self._antenna_joint = cfg.node.joint_names[3]
-        self._create_prediction_publishers(cfg.node.joint_names)
+        self.publishing = PredictionPublishers(self, cfg.node.joint_names, self._publish)
         self._create_monitoring_publishers()
         self._create_subscriptions()
         # trajectories of the worm input joint (a ros2_control joint_trajectory_controller's
@@ -156,9 +158,13 @@ class WormGearSimNode(PredictionPublishing, Node):
             self._warn, self._publish, self._guard_message)
         check_overrides(self)
         self._create_timers(cfg)
+        self.adaptation = NodeAdaptation(self, self.rt, cfg, self._warn, self._publish,
+                                         self._rebuild) if adaptation else None
         # parameter sets: validated on the parameter service, built in a worker thread
+        hooks = {} if self.adaptation is None else dict(
+            pipeline=self.adaptation.pipeline, swapped=self.adaptation.swapped)
         self._params = ParameterUpdates(self, self.rt, cfg, types, self.counters, self._warn,
-                                        self._guard)
+                                        self._guard, **hooks)
         self._log_ready(cfg)
 
     def _create_monitoring_publishers(self) -> None:
@@ -193,9 +199,7 @@ class WormGearSimNode(PredictionPublishing, Node):
             t.cancel()
         self._diag_timer = self.create_timer(cfg.node.diagnostic_period,
                                              self._guard(self.publish_diagnostics))
-        self._name_checks = 0
-        self._name_timer = self.create_timer(NAME_CHECK_PERIOD,
-                                             self._guard(self._check_same_name))
+        self.same_names = SameNameWatch(self, self.counters, self._guard)
 
     def _log_ready(self, cfg: Config) -> None:
         self.get_logger().info(
@@ -210,6 +214,9 @@ class WormGearSimNode(PredictionPublishing, Node):
         if self.rt.compensator is None:
             self.get_logger().error(
                 f'feed-forward unavailable ({self.rt.compensation_error}); no corrections')
+        if self.adaptation is None and cfg.adaptation.enabled:
+            self.get_logger().warning('adaptation.enabled is true, but this node runs '
+                                      'without live adaptation: ignored')
 
     # ---- read-only views (tests, diagnostics) --------------------------------------------
     @property
@@ -232,6 +239,10 @@ class WormGearSimNode(PredictionPublishing, Node):
         return self._params.pending
 
     # ---- helpers -------------------------------------------------------------------------
+    def _rebuild(self) -> None:
+        """The declared set prepared again and swapped in (the adaptation's reset)."""
+        self._params.rebuild()
+
     def _guard(self, callback: Any) -> Any:
         """Timer callback that ends quietly when the context shuts down (.callbacks)."""
         return guard_timer(self.context, callback)
@@ -254,21 +265,6 @@ class WormGearSimNode(PredictionPublishing, Node):
             self._warn('publish_failed', f'publish on {pub.topic_name} failed '
                        f'({type(exc).__name__}: {exc}); '
                        f'{self.counters["publish_failures"]} so far')
-
-    def _check_same_name(self) -> None:
-        """Warn (and report on /diagnostics) when other nodes on the domain have this
-        node's fully qualified name: their topics, parameters and services would mix with
-        this node's, silently.  Runs NAME_CHECKS times after the start."""
-        n = same_name_nodes(self)
-        if n > self.counters['same_name_nodes']:
-            self.counters['same_name_nodes'] = n
-            self.get_logger().warning(
-                f'{n} other node(s) named {self.get_fully_qualified_name()} on this domain: '
-                'their topics, parameters and services mix with this one\'s; give each '
-                'drive its own name or namespace (ROS_DOMAIN_ID apart for separate setups)')
-        self._name_checks += 1
-        if self._name_checks >= NAME_CHECKS:
-            self._name_timer.cancel()
 
     def _on_bad_clock(self, problem: str) -> None:
         """A /clock message that is no time (rclpy would raise in the executor)."""
@@ -397,7 +393,7 @@ class WormGearSimNode(PredictionPublishing, Node):
             # carries the ROS time of the tick
             self._handle(out, '', 0, stamp_ns=None if rt.sim_time else stamp.nanoseconds)
             if rt.compensator is not None:
-                self._publish_latest_feedforward(rt.last_delta)
+                self.publishing.latest_feedforward(rt.last_delta)
         self.load.busy(t0)
 
     # ---- output ----------------------------------------------------------------------------
@@ -419,21 +415,13 @@ class WormGearSimNode(PredictionPublishing, Node):
                 if e.kind == 'simulation_error':
                     self.load.error()
         if out.corrections and self._mode == 'stamped':
-            self._publish_corrections(out.corrections)
+            self.publishing.corrections(out.corrections)
         preds = out.predictions
         if preds:
             check = self._check
             for p in preds:
                 check.predicted_ns(p.stamp_ns if stamp_ns is None else stamp_ns, p.theta)
-            if self._predictions_monitored():
-                rate = self.config.node.monitor_rate_hz
-                for p in preds:
-                    ns = p.stamp_ns if stamp_ns is None else stamp_ns
-                    if rate > 0.0:               # monitoring at its own rate (by stamps)
-                        if 0 <= ns - self._last_monitor_ns < 1e9 / rate:
-                            continue
-                        self._last_monitor_ns = ns
-                    self._publish_prediction(p, ns)
+            self.publishing.predictions(preds, stamp_ns, self.config.node.monitor_rate_hz)
             if preds[-1].held and self._mode == 'stamped':
                 self.counters['held_predictions'] += len(preds)
         if self._mode == 'stamped':
@@ -443,14 +431,20 @@ class WormGearSimNode(PredictionPublishing, Node):
                     hold.reset()
             elif not hold.is_canceled():
                 hold.cancel()
+        if self.adaptation is not None:
+            self.adaptation.predictions(out, stamp_ns)
 
     def _on_measured(self, msg: JointState) -> None:
-        """Encoder angles: residual measured - predicted at the message's stamp (the
-        reception time if unstamped) on ~/prediction_residual; the model check rejects and
-        counts bad samples."""
-        stamp = stamp_ns(msg.header.stamp)
-        if stamp == 0:
-            stamp = self._clock.now().nanoseconds
+        """Encoder angles (stamped, or at the reception time): the live model check, then
+        the adaptation."""
+        stamp = stamp_ns(msg.header.stamp) or self._clock.now().nanoseconds
+        self._residual(stamp, msg)
+        if self.adaptation is not None:
+            self.adaptation.measured(stamp, msg.name, msg.position)
+
+    def _residual(self, stamp: int, msg: JointState) -> None:
+        """Residual measured - predicted at ``stamp`` on ~/prediction_residual; the model
+        check rejects and counts bad samples."""
         try:
             joints, residual = self._check.measured_message_ns(stamp, msg.name, msg.position)
         except ValueError as exc:
@@ -471,8 +465,9 @@ class WormGearSimNode(PredictionPublishing, Node):
         statuses = node_statuses(name, self.rt, self.counters, self.load, self._mode,
                                  self.config.node.command_timing, self.last_error) + \
             [trajectory_status(name, self.counters, self.trajectories, hardware_id),
-             model_check_status(name, self._check, self._clock.now().nanoseconds),
-             backdrive_status(name, margin, at_rest, self.config.node.backdrive_margin_warn)]
+             model_check_status(name, self._check, self._clock.now().nanoseconds)] + \
+            ([] if self.adaptation is None else [self.adaptation.status(name)]) + \
+            [backdrive_status(name, margin, at_rest, self.config.node.backdrive_margin_warn)]
         for s in statuses:
             s.hardware_id = hardware_id
         return statuses
@@ -492,8 +487,12 @@ class WormGearSimNode(PredictionPublishing, Node):
             self._publish(self._pub_margin, self._f_margin)
         self._publish(self._pub_diag, diag.array(self._clock.now().to_msg(),
                                                  self.diagnostic_statuses()))
+        if self.adaptation is not None:
+            self.adaptation.publish()
 
     def destroy_node(self) -> None:
         self._params.shutdown()
+        if self.adaptation is not None:
+            self.adaptation.shutdown()
         self.trajectories.shutdown()
         super().destroy_node()

@@ -7,13 +7,15 @@ only, read-only and type checks here, everything else by the core (:meth:`Config
 which proves the set usable).  Accepted sets are prepared in a worker thread
 (:meth:`RealtimePredictor.prepare`: compensator design, the simulator's trial) and swapped
 in on the executor thread between two samples (:meth:`RealtimePredictor.reconfigure`),
-polled by a steady-clock timer and at the start of every sample callback.
+polled by a steady-clock timer and at the start of every sample callback.  The set the
+pipeline runs may differ from the declared one (``pipeline``: the adaptation's values in
+use on top, :class:`~.adaptation.NodeAdaptation`); ``swapped`` hears of each set swapped in.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
@@ -37,19 +39,27 @@ class ParameterUpdates:
     :class:`Config` (``config``).  ``types``: declared ROS type of each model parameter;
     ``counters``: the node's counters (``rejected_parameter_sets``,
     ``accepted_parameter_sets``, ``parameter_build_errors`` are counted here); ``warn(cause,
-    text)``: the node's throttled warning; ``guard``: wraps a timer callback."""
+    text)``: the node's throttled warning; ``guard``: wraps a timer callback;
+    ``pipeline(declared, names)``: the set the pipeline is to run for the declared set of a
+    set of ``names`` (ConfigError: the set is refused); ``swapped(declared, names)``: called
+    on the executor thread once that set runs."""
 
     def __init__(self, node: Node, rt: RealtimePredictor, config: Config,
                  types: dict[str, int], counters: dict[str, Any],
                  warn: Callable[[str, str], None],
-                 guard: Callable[[Callable[[], None]], Any]) -> None:
+                 guard: Callable[[Callable[[], None]], Any],
+                 pipeline: Callable[[Config, Collection[str]], Config] | None = None,
+                 swapped: Callable[[Config, Collection[str]], None] | None = None) -> None:
         self.node, self.rt, self.config = node, rt, config
         self._types, self._counters, self._warn = types, counters, warn
-        self._evaluated: tuple[tuple, str, Config | None] | None = None
-        self._accepted: Config | None = None
+        self._pipeline = pipeline or (lambda cfg, names: cfg)
+        self._swapped = swapped or (lambda cfg, names: None)
+        self._evaluated: tuple[tuple, str, tuple[Config, Config, tuple] | None] | None = None
+        self._accepted: tuple[Config, Config, tuple] | None = None
         self._builder = concurrent.futures.ThreadPoolExecutor(
             max_workers=1, thread_name_prefix='worm_gear_sim_params')
         self._building: concurrent.futures.Future | None = None
+        self._running: tuple[Config, tuple] | None = None     # (pipeline's set, names)
         node.add_pre_set_parameters_callback(self._pre_set)
         node.add_on_set_parameters_callback(self._on_set)
         node.add_post_set_parameters_callback(self._post_set)
@@ -64,11 +74,12 @@ class ParameterUpdates:
         """An accepted parameter set is still being built (not swapped in yet)."""
         return self._building is not None
 
-    def _evaluate(self, params: list[Parameter]) -> tuple[str, Config | None]:
-        """('', candidate) if the model parameters in ``params`` form a usable set, else
-        (reason, None).  Non-model parameters (qos_overrides, use_sim_time) are left to
-        rclpy.  The result of the last call is remembered (pre-set and on-set callbacks
-        see the same list)."""
+    def _evaluate(self, params: list[Parameter]
+                  ) -> tuple[str, tuple[Config, Config, tuple] | None]:
+        """('', (candidate, the pipeline's set, names)) if the model parameters in
+        ``params`` form a usable set, else (reason, None).  Non-model parameters
+        (qos_overrides, use_sim_time) are left to rclpy.  The result of the last call is
+        remembered (pre-set and on-set callbacks see the same list)."""
         key = tuple((p.name, p.type_, repr(p.value)) for p in params)
         if self._evaluated is not None and self._evaluated[0] == key:
             return self._evaluated[1], self._evaluated[2]
@@ -88,7 +99,9 @@ class ParameterUpdates:
         candidate = None
         if not reason and overrides:
             try:    # the core's validation: types, ranges, cross-field, usable (check_usable)
-                candidate = self.config.replace(overrides)
+                declared = self.config.replace(overrides)
+                candidate = (declared, self._pipeline(declared, tuple(overrides)),
+                             tuple(overrides))
             except (ConfigError, ValueError) as exc:
                 reason = str(exc)
         self._evaluated = (key, reason, candidate)
@@ -116,15 +129,28 @@ class ParameterUpdates:
     def _post_set(self, params: list[Parameter]) -> None:
         """Accepted: the new pipeline configuration is prepared in the worker thread;
         :meth:`swap_prepared` swaps it in on the executor thread, between two samples."""
-        cfg, self._accepted = self._accepted, None
-        if cfg is None:
+        accepted, self._accepted = self._accepted, None
+        if accepted is None:
             return
-        self.config = cfg
+        self.config, run, names = accepted
         self._counters['accepted_parameter_sets'] += 1
-        self._building = self._builder.submit(self.rt.prepare, cfg)
+        self._build(run, names)
+        self.node.get_logger().info(f'parameters accepted: {", ".join(names)}')
+
+    def rebuild(self) -> None:
+        """Prepare the declared set again (its pipeline's set may have changed: the
+        adaptation's reset) and swap it in as a parameter set, no parameter changed."""
+        try:
+            run = self._pipeline(self.config, ())
+        except (ConfigError, ValueError) as exc:
+            self._warn('parameters', f'could not rebuild the parameter set: {exc}')
+            return
+        self._build(run, ())
+
+    def _build(self, run: Config, names: tuple) -> None:
+        self._running = (run, names)
+        self._building = self._builder.submit(self.rt.prepare, run)
         self._swap_timer.reset()
-        names = ', '.join(p.name for p in params if is_model_parameter(p.name))
-        self.node.get_logger().info(f'parameters accepted: {names}')
 
     def swap_prepared(self) -> None:
         """Swap a prepared set in, if one is ready (cheap when none is pending)."""
@@ -135,8 +161,11 @@ class ParameterUpdates:
         self._swap_timer.cancel()
         try:
             prepared = fut.result()
-            if prepared.config is self.config:   # else a newer set superseded it
+            assert self._running is not None
+            run, names = self._running
+            if prepared.config is run:           # else a newer set superseded it
                 self.rt.reconfigure(prepared)
+                self._swapped(self.config, names)
                 note = elastic_load_warning(self.rt.model)   # allowed, not plausible
                 if note:
                     self._warn('load_elastic_parameter', note)

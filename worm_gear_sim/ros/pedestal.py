@@ -95,6 +95,6 @@ class PedestalNode(Node):
 def build_pedestal(path: str | Path | None = None, **kwargs: Any) -> list[Node]:
     """The drive nodes of the pedestal file ``path`` (namespaces = drive names) and the
     pedestal node after them; ``kwargs`` (e.g. ``context``) go to every node."""
-    drives = [WormGearSimNode(namespace=d.name, defaults=d.config, **kwargs)
-              for d in load_pedestal(path)]
+    drives = [WormGearSimNode(namespace=d.name, defaults=d.config, adaptation=False,
+                              **kwargs) for d in load_pedestal(path)]
     return [*drives, PedestalNode(drives, **kwargs)]

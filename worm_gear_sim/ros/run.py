@@ -27,8 +27,8 @@ from rclpy.utilities import remove_ros_args
 
 from ..validation import ConfigError
 from . import signals
-from .adaptation import AdaptiveNode
 from .config_errors import check_params_files, clean_rcl_message, config_error
+from .node import WormGearSimNode
 
 RCLError = _rclpy_impl.RCLError          # RCLInvalidROSArgsError derives from it
 
@@ -128,7 +128,7 @@ def main(args: list[str] | None = None, pedestal: bool = False) -> int:
 def _build(opts: argparse.Namespace, pedestal: bool) -> list[Any]:
     """The process's nodes: one drive, or a pedestal's drives and its trajectory node."""
     if not pedestal:
-        return [AdaptiveNode()]
+        return [WormGearSimNode()]
     from .pedestal import build_pedestal
     return build_pedestal(opts.pedestal)
 
