@@ -122,7 +122,7 @@ def check_write_target(path: str | Path) -> Path:
     target = Path(os.path.realpath(Path(raw).expanduser()))
     try:
         mode = target.stat().st_mode
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
         mode = None
     except OSError as exc:
         raise GuardedFileError(f'{target}: cannot be checked ({exc.strerror or exc})') from None
