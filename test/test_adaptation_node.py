@@ -193,6 +193,13 @@ def test_a_parameter_set_keeps_what_the_node_learnt(ros_harness, tmp_path):
     res = service(h, 'write_adapted_parameters')
     assert res.success, res.message
     assert load_config(out_file).load.output_torque == node.rt.config.load.output_torque > 0.5
+    # the operator sets the load, and another parameter before that set is swapped in: the
+    # operator's load is in use, its estimate restarts there, the drag keeps its own
+    drag = live.adapter.applied_values()[DRAG]
+    assert node.set_parameters([Parameter(LOAD, value=1.0)])[0].successful
+    assert h.set_parameters([Parameter('node.max_command_jump', value=0.5)])[0].successful
+    assert node.rt.config.load.output_torque == 1.0 == live.estimates()[LOAD]
+    assert node.rt.config.load.output_viscous_coefficient == drag
 
 
 def test_adaptation_off_freezes_the_model_and_on_resumes_learning(ros_harness):

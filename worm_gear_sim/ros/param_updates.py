@@ -60,6 +60,9 @@ class ParameterUpdates:
             max_workers=1, thread_name_prefix='worm_gear_sim_params')
         self._building: concurrent.futures.Future | None = None
         self._running: tuple[Config, tuple] | None = None     # (pipeline's set, names)
+        #: the names of the sets accepted since the last swap (a set superseded before it
+        #: was swapped in still counts as set)
+        self._unswapped: tuple[str, ...] = ()
         node.add_pre_set_parameters_callback(self._pre_set)
         node.add_on_set_parameters_callback(self._on_set)
         node.add_post_set_parameters_callback(self._post_set)
@@ -100,8 +103,8 @@ class ParameterUpdates:
         if not reason and overrides:
             try:    # the core's validation: types, ranges, cross-field, usable (check_usable)
                 declared = self.config.replace(overrides)
-                candidate = (declared, self._pipeline(declared, tuple(overrides)),
-                             tuple(overrides))
+                names = tuple(dict.fromkeys(self._unswapped + tuple(overrides)))
+                candidate = (declared, self._pipeline(declared, names), names)
             except (ConfigError, ValueError) as exc:
                 reason = str(exc)
         self._evaluated = (key, reason, candidate)
@@ -135,20 +138,22 @@ class ParameterUpdates:
         self.config, run, names = accepted
         self._counters['accepted_parameter_sets'] += 1
         self._build(run, names)
-        self.node.get_logger().info(f'parameters accepted: {", ".join(names)}')
+        self.node.get_logger().info('parameters accepted: ' + ', '.join(
+            p.name for p in params if is_model_parameter(p.name)))
 
     def rebuild(self) -> None:
         """Prepare the declared set again (its pipeline's set may have changed: the
         adaptation's reset) and swap it in as a parameter set, no parameter changed."""
         try:
-            run = self._pipeline(self.config, ())
+            run = self._pipeline(self.config, self._unswapped)
         except (ConfigError, ValueError) as exc:
             self._warn('parameters', f'could not rebuild the parameter set: {exc}')
             return
-        self._build(run, ())
+        self._build(run, self._unswapped)
 
     def _build(self, run: Config, names: tuple) -> None:
         self._running = (run, names)
+        self._unswapped = names
         self._building = self._builder.submit(self.rt.prepare, run)
         self._swap_timer.reset()
 
@@ -165,6 +170,7 @@ class ParameterUpdates:
             run, names = self._running
             if prepared.config is run:           # else a newer set superseded it
                 self.rt.reconfigure(prepared)
+                self._unswapped = ()
                 self._swapped(self.config, names)
                 note = elastic_load_warning(self.rt.model)   # allowed, not plausible
                 if note:
