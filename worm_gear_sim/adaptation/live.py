@@ -59,6 +59,10 @@ and ``late_steps`` are both 0.  The samples predicted before a step and entering
 A set refused on the way (a ConfigError, an unusable set, a negative play) is never
 applied: the model in use stays, the reason is kept in :attr:`LiveAdaptation.last_refusal`
 and returned once per new reason (the node logs it, throttled).
+
+What was learnt is kept through the operator's parameter sets (:meth:`LiveAdaptation.
+carried_values` and :meth:`~LiveAdaptation.carry_over`, the rules in :mod:`.learnt`) and
+forgotten only by :meth:`~LiveAdaptation.forget` (the node's ``~/reset_adaptation``).
 """
 
 from __future__ import annotations
