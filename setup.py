@@ -11,14 +11,15 @@ package_name = 'worm_gear_sim'
 HERE = Path(__file__).resolve().parent
 
 
-def ros_wheels(distro: str) -> list[str]:
-    """The PyPI ROS 2 wheels of one distro, from requirements/ros-<distro>.txt (one list for
-    scripts/setup_env.sh and the extras; the file is absent only outside a source tree)."""
-    path = HERE / 'requirements' / f'ros-{distro}.txt'
+def requirements(name: str) -> list[str]:
+    """The packages of requirements/<name>.txt (the ROS 2 wheels of a distro, the developer's
+    tools): one list for scripts/setup_env.sh and the extras; the file is absent only outside
+    a source tree."""
+    path = HERE / 'requirements' / f'{name}.txt'
     if not path.is_file():
         return []
     lines = (ln.split('#', 1)[0].strip() for ln in path.read_text().splitlines())
-    return [ln for ln in lines if ln]
+    return [ln for ln in lines if ln and not ln.startswith('-')]
 
 
 setup(
@@ -40,10 +41,10 @@ setup(
         'core': ['numpy>=1.24', 'scipy>=1.10', 'numba>=0.58', 'pyyaml>=6', 'matplotlib>=3.7'],
         'studies': ['dask[distributed]>=2023.1', 'tqdm>=4.60'],
         # pip install .[ros] (Kilted, rclpy 9.x) or .[ros-jazzy] (Jazzy LTS, rclpy 7.1.x)
-        'ros': ros_wheels('kilted'),
-        'ros-jazzy': ros_wheels('jazzy'),
-        'test': ['pytest', 'ruff', 'colcon-core', 'colcon-ros', 'colcon-python-setup-py',
-                 'colcon-package-selection'],
+        'ros': requirements('ros-kilted'),
+        'ros-jazzy': requirements('ros-jazzy'),
+        # tests, lint, types, colcon, the docs site: requirements/dev.txt
+        'dev': requirements('dev'),
     },
     zip_safe=True,
     maintainer='worm_gear_sim developers',

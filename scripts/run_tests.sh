@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The whole test suite: set-up (idempotent), lint, types, then every test, on the PyPI wheels of
+# The whole test suite: set-up with the developer's tools (idempotent), lint, types, then every
+# test (the docs site and every documented command included), on the PyPI wheels of
 # ROS_DISTRO (kilted, the default, in .venv; or jazzy, in .venv-jazzy):
 #   scripts/run_tests.sh                      # Kilted
 #   ROS_DISTRO=jazzy scripts/run_tests.sh     # Jazzy (LTS)
@@ -10,7 +11,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 # shellcheck source=scripts/ros_distro.sh
 . scripts/ros_distro.sh
-scripts/setup_env.sh
+scripts/setup_env.sh --dev
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-42}
 export MPLBACKEND=Agg

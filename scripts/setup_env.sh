@@ -1,11 +1,21 @@
 #!/usr/bin/env bash
-# Create (or refresh) the project venv with everything a plain machine needs: numeric stack,
-# the ROS 2 PyPI wheels of $ROS_DISTRO (kilted, the default, into .venv; jazzy into
-# .venv-jazzy; rclpy + messages + Fast DDS), test tools, and this package in editable mode.
+# Create (or refresh) the project venv with what a plain machine needs to run the package:
+# numpy, scipy, numba, ..., the ROS 2 PyPI wheels of $ROS_DISTRO (kilted, the default, into
+# .venv; jazzy into .venv-jazzy; rclpy + messages + Fast DDS) and this package in editable
+# mode.  No test or lint tool: `--dev` adds requirements/dev.txt on top (pytest, ruff, mypy,
+# hypothesis, colcon, the docs tools; scripts/run_tests.sh does it).
+#   scripts/setup_env.sh           # run-time (scripts/run_demo.sh, run_pass.sh call this)
+#   scripts/setup_env.sh --dev     # run-time + developer's tools
 # Idempotent: re-installs only when a requirements file, setup.py or package.xml changed since
 # the last successful run.  VENV overrides the venv path, PYTHON the interpreter (3.11+).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+DEV=0
+case "${1:-}" in
+    --dev) DEV=1 ;;
+    "") ;;
+    *) echo "setup_env.sh: unknown option '$1' (only --dev)" >&2; exit 2 ;;
+esac
 # shellcheck source=scripts/ros_distro.sh
 . scripts/ros_distro.sh
 PY=${PYTHON:-python3}
@@ -17,12 +27,19 @@ stamp="$VENV/.worm_gear_sim_installed"
 if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ "$ROS_REQUIREMENTS" -nt "$stamp" ] \
         || [ setup.py -nt "$stamp" ] || [ package.xml -nt "$stamp" ]; then
     echo "[setup] installing requirements into $VENV (PyPI: numpy, scipy, numba, ROS 2" \
-         "$ROS_DISTRO wheels; first run: a few minutes)"
+         "$ROS_DISTRO wheels; first run: about two minutes)"
     "$VENV/bin/python" -m pip install --quiet --upgrade pip 'setuptools>=61,<80' wheel
     "$VENV/bin/python" -m pip install --quiet -r requirements.txt -r "$ROS_REQUIREMENTS"
     # Editable install: no data_files; the package finds config/ in the source tree.
     "$VENV/bin/python" -m pip install --quiet --no-deps --no-build-isolation -e .
     touch "$stamp"
+fi
+dev_stamp="$VENV/.worm_gear_sim_dev_installed"
+if [ "$DEV" = 1 ] && { [ ! -f "$dev_stamp" ] || [ requirements/dev.txt -nt "$dev_stamp" ] \
+        || [ "$stamp" -nt "$dev_stamp" ]; }; then
+    echo "[setup] installing the developer's tools into $VENV (requirements/dev.txt)"
+    "$VENV/bin/python" -m pip install --quiet -r requirements/dev.txt
+    touch "$dev_stamp"
 fi
 # The PyPI ROS wheels re-exec Python once to set LD_LIBRARY_PATH; check that rclpy works.
 if ! "$VENV/bin/python" -c "import rclpy, std_msgs.msg, std_srvs.srv, sensor_msgs.msg, diagnostic_msgs.msg, trajectory_msgs.msg" \
