@@ -11,14 +11,14 @@
 #   scripts/run_pass.sh [DURATION_S] [MAX_ELEVATION_DEG]
 #
 # Environment: ROS_DISTRO kilted (default) | jazzy; ROS_DOMAIN_ID (default: yours, or 0);
-# ROS_AUTOMATIC_DISCOVERY_RANGE (default LOCALHOST); PASS_OUTPUT (default pass).
+# ROS_AUTOMATIC_DISCOVERY_RANGE (default LOCALHOST); PASS_OUTPUT (default pass); PASS_DURATION.
 set -euo pipefail
 
 cd "$(dirname "$0")/.."
 case "${1:-}" in
-    -h|--help) sed -n '5,15p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '5,14p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
 esac
-DURATION="${1:-60}"
+DURATION="${1:-${PASS_DURATION:-60}}"
 ELEVATION="${2:-85}"
 for v in "$DURATION" "$ELEVATION"; do
     if ! [[ "$v" =~ ^[0-9]+([.][0-9]+)?$ ]]; then
