@@ -5,8 +5,9 @@ docs/*.md, and each runs as a user would run it.
 
 * ```` ```bash ```` blocks run in ``bash -e -o pipefail``, ```` ```python ```` blocks in a fresh
   interpreter of this venv (``python -c``), ```` ```yaml ```` blocks must parse; ```` ```text ````
-  blocks are shown, not run (what a command prints).  Any other fence, and an indented code
-  block, fails: a command must sit in a block that runs.
+  blocks are shown, not run (what a command prints); ```` ```{directive} ```` blocks belong to
+  the site (MyST).  Any other fence, and an indented code block, fails: a command must sit in a
+  block that runs.
 * Each document runs in a temporary directory of its own, its blocks in order (a block may use
   the files an earlier one wrote); ``.venv`` (and ``.venv-jazzy``) there is this interpreter's
   venv, ``config/``, ``scripts/``, ``benchmarks/``, ``launch/`` and ``urdf/`` the repository's,
@@ -177,8 +178,8 @@ class FenceCheckParser:
         for token in MarkdownIt('commonmark').parse(document.text):
             if token.type == 'fence':
                 language = token.info.strip().split(' ')[0]
-                if language in RUN_LANGUAGES + SHOWN_LANGUAGES:
-                    continue
+                if language in RUN_LANGUAGES + SHOWN_LANGUAGES or language.startswith('{'):
+                    continue                   # '{toctree}': a directive of the site
                 problem = (f'a ```{language} block: write a command as ```bash or ```python '
                            f'(it runs), what it prints as ```text')
             elif token.type == 'code_block':
