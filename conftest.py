@@ -16,12 +16,12 @@ docs/*.md, and each runs as a user would run it.
 * Examples are small: a file larger than ``MAX_FILE_BYTES`` ends its command (RLIMIT_FSIZE),
   a document's directory may not hold more than ``MAX_DIR_BYTES`` after a block, and a block
   may not run longer than ``TIMEOUT_S``.
-* Directives in an HTML comment before a block (invisible on GitHub and on the site):
-  ``<!-- skip: next "why it cannot run in CI" -->`` (Sybil's own) leaves the next block out,
-  with its reason in the test report; ``<!-- docs-test: env NAME=VALUE ... -->`` runs the next
-  block with those variables (the documented small case of a script, e.g. its duration);
-  ``<!-- docs-test: xfail "reason" -->`` expects the next block to fail (a known defect
-  being fixed: it fails the block with the reason as xfail, and warns when it passes).
+* Directives in HTML comments right before a block (invisible on GitHub and on the site),
+  applied when the tests are collected, so that they hold under ``-k`` and ``-m`` too:
+  ``<!-- skip: next "why it cannot run in CI" -->`` (Sybil's markup) skips the block with its
+  reason; ``<!-- docs-test: env NAME=VALUE ... -->`` runs it with those variables (the
+  documented small case of a script, e.g. its duration); ``<!-- docs-test: xfail "reason" -->``
+  marks it as expected to fail (a known defect being fixed; XPASS once it passes).
 * A block that starts ROS 2 (``ros2``, ``rclpy``, ``worm_gear_sim.ros``, the ROS console
   scripts, ``scripts/run_*.sh``) is marked ``ros``, so that the Jazzy run of CI repeats it; it
   runs on ``ROS_DOMAIN_ID`` + 1 with discovery on localhost, as the tests' child processes.
@@ -37,13 +37,12 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import warnings
 from pathlib import Path
 
 import pytest
 from markdown_it import MarkdownIt
-from sybil import Document, Example, Region, Sybil
-from sybil.parsers.markdown import CodeBlockParser, SkipParser
+from sybil import Document, Example, Lexeme, Region, Sybil
+from sybil.parsers.markdown import CodeBlockParser
 from sybil.parsers.markdown.lexers import DirectiveInHTMLCommentLexer
 
 ROOT = Path(__file__).resolve().parent
@@ -66,7 +65,6 @@ def _setup(namespace: dict) -> None:
     for name in LINKED:
         (work / name).symlink_to(ROOT / name)
     namespace['work'] = work
-    namespace['options'] = {}
 
 
 def _teardown(namespace: dict) -> None:
@@ -100,32 +98,24 @@ def _directory_bytes(path: Path) -> int:
 
 def _run(example: Example, argv: list[str]) -> str | None:
     """Run one block; None when it succeeded, else the failure's text."""
-    ns = example.namespace
-    options = ns['options']
-    ns['options'] = {}
+    work = example.namespace['work']
     source = str(example.parsed)
     env = _environment(source)
-    env.update(options.get('env', {}))
+    env.update(directives(example.document.text, example.region.start).get('env', {}))
     try:
-        proc = subprocess.run(argv + [source], cwd=ns['work'], env=env, text=True,
+        proc = subprocess.run(argv + [source], cwd=work, env=env, text=True,
                               capture_output=True, timeout=TIMEOUT_S,
                               preexec_fn=_limit_file_size)
-        failure = None
-        if proc.returncode != 0:
-            failure = (f'exit status {proc.returncode}\n--- stdout (end) ---\n'
-                       f'{proc.stdout[-3000:]}\n--- stderr (end) ---\n{proc.stderr[-3000:]}')
     except subprocess.TimeoutExpired:
-        failure = f'still running after {TIMEOUT_S:.0f} s: an example must finish in seconds'
-    written = _directory_bytes(ns['work'])
-    if failure is None and written > MAX_DIR_BYTES:
-        failure = (f'the examples wrote {written / 2**20:.1f} MiB: a documented example writes '
-                   f'at most a few MB')
-    if 'xfail' in options:
-        if failure is not None:
-            pytest.xfail(options['xfail'])
-        warnings.warn(f'{example.path}:{example.line}: the block marked xfail '
-                      f'({options["xfail"]}) passes now: remove the mark', stacklevel=1)
-    return failure
+        return f'still running after {TIMEOUT_S:.0f} s: an example must finish in seconds'
+    if proc.returncode != 0:
+        return (f'exit status {proc.returncode}\n--- stdout (end) ---\n{proc.stdout[-3000:]}\n'
+                f'--- stderr (end) ---\n{proc.stderr[-3000:]}')
+    written = _directory_bytes(work)
+    if written > MAX_DIR_BYTES:
+        return (f'the examples wrote {written / 2**20:.1f} MiB: a documented example writes at '
+                f'most a few MB')
+    return None
 
 
 def _evaluate_bash(example: Example) -> str | None:
@@ -141,29 +131,53 @@ def _evaluate_yaml(example: Example) -> None:
     yaml.safe_load(str(example.parsed))
 
 
+COMMENT = re.compile(r'<!--\s*(skip|docs-test):\s*(.*?)\s*-->\s*$', re.DOTALL)
+
+
+def _parse_directive(kind: str, arguments: str) -> dict:
+    words = shlex.split(arguments)
+    if kind == 'skip' and len(words) == 2 and words[0] == 'next':
+        return {'skip': words[1]}
+    if kind == 'docs-test' and len(words) > 1 and words[0] == 'env' \
+            and all('=' in w for w in words[1:]):
+        return {'env': dict(w.split('=', 1) for w in words[1:])}
+    if kind == 'docs-test' and len(words) == 2 and words[0] == 'xfail':
+        return {'xfail': words[1]}
+    raise ValueError(f'unknown directive <!-- {kind}: {arguments} -->: write skip: next "reason", '
+                     'docs-test: env NAME=VALUE ..., or docs-test: xfail "reason"')
+
+
+def directives(text: str, start: int) -> dict:
+    """The directives of the HTML comments that stand right before the block at ``start``."""
+    found: dict = {}
+    head = text[:start].rstrip()
+    while head.endswith('-->'):
+        opening = head.rfind('<!--')
+        match = COMMENT.match(head[opening:])
+        if opening < 0 or match is None:
+            break
+        found.update(_parse_directive(match.group(1), match.group(2)))
+        head = head[:opening].rstrip()
+    return found
+
+
 def _evaluate_directive(example: Example) -> None:
-    words = shlex.split(example.parsed)
-    options = example.namespace['options']
-    if words[0] == 'env' and len(words) > 1 and all('=' in w for w in words[1:]):
-        options['env'] = dict(w.split('=', 1) for w in words[1:])
-    elif words[0] == 'xfail' and len(words) == 2:
-        options['xfail'] = words[1]
-    else:
-        raise ValueError(f'unknown docs-test directive: {example.parsed!r} '
-                         '(env NAME=VALUE ... | xfail "reason")')
+    _parse_directive(*example.parsed)
 
 
 class DirectiveParser:
-    """``<!-- docs-test: ... -->``: options for the next block."""
+    """Each ``skip:`` / ``docs-test:`` comment is checked for its syntax (a typo fails)."""
 
     def __init__(self) -> None:
-        self.lexer = DirectiveInHTMLCommentLexer(directive='docs-test', arguments='.+?')
+        self.lexers = [DirectiveInHTMLCommentLexer(directive=kind, arguments='.+?')
+                       for kind in ('skip', 'docs-test')]
 
     def __call__(self, document: Document):
-        for region in self.lexer(document):
-            region.parsed = region.lexemes['arguments']
-            region.evaluator = _evaluate_directive
-            yield region
+        for lexer, kind in zip(self.lexers, ('skip', 'docs-test')):
+            for region in lexer(document):
+                region.parsed = (kind, region.lexemes['arguments'])
+                region.evaluator = _evaluate_directive
+                yield region
 
 
 class FenceCheckParser:
@@ -199,7 +213,7 @@ def _code(language: str, evaluator):
 
 
 pytest_collect_file = Sybil(
-    parsers=[SkipParser(), DirectiveParser(), FenceCheckParser(),
+    parsers=[DirectiveParser(), FenceCheckParser(),
              _code('bash', _evaluate_bash), _code('python', _evaluate_python),
              _code('yaml', _evaluate_yaml)],
     patterns=['README.md', 'docs/*.md'],
@@ -210,8 +224,16 @@ pytest_collect_file = Sybil(
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """A documented block that starts ROS 2 is marked ``ros`` (the Jazzy run repeats it)."""
+    """The directives before each block become its marks (skip, xfail); a block that starts
+    ROS 2 is marked ``ros`` (the Jazzy run repeats it)."""
     for item in items:
         example = getattr(item, 'example', None)
-        if example is not None and ROS_WORDS.search(str(example.parsed)):
+        if example is None or not isinstance(example.parsed, (str, Lexeme)):
+            continue
+        found = directives(example.document.text, example.region.start)
+        if 'skip' in found:
+            item.add_marker(pytest.mark.skip(reason=found['skip']))
+        if 'xfail' in found:
+            item.add_marker(pytest.mark.xfail(reason=found['xfail'], strict=False))
+        if ROS_WORDS.search(str(example.parsed)):
             item.add_marker(pytest.mark.ros)
