@@ -17,6 +17,7 @@ from worm_gear_sim.adaptation.twin import BASE_NS, run_twin, scenario
 from worm_gear_sim.dynamics.model import DriveModel
 from worm_gear_sim.params import Config
 from worm_gear_sim.realtime.predictor import RealtimePredictor
+from worm_gear_sim.stepwise import run_steps
 from worm_gear_sim.validation import ConfigError
 
 RATE = 1000.0
@@ -276,7 +277,7 @@ def test_a_step_is_applied_at_its_fixed_stamp_and_a_late_one_at_the_next(base):
         def submit(job, late=late, jobs=jobs):
             fut: Future = Future()
             if not late:
-                fut.set_result(job())
+                fut.set_result(run_steps(job()))
             jobs.append((job, fut))
             return fut
 
@@ -296,7 +297,7 @@ def test_a_step_is_applied_at_its_fixed_stamp_and_a_late_one_at_the_next(base):
             assert pred.config is cfg and live.counters['late_steps'] == 1
             live.step(t0 + 2 * lead - 1)          # prepared now, but not due
             job, fut = jobs[0]
-            fut.set_result(job())
+            fut.set_result(run_steps(job()))
             live.step(t0 + 2 * lead - 1)
             assert pred.config is cfg
             live.step(t0 + 2 * lead)

@@ -23,7 +23,8 @@ from . import kernel_cache as _kernel_cache
 
 __version__ = '0.1.0'
 
-_kernel_cache.ensure_fresh_cache()   # before any kernel is compiled or loaded (kernel_cache)
+_kernel_cache.choose_cache_dir()     # where the kernels are cached (kernel_cache), then
+_kernel_cache.ensure_fresh_cache()   # before any kernel is compiled or loaded
 
 #: public name -> submodule that defines it
 _EXPORTS: dict[str, str] = {

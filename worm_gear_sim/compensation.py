@@ -67,6 +67,7 @@ constant-rate tracking error is many times the uncompensated one.  Shaping with
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from fractions import Fraction
@@ -80,6 +81,7 @@ from .dynamics.modal import modes
 from .dynamics.model import DriveModel, has_play, rest_flank
 from .params import Config
 from .schema import Parameters
+from .stepwise import Steps, run_steps
 
 __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_filter',
            'SHAPERS', 'compensation_kernel', 'centring_preview', 'with_preview']
@@ -178,11 +180,13 @@ class FilterDesign:
         return float(self.tau[-1])
 
 
+@functools.cache
 def _cardinal_pieces(degree: int, order: int) -> np.ndarray:
     """Coefficients c[i, p] of u**p of the ``order``-th derivative of the cardinal B-spline of
     ``degree`` (knots 0, 1, ..., degree + 1; unit area) on its piece i, x = i + u, 0 <= u < 1:
     the truncated powers M(x) = sum_k (-1)^k C(n+1, k) (x - k)_+^n / n!, expanded exactly in
-    integers (no cancellation left for the floats: each piece is evaluated by Horner in u)."""
+    integers (no cancellation left for the floats: each piece is evaluated by Horner in u).
+    Kept per (degree, order), read-only: the exact fractions were two thirds of a design."""
     n, m = degree, order
     out = np.zeros((n + 1, n - m + 1))
     for i in range(n + 1):
@@ -192,6 +196,7 @@ def _cardinal_pieces(degree: int, order: int) -> np.ndarray:
             for p in range(n - m + 1):         # (u + i - k)^(n-m), binomial in u
                 acc[p] += w * math.comb(n - m, p) * (i - k) ** (n - m - p)
         out[i] = [float(a) for a in acc]
+    out.flags.writeable = False
     return out
 
 
@@ -402,15 +407,30 @@ class Compensator:
     """
 
     def __init__(self, model: DriveModel | Config) -> None:
+        run_steps(self._init_steps(model))
+
+    @classmethod
+    def design_steps(cls, model: DriveModel | Config) -> Steps[Compensator]:
+        """``Compensator(model)`` cut into steps (:mod:`worm_gear_sim.stepwise`): the same
+        object, its design a piece at a time."""
+        self = cls.__new__(cls)
+        yield from self._init_steps(model)
+        return self
+
+    def _init_steps(self, model: DriveModel | Config) -> Steps[None]:
         self._derivs = np.zeros(0)       # r, r', ... of the filtered reference (reset fills it)
         self._flank = np.zeros(12)       # the kernel's flank state (_F_*)
-        self.reconfigure(model)
+        yield from self._reconfigure_steps(model)
         self.reset(0.0, 0.0)
 
     # ---- design ----------------------------------------------------------------------------
     def reconfigure(self, model: DriveModel | Config) -> None:
         """Redesign from a (nominal) model or configuration; keeps the stored reference
         history."""
+        run_steps(self._reconfigure_steps(model))
+
+    def _reconfigure_steps(self, model: DriveModel | Config) -> Steps[None]:
+        """:meth:`reconfigure` in steps (each ~0.1-0.4 ms on an idle core)."""
         model = DriveModel.of(model)
         config = model.config
         cs = config.compensation
@@ -422,9 +442,12 @@ class Compensator:
         self.preview = float(cs.preview_time)
         # the antenna mode with the teeth in contact (with play, the modes of the linearised
         # model are those of a free mesh: a rigid antenna and the gear alone)
-        res = modes(DriveModel(dataclasses.replace(
-            config, mesh=dataclasses.replace(config.mesh, backlash=0.0)))
-            if has_play(model.p) else model)
+        linear = DriveModel(dataclasses.replace(
+            config, mesh=dataclasses.replace(config.mesh, backlash=0.0))) \
+            if has_play(model.p) else model
+        yield
+        res = modes(linear)
+        yield
         # the antenna mode: largest theta4 participation (mode 1 for the default drive)
         k = int(np.argmax(np.abs(res.shapes[2, :])))
         self.mode_frequency_hz = float(res.frequencies_hz[k] or res.undamped_hz[k])
@@ -442,6 +465,7 @@ class Compensator:
         width = float(cs.smoothing_time) or (degree + 1) / config.node.publish_rate_hz
         self.filter = design_filter(shaper, width / (degree + 1), degree, lag, self.preview,
                                     n_deriv)
+        yield
         self._tau = np.ascontiguousarray(self.filter.tau)
         W = self.filter.weights
         # the backlash inverse decides the flank from the lead-free (lag 0) r', r'': the
@@ -451,6 +475,7 @@ class Compensator:
             and has_play(model.p)
         if self.backlash_inverse:
             plain = design_filter(shaper, width / (degree + 1), degree, 0, self.preview, 3)
+            yield
             if not np.array_equal(plain.tau, self.filter.tau):  # pragma: no cover
                 raise RuntimeError('backlash inverse: filter nodes differ')
             W = np.vstack((W, plain.weights[1:3]))

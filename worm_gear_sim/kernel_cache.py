@@ -15,19 +15,44 @@ the stamp ``__pycache__/.numba_sources`` of the package; on a difference the pac
 processes clear once).  ~3 ms per process.  A read-only installation is left as it is
 (numba then caches elsewhere or not at all); ``NUMBA_CACHE_DIR`` moves numba's cache out of
 the package, and then this does nothing.  ``scripts/setup_env.sh`` calls the same function.
+
+**Where the cache is** (:func:`choose_cache_dir`, at the package's first import, before the
+above and before numba reads its settings).  The package's own folders when they are
+writable; else (a read-only installation: a system service on an /opt install) the first
+writable of ``$XDG_CACHE_HOME/worm_gear_sim`` (``~/.cache/worm_gear_sim``), a private folder
+``worm_gear_sim-<uid>`` in the temporary directory (made 0700, taken only if this user owns it
+and nobody else may write into it) and a fresh private temporary folder for this process;
+with none, the kernels compile in memory at every start.  The folder outside the package has
+a subfolder per :func:`sources_digest` (another version's kernels are never loaded; the
+other subfolders are removed).  "Writable" is proven by writing a file: root ignores the
+permission bits, so ``os.access`` alone would say yes to a read-only file system.  A
+``NUMBA_CACHE_DIR`` that is set and writable is used as it is; one that is not writable is
+replaced the same way.  The choice is said in one line (:data:`NOTE`, :func:`take_note`:
+the node logs it, the command line prints it on stderr); nothing is said when the package's
+own folder is used.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import shutil
+import stat
+import tempfile
+from collections.abc import Iterator, MutableMapping
 from pathlib import Path
 
-__all__ = ['ensure_fresh_cache', 'sources_digest', 'STAMP']
+__all__ = ['ensure_fresh_cache', 'sources_digest', 'STAMP', 'choose_cache_dir', 'writable_dir',
+           'take_note', 'NOTE', 'SUBFOLDER']
 
 #: The stamp file, relative to the package folder.
 STAMP = Path('__pycache__') / '.numba_sources'
 _ROOT = Path(__file__).resolve().parent
+#: The folder's name under a user's cache folder (and, with the user id, in the temp dir).
+SUBFOLDER = 'worm_gear_sim'
+#: The one line that says where the kernels are cached when it is not the package's folder
+#: ('' when it is).
+NOTE = ''
 
 
 def sources_digest(root: Path = _ROOT) -> str:
@@ -70,3 +95,124 @@ def ensure_fresh_cache(root: Path = _ROOT) -> bool:
     except (OSError, ImportError):
         return False                          # read-only, or no flock: leave it as it is
     return True
+
+
+def writable_dir(path: Path) -> bool:
+    """Whether ``path`` is (or can be made) a folder this process can write into: made if
+    missing, then a file written and removed in it (os.access alone is not enough: root
+    passes every permission check, and a read-only file system fails only the write)."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        if not os.access(path, os.W_OK | os.X_OK):
+            return False
+        fd, name = tempfile.mkstemp(dir=path, prefix='.write_test_')
+        os.close(fd)
+        os.unlink(name)
+        return True
+    except (OSError, RuntimeError):           # (RuntimeError: no home directory)
+        return False
+
+
+def _package_writable(root: Path) -> bool:
+    """numba's own cache: a ``__pycache__`` beside each of the package's modules."""
+    folders = sorted({p.parent for p in root.rglob('*.py')})
+    return all(writable_dir(f / '__pycache__') for f in folders)
+
+
+def _private(path: Path) -> bool:
+    """A folder this user owns, not a link, that nobody else may write into."""
+    try:
+        path.mkdir(mode=0o700, exist_ok=True)
+        st = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISDIR(st.st_mode) and st.st_uid == os.geteuid() and \
+        not st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)
+
+
+def _candidates(env: MutableMapping[str, str]) -> Iterator[tuple[Path, bool]]:
+    """(folder, keeps other versions' subfolders out: True) in the order they are tried."""
+    xdg = env.get('XDG_CACHE_HOME', '')
+    if os.path.isabs(xdg):
+        yield Path(xdg) / SUBFOLDER, True
+    else:
+        home = env.get('HOME', '')
+        if os.path.isabs(home):
+            yield Path(home) / '.cache' / SUBFOLDER, True
+    try:
+        tmp = Path(tempfile.gettempdir())
+    except OSError:
+        return
+    shared = tmp / f'{SUBFOLDER}-{os.geteuid()}'
+    if _private(shared):
+        yield shared, True
+    try:
+        yield Path(tempfile.mkdtemp(prefix=f'{SUBFOLDER}-kernels-')), False
+    except OSError:
+        return
+
+
+def _prune(base: Path, keep: str) -> None:
+    """Remove the subfolders of other source digests (best effort)."""
+    try:
+        for d in base.iterdir():
+            if d.name != keep and len(d.name) == len(keep) and d.is_dir() and \
+                    all(c in '0123456789abcdef' for c in d.name):
+                shutil.rmtree(d, ignore_errors=True)
+    except OSError:
+        pass
+
+
+def choose_cache_dir(root: Path = _ROOT, env: MutableMapping[str, str] | None = None
+                     ) -> str:
+    """Choose where numba caches the package's kernels (module docstring): sets
+    ``NUMBA_CACHE_DIR`` in ``env`` (default ``os.environ``; and in numba's settings if numba
+    is already imported) when it is not the package's folder; returns the one line that
+    says so ('' when the package's own folder, or a writable ``NUMBA_CACHE_DIR``, is used;
+    kept in :data:`NOTE`)."""
+    global NOTE
+    env = os.environ if env is None else env
+    given = env.get('NUMBA_CACHE_DIR', '')
+    if given:
+        if writable_dir(Path(given)):
+            return ''
+        why = f'NUMBA_CACHE_DIR {given} is not writable'
+    else:
+        if _package_writable(root):
+            return ''
+        why = f'the package folder {root} is not writable'
+    digest = sources_digest(root)[:16]
+    for base, versioned in _candidates(env):
+        folder = base / digest if versioned else base
+        if writable_dir(folder):
+            _set_cache_dir(env, str(folder))
+            if versioned:
+                _prune(base, digest)
+            NOTE = f'worm_gear_sim: {why}; compiled kernels are cached in {folder}'
+            return NOTE
+    _compile_in_memory()
+    NOTE = (f'worm_gear_sim: {why} and no cache folder is writable; the kernels are '
+            'compiled in memory at every start')
+    return NOTE
+
+
+def _set_cache_dir(env: MutableMapping[str, str], folder: str) -> None:
+    env['NUMBA_CACHE_DIR'] = folder
+    import sys
+    config = sys.modules.get('numba.core.config')
+    if config is not None and env is os.environ:    # numba read its settings already
+        config.CACHE_DIR = folder                     # type: ignore[attr-defined]
+
+
+def _compile_in_memory() -> None:
+    """No folder to cache in: numba compiles the ``cache=True`` kernels without a cache
+    (else their definition raises 'cannot cache function')."""
+    from numba.core.dispatcher import Dispatcher
+    Dispatcher.enable_caching = lambda self: None     # type: ignore[method-assign]
+
+
+def take_note() -> str:
+    """:data:`NOTE` once (the node and the command line say it; '' afterwards)."""
+    global NOTE
+    note, NOTE = NOTE, ''
+    return note

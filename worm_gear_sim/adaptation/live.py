@@ -38,8 +38,11 @@ taken:
   made a Config, validated by :meth:`~worm_gear_sim.params.Config.replace`; the model and
   the compensator designed by
   :meth:`~worm_gear_sim.realtime.predictor.RealtimePredictor.prepare`, with the simulator's
-  usable check: 5-15 ms under load) is handed to ``submit`` (the node: a worker thread;
-  the twin: done at once) and nothing else is decided while it is pending;
+  usable check: 1.5 ms on an idle core, a few ms under load) is handed to ``submit`` as
+  steps (:mod:`worm_gear_sim.stepwise`; the node: :func:`in_slices`, a slice of at most
+  ~0.3 ms at each later :meth:`LiveAdaptation.step`, on the sample thread after the
+  sample's answers; the twin: done at once) and nothing else is decided while it is
+  pending;
 * it is swapped in (:meth:`~worm_gear_sim.realtime.predictor.RealtimePredictor.reconfigure`,
   keeping time, state and the reference history: ~0.1 ms) at the first prediction stamped
   at or after t + :data:`APPLY_LEAD`.  The stamp depends on the samples only, so the node
@@ -77,16 +80,17 @@ from typing import Any
 
 import numpy as np
 
-from ..dynamics.model import DriveModel
 from ..params import Config, config_from_mapping
 from ..realtime.predictor import Prepared, RealtimePredictor
+from ..realtime.preparation import prepare_steps
 from ..realtime.switch_interval import short_switch_interval
 from ..schema import Parameters
+from ..stepwise import SLICE_BUDGET, Steps, Stepwise, run_steps
 from .estimator import Adapter
 from .learnt import carried_adapter, carried_values, carry_notes, format_value, touches_estimator
 
 __all__ = ['LiveAdaptation', 'REJECT_REASONS', 'APPLY_LEAD', 'Submit', 'run_now',
-           'in_worker']
+           'in_worker', 'in_slices']
 
 #: A step's correction is blended in over this many periods of the antenna mode of the
 #: model it brings (at most one ``adaptation.step_interval``): a drive without drag rings
@@ -96,8 +100,10 @@ BLEND_PERIODS = 5.0
 #: >= t + APPLY_LEAD [s] (module docstring): time for the worker to prepare it (5-15 ms
 #: measured under load) with margin; small against the hold-offs of the estimate (0.15 s).
 APPLY_LEAD = 0.05
-#: Runs a preparation: returns a future-like object (``done()``, ``result()``).
-Submit = Callable[[Callable[[], Any]], Any]
+#: Runs a preparation (a function that returns its steps, :mod:`worm_gear_sim.stepwise`):
+#: returns a future-like object (``done()``, ``result()``; ``advance()`` when it runs in
+#: slices on the caller's thread).
+Submit = Callable[[Callable[[], Steps[Any]]], Any]
 #: The interpreter's switch interval while a preparation runs in a worker thread [s]: the
 #: sample thread waits at most about this long for the GIL (Python's default, 5 ms, made a
 #: sample wait up to 5-7 ms while the worker prepared: measured, bench_adaptation.py).
@@ -266,8 +272,10 @@ class LiveAdaptation:
         # the simulator's state now, whenever the worker runs: the same result as the twin
         trial = None if pred.sim is None else pred.sim.trial_copy()
 
-        def prepare() -> tuple[Prepared, float]:
-            new = pred.prepare(DriveModel(_as_config(base).replace(overrides)), trial)
+        def prepare() -> Steps[tuple[Prepared, float]]:
+            cfg = _as_config(base).replace(overrides)
+            yield
+            new = yield from prepare_steps(pred, cfg, trial)
             return new, blend_time(new.compensator, base.adaptation.step_interval)
 
         self.pending = _Pending(d.step, int(stamp_ns) + self._lead_ns, self._submit(prepare),
@@ -279,6 +287,9 @@ class LiveAdaptation:
         prepared: moved to the next fixed stamp and counted."""
         p = self.pending
         assert p is not None
+        advance = getattr(p.future, 'advance', None)
+        if advance is not None:               # in slices (in_slices): one, on this thread
+            advance()
         if stamp_ns < p.apply_ns:
             return []
         if not p.future.done():
@@ -422,12 +433,12 @@ def blend_time(compensator: Any, most: float) -> float:
     return min(BLEND_PERIODS / f0, most) if f0 > 0.0 and math.isfinite(f0) else most
 
 
-def run_now(prepare: Callable[[], Any]) -> Future:
+def run_now(prepare: Callable[[], Steps[Any]]) -> Future:
     """A :data:`Submit` that prepares at once (the twin): a done future (its result, or the
     exception the preparation raised)."""
     fut: Future = Future()
     try:
-        fut.set_result(prepare())
+        fut.set_result(run_steps(prepare()))
     except Exception as exc:  # noqa: BLE001 - re-raised by result() where it is applied
         fut.set_exception(exc)
     return fut
@@ -437,11 +448,19 @@ def in_worker(pool: Executor) -> Submit:
     """A :data:`Submit` that runs each preparation in ``pool`` (a worker thread) with the
     switch interval lowered while it runs (:func:`~worm_gear_sim.realtime.switch_interval.
     short_switch_interval`, shared with the trajectory worker)."""
-    def run(prepare: Callable[[], Any]) -> Any:
+    def run(prepare: Callable[[], Steps[Any]]) -> Any:
         with short_switch_interval():
-            return prepare()
+            return run_steps(prepare())
 
     return lambda prepare: pool.submit(run, prepare)
+
+
+def in_slices(budget: float = SLICE_BUDGET) -> Submit:
+    """A :data:`Submit` that runs each preparation on the caller's thread, a slice of about
+    ``budget`` [s] at each :meth:`LiveAdaptation.step` while it is pending (the node: after
+    each sample's answers; no second thread competes with the sample path for the
+    interpreter).  The result is the one :func:`run_now` gives."""
+    return lambda prepare: Stepwise(prepare(), budget)
 
 
 def _as_config(p: Parameters) -> Config:

@@ -24,6 +24,7 @@ from ..config_io import (
     parse_set,
     resolve_config,
 )
+from ..kernel_cache import take_note
 from ..validation import ConfigError
 from .common import PROG, CliError, Parser
 
@@ -69,6 +70,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     status (0 ok, 1 the run failed, 2 bad usage or input, 130 interrupted)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = '--debug' in argv
+    note = take_note()                  # the kernel cache is not the package's folder
+    if note:
+        print(note, file=sys.stderr)
     try:
         parser = build_parser()
         args = parser.parse_args(argv)

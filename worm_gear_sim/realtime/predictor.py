@@ -13,11 +13,13 @@ from ..dynamics.model import DriveModel
 from ..dynamics.simulation import Simulator
 from ..params import Config
 from ..schema import LOAD_LIMIT
+from ..stepwise import run_steps
 from .admission import Admission
 from .blend import unwrap
 from .command_path import CommandPath
 from .command_timing import CommandQueue, StreamClock
 from .outputs import COUNTER_NAMES, Output, Prepared, Reject
+from .preparation import design_steps, prepare_steps
 from .sample_path import SamplePath
 from .stamped_path import StampedPath
 
@@ -76,12 +78,7 @@ class RealtimePredictor:
 
     # ---- configuration -----------------------------------------------------------------
     def _design(self, model: DriveModel) -> Prepared:
-        if not self.compensate:
-            return Prepared(model, None)
-        try:
-            return Prepared(model, Compensator(model))
-        except Exception as exc:  # noqa: BLE001 - run uncompensated, say why
-            return Prepared(model, None, f'{type(exc).__name__}: {exc}')
+        return run_steps(design_steps(model, self.compensate))
 
     def _set_config(self, prepared: Prepared, blend: float = 0.0) -> None:
         self.model = prepared.model
@@ -104,11 +101,9 @@ class RealtimePredictor:
         :meth:`~worm_gear_sim.dynamics.stepping.Stepper.trial_copy` of the simulator taken
         now; it only reads the pipeline, so another thread may run it while samples flow).
         Raises ValueError (ConfigError) if the simulator cannot take it (time step changed,
-        non-finite acceleration).  Every other method belongs to the executor's thread."""
-        model = DriveModel.of(config)
-        if self.sim is not None:
-            (self.sim.trial_copy() if trial is None else trial).reconfigure(model)
-        return self._design(model)
+        non-finite acceleration).  Every other method belongs to the executor's thread.
+        In steps: :func:`~.preparation.prepare_steps`."""
+        return run_steps(prepare_steps(self, config, trial))
 
     def reconfigure(self, new: DriveModel | Config | Prepared, blend: float = 0.0) -> None:
         """Swap in a validated configuration (or what :meth:`prepare` made of one),

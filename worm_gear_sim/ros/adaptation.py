@@ -8,8 +8,9 @@ there whatever ``adaptation.enabled`` says; once adaptation runs it holds the co
 pipeline, the same object the offline twin (``worm-gear-sim adapt``) drives:
 
 * every prediction the pipeline makes goes to it (after the node has published it), then
-  its decision is taken (bounded steps, no jump in the command): a step is prepared in a
-  worker thread (the model, the compensator design) and swapped in at a stamp fixed when it
+  its decision is taken (bounded steps, no jump in the command): a step is prepared a
+  slice of ~0.3 ms after each sample's answers (the model, the compensator design:
+  :func:`~worm_gear_sim.adaptation.live.in_slices`) and swapped in at a stamp fixed when it
   was decided (:data:`~worm_gear_sim.adaptation.live.APPLY_LEAD` later, as in the twin);
   the sample callback only swaps (a step prepared late moves to the next fixed stamp and is
   counted, ``late_steps``);
@@ -43,7 +44,6 @@ file.
 
 from __future__ import annotations
 
-import concurrent.futures
 import json
 from collections.abc import Callable, Collection, Sequence
 from typing import Any
@@ -53,7 +53,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from ..adaptation.live import LiveAdaptation, in_worker
+from ..adaptation.live import LiveAdaptation, in_slices
 from ..config_io import params_document, params_yaml_text
 from ..guarded_io import GuardedFileError, check_write_target, write_text_durably
 from ..params import Config
@@ -89,8 +89,6 @@ class NodeAdaptation:
         self.live: LiveAdaptation | None = None
         self.enabled = config.adaptation.enabled
         self._reset_pending = False
-        self._builder = concurrent.futures.ThreadPoolExecutor(
-            max_workers=1, thread_name_prefix='worm_gear_sim_adapt')
         qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._pub = node.create_publisher(String, ADAPTED_TOPIC, qos)
         self._srv_write = node.create_service(Trigger, WRITE_SERVICE, self._on_write)
@@ -104,7 +102,7 @@ class NodeAdaptation:
 
     def _start(self) -> None:
         self.live = LiveAdaptation(self.rt, self.rt.config.node.joint_names[1:],
-                                   submit=in_worker(self._builder))
+                                   submit=in_slices())
 
     @property
     def running(self) -> LiveAdaptation | None:
@@ -217,7 +215,10 @@ class NodeAdaptation:
                            msg, values, HARDWARE_ID)
 
     def shutdown(self) -> None:
-        self._builder.shutdown(wait=False, cancel_futures=True)
+        """Drop a step being prepared (its slices run on the sample thread, nowhere else)."""
+        pending = None if self.live is None else self.live.pending
+        if pending is not None and hasattr(pending.future, 'cancel'):
+            pending.future.cancel()
 
     # ---- services ----------------------------------------------------------------------
     def _on_write(self, request: Any, response: Any) -> Any:

@@ -65,6 +65,7 @@ from std_msgs.msg import Float64
 
 from ..dynamics.load import ElasticLimitCheck, elastic_load_warning
 from ..dynamics.modal import StepResolutionWarning, step_resolution_warning
+from ..kernel_cache import take_note
 from ..params import Config, config_from_mapping
 from ..realtime import Output, RealtimePredictor
 from ..realtime.model_check import ModelCheck
@@ -78,6 +79,7 @@ from ..topics import (
     REFERENCE_TOPIC,
     RESIDUAL_TOPIC,
 )
+from ..warmup import warm_up
 from . import diagnostics as diag
 from .adaptation import NodeAdaptation
 from .callbacks import (
@@ -129,6 +131,8 @@ class WormGearSimNode(Node):
             warnings.simplefilter('ignore', StepResolutionWarning)
             self.rt = RealtimePredictor(cfg, sim_time=self._clock.ros_time_is_active,
                                         stale_margin=STALE_MARGIN)
+            # every kernel this configuration runs, before subscribing and "ready" (.warmup)
+            self.kernels_s = warm_up(cfg)
         self._worm_input_joint = cfg.node.joint_names[0]
 
         self.counters: dict[str, Any] = dict(
@@ -202,11 +206,14 @@ class WormGearSimNode(Node):
         self.same_names = SameNameWatch(self, self.counters, self._guard)
 
     def _log_ready(self, cfg: Config) -> None:
+        note = take_note()                  # the kernel cache is not the package's folder
+        if note:
+            self.get_logger().warning(note)
         self.get_logger().info(
             f'ready: dt = {self.sim.dt:g} s, {cfg.node.publish_rate_hz:g} Hz, ratio '
             f'1:{self.rt.model.derived.ratio:.6g}; waiting for '
             f'{self.resolve_topic_name(REFERENCE_TOPIC)} (stamped) or '
-            f'{self.resolve_topic_name(COMMAND_TOPIC)}')
+            f'{self.resolve_topic_name(COMMAND_TOPIC)}; kernels ready in {self.kernels_s:.2f} s')
         for note in (step_resolution_warning(self.rt.model),  # allowed, but not trustworthy
                      elastic_load_warning(self.rt.model)):
             if note:
