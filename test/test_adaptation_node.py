@@ -7,7 +7,6 @@ estimate and the same model in use; the node publishes ~/adapted_parameters, sho
 
 from __future__ import annotations
 
-import concurrent.futures
 import json
 import os
 import stat
@@ -52,13 +51,14 @@ def test_node_adaptation_equals_the_twin(ros_harness, twin, tmp_path):
                                 lambda m: adapted.append(json.loads(m.data)), 10)
     antenna = node.config.node.joint_names[3]
     deltas = []
+    slices = 0
     for ns, ref, got in twin.record:          # the twin's order: reference, then encoders
-        live = node.adaptation.live
-        if live is not None and live.pending is not None:   # the worker's time that real
-            concurrent.futures.wait([live.pending.future], timeout=30)   # time gives it
         before = node.rt.counters['corrections']
         node._on_reference(h.reference_msg(ns, ref))
         assert node.rt.counters['corrections'] - before == len(got)
+        live = node.adaptation.live       # a step's preparation: a slice after each sample
+        if live is not None and live.pending is not None:
+            slices = max(slices, getattr(live.pending.future, 'slices', 0))
         deltas.append(node.rt.last_delta if got else None)
         for stamp, meas, _ in got:
             msg = h.JointState(name=[antenna], position=[meas])
@@ -67,6 +67,7 @@ def test_node_adaptation_equals_the_twin(ros_harness, twin, tmp_path):
     live = node.adaptation.live
     assert live is not None and live.counters['rejected'] == 0
     assert live.counters['late_steps'] == 0
+    assert slices >= 3            # prepared in slices on the sample thread, not at once
     assert live.counters['switches'] == len(twin.steps) > 0
     # the corrections: the last of each sample equals the twin's (same arithmetic)
     twin_last = [got[-1][2] for _, _, got in twin.record if got]
@@ -100,8 +101,8 @@ class Loop:
     """The node in a closed loop with a plant, in-process (the live harness's chain
     without the transport): each stamped reference of a sector scan through
     ``_on_reference``, each correction the node publishes commands the plant, whose encoder
-    comes back through ``_on_measured``; a step's preparation is waited for (the time real
-    time gives the worker) and /clock kept 0.3 s behind the stamps."""
+    comes back through ``_on_measured``; a step's preparation runs in slices after the
+    samples, as in the node; /clock kept 0.3 s behind the stamps."""
 
     def __init__(self, h, seconds: float = 6.0) -> None:
         from worm_gear_sim.adaptation.plant import EncoderPlant
@@ -125,9 +126,6 @@ class Loop:
             ns = self.base + int(round(self.t[self.k] * 1e9))
             if self.k % 200 == 0:
                 assert h.wait_clock(ns - 300_000_000)
-            live = node.adaptation.live
-            if live is not None and live.pending is not None:
-                concurrent.futures.wait([live.pending.future], timeout=30)
             self.got.clear()
             node._on_reference(h.reference_msg(ns, float(self.x[self.k])))
             self.k += 1
