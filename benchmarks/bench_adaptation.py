@@ -4,8 +4,8 @@
 
     python benchmarks/bench_adaptation.py [--drives 4] [--seed 1] [--duration 60]
         [--scenario sector] [--stiffness-spread 0.0] [--drag-max 60] [--cost-samples 3000]
-        [--no-drives]
-        [--latency-seconds 8] [--load-min 0.5] [--load-max 5] [--load-sign positive]
+        [--no-drives] [--latency-seconds 8] [--latency-rounds 2] [--first-sample-runs 3]
+        [--load-min 0.5] [--load-max 5] [--load-sign positive]
         [--play-max 5] [--error-max 30] [--gear-orders 1] [--known-drive] [--crossing-times]
 
 Each drive: the default set with a random play (0.5-5 arcmin), load torque (0.5-5 N m),
@@ -53,17 +53,22 @@ that is the model's cost, not the adaptation's) and on from that model; the rati
 medians on / off on the same model (target <= 1.2x) and the absolute figures, with the
 machine's load (shared cores: under load).
 
-Latency (``--latency-seconds``): the same per-sample work paced at 1 kHz in real time (each
-sample's work starts at its deadline, after a sleep that releases the GIL as the node's
-executor does while it waits), from the start model so that steps are decided and applied
-(an adapted step every ``adaptation.step_interval`` after the first window); once with each
-step prepared inside the sample callback (``submit`` = run at once: how the node did it
-before) and once in a worker thread with the swap at the step's fixed stamp (the node now).
-Printed: per sample, the time from its deadline (or the previous sample's end, if later) to
-the end of its work (the wait for the GIL and preemption by other processes included) and
-the work itself; the worst and the 99.9th percentile over all samples, the worst over the
-samples where a step was decided or swapped in, the samples over 1 ms.  A third run
-prepares in a worker thread at Python's default switch interval (5 ms), for comparison.
+Latency (``--latency-seconds``, ``--latency-rounds``): the per-sample work paced at 1 kHz in
+real time (each sample's work starts at its deadline, after a sleep that releases the GIL as
+the node's executor does while it waits), from the start model so that steps are decided and
+applied (an adapted step every ``adaptation.step_interval`` after the first window), in one
+run, alternated round by round: adaptation off; on with each step prepared in slices on the
+sample thread (``in_slices``, the node); on with each step prepared in a worker thread at a
+lowered switch interval (how the node prepared before).  Printed per mode: the lateness
+(from the sample's deadline, or the previous sample's end if later, to the end of its work:
+the wait for the GIL and preemption by other processes included) p99 per round and over all,
+p99.9 and the worst; the work's median, its p99 and worst over the samples within
++-NEAR_STEP of a step's decision; the longest slice; the ratio of the p99 lateness on / off
+per round (target <= 1.5).
+
+First encoder sample (``--first-sample-runs``): in fresh processes built as the node builds
+its pipeline, the work of the sample at which the first encoder sample enters the estimate,
+with the node's warm-up before "ready" (:mod:`worm_gear_sim.warmup`) and without it.
 """
 
 from __future__ import annotations
@@ -81,7 +86,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from worm_gear_sim.adaptation.live import LiveAdaptation, in_worker  # noqa: E402
+from worm_gear_sim.adaptation.live import LiveAdaptation, in_slices, in_worker  # noqa: E402
 from worm_gear_sim.adaptation.twin import (  # noqa: E402
     BASE_NS,
     prepare_start,
@@ -321,21 +326,31 @@ def _sample(p: RealtimePredictor, live: LiveAdaptation, ns: int, x: float, names
         live.measured(c.stamp_ns, names[2:], [meas[c.stamp_ns]])
 
 
+#: Samples each side of a step's decision whose work is "near a step" (the preparation
+#: runs after the decision, the swap APPLY_LEAD later: 50 samples at 1 kHz).
+NEAR_STEP = 60
+#: How each run prepares an adapted step: 'off' (no adaptation), 'slices' (the node:
+#: in_slices, on the sample thread), 'worker' (a worker thread, switch interval lowered:
+#: how the node prepared before).
+LATENCY_MODES = ('off', 'slices', 'worker')
+
+
 def latency(args: argparse.Namespace, base: Config) -> None:
-    """Worst per-sample latency paced at 1 kHz, steps prepared in the callback or in a
-    worker thread (module docstring)."""
+    """Lateness per 1 kHz sample paced in real time, adaptation off and on, alternated in
+    one run (module docstring)."""
     cfg, t, x, meas = encoder_record(args, base, int(args.latency_seconds * 1000))
     names = cfg.node.joint_names[1:]
     dt = 1.0 / cfg.node.publish_rate_hz
+    ok = t >= 0.1                                   # the first samples start the pipeline
 
-    def one(worker: str, paced: bool) -> dict[str, Any]:
-        pool = concurrent.futures.ThreadPoolExecutor(1) if worker else None
+    def one(mode: str, paced: bool = True) -> dict[str, Any]:
+        pool = concurrent.futures.ThreadPoolExecutor(1) if mode == 'worker' else None
         p = RealtimePredictor(cfg, apply_compensation=True, base_ns=BASE_NS)
-        submit = None if pool is None else pool.submit if worker == 'plain' else \
-            in_worker(pool)
-        live = LiveAdaptation(p, names, submit=submit)
+        submit = in_worker(pool) if pool is not None else in_slices()
+        live = None if mode == 'off' else LiveAdaptation(p, names, submit=submit)
         lat, work = np.zeros(t.size), np.zeros(t.size)
-        marked = np.zeros(t.size, bool)
+        decided: list[int] = []
+        longest = 0.0
         start = time.perf_counter() + 0.02
         end = start
         for k in range(t.size):
@@ -346,40 +361,107 @@ def latency(args: argparse.Namespace, base: Config) -> None:
                     time.sleep(deadline - now)
             t0 = time.perf_counter()
             ns = BASE_NS + int(round(t[k] * 1e9))
-            pending, switches = live.pending, live.counters['switches']
-            _sample(p, live, ns, float(x[k]), names, meas)
+            if live is None:
+                p.push(ns, float(x[k]))
+            else:
+                pending = live.pending
+                _sample(p, live, ns, float(x[k]), names, meas)
+                if live.pending is not None and live.pending is not pending:
+                    decided.append(k)
+                if pending is not None and hasattr(pending.future, 'longest'):
+                    longest = max(longest, pending.future.longest)
             t1 = time.perf_counter()
             lat[k], work[k] = t1 - max(deadline, end) if paced else t1 - t0, t1 - t0
             end = t1
-            marked[k] = live.pending is not pending or live.counters['switches'] != switches
         if pool is not None:
             pool.shutdown()
-        ok = t >= 0.1                               # the first samples start the pipeline
-        worst = np.argsort(np.where(ok, lat, 0.0))[-5:][::-1]
-        return {'top': ', '.join(f'{lat[i] * 1e3:.1f}{"*" if marked[i] else ""}'
-                                 for i in worst),
-                'over_1ms': int(np.sum(lat[ok] > 1e-3)), 'steps': live.counters['switches'],
-                'late': live.counters['late_steps'],
-                'max': lat[ok].max(), 'p999': float(np.quantile(lat[ok], 0.999)),
-                'max_step': lat[ok & marked].max() if np.any(ok & marked) else math.nan,
-                'max_other': lat[ok & ~marked].max(), 'work_max': work[ok].max(),
-                'work_step': work[ok & marked].max() if np.any(ok & marked) else math.nan,
-                'median': float(np.median(work[ok]))}
+        return {'lat': lat, 'work': work, 'decided': decided, 'longest': longest,
+                'steps': 0 if live is None else live.counters['switches'],
+                'late': 0 if live is None else live.counters['late_steps']}
 
-    one('lowered', False)                           # compile, warm up
-    print(f'latency per 1 kHz sample, paced in real time, {t.size} samples '
-          f'(load {os.getloadavg()[0]:.2f}):', flush=True)
-    for label, worker in (('prepared in the sample callback (before)', ''),
-                          ('in a worker thread, default switch interval', 'plain'),
-                          ('in a worker thread, swapped at its stamp (now)', 'lowered')):
-        r = one(worker, True)
-        print(f"  {label}: {r['steps']} steps ({r['late']} late); deadline to end: "
-              f"worst {r['max'] * 1e3:.2f} ms, 99.9 % {r['p999'] * 1e3:.2f} ms, worst on the "
-              f"step samples {r['max_step'] * 1e3:.2f} ms, on the others "
-              f"{r['max_other'] * 1e3:.2f} ms; work alone: median {r['median'] * 1e6:.0f} us,"
-              f" worst {r['work_max'] * 1e3:.2f} ms, worst on the step samples "
-              f"{r['work_step'] * 1e3:.2f} ms; samples over 1 ms {r['over_1ms']}, the worst 5 "
-              f"[ms, * a step's sample] {r['top']}", flush=True)
+    one('slices', paced=False)                      # compile, warm up
+    rounds: dict[str, list[dict[str, Any]]] = {m: [] for m in LATENCY_MODES}
+    for _ in range(args.latency_rounds):            # alternated: the load drifts
+        for mode in LATENCY_MODES:
+            rounds[mode].append(one(mode))
+    decided = rounds['slices'][0]['decided']        # the same samples in every run
+    near = np.zeros(t.size, bool)
+    for k in decided:
+        near[max(k - NEAR_STEP, 0):k + NEAR_STEP + 1] = True
+    print(f'latency per 1 kHz sample, paced in real time, {t.size} samples x '
+          f'{args.latency_rounds} rounds alternated (load {os.getloadavg()[0]:.2f}); '
+          f'{len(decided)} steps decided, {int(np.sum(near & ok))} samples within '
+          f'+-{NEAR_STEP} of one:', flush=True)
+    p99 = {m: [float(np.quantile(r['lat'][ok], 0.99)) for r in rs] for m, rs in rounds.items()}
+    for mode, rs in rounds.items():
+        lat = np.concatenate([r['lat'][ok] for r in rs])
+        work = np.concatenate([r['work'][ok] for r in rs])
+        near_w = np.concatenate([r['work'][ok & near] for r in rs])
+        extra = '' if mode == 'off' else (
+            f'; {rs[0]["steps"]} steps ({max(r["late"] for r in rs)} late)' +
+            (f', longest slice {max(r["longest"] for r in rs) * 1e3:.3f} ms'
+             if mode == 'slices' else ''))
+        print(f'  {mode:6s}: lateness p99 {np.quantile(lat, 0.99) * 1e3:.3f} ms (per round '
+              f'{", ".join(f"{v * 1e3:.3f}" for v in p99[mode])}), p99.9 '
+              f'{np.quantile(lat, 0.999) * 1e3:.3f} ms, worst {lat.max() * 1e3:.2f} ms; work '
+              f'median {np.median(work) * 1e6:.0f} us, p99 near a step '
+              f'{np.quantile(near_w, 0.99) * 1e3:.3f} ms, worst near a step '
+              f'{near_w.max() * 1e3:.2f} ms{extra}', flush=True)
+    for mode in ('slices', 'worker'):
+        ratios = [a / b for a, b in zip(p99[mode], p99['off'])]
+        print(f'  p99 lateness {mode} / off: {np.median(ratios):.2f} (per round '
+              f'{", ".join(f"{r:.2f}" for r in ratios)}; target <= 1.5 for the node\'s '
+              f'way, slices)')
+
+
+FIRST_SAMPLE = r'''
+import sys, time
+sys.path.insert(0, sys.argv[2])
+from worm_gear_sim.adaptation.live import LiveAdaptation, in_slices
+from worm_gear_sim.adaptation.twin import BASE_NS, prepare_start, scenario
+from worm_gear_sim.params import Config
+from worm_gear_sim.realtime.predictor import RealtimePredictor
+from worm_gear_sim.warmup import warm_up
+cfg = prepare_start(Config())
+pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=BASE_NS)
+if sys.argv[1] == 'warm':
+    warm_up(cfg)                                   # as the node does before "ready"
+live = LiveAdaptation(pred, cfg.node.joint_names[1:], submit=in_slices())
+antenna = [cfg.node.joint_names[3]]
+t, x = scenario(cfg, 'sector', 0.3)
+for k in range(t.size):
+    t0 = time.perf_counter()
+    out = pred.push(BASE_NS + int(round(t[k] * 1e9)), float(x[k]))
+    for p in out.predictions:
+        live.predicted(p.stamp_ns, p.theta)
+    entered = live.adapter.samples_used + live.adapter.samples_skipped
+    if out.predictions:
+        live.step(out.predictions[-1].stamp_ns)
+    first = entered == 0 and live.adapter.samples_used + live.adapter.samples_skipped > 0
+    for c in out.corrections:
+        live.measured(c.stamp_ns, antenna, [out.predictions[-1].theta[2]])
+    if first:
+        print((time.perf_counter() - t0) * 1e3)
+        break
+'''
+
+
+def first_sample(args: argparse.Namespace) -> None:
+    """The work of the sample at which the first encoder sample enters the estimate, in a
+    fresh process built as the node builds its pipeline: with the node's warm-up before
+    "ready" and without it (the kernels then load at that sample), alternated."""
+    import subprocess
+    root = str(Path(__file__).resolve().parents[1])
+    got: dict[str, list[float]] = {'warm': [], 'cold': []}
+    for _ in range(args.first_sample_runs):
+        for mode in got:
+            out = subprocess.run([sys.executable, '-c', FIRST_SAMPLE, mode, root],
+                                 capture_output=True, text=True, check=True)
+            got[mode].append(float(out.stdout.strip().splitlines()[-1]))
+    print(f'first encoder sample entering the estimate, sample work [ms] in a fresh process '
+          f'(load {os.getloadavg()[0]:.2f}): with the warm-up '
+          f'{", ".join(f"{v:.3f}" for v in got["warm"])}; without (kernels loaded from the '
+          f'cache at that sample) {", ".join(f"{v:.2f}" for v in got["cold"])}')
 
 
 def main() -> int:
@@ -414,6 +496,10 @@ def main() -> int:
     ap.add_argument('--cost-samples', type=int, default=3000)
     ap.add_argument('--no-drives', action='store_true')
     ap.add_argument('--latency-seconds', type=float, default=8.0)
+    ap.add_argument('--latency-rounds', type=int, default=2,
+                    help='rounds of the latency runs, the modes alternated in each [2]')
+    ap.add_argument('--first-sample-runs', type=int, default=3,
+                    help='fresh processes per variant for the first encoder sample [3]; 0: none')
     args = ap.parse_args()
     base = Config()
     print(f'load average at start: {os.getloadavg()}', flush=True)
@@ -421,6 +507,8 @@ def main() -> int:
         cost(args, base)
     if args.latency_seconds > 0:
         latency(args, base)
+    if args.first_sample_runs > 0:
+        first_sample(args)
     if not args.no_drives:
         run_drives(args, base)
     print(f'load average at end: {os.getloadavg()}')

@@ -10,10 +10,10 @@ cost.  Two processes compile disjoint paths side by side:
     python scripts/warm_kernels.py          # both paths, in two processes
     python scripts/warm_kernels.py sim      # one path in this process (sim | comp)
 
-``sim``: the Newmark kernel called from Python (``simulate``) and through the stepping
-simulator (``RealtimePredictor``); ``comp``: the compensator's kernel and the model inverse,
-a known trajectory's correction (the node's trajectory worker) without and with play, and
-the adaptation's estimator.
+``sim``: the Newmark kernel called from Python (``simulate``) and every kernel a node warms
+before it says "ready" (``worm_gear_sim.warmup``: pipeline, adaptation); ``comp``: the
+compensator's kernel and the model inverse, a known trajectory's correction (the node's
+trajectory worker) without and with play, and the adaptation's estimator.
 Each process compiles only what its path calls; what one compiled the other loads from the
 cache.  Nothing here is checked: the tests check the results.
 """
@@ -28,12 +28,10 @@ import time
 def _sim() -> None:
     from worm_gear_sim import Config
     from worm_gear_sim.dynamics.simulation import simulate
-    from worm_gear_sim.realtime import RealtimePredictor
+    from worm_gear_sim.warmup import warm_up
     cfg = Config()
     simulate(cfg, t_end=0.002)
-    p = RealtimePredictor(cfg)
-    for k in range(1, 4):
-        p.push(k * 1_000_000, 0.01 * k)
+    warm_up(cfg.replace({'adaptation.enabled': True}))   # what a node warms before "ready"
 
 
 def _comp() -> None:

@@ -77,13 +77,14 @@ import numpy as np
 from numba import njit
 
 from .dynamics.inverse import gear_torque_demand, inverse_theta1
-from .dynamics.modal import modes
+from .dynamics.modal import modes_steps
 from .dynamics.model import DriveModel, has_play, rest_flank
 from .params import Config
 from .schema import Parameters
 from .stepwise import Steps, run_steps
 
 __all__ = ['Compensator', 'FilterDesign', 'Shaper', 'design_shaper', 'design_filter',
+           'design_filter_steps',
            'SHAPERS', 'compensation_kernel', 'centring_preview', 'with_preview']
 
 SHAPERS = ('none', 'zv', 'zvd', 'ei')
@@ -226,7 +227,16 @@ def _spline_derivs(width: float, degree: int, orders: int):
 def design_filter(shaper: Shaper, knot_spacing: float, degree: int = 4, lag_order: int = 2,
                   preview: float = 0.0, n_deriv: int = 3) -> FilterDesign:
     """Quadrature weights for the filtered reference r and its first ``n_deriv - 1``
-    derivatives.
+    derivatives (:func:`design_filter_steps`, run through)."""
+    return run_steps(design_filter_steps(shaper, knot_spacing, degree, lag_order, preview,
+                                         n_deriv))
+
+
+def design_filter_steps(shaper: Shaper, knot_spacing: float, degree: int = 4,
+                        lag_order: int = 2, preview: float = 0.0, n_deriv: int = 3
+                        ) -> Steps[FilterDesign]:
+    """Quadrature weights for the filtered reference r and its first ``n_deriv - 1``
+    derivatives, in steps (:mod:`worm_gear_sim.stepwise`).
 
     Kernel g = shaper * B-spline (``degree``, uniform knots ``knot_spacing`` apart);
     F = g * (1 + p1 d/dt + p2 d2/dt2) with p chosen so that F reproduces polynomials up to
@@ -269,6 +279,7 @@ def design_filter(shaper: Shaper, knot_spacing: float, degree: int = 4, lag_orde
     wq[0] = wq[-1] = 0.5 * dtau
     gder = np.zeros((need + 1, n))
     for m in range(need + 1):
+        yield
         for a, t0 in zip(A, ti):
             gder[m] += a * bders[m](tau - t0)
     coef = (1.0, p1, p2)
@@ -278,6 +289,7 @@ def design_filter(shaper: Shaper, knot_spacing: float, degree: int = 4, lag_orde
             W[m] += coef[k] * gder[m + k]
         W[m] *= wq
     tau_s = tau - shift
+    yield
     # exact moments: polynomial references of low degree are filtered exactly
     W = _enforce_moments(W, tau_s, lag_order)
     return FilterDesign(tau=tau_s, weights=W, shaper=shaper, knot_spacing=float(knot_spacing),
@@ -446,7 +458,7 @@ class Compensator:
             config, mesh=dataclasses.replace(config.mesh, backlash=0.0))) \
             if has_play(model.p) else model
         yield
-        res = modes(linear)
+        res = yield from modes_steps(linear)
         yield
         # the antenna mode: largest theta4 participation (mode 1 for the default drive)
         k = int(np.argmax(np.abs(res.shapes[2, :])))
@@ -463,8 +475,8 @@ class Compensator:
         # sampled at that rate and joined by straight lines, does not alias into the
         # antenna mode (at f_rate - f_mode)
         width = float(cs.smoothing_time) or (degree + 1) / config.node.publish_rate_hz
-        self.filter = design_filter(shaper, width / (degree + 1), degree, lag, self.preview,
-                                    n_deriv)
+        self.filter = yield from design_filter_steps(shaper, width / (degree + 1), degree, lag,
+                                                     self.preview, n_deriv)
         yield
         self._tau = np.ascontiguousarray(self.filter.tau)
         W = self.filter.weights
@@ -474,7 +486,8 @@ class Compensator:
         self.backlash_inverse = bool(cs.backlash_inverse) and self.quasi_static \
             and has_play(model.p)
         if self.backlash_inverse:
-            plain = design_filter(shaper, width / (degree + 1), degree, 0, self.preview, 3)
+            plain = yield from design_filter_steps(shaper, width / (degree + 1), degree, 0,
+                                                   self.preview, 3)
             yield
             if not np.array_equal(plain.tau, self.filter.tau):  # pragma: no cover
                 raise RuntimeError('backlash inverse: filter nodes differ')

@@ -27,6 +27,7 @@ from .schema import (
     replaced,
     sections_from_mapping,
 )
+from .stepwise import Steps, run_steps
 
 __all__ = [
     'Config', 'config_from_mapping', 'default_config', 'check_usable',
@@ -42,8 +43,15 @@ class Config(Parameters):
         field, cross-field, and usable (:func:`check_usable`, naming the keys changed)."""
         changes = dict(overrides or {})
         changes.update({k.replace('__', '.'): v for k, v in kw.items()})
+        return run_steps(self.replace_steps(changes))
+
+    def replace_steps(self, overrides: Mapping[str, Any]) -> Steps[Config]:
+        """:meth:`replace` in steps (:mod:`worm_gear_sim.stepwise`)."""
+        changes = dict(overrides)
         cfg = replaced(self, changes)     # the changed fields checked, then across fields
-        check_usable(cfg, changed=[k for k in changes])
+        yield
+        from .dynamics.usability import check_usable_steps
+        yield from check_usable_steps(cfg, changed=[k for k in changes])
         return cfg
 
 

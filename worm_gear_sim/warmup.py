@@ -31,14 +31,16 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
+from .kernel_cache import take_note
 from .params import Config
 from .realtime.model_check import ModelCheck
 from .realtime.predictor import RealtimePredictor
 
-__all__ = ['warm_up', 'WARM_PLAY', 'WARM_HARMONICS']
+__all__ = ['warm_up', 'Warmed', 'WARM_PLAY', 'WARM_HARMONICS']
 
 #: The play [rad] of the model the pipeline's reconfiguration is warmed with (the
 #: compensator's backlash inverse and the play-free model of its modes) ...
@@ -48,16 +50,26 @@ WARM_HARMONICS = [1e-6, 1e-6]
 _BASE_NS = 1_000_000_000
 
 
-def warm_up(cfg: Config) -> float:
-    """Compile or load every kernel ``cfg``'s node runs (module docstring); the seconds it
-    took."""
+@dataclass(frozen=True)
+class Warmed:
+    """What :func:`warm_up` did: the seconds it took, and the one line that says where the
+    kernels are cached when it is not the package's folder (said once per process, else
+    '': :func:`~.kernel_cache.take_note`)."""
+
+    seconds: float
+    note: str = ''
+
+
+def warm_up(cfg: Config, adaptation: bool = True) -> Warmed:
+    """Compile or load every kernel ``cfg``'s node runs (module docstring); ``adaptation``
+    False: a node without live adaptation (its kernels are not needed)."""
     t0 = time.perf_counter()
     with warnings.catch_warnings():        # a throwaway's notes: the node logs its own
         warnings.simplefilter('ignore')
         _pipeline(cfg)
-        if cfg.adaptation.enabled:
+        if adaptation and cfg.adaptation.enabled:
             _adaptation(cfg)
-    return time.perf_counter() - t0
+    return Warmed(time.perf_counter() - t0, take_note())
 
 
 def _samples(cfg: Config, n: int) -> list[tuple[int, float]]:

@@ -273,7 +273,7 @@ class LiveAdaptation:
         trial = None if pred.sim is None else pred.sim.trial_copy()
 
         def prepare() -> Steps[tuple[Prepared, float]]:
-            cfg = _as_config(base).replace(overrides)
+            cfg = yield from _as_config(base).replace_steps(overrides)
             yield
             new = yield from prepare_steps(pred, cfg, trial)
             return new, blend_time(new.compensator, base.adaptation.step_interval)

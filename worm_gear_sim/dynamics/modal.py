@@ -11,6 +11,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from ..schema import ANGLE_LIMIT, Parameters
+from ..stepwise import Steps, run_steps
 from .model import (
     DriveModel,
     forces,
@@ -24,7 +25,8 @@ from .model import (
     without_play,
 )
 
-__all__ = ['static_equilibrium', 'ModalResult', 'modes', 'natural_modes', 'damping_matrix',
+__all__ = ['static_equilibrium', 'ModalResult', 'modes', 'modes_steps', 'natural_modes',
+           'damping_matrix',
            'open_mesh_damping_matrix', 'stepping_damping',
            'amplitude_time_step', 'step_resolution', 'step_resolution_warning',
            'StepResolutionWarning', 'STEPS_PER_PERIOD']
@@ -126,10 +128,18 @@ def modes(model: DriveModel | Parameters, theta1: float = 0.0, sliding_rate: flo
                                                             1e6)):
         if not (math.isfinite(float(x)) and abs(float(x)) <= limit):
             raise ValueError(f'modes: {name} = {x!r} must be finite and within +-{limit:g}')
+    return run_steps(modes_steps(model, theta1, sliding_rate, include_damping))
+
+
+def modes_steps(model: DriveModel | Parameters, theta1: float = 0.0, sliding_rate: float = 0.0,
+                include_damping: bool = True) -> Steps[ModalResult]:
+    """:func:`modes` in steps (:mod:`worm_gear_sim.stepwise`), its arguments unchecked."""
     model = DriveModel.of(model)
     u, K, dQdv, M = _linearised(model.p, theta1, sliding_rate)
     C = damping_matrix(model) - dQdv if include_damping else np.zeros((3, 3))
+    yield
     undamped, shapes = _undamped_modes(K, M)
+    yield
     # state-space eigenvalues for damped frequencies and damping ratios
     damped, zeta = _damped_modes(M, K, C, len(undamped))
     return ModalResult(frequencies_hz=damped, undamped_hz=undamped, damping_ratios=zeta,

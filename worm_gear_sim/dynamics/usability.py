@@ -42,13 +42,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..schema import ANGLE_LIMIT, Parameters
+from ..stepwise import Steps, run_steps
 from ..validation import ConfigError
 
 if TYPE_CHECKING:
     from .model import DriveModel
 
-__all__ = ['check_usable', 'usable_model', 'diagnose', 'SPRING_RATIO_MIN', 'OMEGA_DT_MAX',
-           'TRIAL_TIME']
+__all__ = ['check_usable', 'check_usable_steps', 'usable_model', 'diagnose',
+           'SPRING_RATIO_MIN', 'OMEGA_DT_MAX', 'TRIAL_TIME']
 
 #: Two springs on one body: the smaller must be at least this share of the larger (it keeps
 #: 7 significant digits in their sum).
@@ -89,17 +90,30 @@ def check_usable(cfg: Parameters, changed: Iterable[str] | None = None) -> None:
     alone when a failure has no rule of its own.  Without it, the keys that differ from the
     defaults are named.  A usable Config is remembered (Configs are immutable), so checking
     it again is a dictionary look-up."""
+    run_steps(check_usable_steps(cfg, changed))
+
+
+def check_usable_steps(cfg: Parameters, changed: Iterable[str] | None = None) -> Steps[None]:
+    """:func:`check_usable` in steps (:mod:`worm_gear_sim.stepwise`: the node prepares an
+    adapted set a slice at a time); numpy's floating-point errors are ignored inside each
+    step only, never in the caller's code between them."""
     if cfg in _USABLE:
         return
     keys = tuple(changed) if changed is not None else _differs_from_defaults(cfg)
-    try:
-        with np.errstate(all='ignore'):     # thread-local: a bad set fails below, silently
-            model = _check(cfg, keys)
-    except ConfigError:
-        raise
-    except (ArithmeticError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
-        raise _blame(cfg, keys, (), f'not computable ({type(exc).__name__}: {exc})') \
-            from None
+    steps = _check(cfg, keys)
+    while True:
+        try:
+            with np.errstate(all='ignore'):     # a bad set fails below, silently
+                next(steps)
+        except StopIteration as stop:
+            model = stop.value
+            break
+        except ConfigError:
+            raise
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
+            raise _blame(cfg, keys, (), f'not computable ({type(exc).__name__}: {exc})') \
+                from None
+        yield
     with _LOCK:                             # the node's worker thread and its executor
         if len(_USABLE) >= _CACHE_SIZE:
             _USABLE.pop(next(iter(_USABLE)), None)
@@ -153,8 +167,8 @@ def _blame(cfg: Parameters, changed: Sequence[str], suspects: Sequence[str],
     return err
 
 
-def _check(cfg: Parameters, changed: Sequence[str]) -> DriveModel:
-    """The rules (module doc); returns the model it built and ran."""
+def _check(cfg: Parameters, changed: Sequence[str]) -> Steps[DriveModel]:
+    """The rules (module doc), in steps; returns the model it built and ran."""
     from .model import DriveModel, mesh_stiffness_y, tooth_stiffness
     try:
         model = DriveModel(cfg)
@@ -165,6 +179,8 @@ def _check(cfg: Parameters, changed: Sequence[str]) -> DriveModel:
         raise _blame(cfg, changed, b_keys, 'the tooth stiffness of Eqs. 16-17 varies by '
                      'e^(360 |b|) over a mesh cycle; this b makes it overflow (the '
                      'paper: |b| < 0.001 1/deg, a factor 1.3)') from None
+
+    yield
 
     # Rule 1: tooth stiffness over the cycle.  Eqs. 16-17 are exponentials of the contact
     # position x(s); x takes its extremes at mesh phase 0 and 180 deg (cosine mapping) or 0
@@ -232,8 +248,9 @@ def _check(cfg: Parameters, changed: Sequence[str]) -> DriveModel:
     # Rule 3: the modes are computable, damped as :func:`~.modal.modes` gives them to its
     # users (the compensator's antenna mode, the diagnosis of a failing trial): an
     # undamped eigenproblem can succeed where the damped pencil has no finite eigenvalue
-    from .modal import modes
-    full = modes(model)
+    from .modal import modes_steps
+    yield
+    full = yield from modes_steps(model)
     m = (full.undamped_hz, full.shapes)
     if not np.all(np.isfinite(m[0])):
         raise _blame(cfg, changed, (), 'the linearised natural frequencies are not finite')
@@ -248,14 +265,17 @@ def _check(cfg: Parameters, changed: Sequence[str]) -> DriveModel:
 
     # Rule 4: trial (equilibrium finite and in range, a short ramp integrates)
     from .stepping import SimulationError, Stepper
+    yield
     try:
         sim = Stepper(model, theta1=0.0)
+        yield
         u0 = sim.state.theta
         if not (np.all(np.isfinite(u0)) and np.all(np.abs(u0) <= ANGLE_LIMIT)):
             raise _blame(cfg, changed, ('load.output_torque',), f'the static equilibrium '
                          f'(theta2, theta3, theta4) = {u0} is not finite or beyond '
                          f'{ANGLE_LIMIT:g} rad')
         sim.advance_to(0.5 * TRIAL_TIME, TRIAL_ANGLE)
+        yield
         sim.advance_to(TRIAL_TIME, TRIAL_ANGLE)
         s = sim.state
         if not (np.all(np.isfinite(s.theta)) and np.all(np.isfinite(s.omega))):

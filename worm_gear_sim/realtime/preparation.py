@@ -16,6 +16,7 @@ from typing import Any
 from ..compensation import Compensator
 from ..dynamics.model import DriveModel
 from ..dynamics.simulation import Simulator
+from ..dynamics.usability import usable_model
 from ..params import Config
 from ..stepwise import Steps
 from .outputs import Prepared
@@ -39,7 +40,8 @@ def prepare_steps(predictor: Any, config: DriveModel | Config, trial: Simulator 
     """:meth:`~.predictor.RealtimePredictor.prepare` of ``predictor`` in steps (it only
     reads the pipeline: its simulator, copied for the trial unless ``trial`` is given, and
     whether it compensates)."""
-    model = DriveModel.of(config)
+    # (a Config just checked by Config.replace: the model its check built, shared)
+    model = config if isinstance(config, DriveModel) else usable_model(config)
     yield
     sim = predictor.sim
     if sim is not None:

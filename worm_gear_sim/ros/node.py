@@ -63,9 +63,8 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from ..dynamics.load import ElasticLimitCheck, elastic_load_warning
-from ..dynamics.modal import StepResolutionWarning, step_resolution_warning
-from ..kernel_cache import take_note
+from ..dynamics.load import ElasticLimitCheck
+from ..dynamics.modal import StepResolutionWarning
 from ..params import Config, config_from_mapping
 from ..realtime import Output, RealtimePredictor
 from ..realtime.model_check import ModelCheck
@@ -96,6 +95,7 @@ from .interface import NODE_REJECT_REASONS, REFERENCE_DEPTH
 from .param_updates import ParameterUpdates
 from .params_bridge import check_overrides, declare_config, file_defaults, parameter_type
 from .publishers import PredictionPublishers
+from .ready import log_ready
 from .statuses import CallbackLoad, backdrive_status, model_check_status, node_statuses
 from .trajectory_bridge import TrajectoryBridge, trajectory_status
 
@@ -132,7 +132,7 @@ class WormGearSimNode(Node):
             self.rt = RealtimePredictor(cfg, sim_time=self._clock.ros_time_is_active,
                                         stale_margin=STALE_MARGIN)
             # every kernel this configuration runs, before subscribing and "ready" (.warmup)
-            self.kernels_s = warm_up(cfg)
+            self.kernels = warm_up(cfg, adaptation=adaptation)
         self._worm_input_joint = cfg.node.joint_names[0]
 
         self.counters: dict[str, Any] = dict(
@@ -169,7 +169,7 @@ class WormGearSimNode(Node):
             pipeline=self.adaptation.pipeline, swapped=self.adaptation.swapped)
         self._params = ParameterUpdates(self, self.rt, cfg, types, self.counters, self._warn,
                                         self._guard, **hooks)
-        self._log_ready(cfg)
+        log_ready(self, cfg, self.kernels)
 
     def _create_monitoring_publishers(self) -> None:
         """/diagnostics, ~/prediction_residual, ~/backdrive_margin and their messages."""
@@ -204,26 +204,6 @@ class WormGearSimNode(Node):
         self._diag_timer = self.create_timer(cfg.node.diagnostic_period,
                                              self._guard(self.publish_diagnostics))
         self.same_names = SameNameWatch(self, self.counters, self._guard)
-
-    def _log_ready(self, cfg: Config) -> None:
-        note = take_note()                  # the kernel cache is not the package's folder
-        if note:
-            self.get_logger().warning(note)
-        self.get_logger().info(
-            f'ready: dt = {self.sim.dt:g} s, {cfg.node.publish_rate_hz:g} Hz, ratio '
-            f'1:{self.rt.model.derived.ratio:.6g}; waiting for '
-            f'{self.resolve_topic_name(REFERENCE_TOPIC)} (stamped) or '
-            f'{self.resolve_topic_name(COMMAND_TOPIC)}; kernels ready in {self.kernels_s:.2f} s')
-        for note in (step_resolution_warning(self.rt.model),  # allowed, but not trustworthy
-                     elastic_load_warning(self.rt.model)):
-            if note:
-                self.get_logger().warning(note)
-        if self.rt.compensator is None:
-            self.get_logger().error(
-                f'feed-forward unavailable ({self.rt.compensation_error}); no corrections')
-        if self.adaptation is None and cfg.adaptation.enabled:
-            self.get_logger().warning('adaptation.enabled is true, but this node runs '
-                                      'without live adaptation: ignored')
 
     # ---- read-only views (tests, diagnostics) --------------------------------------------
     @property
