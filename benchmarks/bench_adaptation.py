@@ -60,11 +60,13 @@ applied (an adapted step every ``adaptation.step_interval`` after the first wind
 run, alternated round by round: adaptation off; on with each step prepared in slices on the
 sample thread (``in_slices``, the node); on with each step prepared in a worker thread at a
 lowered switch interval (how the node prepared before).  Printed per mode: the lateness
-(from the sample's deadline, or the previous sample's end if later, to the end of its work:
-the wait for the GIL and preemption by other processes included) p99 per round and over all,
+(from the sample's deadline to its answer, which the node publishes before the
+adaptation's work: a previous sample's work still running, the wait for the GIL and
+preemption by other processes included) p99 per round and over all,
 p99.9 and the worst; the work's median, its p99 and worst over the samples within
-+-NEAR_STEP of a step's decision; the longest slice; the ratio of the p99 lateness on / off
-per round (target <= 1.5).
++-NEAR_STEP of a step's decision (wall time: preemption included) and the p99 of its CPU
+time there (the sample thread's own: what the preparation adds); the longest slice and step;
+the ratio of the p99 lateness on / off per round (target <= 1.5).
 
 First encoder sample (``--first-sample-runs``): in fresh processes built as the node builds
 its pipeline, the work of the sample at which the first encoder sample enters the estimate,
@@ -314,16 +316,20 @@ def cost(args: argparse.Namespace, base: Config) -> None:
 
 
 def _sample(p: RealtimePredictor, live: LiveAdaptation, ns: int, x: float, names: Any,
-            meas: dict) -> None:
+            meas: dict) -> float:
     """One 1 kHz sample through the pipeline and the adaptation, as the node's callbacks
-    hand them on: the predictions, a step decision at the last, the encoder samples."""
+    hand them on: the predictions, a step decision at the last, the encoder samples.  The
+    time (perf_counter) its answer was ready: the node publishes it there, before the
+    adaptation's work."""
     out = p.push(ns, x)
+    answered = time.perf_counter()
     for q in out.predictions:
         live.predicted(q.stamp_ns, q.theta)
     if out.predictions:
         live.step(out.predictions[-1].stamp_ns)
     for c in out.corrections:
         live.measured(c.stamp_ns, names[2:], [meas[c.stamp_ns]])
+    return answered
 
 
 #: Samples each side of a step's decision whose work is "near a step" (the preparation
@@ -348,34 +354,36 @@ def latency(args: argparse.Namespace, base: Config) -> None:
         p = RealtimePredictor(cfg, apply_compensation=True, base_ns=BASE_NS)
         submit = in_worker(pool) if pool is not None else in_slices()
         live = None if mode == 'off' else LiveAdaptation(p, names, submit=submit)
-        lat, work = np.zeros(t.size), np.zeros(t.size)
+        lat, work, cpu = np.zeros(t.size), np.zeros(t.size), np.zeros(t.size)
         decided: list[int] = []
-        longest = 0.0
+        longest = longest_step = 0.0
         start = time.perf_counter() + 0.02
-        end = start
         for k in range(t.size):
             deadline = start + k * dt
             if paced:
                 now = time.perf_counter()
                 if deadline > now:
                     time.sleep(deadline - now)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.thread_time()
             ns = BASE_NS + int(round(t[k] * 1e9))
             if live is None:
                 p.push(ns, float(x[k]))
+                answered = time.perf_counter()
             else:
                 pending = live.pending
-                _sample(p, live, ns, float(x[k]), names, meas)
+                answered = _sample(p, live, ns, float(x[k]), names, meas)
                 if live.pending is not None and live.pending is not pending:
                     decided.append(k)
                 if pending is not None and hasattr(pending.future, 'longest'):
                     longest = max(longest, pending.future.longest)
+                    longest_step = max(longest_step, pending.future.longest_step)
+            cpu[k] = time.thread_time() - c0
             t1 = time.perf_counter()
-            lat[k], work[k] = t1 - max(deadline, end) if paced else t1 - t0, t1 - t0
-            end = t1
+            lat[k], work[k] = answered - deadline if paced else t1 - t0, t1 - t0
         if pool is not None:
             pool.shutdown()
-        return {'lat': lat, 'work': work, 'decided': decided, 'longest': longest,
+        return {'lat': lat, 'work': work, 'cpu': cpu, 'decided': decided, 'longest': longest,
+                'longest_step': longest_step,
                 'steps': 0 if live is None else live.counters['switches'],
                 'late': 0 if live is None else live.counters['late_steps']}
 
@@ -397,16 +405,19 @@ def latency(args: argparse.Namespace, base: Config) -> None:
         lat = np.concatenate([r['lat'][ok] for r in rs])
         work = np.concatenate([r['work'][ok] for r in rs])
         near_w = np.concatenate([r['work'][ok & near] for r in rs])
+        near_c = np.concatenate([r['cpu'][ok & near] for r in rs])
         extra = '' if mode == 'off' else (
             f'; {rs[0]["steps"]} steps ({max(r["late"] for r in rs)} late)' +
-            (f', longest slice {max(r["longest"] for r in rs) * 1e3:.3f} ms'
+            (f', longest slice {max(r["longest"] for r in rs) * 1e3:.3f} ms (wall), longest '
+             f'step {max(r["longest_step"] for r in rs) * 1e3:.3f} ms'
              if mode == 'slices' else ''))
         print(f'  {mode:6s}: lateness p99 {np.quantile(lat, 0.99) * 1e3:.3f} ms (per round '
               f'{", ".join(f"{v * 1e3:.3f}" for v in p99[mode])}), p99.9 '
               f'{np.quantile(lat, 0.999) * 1e3:.3f} ms, worst {lat.max() * 1e3:.2f} ms; work '
               f'median {np.median(work) * 1e6:.0f} us, p99 near a step '
               f'{np.quantile(near_w, 0.99) * 1e3:.3f} ms, worst near a step '
-              f'{near_w.max() * 1e3:.2f} ms{extra}', flush=True)
+              f'{near_w.max() * 1e3:.2f} ms, its CPU time p99 near a step '
+              f'{np.quantile(near_c, 0.99) * 1e3:.3f} ms{extra}', flush=True)
     for mode in ('slices', 'worker'):
         ratios = [a / b for a, b in zip(p99[mode], p99['off'])]
         print(f'  p99 lateness {mode} / off: {np.median(ratios):.2f} (per round '

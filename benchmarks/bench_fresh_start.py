@@ -76,7 +76,7 @@ def stream(ctx: object, seconds: float) -> dict:
         answered.setdefault(ns, time.monotonic())
         e = JointState()
         e.header = msg.header
-        e.name, e.position = ['antenna'], [0.0]
+        e.name, e.position = ['antenna_joint'], [0.0]       # the config's encoder joint
         enc.publish(e)
 
     node.create_subscription(JointState, '/worm_gear_sim/compensated_command', on_answer, qos)

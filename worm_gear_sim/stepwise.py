@@ -24,8 +24,9 @@ __all__ = ['Steps', 'run_steps', 'Stepwise', 'SLICE_BUDGET']
 T = TypeVar('T')
 #: Work that yields between its steps and returns its result.
 Steps = Generator[None, None, T]
-#: The time one :meth:`Stepwise.advance` may spend [s] (a step started before the budget is
-#: spent runs to its end: each step of a preparation is ~0.05-0.4 ms on an idle core).
+#: The time one :meth:`Stepwise.advance` may spend [s]: another step is started only while
+#: the time spent plus the longest step so far stays within it (each step of a preparation
+#: is ~0.01-0.3 ms on an idle core; at least one step runs per call).
 SLICE_BUDGET = 0.0003
 
 
@@ -52,6 +53,7 @@ class Stepwise(Generic[T]):
         self._error: BaseException | None = None
         self.slices = 0              # calls of advance that ran a step
         self.longest = 0.0           # the longest slice [s]
+        self.longest_step = 0.0      # the longest step [s]
 
     def done(self) -> bool:
         return self._steps is None
@@ -66,19 +68,23 @@ class Stepwise(Generic[T]):
         return self._value
 
     def advance(self, budget: float | None = None) -> bool:
-        """Run steps until they are done or ``budget`` [s] (default :attr:`budget`) is
-        spent (at least one step); True when done."""
+        """Run steps until they are done or the next one might not end within ``budget``
+        [s] (default :attr:`budget`; the longest step so far is the guess; at least one
+        step); True when done."""
         steps = self._steps
         if steps is None:
             return True
         clock = self._clock
-        t0 = clock()
+        t0 = t = clock()
         end = t0 + (self.budget if budget is None else budget)
         try:
             while True:
                 next(steps)
-                if clock() >= end:
+                t1 = clock()
+                self.longest_step = max(self.longest_step, t1 - t)
+                if t1 + self.longest_step > end:
                     break
+                t = t1
         except StopIteration as stop:
             self._value, self._steps = stop.value, None
         except Exception as exc:  # noqa: BLE001 - re-raised by result(), as a future does

@@ -28,6 +28,7 @@ no kernel is compiled or loaded any more.
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 import warnings
@@ -69,6 +70,7 @@ def warm_up(cfg: Config, adaptation: bool = True) -> Warmed:
         _pipeline(cfg)
         if adaptation and cfg.adaptation.enabled:
             _adaptation(cfg)
+    gc.collect()      # the garbage of compiling (the node's process then freezes its heap)
     return Warmed(time.perf_counter() - t0, take_note())
 
 
