@@ -137,12 +137,14 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--seconds', type=float, default=30.0, help='the stream [30 s]')
     ap.add_argument('--domain-id', type=int, default=150)
+    ap.add_argument('--cache-dir', default='',
+                    help='NUMBA_CACHE_DIR of the node (default: a new empty folder)')
     ap.add_argument('--warm-too', action='store_true',
                     help='a second start with the cache the first one filled')
     args = ap.parse_args()
     import rclpy
     print(f'load average at start: {os.getloadavg()}', flush=True)
-    cache = tempfile.mkdtemp(prefix='bench_fresh_start_')
+    cache = args.cache_dir or tempfile.mkdtemp(prefix='bench_fresh_start_')
     env = dict(os.environ, NUMBA_CACHE_DIR=cache, ROS_DOMAIN_ID=str(args.domain_id),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1')
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'

