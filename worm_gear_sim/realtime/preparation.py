@@ -16,7 +16,6 @@ from typing import Any
 from ..compensation import Compensator
 from ..dynamics.model import DriveModel
 from ..dynamics.simulation import Simulator
-from ..dynamics.usability import usable_model
 from ..params import Config
 from ..stepwise import Steps
 from .outputs import Prepared
@@ -40,8 +39,7 @@ def prepare_steps(predictor: Any, config: DriveModel | Config, trial: Simulator 
     """:meth:`~.predictor.RealtimePredictor.prepare` of ``predictor`` in steps (it only
     reads the pipeline: its simulator, copied for the trial unless ``trial`` is given, and
     whether it compensates)."""
-    # (a Config just checked by Config.replace: the model its check built, shared)
-    model = config if isinstance(config, DriveModel) else usable_model(config)
+    model = DriveModel.of(config)         # (its config is the one given: not a cached one)
     yield
     sim = predictor.sim
     if sim is not None:
