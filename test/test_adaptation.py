@@ -226,7 +226,15 @@ def test_bad_samples_are_rejected_and_counted(live):
                             (BASE_NS + 500_000, names, [0.0, 0.0, 0.0])],
            'other_joint': [(BASE_NS + 3_000_000, ['elevation_joint'], [0.0])],
            'outside_prediction': [(BASE_NS + 50_000_000, names, [0.0, 0.0, 0.0])],
-           'malformed': [(BASE_NS + 3_000_000, names, [0.0])]}
+           'malformed': [(BASE_NS + 3_000_000, names, [0.0]),
+                         (BASE_NS + 3_000_000, [names[2], names[2]], [0.0, 1e-6])],
+           # less than half a command period (1 ms) after the sample used
+           'surplus': [(BASE_NS + 1_400_000, names, [0.0, 0.0, 1e-6])],
+           # farther than node.residual_plausible_max from the prediction: another drive's
+           # encoder, absurd finite values
+           'implausible': [(BASE_NS + 4_000_000, names, [0.0, 0.0, 3.0]),
+                           (BASE_NS + 4_000_000, names, [0.0, 0.0, 1e300]),
+                           (BASE_NS + 4_000_000, names, [0.0, 0.0, -1e150])]}
     for reason, samples in bad.items():
         for s in samples:
             assert live.measured(*s) == reason

@@ -166,7 +166,7 @@ def test_a_play_below_zero_taken_as_zero_keeps_the_offset(cfg):
     x = ad.theta.copy()
     x[lay.i_play] = -0.5 * math.sqrt(ad.P[lay.i_play, lay.i_play])    # within the bound
     x[lay.i_load] -= 0.5 * x[lay.i_play] / c                             # the same offset
-    cand, why = ad._bounded(x)
+    cand, why = ad.bounded(x)
     assert not why and cand[lay.i_play] == 0.0
     moved = abs(offset(cand) - offset(x))
     assert moved < 0.05 * 0.5 * abs(x[lay.i_play])       # zeroing alone: 0.5 |play|

@@ -83,6 +83,9 @@ def test_node_adaptation_equals_the_twin(ros_harness, twin, tmp_path):
     # one message per applied step, one per diagnostics period: the last is the newest
     assert h.spin_until(lambda: len(adapted) >= len(twin.steps) + 1)
     assert adapted[-1]['in_use'] == pytest.approx(twin.in_use, rel=1e-9)
+    # the estimate says whether it is plausible (docs/adaptation.md)
+    assert adapted[-1]['plausible'] == live.plausibility()[0] is True, live.plausibility()
+    assert adapted[-1]['plausibility'] == ''
     res = node.adaptation._on_write(None, type('R', (), {'success': False, 'message': ''})())
     assert res.success, res.message
     cfg = load_config(out_file)

@@ -3,10 +3,10 @@
 """The adapter's compiled sample (:mod:`worm_gear_sim.adaptation.per_sample`) against its
 Python twin (:class:`PythonAdapter` below: the per-sample rule written in Python, as the
 adapter ran it before it was compiled): the same stream through both gives the same
-estimate, covariance, windowed sums and per-sample state bit for bit, sample by sample,
-with every case met on the way (the model in use crossing its play, the flank-change
-events, the step detector finding the drive's crossings, the record full).  And the step
-detector's compiled look against a plain numpy line fit."""
+estimate, covariance, window (its triangular factor) and per-sample state bit for bit,
+sample by sample, with every case met on the way (the model in use crossing its play, the
+flank-change events, the step detector finding the drive's crossings, the record full).
+And the step detector's compiled look against a plain numpy line fit."""
 
 from __future__ import annotations
 
@@ -102,7 +102,7 @@ class PythonAdapter(Adapter):
         compliance = c_pos if w4 > 0.0 else c_neg if w4 < 0.0 else 0.5 * (c_pos + c_neg)
         s = self.settings
         lam = math.exp(-dt / s.window)
-        _sample_step(th, self.P, self._std2, self._phi, ax, self._S, self._b,
+        _sample_step(th, self.P, self._std2, self._phi, ax, self._R,
                      self._sc, lay.i_load, lay.i_drag, lay.i_play, lay.worm0, lay.worm_orders,
                      lay.gear0, lay.gear_orders, theta2, theta3, w4, flank, flank_m, torque,
                      compliance, theta4_meas - theta4_pred, dt / s.memory,
@@ -125,7 +125,7 @@ class PythonAdapter(Adapter):
 def _state(ad: Adapter) -> list[np.ndarray]:
     tm = ad._timing
     # (the scratch of the compiled sample, st[X_*], is its own)
-    return [ad.theta, ad.P, ad._S, ad._b, ad._sc, ad._st[:ps.X_DT], tm._ts, tm._a[:tm._n]]
+    return [ad.theta, ad.P, ad._R, ad._sc, ad._st[:ps.X_DT], tm._ts, tm._a[:tm._n]]
 
 
 def test_the_compiled_sample_equals_the_python_path(monkeypatch):

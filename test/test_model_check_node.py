@@ -116,3 +116,36 @@ def test_bad_measurements_rejected_and_counted(ros_harness):
     assert r.position[0] == pytest.approx(1e-6, abs=1e-15)
     assert r.header.stamp.sec * 10**9 + r.header.stamp.nanosec == last
     assert h.tick_to(T0_NS + 5 * TICK_NS)
+
+
+def test_glitches_a_joint_named_twice_and_a_flood_are_rejected_by_reason(ros_harness):
+    """Absurd finite values, another drive's encoder (+3 rad) and a joint named twice are
+    rejected (implausible, malformed), a burst of 20 samples per command period has one
+    used per period (surplus), the model check says WARN naming the implausible ones, and
+    what it shows is the good samples' residual."""
+    h = ros_harness()
+    names = Config().node.joint_names
+    th4 = []
+    for k in range(5):
+        assert h.command(0.01 * k)
+        assert h.tick_to(T0_NS + k * TICK_NS, timeout=60.0 if k == 0 else 5.0)
+        th4.append(h.joint_states[-1].position[3])
+    node = h.node
+
+    def measured(stamp_ns, nm, pos):         # the subscription's callback, in-process
+        m = h.JointState(name=list(nm), position=[float(p) for p in pos])
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(int(stamp_ns), 10**9)
+        node._on_measured(m)
+
+    at = T0_NS + 2 * TICK_NS
+    for value in (1e300, 1e150, th4[2] + 3.0):
+        measured(at, (names[3],), (value,))
+    measured(at, (names[3], names[3]), (th4[2], th4[2] + 1.0))
+    for j in range(20):                        # 20 samples within one period, 2e-6 off
+        measured(at + j * TICK_NS // 20, (names[3],),
+                 (th4[2] + j / 20 * (th4[3] - th4[2]) + 2e-6,))
+    _, msg, vals = _status(h)
+    assert vals['rejected_implausible'] == '3' and vals['rejected_malformed'] == '1'
+    assert vals['rejected_surplus'] == '18' and vals['samples'] == '2'
+    assert 'implausible' in msg
+    assert float(vals[f'residual_rms_{names[3]} [rad]']) == pytest.approx(2e-6, rel=1e-3)

@@ -363,6 +363,14 @@ class NodeSettings:
                                   'WARN when the windowed residual RMS of theta2, theta3 or '
                                   'theta4 exceeds its entry', 'rad', 0.0, 1e3, lo_open=True,
                                   length=3)
+    residual_plausible_max: float = _f(0.25, 'Live model check and adaptation: an encoder '
+                                       'sample (measured_joint_states) farther than this from '
+                                       'the prediction of its stamp on a joint they use is '
+                                       'rejected as implausible and counted: an encoder of '
+                                       'another drive, a wrapped or corrupted reading. About '
+                                       'twice the worst model error of the default drive '
+                                       '(docs/node.md)', 'rad', 0.0, 1e3, lo_open=True,
+                                       read_only=True)
     backdrive_margin_warn: float = _f(1.2, '/diagnostics turns WARN when the back-drive '
                                       'margin (~/backdrive_margin: the friction the mesh can '
                                       'hold over what the load would need to turn the worm '

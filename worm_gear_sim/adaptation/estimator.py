@@ -66,15 +66,16 @@ there instead of wandering.  The prior also gives the soft flank its sigma_tau. 
 per sample is an n x n update (n <= 2 (8 + 8) + 3), compiled.
 
 **When an adapted set is applied** (:meth:`Adapter.poll`, every ``step_interval``): the
-windowed mean square of the linearised residual (exponential window ``window``), plus the
-error a set would make by crossing the play at the wrong time at the measured flank
-changes, is computed for the current estimate, the model in use and the nominal (start)
-set; the estimate becomes the target only if it lowers the mean square by
-``min_improvement`` against the model in use and is not worse than the nominal one, after
-one window of data.  A noise-only residual gives no such gain (the in-sample gain of
-fitting n parameters to N samples of noise is n/N), so it changes nothing.  A play or drag
-estimate below zero within ``BOUND_SIGMAS`` standard deviations is taken as zero; further
-below, the target is refused (the reason is kept).  The model then moves to the target in
+windowed mean square of the linearised residual (exponential window ``window``, kept as a
+triangular factor: exact whatever the rows' sizes), plus the error a set would make by
+crossing the play at the wrong time at the measured flank changes, is computed for the
+current estimate, the model in use and the nominal (start) set; the estimate becomes the
+target only if it lowers the mean square by ``min_improvement`` against the model in use,
+is not worse than the nominal one and is plausible (:mod:`.plausibility`), after one window
+of data.  A noise-only residual gives no such gain (the in-sample gain of fitting n
+parameters to N samples of noise is n/N), so it changes nothing.  A play or drag estimate
+below zero within ``BOUND_SIGMAS`` standard deviations is taken as zero; further below,
+the target is refused (the reason is kept).  The model then moves to the target in
 steps: each step changes the static correction of the command by at most ``max_step`` [rad
 at the worm] (bounded with the sensitivities above), one step per ``step_interval``: no
 jump in the command.  A step spends that bound on the load and the drag first (they decide
@@ -99,7 +100,8 @@ from . import per_sample as ps
 from .flank_timing import STEP_GAP_WIDE, STEP_SIDE_WIDE, WINDOW, FlankTiming
 from .history import EstimateHistory
 from .layout import DRAG_KEY, LOAD_KEY, PLAY_KEY, Layout
-from .per_sample import _kalman_step, least_step, sample_head, sample_tail
+from .per_sample import _kalman_step, least_step, sample_head, sample_tail, window_norm
+from .plausibility import values_problem
 from .slots import Slot
 
 __all__ = ['FLANK_HOLD_OFF', 'output_compliance', 'Adapter', 'Decision']
@@ -164,13 +166,6 @@ def output_compliance(model: DriveModel, phases: int = 8) -> tuple[float, float]
     return out[0], out[1]
 
 
-def _window_ms(S: np.ndarray, b: np.ndarray, sc: np.ndarray, x: np.ndarray) -> float:
-    """Windowed mean square of y - phi^T x."""
-    if sc[1] <= 0.0:
-        return math.nan
-    return float(max(sc[0] - 2.0 * x @ b + x @ S @ x, 0.0) / sc[1])
-
-
 @dataclass
 class Decision:
     """What :meth:`Adapter.poll` asks the caller to do: apply ``overrides`` (the next step,
@@ -218,9 +213,8 @@ class Adapter:
         self.theta = np.zeros(n)
         self.P = np.zeros((n, n))
         self._phi = np.zeros(n)
-        self._S = np.zeros((n, n))
-        self._b = np.zeros(n)
-        self._sc = np.zeros(2)
+        self._R = np.zeros((n + 2, n + 1))    # the window's factor (per_sample._window_step)
+        self._sc = np.zeros(1)                # and its sum of weights
         self.samples_used = 0
         self.samples_skipped = 0
         self.flank_times = 0
@@ -246,8 +240,7 @@ class Adapter:
             self.nominal_x = self.applied_x.copy()
         self.theta[:] = self.applied_x
         self.P[:] = np.diag(self._std ** 2)
-        self._S[:] = 0.0
-        self._b[:] = 0.0
+        self._R[:] = 0.0
         self._sc[:] = 0.0
         self.target = None
         self._compliance = output_compliance(model)
@@ -274,8 +267,7 @@ class Adapter:
         self._cross_t = -math.inf         # the drive's last crossing, measured or estimated
         self._switches: collections.deque = collections.deque(maxlen=16)
         self._rate = 0.0
-        self._history = EstimateHistory((self.theta, self.P, self._S, self._b, self._sc),
-                                        DETECT_SPAN)
+        self._history = EstimateHistory((self.theta, self.P, self._R, self._sc), DETECT_SPAN)
         self._prev_x = self.applied_x.copy()
         lay = self.layout
         parts = [[i for i in (lay.i_load, lay.i_drag) if i >= 0],
@@ -308,7 +300,7 @@ class Adapter:
         model_flank_t = self._model_flank_t
         # (hist.theta, hist.P: the step detector's estimate, from before its window)
         args = (self._st, timing._ts, timing._a, self.theta, self.P, hist.theta, hist.P,
-                self._std2, self._phi, self.applied_x, self._S, self._b, self._sc, self._lay,
+                self._std2, self._phi, self.applied_x, self._R, self._sc, self._lay,
                 t, theta4_meas, theta2, theta3, theta4_pred)
         got = sample_head(*args)
         if got == ps.NEED_ROOM:                     # the record is full: room, then again
@@ -327,7 +319,7 @@ class Adapter:
         self._flank_time_update(t, drag)
         self._step_update(t, drag)
         return sample_tail(self._st, self.theta, self.P, self._std2, self._phi,
-                           self.applied_x, self._S, self._b, self._sc, self._lay, t,
+                           self.applied_x, self._R, self._sc, self._lay, t,
                            theta4_meas, theta2, theta3, theta4_pred) == ps.USED
 
     def _step_update(self, t: float, drag: float) -> None:
@@ -454,15 +446,12 @@ class Adapter:
         """Windowed RMS of the residual [rad] for the estimate, the model in use and the
         nominal set: the linearised residual of the samples used, plus the error of a
         mistimed crossing of the play at each measured flank change in the window."""
-        S, b, sc = self._S, self._b, self._sc
+        w = self._sc.item(0)
         out = {}
         for name, x in (('estimate', self.theta), ('applied', self.applied_x),
                         ('nominal', self.nominal_x)):
-            if sc[1] <= 0:
-                out[name] = math.nan
-                continue
-            ms = _window_ms(S, b, sc, x)
-            out[name] = math.sqrt(ms + self._crossing_ms(x) / sc[1])
+            out[name] = math.hypot(window_norm(self._R, x), math.sqrt(self._crossing_ms(x))) \
+                / math.sqrt(w) if w > 0.0 else math.nan
         return out
 
     def _crossing_ms(self, x: np.ndarray) -> float:
@@ -496,7 +485,8 @@ class Adapter:
             rms = self.window_rms()
             est, cur, nom = rms['estimate'], rms['applied'], rms['nominal']
             if est * est < (1.0 - s.min_improvement) * cur * cur and est <= nom:
-                cand, why = self._bounded(self.theta)
+                cand, why = self.bounded(self.theta)
+                why = why or values_problem(self.model, self.layout.overrides(cand))
                 if why:
                     self.refused(why)
                 else:
@@ -523,7 +513,7 @@ class Adapter:
                 break
         return Decision(step, self.layout.overrides(step), note)
 
-    def _bounded(self, x: np.ndarray) -> tuple[np.ndarray, str]:
+    def bounded(self, x: np.ndarray) -> tuple[np.ndarray, str]:
         """The candidate of estimate ``x``: a play or drag below zero by less than
         ``BOUND_SIGMAS`` standard deviations is set to zero (zero is within its
         uncertainty), the other values conditioned on it (x - P[:, i] x_i / P_ii: those it

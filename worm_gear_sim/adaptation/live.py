@@ -6,11 +6,13 @@
 (compensation applied to its simulated drive).  The caller hands it
 
 * every prediction (stamp, theta2..theta4) -> :meth:`predicted`;
-* every encoder message (stamp, joint names, positions) -> :meth:`measured`: checked
-  (non-finite values or stamp, a stamp not after the previous one, no antenna joint, outside
-  the stored predictions, names and positions of unequal length: rejected and counted by
-  reason, the estimate untouched), then it waits with the prediction of its stamp (which
-  does not change later) for its entry (below);
+* every encoder message (stamp, joint names, positions) -> :meth:`measured`: admitted by
+  the rule the live model check applies too
+  (:class:`~worm_gear_sim.realtime.encoder_admission.EncoderAdmission`, on the antenna
+  joint: non-finite, out of order, more than one per command period, malformed, no antenna
+  joint, outside the stored predictions, farther than ``node.residual_plausible_max`` from
+  the prediction: rejected and counted by reason, the estimate untouched), then it waits
+  with the prediction of its stamp (which does not change later) for its entry (below);
 
 and every time a prediction has been handed over, :meth:`step` with its stamp: the waiting
 samples enter the estimate, then the adapter may decide.
@@ -81,6 +83,7 @@ from typing import Any
 import numpy as np
 
 from ..params import Config, config_from_mapping
+from ..realtime.encoder_admission import ENCODER_REASONS, EncoderAdmission
 from ..realtime.predictor import Prepared, RealtimePredictor
 from ..realtime.preparation import prepare_steps
 from ..realtime.switch_interval import short_switch_interval
@@ -88,6 +91,7 @@ from ..schema import Parameters
 from ..stepwise import SLICE_BUDGET, Steps, Stepwise, run_steps
 from .estimator import Adapter
 from .learnt import carried_adapter, carried_values, carry_notes, format_value, touches_estimator
+from .plausibility import estimate_problem
 
 __all__ = ['LiveAdaptation', 'REJECT_REASONS', 'APPLY_LEAD', 'Submit', 'run_now',
            'in_worker', 'in_slices']
@@ -109,8 +113,7 @@ Submit = Callable[[Callable[[], Steps[Any]]], Any]
 #: sample wait up to 5-7 ms while the worker prepared: measured, bench_adaptation.py).
 
 #: Reasons an encoder sample is rejected (counted under ``rejected_<reason>``).
-REJECT_REASONS = ('non_finite', 'out_of_order', 'other_joint', 'outside_prediction',
-                  'malformed')
+REJECT_REASONS = ('other_joint', *ENCODER_REASONS)
 
 
 class LiveAdaptation:
@@ -140,7 +143,10 @@ class LiveAdaptation:
         self.last_refusal = ''
         self.last_note = ''
         self._base_ns: int | None = None
-        self._last_ns: int | None = None
+        node = predictor.config.node
+        self.admission = EncoderAdmission(
+            self.joint_names, (2,), 'other_joint', max_residual=node.residual_plausible_max,
+            period=int(round(1e9 / node.publish_rate_hz)))
         self._submit = submit or run_now
         self._lead_ns = int(round(APPLY_LEAD * 1e9))
         self._delay_ns = int(round(predictor.config.adaptation.sample_delay * 1e9))
@@ -164,7 +170,8 @@ class LiveAdaptation:
         self.adapter = Adapter(self.predictor.model, self.predictor.config.adaptation)
         self.waiting.clear()
         self.pending = None
-        self._base_ns = self._last_ns = None
+        self._base_ns = None
+        self.admission.reset()
         self._step_ns = -1
         self.last_note = ''
         self.counters['restarts'] += 1
@@ -189,6 +196,12 @@ class LiveAdaptation:
         assert self._base_ns is not None
         return (int(stamp_ns) - self._base_ns) * 1e-9
 
+    def _prediction(self, stamp_ns: int) -> tuple[float, float, float] | None:
+        """The stored prediction at ``stamp_ns`` (None outside them)."""
+        if self._base_ns is None:
+            return None
+        return self.history.at(self._seconds(stamp_ns))
+
     def _reject(self, reason: str) -> str:
         self.counters['rejected'] += 1
         self.counters[f'rejected_{reason}'] += 1
@@ -198,30 +211,18 @@ class LiveAdaptation:
                  ) -> str | None:
         """An encoder message; returns None (used or waiting) or the rejection reason."""
         self.counters['samples'] += 1
-        if len(names) != len(positions):
-            return self._reject('malformed')
         try:
-            k = (names if isinstance(names, (list, tuple)) else list(names)).index(
-                self.joint_names[2])
-        except ValueError:
-            return self._reject('other_joint')
-        try:
-            meas = float(positions[k])
             stamp_ns = int(stamp_ns)
         except (TypeError, ValueError, OverflowError):
             return self._reject('non_finite')
-        if not math.isfinite(meas) or stamp_ns <= 0:
+        if stamp_ns <= 0:
             return self._reject('non_finite')
-        if self._last_ns is not None and stamp_ns <= self._last_ns:
-            return self._reject('out_of_order')
-        if self._base_ns is None:
-            return self._reject('outside_prediction')
+        got = self.admission.admit(stamp_ns, names, positions, self._prediction)
+        if isinstance(got, str):
+            return self._reject(got)
+        meas = got[1][0]
+        theta2, theta3, theta4 = got[2]
         t = self._seconds(stamp_ns)
-        pred = self.history.at(t)
-        if pred is None:
-            return self._reject('outside_prediction')
-        self._last_ns = stamp_ns
-        theta2, theta3, theta4 = pred
         entry = stamp_ns + self._delay_ns
         if entry > self._step_ns:
             self.waiting.append((entry, t, meas, theta2, theta3, theta4))
@@ -380,6 +381,12 @@ class LiveAdaptation:
     def estimates(self) -> dict[str, Any]:
         return self.adapter.estimates()
 
+    def plausibility(self) -> tuple[bool, str]:
+        """(whether the estimate is plausible, why not: '' when it is):
+        :func:`~.plausibility.estimate_problem`.  An implausible estimate is never applied."""
+        why = estimate_problem(self.adapter)
+        return not why, why
+
     def status(self) -> tuple[str, str, dict[str, str]]:
         """(level OK/WARN, message, key values) for /diagnostics."""
         ad = self.adapter
@@ -389,6 +396,8 @@ class LiveAdaptation:
                                ('residual_rms_in_use [rad]', rms['applied']),
                                ('residual_rms_nominal [rad]', rms['nominal']))}
         values.update({k: str(v) for k, v in self.counters.items()})
+        plausible, why = self.plausibility()
+        values['estimate plausible'] = 'yes' if plausible else f'no: {why}'
         for k, v in ad.estimates().items():
             values[f'estimate {k}'] = format_value(v)
         for k, v in ad.applied_values().items():

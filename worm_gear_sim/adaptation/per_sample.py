@@ -1,10 +1,11 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """The adapter's per-sample work, compiled (:class:`~.estimator.Adapter`; :mod:`.estimator`'s
-docstring for what it computes): the regressors, the Kalman step, the windowed sums, and an
-encoder sample in one call (:func:`sample_head`, which ends with :func:`sample_tail`), or in
-two with the adapter's Python between them when the sample needs it (a flank-change event
-to measure, a step the detector found: a few per scan period).
+docstring for what it computes): the regressors, the Kalman step, the window (its triangular
+factor, :func:`_window_step`), and an encoder sample in one call (:func:`sample_head`,
+which ends with :func:`sample_tail`), or in two with the adapter's Python between them when
+the sample needs it (a flank-change event to measure, a step the detector found: a few per
+scan period).
 
 The adapter's per-sample scalars (the rates, the flanks, the hold-offs, the counts) live in
 one float array (``Adapter._st``, indices ``S_*``; ``X_*``: the head's values for the tail)
@@ -94,12 +95,12 @@ def _kalman_step(theta, P, q, p_max, phi, y, r_var, huber):
 
 
 @njit(cache=True)
-def _sample_step(th, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play, worm0, nw,
+def _sample_step(th, P, std2, phi, applied, R, sc, i_load, i_drag, i_play, worm0, nw,
                  gear0, ng, th2, th3, w4, flank, flank_m, torque, compliance, resid, forget,
                  lam, r_var, huber, sure):
     """One encoder sample into the estimate and the window (module docstring): the soft
     flank from the estimate's covariance, the regressors, y = r + phi^T theta_model (the
-    model's play on its own flank), forgetting, the Kalman step; the windowed sums with the
+    model's play on its own flank), forgetting, the Kalman step; the window's row with the
     estimate's hard flank (where it agrees with the model's, the model in use's linearised
     residual is the residual itself)."""
     soft = flank
@@ -128,20 +129,68 @@ def _sample_step(th, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play, wo
     _kalman_step(th, P, q, std2, phi, y, r_var, huber)
     if i_play >= 0:
         phi[i_play] = -0.5 * flank     # the window judges sets by the hard flank: for the
-    _window_step(S, b, sc, phi, y, lam)  # model in use (same flank) y - phi x is r itself
+    _window_step(R, sc, phi, y, lam)   # model in use (same flank) y - phi x is r itself
 
 
 @njit(cache=True)
-def _window_step(S, b, sc, phi, y, lam):
-    """Exponentially weighted sums: S = sum w phi phi^T, b = sum w phi y, sc = [sum w y^2,
-    sum w]."""
+def _window_step(R, sc, phi, y, lam):
+    """The exponentially weighted window of the rows [phi, y] (a row of age k weighs lam^k)
+    as its triangular factor: R[:m] (m = n + 1, upper triangular) with R^T R = sum w [phi,
+    y]^T [phi, y]; the rows so far scaled by sqrt(lam), then the new row rotated in (Givens,
+    R[m] its scratch).  The windowed residual of a set x is |R[:m] [x, -1]|
+    (:func:`window_norm`): no square expanded, so no cancellation between large terms, and
+    no square formed, so no overflow (the mean square from sums of phi phi^T, phi y and y^2
+    lost what a large y ever brought, and an infinite one for ever).  sc[0] = sum w."""
     n = phi.size
-    for i in range(n):
-        b[i] = lam * b[i] + phi[i] * y
-        for j in range(n):
-            S[i, j] = lam * S[i, j] + phi[i] * phi[j]
-    sc[0] = lam * sc[0] + y * y
-    sc[1] = lam * sc[1] + 1.0
+    m = n + 1
+    g = math.sqrt(lam)
+    for i in range(m):
+        for j in range(i, m):
+            R[i, j] *= g
+    row = R[m]
+    for j in range(n):
+        row[j] = phi[j]
+    row[n] = y
+    for i in range(m):
+        bi = row[i]
+        if bi == 0.0:
+            continue
+        a = R[i, i]
+        r = math.hypot(a, bi)
+        c = a / r
+        s = bi / r
+        R[i, i] = r
+        for j in range(i + 1, m):
+            rij = R[i, j]
+            xj = row[j]
+            R[i, j] = c * rij + s * xj
+            row[j] = c * xj - s * rij
+        row[i] = 0.0
+    sc[0] = lam * sc[0] + 1.0
+
+
+@njit(cache=True)
+def window_norm(R, x):
+    """|R[:m] [x, -1]| (m = x.size + 1): the root of the window's weighted sum of squared
+    residuals y - phi^T x (:func:`_window_step`), scaled by its largest entry (no
+    overflow)."""
+    n = x.size
+    m = n + 1
+    z = np.empty(m)
+    big = 0.0
+    for i in range(m):
+        v = -R[i, n]
+        for j in range(i, n):
+            v += R[i, j] * x[j]
+        z[i] = v
+        big = max(big, abs(v))
+    if big == 0.0 or not math.isfinite(big):
+        return big
+    acc = 0.0
+    for i in range(m):
+        q = z[i] / big
+        acc += q * q
+    return big * math.sqrt(acc)
 
 
 @njit(cache=True)
@@ -158,7 +207,7 @@ def least_step(theta, P, lay, play0):
 
 
 @njit(cache=True)
-def sample_head(st, ts, ta, theta, P, theta_d, P_d, std2, phi, applied, S, b, sc, lay, t, meas,
+def sample_head(st, ts, ta, theta, P, theta_d, P_d, std2, phi, applied, R, sc, lay, t, meas,
                 th2, th3, th4):
     """An encoder sample at ``t`` (measured theta4 ``meas``, the prediction theta2..theta4
     of that instant), up to the flank-change events: the rates (alpha4 low-passed), the
@@ -242,12 +291,11 @@ def sample_head(st, ts, ta, theta, P, theta_d, P_d, std2, phi, applied, S, b, sc
                        st[S_APPLIED_BOUND])[0]:
             return PYTHON                       # found: the caller measures with it
         ts[T_NEXT_LOOK] = t + STEP_STRIDE
-    return sample_tail(st, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3,
-                       th4)
+    return sample_tail(st, theta, P, std2, phi, applied, R, sc, lay, t, meas, th2, th3, th4)
 
 
 @njit(cache=True)
-def sample_tail(st, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, th3, th4):
+def sample_tail(st, theta, P, std2, phi, applied, R, sc, lay, t, meas, th2, th3, th4):
     """The rest of :func:`sample_head`'s sample (its values in ``st[X_*]``): skipped near a
     flank change (past, ahead, or a step of the model's hold-off), else into the filter
     and the window.  Returns USED or SKIPPED."""
@@ -274,7 +322,7 @@ def sample_tail(st, theta, P, std2, phi, applied, S, b, sc, lay, t, meas, th2, t
     # load's own uncertainty wide and the soft flank the play a noise for ever
     sure = i_play >= 0 and t - st[S_CROSS_T] > window and abs(load) > 2.0 * (
         max(drag, 0.0) * st[S_W_MAX] + st[S_INERTIA] * st[S_A_MAX])
-    _sample_step(theta, P, std2, phi, applied, S, b, sc, i_load, i_drag, i_play,
+    _sample_step(theta, P, std2, phi, applied, R, sc, i_load, i_drag, i_play,
                  lay[L_WORM0], lay[L_NW], lay[L_GEAR0], lay[L_NG], th2, th3, w4,
                  st[S_FLANK], st[S_FLANK_M], torque, compliance, meas - th4,
                  dt / st[S_MEMORY], lam, st[S_NOISE2], st[S_HUBER], sure)

@@ -15,10 +15,13 @@ pipeline, the same object the offline twin (``worm-gear-sim adapt``) drives:
   the sample callback only swaps (a step prepared late moves to the next fixed stamp and is
   counted, ``late_steps``);
 * every ``measured_joint_states`` message goes to it after the model check; a rejected
-  sample (non-finite, out of order, no antenna joint, outside the predictions) is counted
-  and logged once per LOG_THROTTLE_S;
+  sample (the admission's reasons: non-finite, out of order, surplus, malformed, no antenna
+  joint, outside the predictions, implausible) is counted and logged once per
+  LOG_THROTTLE_S per reason;
 * ``~/adapted_parameters`` (std_msgs/String, JSON, transient local, depth 1): the estimate
-  and the values in use, on every applied step, every diagnostics period and at the first
+  and the values in use, whether the estimate is plausible (``plausible``, and why not in
+  ``plausibility``: :mod:`worm_gear_sim.adaptation.plausibility`; an implausible estimate is
+  never applied), on every applied step, every diagnostics period and at the first
   late encoder sample and the first late step (so the last message's late counters are 0
   only if none came late).  A JSON
   text keeps the harmonics' arrays and the dotted names as they are in a params file;
@@ -74,12 +77,12 @@ PARAMS_FILE = 'adaptation.params_file'
 class NodeAdaptation:
     """The live adaptation of the drive node ``node`` (module docstring) beside its
     pipeline ``rt``; ``config``: the node's declared set at the start; ``warn(cause,
-    text)``: the node's throttled warning; ``publish(pub, msg)``: its counted publish;
+    text)``: the node's throttled warning (``text`` or a callable that makes it); ``publish(pub, msg)``: its counted publish;
     ``rebuild()``: prepares the node's declared set again and swaps it in (through
     :meth:`pipeline` and :meth:`swapped`, as a parameter set)."""
 
     def __init__(self, node: Node, rt: RealtimePredictor, config: Config,
-                 warn: Callable[[str, str], None], publish: Callable[[Any, Any], None],
+                 warn: Callable[[str, Any], None], publish: Callable[[Any, Any], None],
                  rebuild: Callable[[], None]) -> None:
         self.node, self.rt = node, rt
         self._warn, self._publish, self._rebuild = warn, publish, rebuild
@@ -142,8 +145,9 @@ class NodeAdaptation:
             self.publish()      # the first late sample: the node no longer equals the twin,
             #                     said at once (counters are cumulative)
         if reason is not None:
-            self._warn('adaptation_rejected', f'adaptation: rejected {MEASURED_TOPIC} sample '
-                       f'({reason}); {live.counters["rejected"]} so far')
+            self._warn('adaptation_' + reason, lambda: (
+                f'adaptation: rejected {MEASURED_TOPIC} sample ({reason}); '
+                f'{live.counters["rejected_" + reason]} so far'))
 
     # ---- parameter sets (the node's ParameterUpdates) -----------------------------------
     def pipeline(self, declared: Config, names: Collection[str]) -> Config:
@@ -196,9 +200,11 @@ class NodeAdaptation:
         live = self.live
         if live is None:
             return
+        plausible, why = live.plausibility()
         doc = {'stamp_ns': self._clock.now().nanoseconds, 'enabled': self.enabled,
-               'estimate': live.estimates(), 'in_use': live.adapter.applied_values(),
-               'counters': live.counters, 'last_refusal': live.last_refusal}
+               'estimate': live.estimates(), 'plausible': plausible, 'plausibility': why,
+               'in_use': live.adapter.applied_values(), 'counters': live.counters,
+               'last_refusal': live.last_refusal}
         self._publish(self._pub, String(data=json.dumps(doc)))
 
     def status(self, name: str) -> Any:

@@ -27,8 +27,10 @@ class LogThrottle:
         self._last: dict[str, int] = {}
         self._held: dict[str, int] = {}
 
-    def __call__(self, cause: str, text: str) -> str:
-        """The line to log now for ``cause`` ('' while throttled)."""
+    def __call__(self, cause: str, text: str | Callable[[], str]) -> str:
+        """The line to log now for ``cause`` ('' while throttled); ``text`` may be a
+        callable that makes the line, called only when it is logged (a flood of bad input
+        costs no formatting)."""
         now = time.monotonic_ns()
         last = self._last.get(cause)
         if last is not None and now - last < self.period_ns:
@@ -36,6 +38,8 @@ class LogThrottle:
             return ''
         self._last[cause] = now
         held = self._held.pop(cause, 0)
+        if not isinstance(text, str):
+            text = text()
         return f'{text} [{held} more like this held back]' if held else text
 
 

@@ -149,8 +149,7 @@ class WormGearSimNode(Node):
         self._last_watch_ns = 0
         self._period_ns = int(round(1e9 / cfg.node.publish_rate_hz))
         guard_clock_source(self, self._on_bad_clock)
-        self._check = ModelCheck(cfg.node.joint_names[1:], cfg.node.residual_window,
-                                 cfg.node.residual_warn_rms)
+        self._check = ModelCheck.of(cfg.node)
         self._antenna_joint = cfg.node.joint_names[3]
         self.publishing = PredictionPublishers(self, cfg.node.joint_names, self._publish)
         self._create_monitoring_publishers()
@@ -259,11 +258,12 @@ class WormGearSimNode(Node):
         self._warn('clock_rejected', f'rejected /clock message: {problem}; '
                    f'{self.counters["rejected_clock_messages"]} so far')
 
-    def _warn(self, cause: str, text: str) -> None:
+    def _warn(self, cause: str, text: Any) -> None:
         """Log ``text`` at most once per LOG_THROTTLE_S for each ``cause`` (a command
-        rejection never hides a parameter rejection or a simulation error)."""
-        self.last_error = text
+        rejection never hides a parameter rejection or a simulation error); ``text`` may be
+        a callable that makes it, called only when it is logged (a flood costs no text)."""
         line = self._throttle(cause, text)
+        self.last_error = text if isinstance(text, str) else line or self.last_error
         if line:
             self.get_logger().warning(line)
 
@@ -431,12 +431,14 @@ class WormGearSimNode(Node):
 
     def _residual(self, stamp: int, msg: JointState) -> None:
         """Residual measured - predicted at ``stamp`` on ~/prediction_residual; the model
-        check rejects and counts bad samples."""
-        try:
-            joints, residual = self._check.measured_message_ns(stamp, msg.name, msg.position)
-        except ValueError as exc:
-            self._warn('measured_rejected', f'rejected {MEASURED_TOPIC}: {exc}')
+        check's admission rejects and counts bad and surplus samples (a few comparisons
+        each)."""
+        check = self._check
+        got = check.offer_ns(stamp, msg.name, msg.position)
+        if isinstance(got, str):
+            self._warn('measured_' + got, lambda: check.rejection_text(got))
             return
+        joints, residual = got
         if self._pub_res.get_subscription_count():
             r = self._res
             r.header.stamp.sec, r.header.stamp.nanosec = divmod(stamp, NS)
