@@ -77,9 +77,10 @@ PARAMS_FILE = 'adaptation.params_file'
 class NodeAdaptation:
     """The live adaptation of the drive node ``node`` (module docstring) beside its
     pipeline ``rt``; ``config``: the node's declared set at the start; ``warn(cause,
-    text)``: the node's throttled warning (``text`` or a callable that makes it); ``publish(pub, msg)``: its counted publish;
-    ``rebuild()``: prepares the node's declared set again and swaps it in (through
-    :meth:`pipeline` and :meth:`swapped`, as a parameter set)."""
+    text)``: the node's throttled warning (``text`` or a callable that makes it);
+    ``publish(pub, msg)``: its counted publish; ``rebuild()``: prepares the node's declared
+    set again and swaps it in (through :meth:`pipeline` and :meth:`swapped`, as a parameter
+    set)."""
 
     def __init__(self, node: Node, rt: RealtimePredictor, config: Config,
                  warn: Callable[[str, Any], None], publish: Callable[[Any, Any], None],
