@@ -46,10 +46,10 @@ def run(seconds: float, flood: int, adaptation: bool) -> list[dict]:
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import JointState
 
-    from worm_gear_sim.ros.adaptation import AdaptiveNode
+    from worm_gear_sim.ros.node import WormGearSimNode
 
     rclpy.init()
-    node = AdaptiveNode(parameter_overrides=[
+    node = WormGearSimNode(parameter_overrides=[
         Parameter('adaptation.enabled', value=adaptation),
         Parameter('node.compensation_applied', value=True)])
     names = node.config.node.joint_names
@@ -74,7 +74,7 @@ def run(seconds: float, flood: int, adaptation: bool) -> list[dict]:
         """References k0 .. k0 + n_ms - 1, ``per_ms`` encoder messages per ms."""
         late, enc_cpu, ref_cpu, behind = [], 0, 0, 0
         rc, check = node.rt.counters, node._check
-        live = node.adaptation
+        live = node.adaptation.live
         c0 = rc['corrections']
         r0 = dict(check.rejections)
         a0 = dict(live.counters) if live is not None else {}
