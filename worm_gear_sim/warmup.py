@@ -131,11 +131,12 @@ def _adaptation(cfg: Config) -> None:
     ad = live.adapter
     t = float(ad._last_t) if math.isfinite(ad._last_t) else 0.0
     th2, th3, th4 = (float(v) for v in last)
-    per_sample.sample_tail(ad._st, ad.theta, ad.P, ad._std2, ad._phi, ad.applied_x, ad._S,
-                           ad._b, ad._sc, ad._lay, t, th4 + 1e-6, th2, th3, th4)
+    per_sample.sample_tail(ad._st, ad.theta, ad.P, ad._std2, ad._phi, ad.applied_x, ad._R,
+                           ad._sc, ad._lay, t, th4 + 1e-6, th2, th3, th4)
     ad._timing._next_look = -math.inf     # the step detector's look, due now
     ad._step_update(t, 0.0)
     phi = np.zeros(ad.layout.n)
     phi[0] = 1.0
     per_sample._kalman_step(ad.theta, ad.P, np.zeros(ad.layout.n), ad._std ** 2, phi,
                             abs(1e-6), 1e-14, 4.0)
+    per_sample.window_norm(ad._R, ad.theta)   # the window's residuals (diagnostics)
