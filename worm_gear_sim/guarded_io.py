@@ -19,6 +19,7 @@ import os
 import re
 import secrets
 import stat
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -115,7 +116,9 @@ def check_write_target(path: str | Path) -> Path:
     """The file :func:`write_text_durably` would write for ``path`` (``~`` expanded,
     symbolic links followed: a link keeps pointing at the file); GuardedFileError naming the
     reason if it is not a regular file or a new path in a writable directory (empty, a
-    directory, ``/``, a device, a FIFO, a socket, below a file).  Creates nothing."""
+    directory, ``/``, a device, a FIFO, a socket, below a file, a directory that takes no
+    new file such as ``/proc``).  Leaves nothing behind (a writable directory is probed by
+    creating and removing a file: :func:`_takes_a_file`)."""
     raw = os.fspath(path)
     if not raw.strip():
         raise GuardedFileError('empty path: name a file')
@@ -133,9 +136,21 @@ def check_write_target(path: str | Path) -> Path:
         parent = parent.parent
     if not parent.is_dir():
         raise GuardedFileError(f'{target}: {parent} is not a directory')
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not (os.access(parent, os.W_OK | os.X_OK) and _takes_a_file(parent)):
         raise GuardedFileError(f'{target}: directory {parent} is not writable')
     return target
+
+
+def _takes_a_file(directory: Path) -> bool:
+    """Whether a file can be created in ``directory`` now: a probe file created and removed
+    at once (as root, ``os.access`` says yes to ``/proc`` and to a read-only mount)."""
+    try:
+        fd, probe = tempfile.mkstemp(dir=directory, prefix='.write-probe-')
+    except OSError:
+        return False
+    os.close(fd)
+    os.unlink(probe)
+    return True
 
 
 def _kind(mode: int) -> str:

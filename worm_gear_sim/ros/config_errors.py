@@ -44,7 +44,8 @@ def check_params_files(argv: list[str]) -> str:
     return ''
 
 
-def config_error(text: str) -> int:
-    """Print the one-line start-up error and return :data:`EXIT_CONFIG_ERROR`."""
-    print(f'{PROGRAM}: error: {" ".join(str(text).split())}', file=sys.stderr, flush=True)
+def config_error(text: str, program: str = PROGRAM) -> int:
+    """Print the one-line start-up error of ``program`` and return
+    :data:`EXIT_CONFIG_ERROR`."""
+    print(f'{program}: error: {" ".join(str(text).split())}', file=sys.stderr, flush=True)
     return EXIT_CONFIG_ERROR

@@ -32,6 +32,10 @@ EncoderPlant`, the one the offline twin ``worm-gear-sim adapt`` steps).
   depth:=1000`` so that no encoder sample is lost (its default is the sensor-data profile,
   best effort, keep last 5).
 
+Start-up errors (a plant file the core refuses, an encoder noise that is not a number >= 0,
+a ``--record`` path where no file can be written, a malformed option): one line on stderr,
+exit code 2, before any ROS entity exists (:mod:`.config_errors`).
+
 ``--record``: on exit (SIGINT/SIGTERM) writes OUT.npz with, per command since the last
 (re)start, ``stamp_ns``, ``command``, ``theta4`` (the plant's, without noise) and
 ``measured``, plus ``base_ns`` and ``theta1_start`` (the reference it started at) and the
@@ -43,7 +47,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import rclpy
@@ -55,14 +59,18 @@ from sensor_msgs.msg import JointState
 
 from ..adaptation.plant import EncoderPlant
 from ..config_io import load_config
+from ..guarded_io import GuardedFileError, check_write_target
 from ..params import Config
 from ..topics import COMPENSATED_COMMAND_TOPIC, MEASURED_TOPIC, REFERENCE_TOPIC, private_topic
+from ..validation import ConfigError
 from .callbacks import stamp_ns
+from .config_errors import clean_rcl_message, config_error
 from .interface import REFERENCE_DEPTH
 
 __all__ = ['PlantNode', 'main', 'PLANT_NODE_NAME']
 
 PLANT_NODE_NAME = 'worm_gear_plant'
+PROGRAM = 'worm_gear_sim.ros.plant'
 #: Commands kept while the first reference has not come (the plant does not know its t = 0).
 MAX_EARLY = 1000
 #: References seen connected in a row before the plant starts (module docstring).
@@ -186,9 +194,19 @@ class PlantNode(Node):
                  **{f'counter_{k}': v for k, v in self.counters.items()})
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line (:func:`main`), not argparse's usage block."""
+
+    def error(self, message: str) -> NoReturn:
+        raise _StartupError(message)
+
+
+class _StartupError(Exception):
+    """A start-up error: one line, exit code 2 (:mod:`.config_errors`)."""
+
+
 def _parse(argv: list[str]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog='worm_gear_sim.ros.plant',
-                                 description=__doc__.split('\n\n')[0])
+    ap = _Parser(prog=PROGRAM, description=__doc__.split('\n\n')[0])
     ap.add_argument('--plant', required=True, metavar='PLANT.yaml',
                     help='the simulated drive (a params file)')
     ap.add_argument('--noise', type=float, default=1e-6, help='encoder noise RMS [1e-6 rad]')
@@ -202,12 +220,45 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     return ap.parse_args(argv)
 
 
+def _checked(argv: list[str]) -> tuple[argparse.Namespace, Config]:
+    """The options and the plant, checked before anything starts: the plant file (the
+    core's loader), the encoder's noise, resolution and seed (a trial of the core's
+    :class:`EncoderPlant`, which the first reference would otherwise build) and that
+    ``--record`` can be written; _StartupError naming the option otherwise."""
+    opts = _parse(argv)
+    try:
+        plant = load_config(opts.plant)
+    except (ConfigError, OSError) as exc:
+        raise _StartupError(f'--plant {opts.plant}: {exc}') from None
+    if opts.subscribers < 0:
+        raise _StartupError(f'--subscribers {opts.subscribers}: must be >= 0')
+    try:
+        EncoderPlant(plant, 0.0, noise=opts.noise, encoder_bits=opts.encoder_bits,
+                     seed=opts.seed)
+    except (ConfigError, ValueError, ArithmeticError) as exc:
+        raise _StartupError(f'the encoder (--noise, --encoder-bits, --seed): {exc}') from None
+    if opts.record:
+        try:
+            check_write_target(opts.record)
+        except GuardedFileError as exc:
+            raise _StartupError(f'--record {opts.record}: cannot write the record ({exc})'
+                                ) from None
+    return opts, plant
+
+
 def main(args: list[str] | None = None) -> int:
-    argv = sys.argv if args is None else args
-    opts = _parse(remove_ros_args(args=argv)[1:])
-    plant = load_config(opts.plant)
-    from .run import after_shutdown, leave, make_executor, spin_until_shutdown
-    rclpy.init(args=argv)
+    argv = list(sys.argv if args is None else args)
+    from .run import RCLError, after_shutdown, leave, make_executor, spin_until_shutdown
+    try:
+        opts, plant = _checked(remove_ros_args(args=argv)[1:])
+    except _StartupError as exc:
+        return config_error(str(exc), PROGRAM)
+    except RCLError as exc:
+        return config_error(clean_rcl_message(exc), PROGRAM)
+    try:
+        rclpy.init(args=argv)
+    except RCLError as exc:
+        return config_error(clean_rcl_message(exc), PROGRAM)
     node = ex = None
     try:
         node = PlantNode(plant, noise=opts.noise, encoder_bits=opts.encoder_bits,
