@@ -93,3 +93,49 @@ def test_a_decimated_record_says_so_in_the_sampling_verdict_and_the_report(monke
     assert rec.source == {data.FIT_EVERY: 4, data.RECORDED_SAMPLES: 1000}
     verdict = sampling_check(Config(), [rec])['theta4'].describe()
     assert 'the fit keeps every 4th sample of long, recorded at 10000 Hz' in verdict, verdict
+
+
+def test_a_mismatch_sweep_of_a_million_drives_is_refused_at_once(tmp_path):
+    """Each drive is a whole calibration (~24 s): 10^6 of them is refused before any work,
+    with the bound of the same home as the pass's (cli.limits)."""
+    from worm_gear_sim.cli.limits import MAX_MISMATCH_DRIVES
+    line = one_line_error(cli_in_process('sweep', 'mismatch', '-o', tmp_path, '--drives',
+                                         '1000000'),
+                          '--drives 1000000', 'days', f'at most {MAX_MISMATCH_DRIVES} drives')
+    assert 'calibration' in line
+    assert not any(tmp_path.iterdir())
+
+
+CALIBRATE = ('calibrate', '--fit', 'load.output_torque', '--plant')
+
+
+@pytest.mark.parametrize('args, fragments', [
+    (('--sample-rate', '1e8'), ('--sample-rate 1e+08 Hz', 'samples', 'GB of records',
+                                'at most 5e+06 samples')),
+    (('--measure', 'theta9'), ('--measure theta9', 'theta9 is not one of theta2, theta3, '
+                                                   'theta4')),
+    (('--measure', 'theta4', '--outputs', 'theta4,omega'), ('--outputs', 'omega')),
+    (('--noise', 'nan'), ('--noise nan',)),
+    (('--encoder-bits', '99'), ('--encoder-bits', '99')),
+])
+def test_calibrate_refuses_bad_recording_options_before_the_run(args, fragments, tmp_path):
+    from worm_gear_sim.config_io import default_config_path
+    r = cli_in_process(*CALIBRATE, default_config_path(), '-o', tmp_path / 'fitted.yaml',
+                       *args)
+    one_line_error(r, *fragments)
+    assert 'move ' not in r.stdout            # nothing designed was run
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize('where', ['/proc/worm_gear_sim/fitted.yaml', 'a_file/fitted.yaml',
+                                   'a_dir.yaml'])
+def test_calibrate_checks_its_output_path_before_the_run(where, tmp_path):
+    """An -o where the files cannot be written was found only after the whole run (a
+    traceback-free error, but after the fit): now at once, and nothing runs."""
+    from worm_gear_sim.config_io import default_config_path
+    (tmp_path / 'a_file').write_text('x')
+    (tmp_path / 'a_dir.yaml').mkdir()
+    out = where if where.startswith('/') else tmp_path / where
+    r = cli_in_process(*CALIBRATE, default_config_path(), '-o', out)
+    one_line_error(r, f'-o {out}', 'nothing was run')
+    assert 'move ' not in r.stdout

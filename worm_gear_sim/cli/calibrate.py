@@ -27,13 +27,15 @@ from pathlib import Path
 from typing import Any
 
 from ..config_io import load_config
+from ..guarded_io import output_path_problem
 from ..identification import FitOptions
 from ..validation import ConfigError
 from .common import CliError, add_config_options, config_from_args, fit_in_process, say
+from .limits import MAX_CALIBRATION_SAMPLES, check_work
 from .identify import _jsonable, write_params_yaml
 
 __all__ = ['register', 'cmd_calibrate', 'report_calibration', 'add_limit_options',
-           'limits_of']
+           'limits_of', 'angle_list']
 
 
 def register(subparsers: Any) -> None:
@@ -99,20 +101,73 @@ def limits_of(args: argparse.Namespace) -> Any:
     return Limits(args.max_angle, args.max_rate, args.max_accel, args.duration, args.start)
 
 
+def angle_list(text: str | None, option: str) -> tuple[str, ...] | None:
+    """``theta2,theta4`` -> ('theta2', 'theta4'), each one of the model's measurable angles
+    (``identification.OUTPUTS``); CliError naming ``option`` otherwise (None: not given).
+    Shared with ``worm_gear_sim_calibrate``."""
+    from ..identification import OUTPUTS
+    if text is None:
+        return None
+    names = tuple(dict.fromkeys(o.strip() for o in text.split(',') if o.strip()))
+    bad = [o for o in names if o not in OUTPUTS]
+    if bad or not names:
+        raise CliError(f'{option} {text}: ' + (f'{", ".join(bad)} is not' if bad else 'give')
+                       + f' one of {", ".join(OUTPUTS)} (comma-separated)')
+    return names
+
+
+def _check_outputs(out: Path, plot: bool) -> None:
+    """FITTED.yaml, its report and its figure can be written (before the run)."""
+    if out.suffix.lower() not in ('.yaml', '.yml'):
+        raise CliError(f'-o {out}: the fitted parameter file must end in .yaml')
+    for path in [out, out.with_suffix('.json')] + ([out.with_suffix('.png')] if plot else []):
+        why = output_path_problem(path)
+        if why:
+            raise CliError(f'-o {out}: {why}; nothing was run')
+
+
+def _check_record_size(moves: list, args: argparse.Namespace, columns: int) -> None:
+    """The records (or the exported series) of the designed moves at --sample-rate within
+    MAX_CALIBRATION_SAMPLES (.limits)."""
+    n = sum(int(math.floor(m.t_end * args.sample_rate + 1e-9)) + 1 for m in moves)
+    seconds = sum(m.t_end for m in moves)
+    check_work(f'--sample-rate {args.sample_rate:g} Hz', n, MAX_CALIBRATION_SAMPLES,
+               'samples', f'{len(moves)} moves of {seconds:.3g} s in all: {n:.3g} samples, '
+               f'~{n * columns * 8 / 1e9:.3g} GB of records',
+               'lower --sample-rate (the fit uses at most 200000 samples of a move) or '
+               '--duration')
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
+    from ..adaptation.plant import encoder_resolution
     from ..identification.calibrate import calibrate, excitation_series, plant_runner
     from ..identification.excitation import design_excitation
     cfg = config_from_args(args)
     keys = [k.strip() for item in args.fit for k in item.split(',') if k.strip()]
     out = Path(args.output)
-    if out.suffix.lower() not in ('.yaml', '.yml'):
-        raise CliError(f'-o {out}: the fitted parameter file must end in .yaml')
     if not (math.isfinite(args.sample_rate) and args.sample_rate > 0):
         raise CliError(f'--sample-rate {args.sample_rate!r}: must be a positive number')
     if not (math.isfinite(args.accept) and 0 < args.accept < 1):
         raise CliError(f'--accept {args.accept!r}: a share between 0 and 1')
+    measure = angle_list(args.measure, '--measure') or ('theta4',)
+    outputs = angle_list(args.outputs, '--outputs')
+    if not (math.isfinite(args.noise) and args.noise >= 0):
+        raise CliError(f'--noise {args.noise!r}: an encoder noise RMS >= 0 rad')
+    if args.seed < 0:
+        raise CliError(f'--seed {args.seed}: must be >= 0')
+    try:
+        res_bits = encoder_resolution(args.encoder_bits)
+    except ValueError as exc:
+        raise CliError(f'--encoder-bits: {exc}') from None
+    if args.export_excitation:
+        why = output_path_problem(args.export_excitation)
+        if why:
+            raise CliError(f'--export-excitation: {why}')
+    else:
+        _check_outputs(out, not args.no_plot)
     limits = limits_of(args)
     moves = design_excitation(limits, keys, cfg)   # IdentificationError: exit 2, one line
+    _check_record_size(moves, args, 2 + (0 if args.export_excitation else len(measure)))
     for m in moves:
         say(args, f'move {m.name} ({m.role}): {m.profile.describe()}, {m.t_end:.3f} s')
     if args.export_excitation:
@@ -131,15 +186,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         plant = load_config(args.plant)
     except (ConfigError, OSError) as exc:
         raise CliError(f'--plant {args.plant}: {exc}') from None
-    measure = tuple(o.strip() for o in args.measure.split(',') if o.strip())
-    res_bits = 2 * math.pi / 2 ** args.encoder_bits if args.encoder_bits > 0 else 0.0
     run = plant_runner(plant, args.sample_rate, measure, args.noise, res_bits, args.seed)
-    outputs = [o.strip() for o in args.outputs.split(',')] if args.outputs else None
     opt = FitOptions(strategy='robust', serial=fit_in_process(args),
                      workers=args.workers)
     t0 = time.perf_counter()
-    res = calibrate(cfg, keys, limits, run, options=opt, outputs=outputs,
-                    accept_rel=args.accept)
+    res = calibrate(cfg, keys, limits, run, options=opt,
+                    outputs=list(outputs) if outputs else None, accept_rel=args.accept)
     wall = time.perf_counter() - t0
     json_path, figures = report_calibration(
         res, cfg, keys, limits, out, f'plant {args.plant}',

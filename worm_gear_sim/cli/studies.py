@@ -17,6 +17,7 @@ from ..params import Config
 from ..records import write_csv_columns
 from ..studies import PAPER_STUDIES
 from .common import CliError, add_config_options, config_from_args, fmt_table, say
+from .limits import CALIBRATION_S_PER_DRIVE, MAX_MISMATCH_DRIVES, check_work, duration_text
 
 
 def register(sub: Any) -> None:
@@ -296,6 +297,11 @@ def _mismatch_study(args: argparse.Namespace, cfg: Config, outdir: Path) -> None
         raise CliError('--errors must be shares > -1 (e.g. -0.3,0,0.3)')
     if args.drives < 0:
         raise CliError(f'--drives {args.drives}: must be >= 0')
+    check_work(f'--drives {args.drives}', args.drives, MAX_MISMATCH_DRIVES, 'drives',
+               f'{args.drives} random drives, each a calibration of ~'
+               f'{CALIBRATION_S_PER_DRIVE:g} s (~'
+               f'{duration_text(args.drives * CALIBRATION_S_PER_DRIVE)} on one machine)',
+               'give fewer (runs with other --seed values add up)')
     moves = [m.strip() for m in args.moves.split(',') if m.strip()]
     if not moves or any(m not in MOVES for m in moves):
         raise CliError(f'--moves {args.moves!r}: choose from {", ".join(MOVES)}')

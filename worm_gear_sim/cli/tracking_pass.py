@@ -21,6 +21,7 @@ from ..studies.tracking_pass import PassResult, pass_window, stream_pass
 from ..studies.tracking_pass import evaluate_pass as _evaluate
 from ..trajectory_compensation import MAX_TRAJECTORY_POINTS
 from .common import CliError, fmt_table, say
+from .limits import MAX_PASS_COMPENSATED_S, MAX_PASS_TRAJECTORIES, check_work
 from .plotting import plot_pass
 
 __all__ = ['register', 'PASS_COLUMNS', 'write_pass', 'pass_table']
@@ -75,12 +76,6 @@ def write_pass(result: PassResult, out: Path, title: str) -> tuple[Path, Path]:
     return csv, plot_pass(result, out / 'pass.png', title)
 
 
-#: Bounds of the work of a pass (``--every`` small against ``--duration``): trajectories,
-#: and seconds of compensated trajectory in all (~0.1 s of CPU and ~50 kB kept per second).
-MAX_PASS_TRAJECTORIES = 1000
-MAX_PASS_COMPENSATED_S = 3600.0
-
-
 def _check(args: argparse.Namespace) -> None:
     for name in ('duration', 'chunk', 'every', 'waypoint_period', 'altitude'):
         v = getattr(args, name)
@@ -102,11 +97,12 @@ def _check(args: argparse.Namespace) -> None:
                        f'{args.chunk / args.waypoint_period:.6g} waypoints per --chunk, at '
                        f'most {MAX_TRAJECTORY_POINTS - 2}')
     n = math.ceil(args.duration / args.every) + 1
-    if n > MAX_PASS_TRAJECTORIES or n * args.chunk > MAX_PASS_COMPENSATED_S:
-        raise CliError(f'--every = {args.every:g} s: {n} trajectories of {args.chunk:g} s '
-                       f'({n * args.chunk:.6g} s to compensate); at most '
-                       f'{MAX_PASS_TRAJECTORIES} and {MAX_PASS_COMPENSATED_S:g} s: raise '
-                       '--every or shorten --chunk')
+    work = f'{n} trajectories of {args.chunk:g} s ({n * args.chunk:.6g} s to compensate)'
+    way_out = 'raise --every or shorten --chunk'
+    check_work(f'--every = {args.every:g} s', n, MAX_PASS_TRAJECTORIES, 'trajectories', work,
+               way_out)
+    check_work(f'--every = {args.every:g} s', n * args.chunk, MAX_PASS_COMPENSATED_S,
+               's to compensate', work, way_out)
 
 
 def cmd_pass(args: argparse.Namespace) -> int:
