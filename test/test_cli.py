@@ -145,6 +145,52 @@ def test_sweep_on_threads_equals_serial(tmp_path, capsys):
     assert a == (tmp_path / 'serial' / 'flywheel.csv').read_bytes()   # same numbers
 
 
+def test_sweep_checks_each_case_at_its_step_and_a_refused_case_fails_its_row(tmp_path,
+                                                                              capsys):
+    """A shaft 10 000 times stiffer is checked at the smaller step it runs at (it was refused
+    at the configured 4 us step, and that stopped the whole sweep, exit 2, nothing written);
+    a value the model refuses fails its own row (CSV column error, a line on stderr), the
+    others run, exit status 1."""
+    status, stdout, err = run(capsys, 'sweep', '--param', 'materials.worm_shaft_shear_modulus',
+                              '--values', '7.7e10,7.7e14,-1', '--end-time', '0.025',
+                              '--serial', '--no-progress', '-o', tmp_path)
+    assert status == 1, err
+    header, rows = read_csv(tmp_path / 'custom.csv')
+    by_label = {r[header.index('label')]: r for r in rows}
+    assert set(by_label) == {'7.7e10', '7.7e14', '-1'}
+    for label in ('7.7e10', '7.7e14'):
+        assert math.isfinite(float(by_label[label][header.index('amp4')]))
+        assert by_label[label][header.index('error')] == ''
+    assert 'must be > 0' in by_label['-1'][header.index('error')]
+    assert float(by_label['-1'][header.index('amp4')]) != float(by_label['-1'][
+        header.index('amp4')])                                          # nan
+    lines = err.strip().splitlines()
+    assert any('-1 failed' in ln and 'must be > 0' in ln for ln in lines), err
+    assert lines[-1].startswith('worm-gear-sim: 1 of 3 cases failed'), err
+    assert 'must be > 0' in stdout                      # the table's error column
+    assert_png(tmp_path / 'custom.png')
+
+
+def test_every_case_of_the_paper_studies_passes_the_check_at_its_step():
+    """``sweep all`` (the README's command) runs: no case of the paper's studies is refused
+    when checked as it runs (studies.case_config)."""
+    from worm_gear_sim.studies import PAPER_STUDIES, case_config, paper_study
+    cfg = Config()
+    for name in PAPER_STUDIES:
+        for c in paper_study(name, cfg).cases:
+            case_config(cfg, c.overrides)
+
+
+def test_sweep_help_names_the_default_engine_of_the_code(capsys):
+    from worm_gear_sim.studies.engine import DEFAULT_ENGINE, ENGINE_TEXT
+    status, out, _ = run(capsys, 'sweep', '--help')
+    assert status == 0
+    text = ' '.join(out.split())
+    assert f'Runs on {ENGINE_TEXT[DEFAULT_ENGINE]}' in text
+    assert f'(default: {DEFAULT_ENGINE})' in text
+    assert 'Dask LocalCluster with one worker process per core by default' not in text
+
+
 def test_sweep_user_parameter_with_compare(tmp_path, capsys):
     status, stdout, _ = run(capsys, 'sweep', '--param', 'mesh.phase_offset', '--values',
                             '0,3', '--compare', 'input.move_time=0.02,0.025', '--name',

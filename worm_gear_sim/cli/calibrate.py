@@ -31,8 +31,8 @@ from ..guarded_io import output_path_problem
 from ..identification import FitOptions
 from ..validation import ConfigError
 from .common import CliError, add_config_options, config_from_args, fit_in_process, say
-from .limits import MAX_CALIBRATION_SAMPLES, check_work
 from .identify import _jsonable, write_params_yaml
+from .limits import MAX_CALIBRATION_SAMPLES, check_work
 
 __all__ = ['register', 'cmd_calibrate', 'report_calibration', 'add_limit_options',
            'limits_of', 'angle_list']

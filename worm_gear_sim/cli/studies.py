@@ -1,12 +1,14 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """``experiment`` (the paper's Sec. 3) and ``sweep`` (Sec. 4 parametric studies, any
-parameter, on Dask)."""
+parameter, on threads or Dask)."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
+import sys
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -16,7 +18,8 @@ from ..config_io import check_key, params_document, params_json_dump, typed_valu
 from ..params import Config
 from ..records import write_csv_columns
 from ..studies import PAPER_STUDIES
-from .common import CliError, add_config_options, config_from_args, fmt_table, say
+from ..studies.engine import DEFAULT_ENGINE, ENGINE_TEXT, ENGINES
+from .common import PROG, CliError, add_config_options, config_from_args, fmt_table, say
 from .limits import CALIBRATION_S_PER_DRIVE, MAX_MISMATCH_DRIVES, check_work, duration_text
 
 
@@ -41,7 +44,10 @@ def register(sub: Any) -> None:
                        description='Parametric studies (paper Figs. 12-18) or a sweep of any '
                        'parameter. Output per study: <study>.csv (max oscillation amplitudes '
                        'of theta2 and theta4 after the move, and more) and <study>.png. Runs '
-                       'on a Dask LocalCluster with one worker process per core by default.')
+                       f'on {ENGINE_TEXT[DEFAULT_ENGINE]}, one per core, by default '
+                       '(--engine). A case the model refuses (checked at the step it runs '
+                       'at) or that fails fails its own row (column error, and a line on '
+                       'stderr); the others run; exit status 1 then.')
     add_config_options(p)
     p.add_argument('study', nargs='*', metavar='STUDY',
                    help=f'{", ".join(PAPER_STUDIES)} or all; or play / gust: the antenna '
@@ -66,9 +72,9 @@ def register(sub: Any) -> None:
     p.add_argument('--workers', '-j', type=int, metavar='N',
                    help='threads (--engine threads) or LocalCluster worker processes '
                    '(--engine dask); default: all cores')
-    p.add_argument('--engine', choices=('threads', 'dask'), default='threads',
-                   help='cases on threads of this process (default) or on a Dask '
-                   'LocalCluster of processes')
+    p.add_argument('--engine', choices=ENGINES, default=DEFAULT_ENGINE,
+                   help='; '.join(f'{k}: {v}' for k, v in ENGINE_TEXT.items())
+                   + ' (default: %(default)s)')
     p.add_argument('--scheduler', metavar='ADDRESS', help='run on an existing Dask cluster, '
                    'e.g. tcp://10.0.0.5:8786 (workers need worm_gear_sim installed)')
     p.add_argument('--serial', action='store_true', help='run in this process, one case '
@@ -149,7 +155,7 @@ def _write_traces(trajs: Mapping[str, Any], path: Path, every: int) -> None:
 SWEEP_COLUMNS: tuple[str, ...] = (
     'study', 'series', 'label', 'x', 'amp2', 'amp3', 'amp4', 'half_pp2', 'half_pp4', 'eq2',
     'eq4', 'mean2', 'mean4', 'freq2_hz', 'freq4_hz', 'max_err2', 'max_err4', 'decay4', 'J_4',
-    'ratio', 't_move', 't_end', 'steps', 'subdivision_events', 'overrides',
+    'ratio', 't_move', 't_end', 'steps', 'subdivision_events', 'overrides', 'error',
 )
 
 
@@ -183,11 +189,24 @@ def _sweep_studies(args: argparse.Namespace, cfg: Config) -> list:
                        'give --param PATH --values V1,V2,...')
     if args.compare:
         studies = [_with_compare(s, args.compare, cfg) for s in studies]
-    # validate every case before starting workers (a bad value fails fast, in one line)
-    for st in studies:
-        for c in st.cases:
-            cfg.replace(dict(c.overrides))
     return studies
+
+
+def _refused(cfg: Config, studies: list) -> dict[int, str]:
+    """Each case checked as it will run (``studies.case_config``: at the smaller step a stiff
+    case needs), before any runs: the index among all cases -> why it is refused."""
+    from ..studies import case_config
+    from ..studies.engine import CASE_ERRORS, case_error
+    out = {}
+    cases = [c for st in studies for c in st.cases]
+    for i, c in enumerate(cases):
+        try:
+            case_config(cfg, dict(c.overrides))
+        except CASE_ERRORS as exc:
+            out[i] = case_error(exc)
+    if len(out) == len(cases):
+        raise CliError(f'every case refused ({len(cases)}); the first: {out[0]}')
+    return out
 
 
 def _with_compare(study, spec: str, cfg: Config):
@@ -405,19 +424,28 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         _error_studies(args, cfg, list(dict.fromkeys(special)))
         return 0
     studies = _sweep_studies(args, cfg)
+    all_cases = [c for st in studies for c in st.cases]
+    refused = _refused(cfg, studies)
     outdir = Path(args.out_dir)
     outdir.mkdir(parents=True, exist_ok=True)
-    all_cases = [c for st in studies for c in st.cases]
     n_workers = args.workers or default_workers()
     engine = ('this process' if args.serial else f'Dask scheduler {args.scheduler}'
               if args.scheduler else f'{n_workers} threads' if args.engine == 'threads' else
               f'Dask LocalCluster, {n_workers} worker processes')
     say(args, f'{len(all_cases)} cases in {len(studies)} '
-         f'stud{"y" if len(studies) == 1 else "ies"} on {engine}')
+         f'stud{"y" if len(studies) == 1 else "ies"} on {engine}'
+         + (f' ({len(refused)} refused before the run: rows with an error)' if refused
+            else ''))
     t0 = time.perf_counter()
-    rows = run_cases(cfg, all_cases, workers=args.workers, scheduler=args.scheduler,
-                     serial=args.serial, progress=not args.no_progress,
-                     engine=args.engine)
+    ran = iter(run_cases(cfg, [c for i, c in enumerate(all_cases) if i not in refused],
+                         workers=args.workers, scheduler=args.scheduler, serial=args.serial,
+                         progress=not args.no_progress, engine=args.engine,
+                         failed_rows=True))
+    rows = [_failed_row(c, refused[i]) if i in refused else next(ran)
+            for i, c in enumerate(all_cases)]
+    for r in rows:
+        if r.get('error'):
+            r.update({k: math.nan for k in _METRICS if k not in r})
     wall = time.perf_counter() - t0
     params_json_dump(params_document(cfg), outdir / 'sweep_params.json')
     k = 0
@@ -429,11 +457,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         rows_to_csv(part, SWEEP_COLUMNS, csv_path)
         plot_sweep(part, png_path, st.title, st.x_label, st.x_log, st.categorical)
         say(args, f'\n{st.title}')
-        say(args, fmt_table(part, [('series', 'series', ''), ('label', 'case', ''),
-                                     ('amp2', 'amp theta2 [rad]', '.4e'),
-                                     ('amp4', 'amp theta4 [rad]', '.4e'),
-                                     ('freq4_hz', 'f4 [Hz]', '.2f'),
-                                     ('max_err4', 'max|err4| [rad]', '.4e')]))
+        cols = [('series', 'series', ''), ('label', 'case', ''),
+                ('amp2', 'amp theta2 [rad]', '.4e'), ('amp4', 'amp theta4 [rad]', '.4e'),
+                ('freq4_hz', 'f4 [Hz]', '.2f'), ('max_err4', 'max|err4| [rad]', '.4e')]
+        if any(r.get('error') for r in part):
+            cols.append(('failed', 'error', ''))
+        say(args, fmt_table([{**r, 'failed': _short(r.get('error', ''))} for r in part],
+                            cols))
         say(args, f'wrote {csv_path}, {png_path}')
         if args.compare:
             env = envelope_rows(part)
@@ -451,13 +481,36 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                                         ('amp4', 'amp theta4 [rad]', '.4e'),
                                         ('amp4_at', 'at', '')]))
             say(args, f'wrote {env_csv}, {env_png}')
-        if args.traces and len(st.cases) <= 8:
-            _sweep_traces(cfg, st, outdir / f'{st.name}_traces.png')
+        ok = [c for c, r in zip(st.cases, part) if not r.get('error')]
+        if args.traces and ok and len(st.cases) <= 8:
+            _sweep_traces(cfg, dataclasses.replace(st, cases=tuple(ok)),
+                          outdir / f'{st.name}_traces.png')
             say(args, f'wrote {outdir / (st.name + "_traces.png")}')
     kernel = sum(r.get('kernel_s', 0.0) for r in rows)
     say(args, f'\n{len(rows)} cases in {wall:.2f} s wall ({len(rows) / wall:.2f} cases/s; '
          f'integration time summed over the cases {kernel:.2f} s)')
+    failed = [r for r in rows if r.get('error')]
+    for r in failed:
+        print(f'{PROG}: case {r["study"]} / {r["series"]} / {r["label"]} failed: '
+              f'{r["error"]}', file=sys.stderr)
+    if failed:
+        print(f'{PROG}: {len(failed)} of {len(rows)} cases failed (their rows hold the '
+              'reason in the column error); the others ran', file=sys.stderr)
+        return 1
     return 0
+
+
+#: The metric columns of a sweep row (nan in a failed case's row).
+_METRICS = SWEEP_COLUMNS[SWEEP_COLUMNS.index('amp2'):SWEEP_COLUMNS.index('overrides')]
+
+
+def _failed_row(case: Any, error: str) -> dict[str, Any]:
+    return {'study': case.study, 'series': case.series, 'x': case.x, 'label': case.label,
+            'overrides': dict(case.overrides), 'error': error}
+
+
+def _short(text: str, width: int = 60) -> str:
+    return text if len(text) <= width else text[:width - 3] + '...'
 
 
 def _sweep_traces(cfg: Config, study, path: Path) -> None:

@@ -224,9 +224,12 @@ ENVELOPE_COLUMNS: tuple[str, ...] = ('study', 'series', 'label', 'x', 'amp2', 'a
 def envelope_rows(rows: Sequence[Mapping[str, Any]], sep: str = COMPARE_SEP) -> list[dict]:
     """Worst case over a ``--compare`` family: rows whose series read ``'<base> | k=v'`` are
     grouped by (base series, label) and reduced to the maximum amplitudes, with the compared
-    value that produced each maximum (``amp2_at``, ``amp4_at``)."""
+    value that produced each maximum (``amp2_at``, ``amp4_at``).  Rows of failed cases
+    (an ``error``) are left out."""
     groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
     for r in rows:
+        if r.get('error'):
+            continue
         base, _, tag = str(r['series']).partition(sep)
         groups.setdefault((base, str(r['label'])), []).append({**r, '_tag': tag})
     out = []

@@ -19,15 +19,21 @@ from ..dynamics.modal import amplitude_time_step, static_equilibrium
 from ..dynamics.model import DriveModel
 from ..dynamics.profiles import Profile, make_profile
 from ..dynamics.simulation import Simulator
+from ..dynamics.stepping import SimulationError
 from ..params import Config, config_from_mapping
 from .cases import Case
 from .metrics import move_end_time, oscillation_metrics
 
 __all__ = ['run_case', 'run_cases', 'case_config', 'warm_up', 'local_cluster_client',
-           'WORKER_ENV', 'ENGINES']
+           'WORKER_ENV', 'ENGINES', 'DEFAULT_ENGINE', 'ENGINE_TEXT', 'CASE_ERRORS', 'case_error']
 
-#: Engines of :func:`run_cases` on this machine: threads (default) or a Dask LocalCluster.
+#: Engines of :func:`run_cases` on this machine: threads of this process or a Dask
+#: LocalCluster of processes; the default is :data:`DEFAULT_ENGINE`.
 ENGINES = ('threads', 'dask')
+DEFAULT_ENGINE = 'threads'
+#: What each engine is, for a person (``sweep --help``).
+ENGINE_TEXT = {'threads': 'threads of this process (the kernel releases the interpreter lock)',
+               'dask': 'a Dask LocalCluster of worker processes'}
 
 
 # ---- running one case ---------------------------------------------------------------------
@@ -97,10 +103,26 @@ def run_case(base: Config | Mapping[str, Any], overrides: Mapping[str, Any] | No
     return out
 
 
+#: What a case can fail with on its own (a ConfigError naming the key, a SimulationError,
+#: a numerically unusable set): with ``failed_rows`` the case's row says it, the others run.
+CASE_ERRORS: tuple[type[BaseException], ...] = (ValueError, ArithmeticError, SimulationError)
+
+
+def case_error(exc: BaseException) -> str:
+    """A case's failure in one line (the row's ``error``)."""
+    return ' '.join(str(exc).split()) or type(exc).__name__
+
+
 def _run_payload(payload: tuple) -> dict[str, Any]:
-    """Run one case: (index, base nested dict, overrides, t_end) -> result dict."""
-    index, base, overrides, t_end = payload
-    res = run_case(base, overrides, t_end)
+    """Run one case: (index, base nested dict, overrides, t_end, failed_rows) -> result
+    dict; with ``failed_rows`` a case that fails returns ``{'error': its reason}``."""
+    index, base, overrides, t_end, failed_rows = payload
+    try:
+        res = run_case(base, overrides, t_end)
+    except CASE_ERRORS as exc:
+        if not failed_rows:
+            raise
+        res = {'error': case_error(exc)}
     res['index'] = index
     return res
 
@@ -108,7 +130,7 @@ def _run_payload(payload: tuple) -> dict[str, Any]:
 def _run_chunk(base: Mapping[str, Any], items: Sequence[tuple]) -> list[dict[str, Any]]:
     """Worker entry point: several cases sharing one base config (fewer, larger tasks keep
     the scheduler's per-task cost small against ~50 ms cases)."""
-    return [_run_payload((i, base, ov, t_end)) for i, ov, t_end in items]
+    return [_run_payload((i, base, ov, t_end, rows)) for i, ov, t_end, rows in items]
 
 
 # ---- running many cases -------------------------------------------------------------------
@@ -128,7 +150,8 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
               scheduler: str | None = None, serial: bool = False, progress: bool = False,
               t_end: float | None = None, client: Any = None, chunk_size: int | None = None,
               on_result: Callable[[dict], None] | None = None,
-              engine: str = 'threads') -> list[dict[str, Any]]:
+              engine: str = DEFAULT_ENGINE, failed_rows: bool = False
+              ) -> list[dict[str, Any]]:
     """Run the cases and return one result dict per case, in case order.
 
     Engines: ``serial=True`` runs in this process, one case after the other; ``client`` uses
@@ -141,13 +164,14 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
     once (as a plain dict); each task carries a chunk of cases (their overrides; default
     chunk: about 16 tasks per worker, at most 16 cases) and returns only their metrics.
     A case that fails raises its own error (a ConfigError naming the key, a
-    SimulationError) on every engine.  Results do not depend on the engine (same code, same
-    arithmetic, bit for bit).
+    SimulationError) on every engine; with ``failed_rows`` (:data:`CASE_ERRORS`) its row
+    holds ``error`` (the reason, one line) instead, and the other cases run.  Results do
+    not depend on the engine (same code, same arithmetic, bit for bit).
     """
     if engine not in ENGINES:
         raise ValueError(f'engine {engine!r}: one of {", ".join(ENGINES)}')
     base_map = base.to_nested_dict()
-    items = [(i, dict(c.overrides), t_end) for i, c in enumerate(cases)]
+    items = [(i, dict(c.overrides), t_end, failed_rows) for i, c in enumerate(cases)]
     results: list[dict[str, Any] | None] = [None] * len(cases)
     studies = list(dict.fromkeys(c.study for c in cases))
     bar = None
@@ -166,11 +190,11 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
     try:
         if serial:
             start_bar()
-            for i, ov, te in items:
-                done(_run_payload((i, base_map, ov, te)))
+            for it in items:
+                done(_run_payload((it[0], base_map, *it[1:])))
         elif client is None and scheduler is None and engine == 'threads':
             start_bar()
-            map_like_serial(lambda it: _run_payload((it[0], base_map, it[1], it[2])), items,
+            map_like_serial(lambda it: _run_payload((it[0], base_map, *it[1:])), items,
                             workers=workers, on_result=lambda _, r: done(r))
         else:
             with _dask_client(client, scheduler, workers) as cl:
