@@ -107,12 +107,13 @@ def _stride(args: argparse.Namespace, dt: float) -> tuple[int, str]:
         if args.record_every < 1:
             raise CliError('--record-every must be >= 1')
         return args.record_every, f'every {args.record_every} step(s)'
+    from ..dynamics.simulation import record_stride
     rate = DEFAULT_OUTPUT_RATE if args.output_rate is None else args.output_rate
     if not math.isfinite(rate) or rate < 0:
         raise CliError(f'--output-rate must be >= 0 Hz, got {rate!r}')
-    if rate == 0 or rate * dt >= 1.0:
+    n = record_stride(dt, 1.0 / rate if rate > 0 else 0.0)
+    if n == 1:
         return 1, f'every step ({1 / dt:g} Hz)'
-    n = max(1, int(round(1.0 / (rate * dt))))
     return n, f'{1 / (n * dt):g} Hz (every {n} steps; --output-rate 0 for every step)'
 
 

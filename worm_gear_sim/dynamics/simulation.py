@@ -14,6 +14,7 @@ likely cause of a failed integration in its :class:`SimulationError`.  What a ru
 
 from __future__ import annotations
 
+import math
 import warnings
 from pathlib import Path
 
@@ -31,7 +32,7 @@ from .trajectory import (
 )
 from .usability import check_usable, diagnose
 
-__all__ = ['Simulator', 'simulate', 'simulate_to_csv', 'KEEP_ROWS']
+__all__ = ['Simulator', 'simulate', 'simulate_to_csv', 'KEEP_ROWS', 'record_stride']
 
 
 class Simulator(Stepper):
@@ -82,20 +83,35 @@ class Simulator(Stepper):
 KEEP_ROWS = 200_000
 
 
+def record_stride(dt: float, record_dt: float | None = None, record_every: int = 1) -> int:
+    """Integration steps per recorded row: ``record_every``, or with ``record_dt`` [s] the
+    whole number of steps of ``dt`` nearest to it (at least 1: every step).  The one rule of
+    :func:`simulate`, :func:`simulate_to_csv` and ``worm-gear-sim simulate --output-rate``."""
+    if record_dt is None:
+        return int(record_every)
+    if not (math.isfinite(record_dt) and record_dt >= 0):
+        raise ValueError(f'record_dt must be a time step >= 0 s, got {record_dt!r}')
+    return max(1, int(round(record_dt / dt)))
+
+
 def simulate(model: DriveModel | Parameters, profile: Profile | None = None,
              t_end: float | None = None, record_every: int = 1,
              theta1_initial: float | None = None,
-             max_bytes: float | None = None, load: LoadSignal | None = None) -> Trajectory:
+             max_bytes: float | None = None, load: LoadSignal | None = None, *,
+             record_dt: float | None = None) -> Trajectory:
     """Batch run of ``model`` (a :class:`DriveModel` or a Config) from rest: the config's
     input profile (or ``profile``) to ``t_end``, in memory (up-front ValueError beyond
-    ``max_bytes``, see :meth:`Simulator.run`; long runs: :func:`simulate_to_csv`).
-    ``load``: a load torque signal (:mod:`worm_gear_sim.dynamics.load`) in place of the constant
-    ``load.output_torque``; the drive starts at rest under its value at t = 0."""
+    ``max_bytes``, see :meth:`Simulator.run`; long runs: :func:`simulate_to_csv`).  A row
+    every ``record_every`` steps, or about every ``record_dt`` seconds
+    (:func:`record_stride`).  ``load``: a load torque signal
+    (:mod:`worm_gear_sim.dynamics.load`) in place of the constant ``load.output_torque``;
+    the drive starts at rest under its value at t = 0."""
     config = model.config if isinstance(model, DriveModel) else model
     profile = profile if profile is not None else make_profile(config.input)
     t_end = config.input.end_time if t_end is None else t_end
+    stride = record_stride(config.integrator.time_step, record_dt, record_every)
     sim = _at_rest(model, profile, theta1_initial, load)
-    return sim.run(profile, t_end, record_every, max_bytes=max_bytes, load=load)
+    return sim.run(profile, t_end, stride, max_bytes=max_bytes, load=load)
 
 
 def _at_rest(model: DriveModel | Parameters, profile: Profile, theta1_initial: float | None,
@@ -116,16 +132,20 @@ def simulate_to_csv(model: DriveModel | Parameters, path: str | Path,
                     profile: Profile | None = None, t_end: float | None = None,
                     record_every: int = 1, theta1_initial: float | None = None,
                     header_comment: str = '', keep_rows: int = KEEP_ROWS,
-                    chunk_steps: int = 1 << 16, load: LoadSignal | None = None) -> Trajectory:
+                    chunk_steps: int = 1 << 16, load: LoadSignal | None = None, *,
+                    record_dt: float | None = None) -> Trajectory:
     """:func:`simulate` streamed to a CSV file in chunks: memory stays bounded whatever the
     duration.  Returns a thinned Trajectory (every k-th recorded row, at most about
     ``keep_rows`` rows, always the last) for plots and metrics; the file has every
-    recorded row and equals ``simulate(...).to_csv(path)``."""
+    recorded row and equals ``simulate(...).to_csv(path)``.  The file grows by ~400 bytes
+    per row: by default every step is a row (250 000 per simulated second at 4 us, ~100 MB);
+    ``record_dt`` (e.g. 1e-3: a row per millisecond, 0.4 MB per simulated second) or
+    ``record_every`` keep fewer (:func:`record_stride`)."""
     config = model.config if isinstance(model, DriveModel) else model
     profile = profile if profile is not None else make_profile(config.input)
     t_end = config.input.end_time if t_end is None else t_end
     sim = _at_rest(model, profile, theta1_initial, load)
-    n_total, stride = sim._plan(t_end, record_every)
+    n_total, stride = sim._plan(t_end, record_stride(sim.dt, record_dt, record_every))
     n_rows = n_total // stride + 1
     keep = max(1, -(-n_rows // max(1, int(keep_rows))))     # ceil
     kept: list[Trajectory] = []
