@@ -63,6 +63,10 @@ def _cases(tmp_path: Path) -> list[tuple[list[str], list[str]]]:
         (['-p', 'friction.mu_kinetic:=5'], ['friction.mu_kinetic', 'INTEGER', 'DOUBLE']),
         (['-p', 'friction.model:=coulomb'], ['friction.model', 'coulomb']),
         (['-p', 'input.accel_time:=0.5'], ['input.accel_time', 'move_time']),
+        # an unknown section: the rule of the CLI's params files (validation.unknown_name)
+        (['--params-file', _file(tmp_path, 'section.yaml', '/**:\n  ros__parameters:\n'
+                                 '    bogus:\n      x: 1.0\n')],
+         ['bogus.x', "unknown section 'bogus'"]),
     ]
 
 

@@ -18,7 +18,7 @@ YAML_PATH = REPO / 'config' / 'worm_gear_sim.yaml'
 
 
 def test_yaml_equals_code_defaults():
-    raw = yaml.safe_load(YAML_PATH.read_text())['worm_gear_sim']['ros__parameters']
+    raw = yaml.safe_load(YAML_PATH.read_text())['/**']['ros__parameters']
     flat = Config().to_flat_dict()
     yaml_flat = {f'{s}.{k}': v for s, sec in raw.items() for k, v in sec.items()}
     assert set(yaml_flat) == set(flat), set(yaml_flat) ^ set(flat)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -33,8 +34,8 @@ from .guarded_io import (
     read_text_file,
 )
 from .params import Config, config_from_mapping
-from .schema import NODE_NAME
-from .validation import ConfigError, suggest, value_kind
+from .schema import NODE_NAME, SECTIONS
+from .validation import ConfigError, ForeignParameterWarning, suggest, unknown_name, value_kind
 
 __all__ = ['load_config', 'default_config_path', 'PARAMS_FORMAT', 'typed_value', 'parse_set',
            'check_key', 'params_document', 'load_params_json', 'load_any_config',
@@ -48,43 +49,87 @@ _TRUE = ('true', 'yes', 'on', '1')
 _FALSE = ('false', 'no', 'off', '0')
 
 
-def _ros_parameters(doc: Any, path: str, node_name: str) -> Mapping[str, Any]:
+def _matches(key: str, node_name: str) -> bool:
+    """Whether a params file's top-level key addresses the node ``node_name`` (in any
+    namespace): ``node_name``, ``/node_name``, ``/ns/node_name``, ``/**`` and
+    ``/**/node_name`` (the wildcards of rcl's params files)."""
+    return key in (node_name, f'/{node_name}', '/**') or key.endswith('/' + node_name)
+
+
+def _ros_parameters(doc: Any, path: str, node_name: str) -> dict[str, Any]:
+    """The parameters (dotted names) a params file gives the node ``node_name``: every block
+    addressed to it (:func:`_matches`), merged in file order as rcl does (a later block's
+    value wins); plain sections at top level (no ``ros__parameters``) for offline use."""
     if not isinstance(doc, Mapping):
-        raise ConfigError('', f'{path}: expected a mapping with "{node_name}: ros__parameters:"')
-    for key in (node_name, f'/{node_name}', '/**'):
-        if key in doc:
-            block = doc[key]
+        raise ConfigError('', f'{path}: expected a mapping with "/**: ros__parameters:" (or '
+                          f'"{node_name}: ros__parameters:")')
+    blocks = [(k, v) for k, v in doc.items() if isinstance(k, str) and _matches(k, node_name)]
+    if blocks:
+        merged: dict[str, Any] = {}
+        for key, block in blocks:
             if not isinstance(block, Mapping) or 'ros__parameters' not in block:
                 raise ConfigError(key, f'{path}: "{key}" must hold a "ros__parameters" mapping')
-            params = block['ros__parameters']
-            return params if params is not None else {}
-    for key, block in doc.items():  # namespaced node, e.g. /radar/worm_gear_sim
-        if isinstance(key, str) and key.endswith('/' + node_name) and isinstance(block, Mapping):
-            return block.get('ros__parameters') or {}
+            merged.update(_dotted(block['ros__parameters'] or {}, f'{path}: {key}'))
+        return merged
     if 'ros__parameters' in doc:
-        raise ConfigError('', f'{path}: put ros__parameters under "{node_name}:"')
+        raise ConfigError('', f'{path}: put ros__parameters under "/**:" (or "{node_name}:")')
     # Plain sections at top level are accepted for offline use.
-    return doc
+    return dict(_dotted(doc, path))
+
+
+def _dotted(params: Any, where: str) -> list[tuple[str, Any]]:
+    """(dotted name, value) of a ``ros__parameters`` mapping: a section's mapping gives
+    ``section.key`` names, a plain name stays plain (as rcl flattens a section)."""
+    if not isinstance(params, Mapping):
+        raise ConfigError('', f'{where}: parameters must be a mapping, got '
+                          f'{type(params).__name__}')
+    out = []
+    for name, value in params.items():
+        if not isinstance(name, str):
+            raise ConfigError(str(name), 'parameter names must be strings')
+        if isinstance(value, Mapping) and name not in _ROS_RESERVED:
+            out += [(f'{name}.{sub}', v) for sub, v in value.items()]
+        else:
+            out.append((name, value))
+    return out
 
 
 def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
                 node_name: str = NODE_NAME) -> Config:
-    """Load a YAML parameter file (ROS layout or plain sections) and validate it."""
+    """Load a YAML parameter file (ROS layout or plain sections) and validate it as the node
+    does: each value of its parameter's type (``5.0``, not ``5``, for a float: strict
+    :func:`~worm_gear_sim.validation.coerce`), an unknown dotted name an error, a plain name
+    unlike ours ignored with a :class:`~worm_gear_sim.validation.ForeignParameterWarning`
+    (:func:`~worm_gear_sim.validation.unknown_name`: the node's rule).  ``overrides``
+    (dotted, e.g. ``--set`` values) are applied after, leniently."""
     if path is None:
         path = default_config_path()
     p = Path(path)
     doc = safe_yaml_load(read_config_text(p), str(p))
     if doc is None:
         doc = {}
-    params = _ros_parameters(doc, str(p), node_name)
-    params = {k: v for k, v in params.items() if k not in _ROS_RESERVED}
-    cfg = config_from_mapping(params, source=str(p))
+    params = {}
+    for name, value in _ros_parameters(doc, str(p), node_name).items():
+        if name.split('.', 1)[0] in _ROS_RESERVED:
+            continue
+        if name not in _MODEL_NAMES:
+            err = unknown_name(name, _MODEL_NAMES, SECTIONS)
+            if err is not None:
+                raise ConfigError(err.key, f'{err.reason} (in {p})')
+            warnings.warn(f'{p}: ignoring parameter {name!r}: not a parameter of '
+                          f'{node_name} (another node\'s, in a shared block?)',
+                          ForeignParameterWarning, stacklevel=2)
+            continue
+        params[name] = value
+    cfg = config_from_mapping(params, source=str(p), strict=True)
     return cfg.replace(overrides) if overrides else cfg
 
 
 # Parameters rclpy itself may find in a params file; they are not model parameters.
 _ROS_RESERVED = frozenset({'use_sim_time', 'qos_overrides', 'diagnostic_updater',
                            'start_type_description_service'})
+#: The model's parameters (dotted names).
+_MODEL_NAMES = frozenset(Config().to_flat_dict())
 
 
 def default_config_path() -> Path:
@@ -298,7 +343,8 @@ def params_yaml_text(doc: Mapping[str, Any]) -> str:
     """A :func:`params_document` as a ROS params YAML (the derived block as a comment)."""
     body = {k: v for k, v in doc.items() if k not in _RESERVED_JSON_KEYS}
     derived = json.dumps(doc['derived'])
-    return ('# worm_gear_sim resolved parameters (ROS params file)\n'
+    return ('# worm_gear_sim resolved parameters (ROS params file; /**: whatever the node is '
+            'named)\n'
             f'# derived: {derived}\n'
-            + yaml.safe_dump({'worm_gear_sim': {'ros__parameters': body}},
+            + yaml.safe_dump({'/**': {'ros__parameters': body}},
                              sort_keys=False, default_flow_style=None))

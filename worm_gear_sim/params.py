@@ -56,10 +56,11 @@ class Config(Parameters):
 
 
 def config_from_mapping(data: Mapping[str, Any], source: str = '<mapping>',
-                        usable: bool = True) -> Config:
+                        usable: bool = True, strict: bool = False) -> Config:
     """Build a Config from nested sections (the ``ros__parameters`` content) or dotted keys,
-    validated per field, across fields and (``usable``) by :func:`check_usable`."""
-    cfg = Config(**sections_from_mapping(data, source))
+    validated per field (``strict``: each value of its parameter's type, as in a params
+    file), across fields and (``usable``) by :func:`check_usable`."""
+    cfg = Config(**sections_from_mapping(data, source, strict))
     if usable:
         check_usable(cfg)
     return cfg

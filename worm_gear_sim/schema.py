@@ -513,10 +513,11 @@ class Parameters:
         return out
 
 
-def sections_from_mapping(data: Mapping[str, Any], source: str = '<mapping>'
-                          ) -> dict[str, Any]:
+def sections_from_mapping(data: Mapping[str, Any], source: str = '<mapping>',
+                          strict: bool = False) -> dict[str, Any]:
     """The section objects (``{'mesh': Mesh(...), ...}``) of nested sections (the
-    ``ros__parameters`` content) or dotted keys, each value checked and coerced per field;
+    ``ros__parameters`` content) or dotted keys, each value checked and coerced per field
+    (``strict``: as a params file, :func:`~worm_gear_sim.validation.coerce`);
     :class:`ConfigError` names an unknown section or key (with the closest valid name)."""
     if not isinstance(data, Mapping):
         raise ConfigError('', f'{source}: parameters must be a mapping, got {type(data).__name__}')
@@ -546,7 +547,7 @@ def sections_from_mapping(data: Mapping[str, Any], source: str = '<mapping>'
                 raise ConfigError(key, 'unknown parameter' + suggest(key, known))
             f = names[name]
             default = field_default(f)
-            sec_kwargs[name] = coerce(key, value, default, f.metadata)
+            sec_kwargs[name] = coerce(key, value, default, f.metadata, strict)
         kwargs[sec] = cls(**sec_kwargs)
     return kwargs
 

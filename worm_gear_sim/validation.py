@@ -1,7 +1,8 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """Validation of parameter values: the one "type from the default" rule (:func:`value_kind`),
-the per-field checks (type, finiteness, range, choices, length) against a field's metadata.
+the per-field checks (type, finiteness, range, choices, length) against a field's metadata,
+and the one rule for a name that is not a parameter of the model (:func:`unknown_name`).
 The cross-field checks of a whole set are the schema's (:mod:`~worm_gear_sim.schema`,
 ``validate``), which calls these per field.
 
@@ -17,7 +18,8 @@ import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-__all__ = ['ConfigError', 'suggest', 'VALUE_KINDS', 'value_kind', 'field_default', 'coerce']
+__all__ = ['ConfigError', 'suggest', 'VALUE_KINDS', 'value_kind', 'field_default', 'coerce',
+           'unknown_name', 'ForeignParameterWarning']
 
 
 class ConfigError(ValueError):
@@ -31,6 +33,37 @@ class ConfigError(ValueError):
         self.reason = message
         super().__init__(f'{key}: {message}' if key else message)
 
+
+
+class ForeignParameterWarning(UserWarning):
+    """A parameter name unlike every one of the model's, ignored: another node's key in a
+    ``/**`` block shared by several nodes (:func:`unknown_name`)."""
+
+
+def unknown_name(name: str, known: Iterable[str], sections: Iterable[str]
+                 ) -> ConfigError | None:
+    """The one rule for a name that is not a parameter of the model, in a params file the
+    command line reads (:func:`~worm_gear_sim.config_io.load_config`) and in the parameters
+    the node is given (a params file, ``-p``).  A dotted name (every parameter of the package
+    is ``section.key``) is an error: a key unknown in one of the sections, or an unknown
+    section (``adaptaton.enabled``: ignored, the user would believe a setting applied that
+    is not); so is a plain name close to one of ours.  A plain name unlike any of ours is
+    another node's key in a ``/**`` block shared by several nodes (``use_sim_time``-like):
+    None, the caller ignores it with a warning (:class:`ForeignParameterWarning`)."""
+    known, sections = list(known), list(sections)
+    head, dot, _ = name.partition('.')
+    if dot:
+        if head in sections:
+            return ConfigError(name, 'unknown parameter' + suggest(name, known))
+        return ConfigError(name, f'unknown section {head!r}'
+                           + (suggest(name, known) or suggest(head, sections))
+                           + f' (the sections: {", ".join(sections)})')
+    if name in sections:
+        return ConfigError(name, 'is a section: give it a mapping of its parameters')
+    close = suggest(name, known) or suggest(name, sections)
+    if close:
+        return ConfigError(name, 'unknown parameter' + close)
+    return None
 
 
 def suggest(key: str, known: Iterable[str]) -> str:
@@ -69,8 +102,16 @@ def field_default(f: dataclasses.Field) -> Any:
     return factory()
 
 
-def coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
-    """Type-check one value against its field's kind (:func:`value_kind`) and metadata."""
+#: Why a params file must write a value as its parameter's type (strict coercion).
+_AS_THE_NODE = 'a params file types a value as written; the node refuses another type'
+
+
+def coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any],
+           strict: bool = False) -> Any:
+    """Type-check one value against its field's kind (:func:`value_kind`) and metadata.
+    Lenient (``strict`` False: Python values, ``--set`` literals): an integer for a float,
+    an integral float for an integer.  ``strict`` (a YAML params file, the node's rule):
+    neither, with the value to write instead."""
     kind = value_kind(default)
     if kind == 'bool':
         if not isinstance(value, bool):
@@ -78,8 +119,11 @@ def coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
         return value
     if kind == 'int':
         if isinstance(value, bool) or not isinstance(value, int):
-            if isinstance(value, float) and value.is_integer():
+            if isinstance(value, float) and value.is_integer() and not strict:
                 value = int(value)
+            elif isinstance(value, float) and value.is_integer():
+                raise ConfigError(key, f'must be an integer, got the float {value!r}: write '
+                                  f'{int(value)} ({_AS_THE_NODE})')
             else:
                 raise ConfigError(key, f'must be an integer, got {value!r}')
         _check_range(key, float(value), meta)
@@ -87,6 +131,9 @@ def coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
     if kind == 'float':
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(key, f'must be a number, got {value!r}')
+        if strict and isinstance(value, int):
+            raise ConfigError(key, f'must be a floating-point number, got the integer '
+                              f'{value!r}: write {value}.0 ({_AS_THE_NODE})')
         value = float(value)
         _check_range(key, value, meta)
         return value
@@ -112,6 +159,9 @@ def coerce(key: str, value: Any, default: Any, meta: Mapping[str, Any]) -> Any:
         for i, v in enumerate(value):
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 raise ConfigError(key, f'entry {i} must be a number, got {v!r}')
+            if strict and isinstance(v, int):
+                raise ConfigError(key, f'entry {i} must be a floating-point number, got the '
+                                  f'integer {v!r}: write {v}.0 ({_AS_THE_NODE})')
             _check_range(f'{key}[{i}]', float(v), meta)
             out.append(float(v))
         return tuple(out)

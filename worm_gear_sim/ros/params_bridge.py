@@ -27,7 +27,7 @@ from rclpy.parameter import Parameter
 from ..config_io import load_config
 from ..params import Config
 from ..schema import SECTIONS
-from ..validation import ConfigError, value_kind
+from ..validation import ConfigError, unknown_name, value_kind
 from ..validation import suggest as suggest_name
 
 __all__ = ['parameter_type', 'descriptor_for', 'declare_config', 'to_core_value',
@@ -118,19 +118,20 @@ def declare_config(node: Any, defaults: Config) -> dict[str, Any]:
 
 def check_overrides(node: Any) -> None:
     """Parameters given to ``node`` (params file, ``-p``, ``parameter_overrides``) that it
-    does not declare: a misspelt model or QoS key raises :class:`ConfigError` naming it,
-    with the closest declared name; any other unknown name is logged and ignored (a ``/**``
-    block shared by several nodes may hold theirs)."""
-    declared = {name: None for name in MODEL_PARAMETER_NAMES}
+    does not declare, by the core's rule (:func:`~worm_gear_sim.validation.unknown_name`,
+    the one the command line applies to a params file): a misspelt model key, an unknown
+    section or a QoS override of a topic it does not have raises :class:`ConfigError`
+    naming it, with the closest declared name; a plain name unlike ours (another node's, in
+    a shared ``/**`` block) is logged and ignored."""
     unknown = sorted(n for n in node._parameter_overrides if not node.has_parameter(n))
     for name in unknown:
-        head = name.split('.', 1)[0]
-        hint = suggest_name(name, declared)
-        if head in SECTIONS or head == 'qos_overrides' or hint:
-            if head == 'qos_overrides':
-                qos = node.get_parameters_by_prefix('qos_overrides')
-                hint = suggest_name(name, {'qos_overrides.' + n: None for n in qos})
+        if name.split('.', 1)[0] == 'qos_overrides':
+            qos = node.get_parameters_by_prefix('qos_overrides')
+            hint = suggest_name(name, {'qos_overrides.' + n: None for n in qos})
             raise ConfigError(name, 'unknown parameter of this node' + hint)
+        err = unknown_name(name, MODEL_PARAMETER_NAMES, SECTIONS)
+        if err is not None:
+            raise err
         node.get_logger().warning(f'ignoring parameter {name!r}: not a parameter of '
                                   f'{node.get_name()}')
 
@@ -145,11 +146,17 @@ def to_core_value(value: Any) -> Any:
 
 
 def coerce_parameter(param: Parameter, declared_type: int) -> Parameter:
-    """Accept an integer (or integer array) for a double (array) parameter, as the YAML
-    loader of the core does; any other type is returned unchanged (rclpy rejects it)."""
+    """A value typed on a command line at run time (``ros2 param set``), as the CLI's
+    ``--set`` takes it: an integer (or integer array) for a double (array) parameter, an
+    integral double for an integer one; any other type is returned unchanged (rclpy
+    rejects it).  Params files are strict (the type as written), in the node and in the
+    CLI alike (:func:`~worm_gear_sim.validation.coerce`)."""
     if declared_type == ParameterType.PARAMETER_DOUBLE and \
             param.type_ == Parameter.Type.INTEGER:
         return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
+    if declared_type == ParameterType.PARAMETER_INTEGER and \
+            param.type_ == Parameter.Type.DOUBLE and float(param.value).is_integer():
+        return Parameter(param.name, Parameter.Type.INTEGER, int(param.value))
     if declared_type == ParameterType.PARAMETER_DOUBLE_ARRAY and \
             param.type_ == Parameter.Type.INTEGER_ARRAY:
         return Parameter(param.name, Parameter.Type.DOUBLE_ARRAY,
