@@ -355,3 +355,28 @@ def test_every_command_module_registers_its_commands(capsys):
         assert command in out
     assert parser.parse_args(['compensate', '--no-plot']).func.__module__ == \
         'worm_gear_sim.cli.compensate'
+
+
+def test_run_png_shows_the_mesh_load_readably(tmp_path, monkeypatch):
+    """run.png's bottom panel drew W_n and mu over the whole run: a barcode of the antenna's
+    ringing (it changes flank every half period).  Now no panel draws the W_n curve over
+    more than a few periods (the zoom), the whole run shows its range."""
+    from worm_gear_sim.cli import plotting
+    from worm_gear_sim.dynamics.simulation import simulate
+    figs = []
+    monkeypatch.setattr(plotting, '_save', lambda fig, path: figs.append(fig) or Path(path))
+    traj = simulate(Config().replace({'input.end_time': 0.15}))
+    plotting.plot_trajectory(traj, tmp_path / 'run.png')
+    curves = []
+    for ax in figs[0].axes:
+        if ax.get_ylabel() != 'W_n [N]':
+            continue
+        lo, hi = ax.get_xlim()
+        for line in ax.get_lines():
+            x, y = np.asarray(line.get_xdata(), float), np.asarray(line.get_ydata(), float)
+            y = y[(x >= lo) & (x <= hi)]
+            if y.size > 10 and np.ptp(y) > 0:
+                curves.append(int(np.count_nonzero(np.diff(np.sign(y)) != 0)))
+    assert curves, 'no W_n curve drawn'
+    assert max(curves) <= 10, curves          # <= 5 periods of the flank changes
+    assert max(curves) >= 4, curves           # and the zoom shows some

@@ -14,7 +14,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-__all__ = ['plot_adaptation', 'plot_trajectory', 'plot_experiment', 'plot_sweep', 'plot_modes',
+__all__ = ['plot_adaptation', 'plot_trajectory', 'trajectory_figure', 'mesh_zoom_window',
+           'plot_experiment', 'plot_sweep', 'plot_modes',
            'plot_traces', 'plot_pass']
 
 _DPI = 100
@@ -35,9 +36,44 @@ def _save(fig: Figure, path: str | Path) -> Path:
     return p
 
 
-def plot_trajectory(traj: Any, path: str | Path, title: str = '') -> Path:
-    """Angles, errors and mesh quantities of one run (simulate)."""
-    fig, ax = _new(3, 1, (8.0, 8.5))
+#: Periods of the mesh load's oscillation shown in the zoom of :func:`plot_trajectory`, and
+#: in each bin of the normal force's range over the whole run (at most ENVELOPE_BINS bins).
+ZOOM_CYCLES = 3
+ENVELOPE_BINS = 200
+
+
+def _mesh_oscillation(traj: Any) -> tuple[float, float]:
+    """(the instant the command stops, the normal force's dominant frequency after it [Hz]
+    or nan); from the start when the command moves over the last tenth of the run."""
+    from ..studies import dominant_frequency
+    t, wn = np.asarray(traj.t, float), np.asarray(traj.normal_force, float)
+    moving = np.flatnonzero(np.diff(np.asarray(traj.theta1, float)) != 0.0)
+    start = float(t[moving[-1] + 1]) if moving.size else float(t[0])
+    if t[-1] - start < 0.1 * (t[-1] - t[0]):
+        start = float(t[0])
+    sel = t >= start
+    return start, dominant_frequency(t[sel], wn[sel], f_min=2.0 / max(t[-1] - start, 1e-9))
+
+
+def mesh_zoom_window(traj: Any) -> tuple[float, float]:
+    """The window [s] of the mesh quantities' zoom: ZOOM_CYCLES periods of the normal
+    force's dominant oscillation from the instant the command stops (:func:`_mesh_oscillation`;
+    20 ms when no oscillation stands out)."""
+    t = np.asarray(traj.t, float)
+    if t.size < 2:
+        return (float(t[0]), float(t[0])) if t.size else (0.0, 0.0)
+    start, f = _mesh_oscillation(traj)
+    width = ZOOM_CYCLES / f if math.isfinite(f) and f > 0 else 0.02
+    width = max(width, 20 * float(t[1] - t[0]))
+    return start, min(float(t[-1]), start + width)
+
+
+def trajectory_figure(traj: Any, title: str = '') -> Figure:
+    """Angles, errors and the mesh quantities of one run (:func:`plot_trajectory`): the
+    normal force's range over the run (it changes flank at the antenna's ringing, a
+    barcode at full length) and a zoom on ZOOM_CYCLES periods with the friction
+    coefficient (:func:`mesh_zoom_window`)."""
+    fig, ax = _new(4, 1, (8.0, 10.5))
     t = traj.t
     ratio = traj.output_per_input
     a = ax[0, 0]
@@ -52,16 +88,45 @@ def plot_trajectory(traj: Any, path: str | Path, title: str = '') -> Path:
     a.plot(t, traj.output_error, lw=0.8, label='theta4 - theta1 l_w/r_g')
     a.set_ylabel('error [rad]')
     a.legend(loc='upper right', fontsize=8)
+    t0, t1 = mesh_zoom_window(traj)
     a = ax[2, 0]
-    a.plot(t, traj.normal_force, lw=0.8, color='C2')
+    wn = np.asarray(traj.normal_force, float)
+    f = _mesh_oscillation(traj)[1] if len(t) > 1 else math.nan
+    cycles = (t[-1] - t[0]) * f / ZOOM_CYCLES if math.isfinite(f) and f > 0 else math.inf
+    bins = [e for e in np.array_split(np.arange(len(t)), int(min(ENVELOPE_BINS, len(t),
+                                                                  max(1.0, cycles))))
+            if e.size]
+    edges = [float(t[e[0]]) for e in bins] + [float(t[-1])]
+    lo, hi = [float(wn[e].min()) for e in bins], [float(wn[e].max()) for e in bins]
+    a.stairs(hi, edges, baseline=lo, fill=True, color='C2', alpha=0.5, label='W_n: range')
+    a.axvspan(t0, t1, color='0.75', zorder=0, label='the zoom below')
+    a.axhline(0.0, color='0.4', lw=0.6)
     a.set_ylabel('W_n [N]', color='C2')
-    a.set_xlabel('t [s]')
+    a.set_title(f'normal force on the teeth: its range over each {len(bins)}th of the run '
+                '(sign: the flank in contact)', fontsize=9)
+    a.legend(loc='upper right', fontsize=8)
+    a = ax[3, 0]
+    sel = (t >= t0) & (t <= t1)
+    a.plot(t[sel] * 1e3, wn[sel], lw=1.0, color='C2')
+    a.set_ylabel('W_n [N]', color='C2')
+    a.set_xlim(t0 * 1e3, t1 * 1e3)
+    a.set_xlabel('t [ms]')
     b = a.twinx()
-    b.plot(t, traj.friction_coefficient, lw=0.6, color='C3')
-    b.set_ylabel('mu (signed)', color='C3')
+    b.plot(t[sel] * 1e3, np.asarray(traj.friction_coefficient)[sel], lw=0.8, color='C3')
+    b.set_ylabel('friction coefficient mu (signed)', color='C3')
+    a.set_title(f'zoom: {ZOOM_CYCLES} periods of the mesh load, t = {t0 * 1e3:.4g} to '
+                f'{t1 * 1e3:.4g} ms', fontsize=9)
+    for row in ax[:3, 0]:
+        row.set_xlabel('t [s]')
     for row in ax[:, 0]:
         row.grid(True, alpha=0.3)
-    return _save(fig, path)
+    return fig
+
+
+def plot_trajectory(traj: Any, path: str | Path, title: str = '') -> Path:
+    """Angles, errors and mesh quantities of one run (simulate): :func:`trajectory_figure`
+    as a PNG."""
+    return _save(trajectory_figure(traj, title), path)
 
 
 def plot_experiment(trajs: Mapping[str, Any], rows: Sequence[Mapping[str, Any]],
