@@ -143,3 +143,23 @@ def test_a_worker_that_dies_stops_the_map_and_the_pool():
     assert not any(p.is_alive() for p, _ in pool._procs)
     with pytest.raises(RuntimeError, match='closed'):
         pool.map(_dies, [0])
+
+
+def test_a_progress_bar_leaves_the_fit_free_to_fork():
+    """tqdm's monitor thread, started by the first progress bar (identify's, a sweep's) and
+    never ended, made fork_is_safe() False for the rest of the process: every later fit ran
+    its evaluations on threads.  The package's bars start no thread."""
+    import subprocess
+    import sys
+    code = ('import sys\n'
+            'from worm_gear_sim.studies.engine import _progress\n'
+            'from worm_gear_sim.progress import progress_bar\n'
+            'from worm_gear_sim.dynamics.forked import fork_is_safe\n'
+            'for bar in (_progress(3, True, "sweep"), progress_bar(2, "identify", "start")):\n'
+            '    bar.update()\n'
+            '    bar.close()\n'
+            'print(fork_is_safe())\n')
+    run = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == 'True'

@@ -469,11 +469,8 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
     def start_bar() -> None:   # after the engine is up: no bar before a connection error
         nonlocal bar
         if opt.progress:
-            import sys
-
-            from tqdm import tqdm
-            bar = tqdm(total=len(starts), desc='identify', unit='start', file=sys.stderr,
-                       dynamic_ncols=True)
+            from ..progress import progress_bar
+            bar = progress_bar(len(starts), 'identify', 'start')
 
     def done(r: dict[str, Any]) -> None:
         out.append(r)

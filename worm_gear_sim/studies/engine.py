@@ -137,13 +137,8 @@ def _run_chunk(base: Mapping[str, Any], items: Sequence[tuple]) -> list[dict[str
 def _progress(total: int, enabled: bool, desc: str):
     if not enabled:
         return None
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover - tqdm is a declared dependency
-        return None
-    import sys
-    return tqdm(total=total, desc=desc, unit='case', file=sys.stderr, leave=True,
-                dynamic_ncols=True)
+    from ..progress import progress_bar
+    return progress_bar(total, desc, 'case')
 
 
 def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None,
