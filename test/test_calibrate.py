@@ -71,9 +71,22 @@ def test_calibrate_on_a_plant_with_five_parameters_changed(tmp_path, capsys):
     out = tmp_path / 'fitted.yaml'
     rc = main(['calibrate', '--fit', f'{KG},{ZETA},{MU},{COUT}', '--plant', str(plant),
                '-o', str(out), '--no-plot', '--serial'])
-    assert rc == 0, capsys.readouterr().err
+    stdout, err = capsys.readouterr()
+    assert rc == 0, err
     report = json.loads(out.with_suffix('.json').read_text())
     assert report['accepted'] and report['output_yaml'] == str(out)
+    # the verdict in one line, then the recommendation and the improvement it predicts
+    lines = stdout.splitlines()
+    k = lines.index('verdict: accepted')
+    assert lines[k + 1].startswith('recommended compensator (as configured): '
+                                   'compensation.enabled = true'), lines[k + 1]
+    assert lines[k + 2].startswith('predicted on a sector scan'), lines[k + 2]
+    rec = report['recommendation']
+    assert rec['improvement'] == pytest.approx(rec['raw_rms_rad'] / rec['compensated_rms_rad'])
+    assert rec['improvement'] > 10 and report['verdict'] == 'verdict: accepted'
+    # progress on stderr: a stage per move, the fit, the validation, the prediction
+    assert all(w in err for w in ('record step_out', 'fit', 'validate',
+                                  'predict a sector scan')), err
     rel = report['validation']['after'][0]['theta4']['rel']
     before = report['validation']['before'][0]['theta4']['rel']
     assert rel <= 0.03 and before > 10 * rel, (rel, before)
@@ -111,11 +124,14 @@ def test_what_is_not_accepted_writes_no_yaml(tmp_path, capsys):
     rc = main(['calibrate', '--fit', ZETA, '--plant', str(plant), '-o', str(out),
                '--no-plot', '--serial', '--accept', '0.001', '--duration', '0.8',
                '--sample-rate', '2000'])      # a short excitation: refusal is the rule
-    err = capsys.readouterr().err
+    stdout, err = capsys.readouterr()
     assert rc == 2 and 'not accepted' in err and 'previous parameters' in err
     assert not out.exists()
     report = json.loads(out.with_suffix('.json').read_text())
     assert not report['accepted'] and report['reasons']
+    verdict = [ln for ln in stdout.splitlines() if ln.startswith('verdict: ')]
+    assert verdict == ['verdict: refused — ' + '; '.join(report['reasons'])], verdict
+    assert 'recommended compensator' not in stdout and report['recommendation'] is None
 
 
 @pytest.mark.parametrize('argv, words', [
@@ -162,3 +178,45 @@ def test_a_record_that_stops_is_refused():
                       measured={'theta4': rec.measured['theta4'][:n]})
     with pytest.raises(IdentificationError, match='stops after'):
         calibrate(Config(), [ZETA], Limits(0.12, 6.0, 1500.0), short)
+
+
+def test_calibrate_help_points_to_the_live_calibrator(capsys):
+    assert main(['calibrate', '--help']) == 0
+    text = ' '.join(capsys.readouterr().out.split())
+    assert 'worm_gear_sim_calibrate' in text and 'real drive' in text
+
+
+def test_the_calibration_figure_reads_in_microradians_with_the_verdict_and_a_spectrum(
+        tmp_path, monkeypatch):
+    """fitted.png was in rad with a 1e-5 offset and a 'u' nobody explained, without verdict
+    or frequency view."""
+    from matplotlib.figure import Figure
+
+    from worm_gear_sim.dynamics.profiles import TrapezoidalProfile
+    from worm_gear_sim.identification.data import record_from_model
+    from worm_gear_sim.identification.plot import plot_fit
+    figs = []
+    real = Figure.savefig
+    monkeypatch.setattr(Figure, 'savefig', lambda self, *a, **k: (figs.append(self),
+                                                                  real(self, *a, **k)))
+    base = Config()
+    plant = base.replace({COUT: 2.0})
+    rec = record_from_model(plant, TrapezoidalProfile(0.06, 0.02, 0.004, 0.005), 0.15, 1e4,
+                            name='step')
+    plot_fit([rec], base, plant, tmp_path / 'f.png', 'calibrate',
+             'verdict: accepted (held-out theta4 RMS 1.00 % of its amplitude)')
+    fig = figs[0]
+    assert 'verdict: accepted' in fig.get_suptitle()
+    labels = [a.get_ylabel() for a in fig.axes if a.get_visible()]
+    assert labels[0] == 'theta4 - theta1 l_w/r_g [µrad]', labels
+    assert all('µrad' in lb for lb in labels) and not any(' u ' in lb for lb in labels)
+    for a in fig.axes:
+        a.figure.canvas.draw()
+        assert a.yaxis.get_offset_text().get_text() == '', a.get_ylabel()
+    spectrum = fig.axes[-1]
+    assert spectrum.get_xlabel() == 'frequency [Hz]' and spectrum.get_yscale() == 'log'
+    names = [ln.get_label() for ln in spectrum.get_lines()]
+    assert 'measured' in names and 'model after the fit' in names
+    # the measured spectrum peaks at the drive's first mode (94-95 Hz at these parameters)
+    f, amp = (np.asarray(x) for x in spectrum.get_lines()[0].get_data())
+    assert 85 < f[np.argmax(amp)] < 105

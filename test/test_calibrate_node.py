@@ -67,7 +67,7 @@ def test_a_running_node_is_calibrated_against_its_drive_and_updated_atomically(
         bad = subprocess.run(
             [sys.executable, '-m', 'worm_gear_sim.ros.calibrate', '--fit', KEYS, '-o',
              str(tmp_path / 'bad.yaml'), '--servo-topic', '/plant/worm_angle_reference',
-             '--measured-topic', '/no_encoders', '--settle-timeout', '2', '--serial'],
+             '--measured-topic', '/no_encoders', '--settle-timeout', '2', '--serial', '--yes'],
             env=ros_subprocess_env, capture_output=True, text=True, timeout=180)
         assert bad.returncode == 2, bad.stdout + bad.stderr
         assert 'no measured joint states on /no_encoders' in bad.stderr
@@ -77,7 +77,7 @@ def test_a_running_node_is_calibrated_against_its_drive_and_updated_atomically(
         run = subprocess.run(
             [sys.executable, '-m', 'worm_gear_sim.ros.calibrate', '--fit', KEYS, '-o',
              str(tmp_path / 'fitted.yaml'), '--servo-topic', '/plant/worm_angle_reference',
-             '--measured-topic', '/plant/joint_states', '--serial', '--no-plot'],
+             '--measured-topic', '/plant/joint_states', '--serial', '--no-plot', '--yes'],
             env=ros_subprocess_env, capture_output=True, text=True, timeout=300)
         assert run.returncode == 0, run.stdout + run.stderr
         assert 'applied to /worm_gear_sim in one atomic set' in run.stdout

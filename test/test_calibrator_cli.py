@@ -3,10 +3,12 @@
 """``worm_gear_sim_calibrate`` under hostile use: options out of range refused in one
 line before anything starts (a NaN settle timeout would wait forever); Ctrl-C, during the
 start-up imports or while it waits for the node, ends the process with one line
-"interrupted; nothing applied", exit 130, no traceback (as a process)."""
+"interrupted; nothing applied", exit 130, no traceback (as a process); it asks before it
+moves the axis."""
 
 from __future__ import annotations
 
+import io
 import signal
 import subprocess
 import sys
@@ -33,10 +35,47 @@ def test_a_settle_timeout_that_is_not_a_finite_positive_time_is_refused(value, t
                                                f'{float(value)!r}'), err
 
 
+class _Terminal(io.StringIO):
+    """A stdin that is a terminal, with the user's answer typed in."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.mark.parametrize('stdin, status, words', [
+    (io.StringIO(''), 2, ['stdin is not a terminal', '--yes', 'nothing moved']),
+    (_Terminal('n\n'), 1, ['not confirmed', 'nothing moved']),
+    (_Terminal('\n'), 1, ['not confirmed']),
+])
+def test_it_asks_before_it_moves_the_axis(stdin, status, words, tmp_path, capsys,
+                                          monkeypatch):
+    """The live calibrator streamed the excitation to the servo without asking; now it asks
+    (--yes skips it), and a stdin nobody can answer from is refused, before any ROS
+    entity exists (the node named here does not exist: asked first, it would wait 30 s)."""
+    monkeypatch.setattr(sys, 'stdin', stdin)
+    t0 = time.monotonic()
+    assert main([*ARGS, '-o', str(tmp_path / 'f.yaml'), '--node', '/no_such_node']) == status
+    assert time.monotonic() - t0 < 20
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and all(w in lines[0] for w in words), err
+    if isinstance(stdin, _Terminal):
+        assert 'Move it? [y/N]' in out and '/servo' in out and '0.12 rad each way' in out
+
+
+def test_a_yes_at_the_prompt_goes_on(tmp_path):
+    from worm_gear_sim.ros.calibrate import _args, consent
+    opts = _args([*ARGS, '-o', str(tmp_path / 'f.yaml')])
+    assert consent(opts, _Terminal('y\n'), io.StringIO()) is None
+    assert consent(opts, io.StringIO(''), io.StringIO())[0] == 2
+    assert consent(_args([*ARGS, '-o', str(tmp_path / 'f.yaml'), '--yes']),
+                   io.StringIO(''), io.StringIO()) is None
+
+
 def _start(env, tmp_path: Path) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, '-m', 'worm_gear_sim.ros.calibrate', *ARGS, '-o',
-         str(tmp_path / 'f.yaml'), '--node', '/no_such_node'],
+         str(tmp_path / 'f.yaml'), '--node', '/no_such_node', '--yes'],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 

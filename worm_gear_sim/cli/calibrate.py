@@ -35,7 +35,7 @@ from .identify import _jsonable, write_params_yaml
 from .limits import MAX_CALIBRATION_SAMPLES, check_work
 
 __all__ = ['register', 'cmd_calibrate', 'report_calibration', 'add_limit_options',
-           'limits_of', 'angle_list']
+           'limits_of', 'angle_list', 'StageBar', 'recommendation', 'verdict_line']
 
 
 def register(subparsers: Any) -> None:
@@ -46,7 +46,10 @@ def register(subparsers: Any) -> None:
         'step, a held-out S-curve; or, when the play, load torque or drag is fitted, slow '
         'and fast sweeps out and back at constant rates and a held-out sweep), run it on the '
         'drive (--plant: a simulated drive), fit the chosen parameters, validate on the '
-        'held-out move, and write the fitted params file when accepted. See '
+        'held-out move, and write the fitted params file when accepted; print the verdict, '
+        'the compensator settings it recommends and the improvement they predict on a '
+        'sector scan. A real drive behind a running node: worm_gear_sim_calibrate (the same '
+        'calibration streamed to the servo over ROS; it asks before it moves the axis). See '
         'docs/identification.md, "Calibrate in one command".')
     add_config_options(p, end_time=False)
     p.add_argument('--fit', action='append', required=True, metavar='KEY[,KEY...]',
@@ -78,6 +81,7 @@ def register(subparsers: Any) -> None:
     p.add_argument('--workers', type=int, metavar='N', help='fit the starts on a Dask '
                    'LocalCluster of N worker processes')
     p.add_argument('--no-plot', action='store_true', help='skip the figure')
+    p.add_argument('--no-progress', action='store_true', help='no progress bar')
     p.set_defaults(func=cmd_calibrate)
 
 
@@ -190,26 +194,81 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     opt = FitOptions(strategy='robust', serial=fit_in_process(args),
                      workers=args.workers)
     t0 = time.perf_counter()
-    res = calibrate(cfg, keys, limits, run, options=opt,
-                    outputs=list(outputs) if outputs else None, accept_rel=args.accept)
+    stages = StageBar(len(moves), not (args.no_progress or args.quiet))
+    try:
+        res = calibrate(cfg, keys, limits, run, options=opt,
+                        outputs=list(outputs) if outputs else None, accept_rel=args.accept,
+                        progress=stages)
+        advice = recommendation(res, stages)
+    finally:
+        stages.close()
     wall = time.perf_counter() - t0
     json_path, figures = report_calibration(
         res, cfg, keys, limits, out, f'plant {args.plant}',
         ' '.join(getattr(args, '_argv', [])), wall, not args.no_plot,
-        lambda line: say(args, line), plant=args.plant)
+        lambda line: say(args, line), advice, plant=args.plant)
     if not res.accepted:
         raise CliError(f'calibration not accepted: {res.reasons[0]}; no YAML written '
                        f'(report: {json_path}); the previous parameters stay in use')
     return 0
 
 
+class StageBar:
+    """The progress of a calibration (:func:`~worm_gear_sim.identification.calibrate.
+    calibrate`'s ``progress`` callback): one step per stage (each move's record, the fit,
+    the validation, ..., the recommendation), the running stage's name as the bar's
+    description; no bar when not ``enabled``.  Shared with ``worm_gear_sim_calibrate``."""
+
+    def __init__(self, moves: int, enabled: bool) -> None:
+        from ..progress import progress_bar
+        self.bar = progress_bar(moves + 4, 'calibrate', 'stage') if enabled else None
+        self.started = False
+
+    def __call__(self, stage: str) -> None:
+        if self.bar is None:
+            return
+        if self.started:
+            self.bar.update(1)
+        self.started = True
+        if self.bar.n >= self.bar.total:      # a refit: one stage more than planned
+            self.bar.total = self.bar.n + 1
+        self.bar.set_description_str(stage)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            if self.started:
+                self.bar.total = self.bar.n + 1
+                self.bar.update(1)
+            self.bar.close()
+
+
+def recommendation(res: Any, stage: Any = None) -> Any:
+    """The compensator settings recommended for an accepted calibration and the improvement
+    they predict on a sector scan (:func:`~worm_gear_sim.studies.recommendation.
+    recommend_compensator`); None when not accepted."""
+    if not res.accepted:
+        return None
+    from ..studies.recommendation import recommend_compensator
+    if stage is not None:
+        stage('predict a sector scan')
+    return recommend_compensator(res.config)
+
+
+def verdict_line(res: Any) -> str:
+    """``verdict: accepted`` or ``verdict: refused — <reasons>``."""
+    return 'verdict: accepted' if res.accepted else \
+        'verdict: refused — ' + '; '.join(res.reasons)
+
+
 def report_calibration(res: Any, base: Any, keys: list[str], limits: Any, out: Path,
                        source: str, command: str, wall: float, plot: bool,
-                       say_line: Any, **extra: Any) -> tuple[Path, list[str]]:
-    """Print the fit, the held-out errors and bounds; write FITTED.json (the report), the
-    before/after figure FITTED.png and, only when accepted, FITTED.yaml.  Shared by this
-    command and the node's calibration (``worm_gear_sim_calibrate``).  Returns the report's
-    path and the figures."""
+                       say_line: Any, advice: Any = None,
+                       **extra: Any) -> tuple[Path, list[str]]:
+    """Print the fit, the held-out errors and bounds, the verdict and (``advice``:
+    :func:`recommendation`) the recommended compensator and its predicted improvement;
+    write FITTED.json (the report), the figure FITTED.png (the verdict on it) and, only
+    when accepted, FITTED.yaml.  Shared by this command and the node's calibration
+    (``worm_gear_sim_calibrate``).  Returns the report's path and the figures."""
     say_line(res.fit.table())
     direct = res.fit.frequency_info.get('direct', {})
     if direct.get('values'):
@@ -231,6 +290,10 @@ def report_calibration(res: Any, base: Any, keys: list[str], limits: Any, out: P
                  f'{b.spread_rad:.3g}); held-out {row["name"]}: '
                  f'{row["theta4"]["rms_rad"]:.3g} rad '
                  f'({"within" if b.covers(row["theta4"]["rms_rad"]) else "OUTSIDE"})')
+    say_line(verdict_line(res))
+    if advice is not None:
+        for line in advice.lines():
+            say_line(line)
     stem = out.with_suffix('')
     out.parent.mkdir(parents=True, exist_ok=True)
     report = res.fit.to_dict()
@@ -244,15 +307,20 @@ def report_calibration(res: Any, base: Any, keys: list[str], limits: Any, out: P
                                      'duration_s': b.duration, 'bound_rad': b.bound_rad,
                                      'misfit_rad': b.misfit_rad, 'spread_rad': b.spread_rad}
                                     for b in res.bounds],
-                  accepted=res.accepted, reasons=res.reasons, seconds=wall,
+                  accepted=res.accepted, reasons=res.reasons, verdict=verdict_line(res),
+                  recommendation=advice.to_dict() if advice is not None else None,
+                  seconds=wall,
                   seen=res.seen, not_seen=res.not_seen,
                   output_yaml=None)
     figures = []
     if plot:
         from ..identification.plot import plot_fit
-        figures.append(str(plot_fit(res.held_out + res.train, base, res.config,
-                                    stem.with_suffix('.png'),
-                                    'calibrate: held-out move and training moves')))
+        worst = res.worst_held_out()
+        figures.append(str(plot_fit(
+            res.held_out + res.train, base, res.config, stem.with_suffix('.png'),
+            'calibrate: held-out move and training moves',
+            _figure_verdict(res) + (f' (held-out theta4 RMS {100 * worst:.2f} % of its '
+                                    'amplitude)' if math.isfinite(worst) else ''))))
     report['figures'] = figures
     if res.accepted:
         header = [f'worm_gear_sim parameters calibrated ({source}); created '
@@ -268,3 +336,11 @@ def report_calibration(res: Any, base: Any, keys: list[str], limits: Any, out: P
              + (f', {out}' if res.accepted else '') + (f', {", ".join(figures)}' if figures
                                                        else ''))
     return json_path, figures
+
+
+def _figure_verdict(res: Any) -> str:
+    """The verdict for the figure's title: the first reason only (a title is one line)."""
+    if res.accepted:
+        return 'verdict: accepted'
+    more = f' (+{len(res.reasons) - 1} more)' if len(res.reasons) > 1 else ''
+    return f'verdict: refused — {res.reasons[0] if res.reasons else "?"}{more}'

@@ -47,7 +47,8 @@ from .fit import FitOptions, identify, wind_up_only
 from .report import FitResult, prediction_errors
 from .unload import split_refit
 
-__all__ = ['plant_runner', 'calibrate', 'CalibrationResult', 'excitation_series', 'ACCEPT_REL']
+__all__ = ['plant_runner', 'calibrate', 'CalibrationResult', 'excitation_series', 'ACCEPT_REL',
+           'STAGES']
 
 #: Accepted when every held-out move's theta4 RMS error is within this share of its
 #: oscillation amplitude (and the fit itself is trustworthy).
@@ -129,35 +130,49 @@ class CalibrationResult:
         return max(rel) if rel else math.nan
 
 
+#: The stages :func:`calibrate` reports to its ``progress`` callback, besides one
+#: ``record <move>`` per move (the refits only when they run).
+STAGES = ('fit', 'validate', 'refit with every key free', 'refit with the unload dither',
+          'prediction bound')
+
+
 def calibrate(base: Config, keys: Sequence[str], limits: Limits,
               run: Callable[[Move], Record], *, options: FitOptions | None = None,
               outputs: Sequence[str] | None = None,
-              accept_rel: float = ACCEPT_REL) -> CalibrationResult:
+              accept_rel: float = ACCEPT_REL,
+              progress: Callable[[str], None] | None = None) -> CalibrationResult:
     """Design the excitation, run it (``run(move) -> Record``), fit ``keys`` of ``base`` on
     the training moves, validate on the held-out ones; accepted when the fit is
     trustworthy and every held-out theta4 error is within ``accept_rel`` of its amplitude.
-    Raises IdentificationError (nothing fitted) when the limits or the records are
-    unusable: no motion measured, motion unrelated to the command, a record that stops."""
+    ``progress(stage)`` is called as each stage starts (``record <move>``, then
+    :data:`STAGES`).  Raises IdentificationError (nothing fitted) when the limits or the
+    records are unusable: no motion measured, motion unrelated to the command, a record
+    that stops."""
     moves = design_excitation(limits, keys, base)
     opt = options or FitOptions()
+    stage = progress or (lambda _: None)
     if uses_sweeps(keys) and opt.n_starts is None:
         # the direct estimates and the play scan are the global stage: one local fit (from
         # the frequency start) suffices, and halves the time
         opt = dataclasses.replace(opt, n_starts=1)
     records = []
     for m in moves:
+        stage(f'record {m.name}')
         rec = run(m)
         _check_followed(rec, m)
         records.append(rec)
     train = [r for r, m in zip(records, moves) if m.role == 'train']
     held = [r for r, m in zip(records, moves) if m.role == 'validate']
+    stage('fit')
     res = identify(base, train, keys, options=opt, outputs=outputs)
+    stage('validate')
     before = prediction_errors(base, held)
     after = prediction_errors(res.config, held)
     reasons = _reasons(res, after, accept_rel)
     if reasons and res.strategy.get('priors') and opt.priors is None:
         # the default prior (fit.PRIORS) is an assumption about the drive: refused with it,
         # the fit runs again with every key free, and the held-out moves judge that one
+        stage('refit with every key free')
         free = identify(base, train, keys, options=dataclasses.replace(opt, priors={}),
                         outputs=outputs)
         after_free = prediction_errors(free.config, held)
@@ -173,6 +188,7 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
     if reserve and PLAY in res.not_seen and LOAD in res.keys:
         # one flank in every sweep: the dither (.unload) tells the play from the load; its
         # fit is kept when it lifts the gear and the held-out moves accept it
+        stage('refit with the unload dither')
         split = split_refit(base, train + reserve, keys, res, opt, outputs)
         after_split = prediction_errors(split.config, held)
         reasons_split = _reasons(split, after_split, accept_rel)
@@ -188,6 +204,7 @@ def calibrate(base: Config, keys: Sequence[str], limits: Limits,
     bounds = []
     if 'theta4' in res.output_verdicts and res.output_verdicts['theta4'] == 'matched':
         from .uncertainty import prediction_bound
+        stage('prediction bound')
         bounds = [prediction_bound(res, train, h) for h in held]
     return CalibrationResult(moves, train, held, res, before, after, not reasons, reasons,
                              bounds)

@@ -19,9 +19,15 @@ FITTED.yaml.  Accepted, the fitted keys are set on the node in one atomic parame
 (``set_parameters_atomically``: all or none); not accepted, nothing is applied and the
 previous parameters stay in use.
 
-Exit status: 0 accepted (and applied, unless ``--dry-run``); 1 not accepted or the node
-refused the set; 2 bad arguments, no node, or a drive that did not follow (no measured
-motion, motion unrelated to the command, records that stop, never at rest); 130
+Before anything moves it asks (the axis, the limits of the motion; ``--yes`` skips the
+question; a stdin that is not a terminal without ``--yes``: one line, exit status 2).  It
+prints the verdict, the compensator settings it recommends and the improvement they predict
+on a sector scan, as ``worm-gear-sim calibrate`` does.
+
+Exit status: 0 accepted (and applied, unless ``--dry-run``); 1 not accepted, the node
+refused the set, or the motion not confirmed; 2 bad arguments, no node, or a drive that did
+not follow (no measured motion, motion unrelated to the command, records that stop, never
+at rest); 130
 interrupted (Ctrl-C, SIGINT) before the fitted set was sent: one line "interrupted;
 nothing applied".  While the set is being applied (one atomic request, at most 30 s)
 SIGINT is ignored, so the answer is always reported.  This module imports only the
@@ -77,8 +83,12 @@ def _args(argv: list[str]) -> argparse.Namespace:
     ap.add_argument('--settle-timeout', type=float, default=10.0, metavar='S',
                     help='longest wait for the drive to come to rest (default: %(default)s)')
     ap.add_argument('--dry-run', action='store_true', help='do not set the fitted values')
+    ap.add_argument('--yes', '-y', action='store_true',
+                    help='do not ask before moving the axis (needed when stdin is not a '
+                    'terminal)')
     ap.add_argument('--serial', action='store_true', help='fit in this process (no Dask)')
     ap.add_argument('--no-plot', action='store_true')
+    ap.add_argument('--no-progress', action='store_true', help='no progress bar')
     add_limit_options(ap)
     return ap.parse_args(argv)
 
@@ -249,10 +259,13 @@ def _exit_interrupted(signum: int, frame: Any) -> None:
 
 def bad_arguments(opts: argparse.Namespace) -> str | None:
     """The first option out of its range, as one line (None: all valid)."""
-    measure = [o.strip() for o in opts.measure.split(',') if o.strip()]
-    bad = [o for o in measure if o not in OUTPUTS]
-    if bad:
-        return f'--measure {",".join(bad)}: not one of {", ".join(OUTPUTS)}'
+    from ..cli.calibrate import angle_list
+    from ..cli.common import CliError
+    try:
+        angle_list(opts.measure, '--measure')
+        angle_list(opts.outputs, '--outputs')
+    except CliError as exc:
+        return str(exc)
     if Path(opts.output).suffix.lower() not in ('.yaml', '.yml'):
         return f'-o {opts.output}: the fitted parameter file must end in .yaml'
     if not (math.isfinite(opts.accept) and 0 < opts.accept < 1):
@@ -261,6 +274,27 @@ def bad_arguments(opts: argparse.Namespace) -> str | None:
         return (f'--settle-timeout {opts.settle_timeout!r}: a finite number of seconds > 0 '
                 '(the longest wait for the drive to come to rest)')
     return None
+
+
+def consent(opts: argparse.Namespace, stdin: Any = None, stdout: Any = None
+            ) -> tuple[int, str] | None:
+    """Ask before the axis moves: None to go on, else (exit status, the one line why not).
+    ``--yes`` skips the question; a stdin that is not a terminal cannot answer it: refused
+    (2, as a bad argument); an answer other than y: 1."""
+    if opts.yes:
+        return None
+    stdin = sys.stdin if stdin is None else stdin
+    stdout = sys.stdout if stdout is None else stdout
+    if not (hasattr(stdin, 'isatty') and stdin.isatty()):
+        return 2, ('stdin is not a terminal, so nobody can confirm that the axis may move: '
+                   'give --yes to let the calibration move it; nothing moved')
+    stdout.write(f'This streams an excitation to {opts.servo_topic}: the worm axis of '
+                 f'{opts.node} moves up to {opts.max_angle:g} rad each way from where it is, '
+                 f'at up to {opts.max_rate:g} rad/s and {opts.max_accel:g} rad/s^2, '
+                 f'{opts.duration:g} s of moves. Clear the axis. Move it? [y/N] ')
+    stdout.flush()
+    answer = stdin.readline().strip().lower()
+    return None if answer in ('y', 'yes') else (1, 'not confirmed; nothing moved')
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -273,6 +307,10 @@ def main(argv: list[str] | None = None) -> int:
         if why is not None:
             print(f'{PROG}: {why}', file=sys.stderr)
             return 2
+        refused = consent(opts)
+        if refused is not None:
+            print(f'{PROG}: {refused[1]}', file=sys.stderr)
+            return refused[0]
         # the heavy imports while a Ctrl-C still ends the process at once
         import rclpy
         from rclpy.signals import SignalHandlerOptions
@@ -295,10 +333,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(opts: argparse.Namespace, argv: list[str] | None) -> int:
-    from ..cli.calibrate import limits_of, report_calibration
+    from ..cli.calibrate import StageBar, limits_of, recommendation, report_calibration
     from ..identification import FitOptions
     from ..identification.calibrate import calibrate
     from ..identification.data import IdentificationError
+    from ..identification.excitation import design_excitation
     from ..validation import ConfigError
     keys = [k.strip() for item in opts.fit for k in item.split(',') if k.strip()]
     measure = [o.strip() for o in opts.measure.split(',') if o.strip()]
@@ -319,19 +358,26 @@ def _run(opts: argparse.Namespace, argv: list[str] | None) -> int:
                          list(base.node.joint_names), measure,
                          base.node.publish_rate_hz, opts.settle_timeout)
         t0 = time.perf_counter()
+        stages = None
         try:
+            stages = StageBar(len(design_excitation(limits, keys, base)),
+                              not opts.no_progress)
             res = calibrate(base, keys, limits, drive,
                             options=FitOptions(strategy='robust', serial=opts.serial),
                             outputs=opts.outputs.split(',') if opts.outputs else None,
-                            accept_rel=opts.accept)
+                            accept_rel=opts.accept, progress=stages)
+            advice = recommendation(res, stages)
         except (IdentificationError, ConfigError) as exc:
             raise CalibrationAborted(str(exc)) from None
+        finally:
+            if stages is not None:
+                stages.close()
         wall = time.perf_counter() - t0
         json_path, _ = report_calibration(
             res, base, keys, limits, out, f'node {opts.node} on {opts.measured_topic}',
             ' '.join(sys.argv if argv is None else ['worm_gear_sim_calibrate', *argv]),
-            wall, not opts.no_plot, print, node=opts.node, servo_topic=opts.servo_topic,
-            measured_topic=opts.measured_topic)
+            wall, not opts.no_plot, print, advice, node=opts.node,
+            servo_topic=opts.servo_topic, measured_topic=opts.measured_topic)
         if not res.accepted:
             print(f'calibration not accepted: {res.reasons[0]}; nothing applied to '
                   f'{opts.node}, its parameters stay in use (report: {json_path})',
