@@ -22,7 +22,7 @@ def progress_bar(total: int, desc: str, unit: str) -> Any:
     except ImportError:  # pragma: no cover - tqdm is a declared dependency
         return None
 
-    class _Bar(tqdm):           # type: ignore[misc, valid-type]
+    class _Bar(tqdm):
         monitor_interval = 0    # no monitor thread (module docstring)
 
     return _Bar(total=total, desc=desc, unit=unit, file=sys.stderr, leave=True,

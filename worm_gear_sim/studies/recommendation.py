@@ -95,14 +95,15 @@ def recommend_compensator(fitted: Config) -> Recommendation:
     the improvement they predict on a sector scan (module docstring)."""
     move = sector_scan(fitted)
     raw = float(np.sqrt(np.mean(antenna_error(fitted, move.t, move.theta1, move.theta1) ** 2)))
-    tried = []
-    for settings in _candidates(fitted):
-        model = fitted.replace(settings)
-        b = benefit(model, None, move, raw, how='causal')
-        tried.append({'settings': settings, 'compensated_rms_rad': b['compensated_rms'],
+    tried: list[dict[str, Any]] = []
+    results: list[tuple[float, dict[str, Any]]] = []
+    for candidate in _candidates(fitted):
+        b = benefit(fitted.replace(candidate), None, move, raw, how='causal')
+        tried.append({'settings': candidate, 'compensated_rms_rad': b['compensated_rms'],
                       'improvement': b['improvement']})
-    best = min(tried, key=lambda r: r['compensated_rms_rad'])
-    settings, rms = dict(best['settings']), best['compensated_rms_rad']
+        results.append((float(b['compensated_rms']), candidate))
+    rms, best = min(results, key=lambda r: r[0])
+    settings: dict[str, Any] = dict(best)
     if not rms < raw:                                   # nothing beats no compensation
         settings, rms = {'compensation.enabled': False}, raw
     flat = fitted.to_flat_dict()
