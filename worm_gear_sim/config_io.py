@@ -40,7 +40,7 @@ from .validation import ConfigError, ForeignParameterWarning, suggest, unknown_n
 __all__ = ['load_config', 'default_config_path', 'PARAMS_FORMAT', 'typed_value', 'parse_set',
            'check_key', 'params_document', 'load_params_json', 'load_any_config',
            'resolve_config', 'params_json_dump', 'params_yaml_text', 'read_config_text',
-           'safe_yaml_load']
+           'safe_yaml_load', 'ROS_RESERVED']
 
 PARAMS_FORMAT = 'worm_gear_sim.params/1'
 _RESERVED_JSON_KEYS = ('format', 'derived')
@@ -87,7 +87,7 @@ def _dotted(params: Any, where: str) -> list[tuple[str, Any]]:
     for name, value in params.items():
         if not isinstance(name, str):
             raise ConfigError(str(name), 'parameter names must be strings')
-        if isinstance(value, Mapping) and name not in _ROS_RESERVED:
+        if isinstance(value, Mapping) and name not in ROS_RESERVED:
             out += [(f'{name}.{sub}', v) for sub, v in value.items()]
         else:
             out.append((name, value))
@@ -110,7 +110,7 @@ def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | N
         doc = {}
     params = {}
     for name, value in _ros_parameters(doc, str(p), node_name).items():
-        if name.split('.', 1)[0] in _ROS_RESERVED:
+        if name.split('.', 1)[0] in ROS_RESERVED:
             continue
         if name not in _MODEL_NAMES:
             err = unknown_name(name, _MODEL_NAMES, SECTIONS)
@@ -125,8 +125,9 @@ def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | N
     return cfg.replace(overrides) if overrides else cfg
 
 
-# Parameters rclpy itself may find in a params file; they are not model parameters.
-_ROS_RESERVED = frozenset({'use_sim_time', 'qos_overrides', 'diagnostic_updater',
+#: Parameters of ROS itself a params file may hold (a name or a section); not the model's:
+#: skipped by the loader, never an unknown name for the node.
+ROS_RESERVED = frozenset({'use_sim_time', 'qos_overrides', 'diagnostic_updater',
                            'start_type_description_service'})
 #: The model's parameters (dotted names).
 _MODEL_NAMES = frozenset(Config().to_flat_dict())

@@ -24,7 +24,7 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
-from ..config_io import load_config
+from ..config_io import ROS_RESERVED, load_config
 from ..params import Config
 from ..schema import SECTIONS
 from ..validation import ConfigError, unknown_name, value_kind
@@ -129,6 +129,10 @@ def check_overrides(node: Any) -> None:
             qos = node.get_parameters_by_prefix('qos_overrides')
             hint = suggest_name(name, {'qos_overrides.' + n: None for n in qos})
             raise ConfigError(name, 'unknown parameter of this node' + hint)
+        if name.split('.', 1)[0] in ROS_RESERVED:       # ROS's own, not declared here
+            node.get_logger().warning(f'ignoring parameter {name!r}: not declared by '
+                                      f'{node.get_name()}')
+            continue
         err = unknown_name(name, MODEL_PARAMETER_NAMES, SECTIONS)
         if err is not None:
             raise err
