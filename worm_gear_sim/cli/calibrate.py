@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config_io import load_config
-from ..guarded_io import output_path_problem
+from ..guarded_io import GuardedFileError, check_write_target
 from ..identification import FitOptions
 from ..validation import ConfigError
 from .common import CliError, add_config_options, config_from_args, fit_in_process, say
@@ -125,9 +125,10 @@ def _check_outputs(out: Path, plot: bool) -> None:
     if out.suffix.lower() not in ('.yaml', '.yml'):
         raise CliError(f'-o {out}: the fitted parameter file must end in .yaml')
     for path in [out, out.with_suffix('.json')] + ([out.with_suffix('.png')] if plot else []):
-        why = output_path_problem(path)
-        if why:
-            raise CliError(f'-o {out}: {why}; nothing was run')
+        try:
+            check_write_target(path)
+        except GuardedFileError as exc:
+            raise CliError(f'-o {out}: {exc}; nothing was run') from None
 
 
 def _check_record_size(moves: list, args: argparse.Namespace, columns: int) -> None:
@@ -164,9 +165,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise CliError(f'--encoder-bits: {exc}') from None
     if args.export_excitation:
-        why = output_path_problem(args.export_excitation)
-        if why:
-            raise CliError(f'--export-excitation: {why}')
+        try:
+            check_write_target(args.export_excitation)
+        except GuardedFileError as exc:
+            raise CliError(f'--export-excitation: {exc}') from None
     else:
         _check_outputs(out, not args.no_plot)
     limits = limits_of(args)
