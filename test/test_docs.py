@@ -76,6 +76,19 @@ def test_every_figure_is_shown_somewhere():
     assert not unused, f'figures no page links to: {unused}'
 
 
+
+def test_every_doc_the_code_names_exists():
+    """A comment or docstring that sends the reader to a page of docs/ (the package, the tests, the
+    benchmarks, the scripts) names a page that is there."""
+    missing = []
+    for folder in ('worm_gear_sim', 'test', 'benchmarks', 'scripts'):
+        for path in sorted((ROOT / folder).rglob('*.py')):
+            for number, line in enumerate(path.read_text().splitlines(), 1):
+                for name in re.findall(r'docs/([\w.-]+\.md)', line):
+                    if not (DOCS / name).is_file():
+                        missing.append(f'{path.relative_to(ROOT)}:{number}: docs/{name}')
+    assert not missing, 'pages that do not exist:\n' + '\n'.join(missing)
+
 DEV_TOOLS = {'pytest', 'pytest-xdist', 'hypothesis', 'mypy', 'ruff', 'colcon-core', 'sphinx',
              'myst-parser', 'sybil'}
 

@@ -135,7 +135,7 @@ def _float(t: np.ndarray, t0: float, tau: float, size: float, seed: int) -> np.n
 def test_a_crossing_on_the_steep_scale_is_timed_where_its_rise_starts(tau, size):
     """The steep scale times a step where the float starts, extrapolated from its 5 % and
     50 % crossings as a cube's, not at its middle (0.79 tau later: 24-79 ms here; 43-91 ms
-    late on drawn drives, docs/adaptation-log.md): within the time sd the estimator weighs it
+    late on the drawn drives of bench_adaptation.py): within the time sd the estimator weighs it
     with (RISE_TIME_SHARE of the rise to the middle, itself 0.79 tau within 15 %). The size
     within 2 % (10 % when the float outlasts the 60 ms gap and its start bends the line
     before)."""

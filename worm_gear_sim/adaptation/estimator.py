@@ -120,11 +120,11 @@ SWITCH_TIME_SD = 2e-3
 SWITCH_TORQUE_SD = 2e-3
 #: Timing uncertainty of a flank change measured by the area formula [s] (neither the
 #: float's onset nor the arch seen): the formula holds only when the model crosses first,
-#: and off that case it was measured 12-330 ms off (docs/adaptation-log.md)
+#: and off that case it was measured 12-330 ms off (benchmarks/bench_adaptation.py drives)
 AREA_TIME_SD = 0.05
 #: Timing uncertainty of a crossing the steep scale of the step detector found, as a share
 #: of the time from the rise's extrapolated start to the step's middle (the start measured
-#: 4-33 ms off on 11 drives drawn with drag, the rise 53-144 ms: docs/adaptation-log.md)
+#: 4-33 ms off on 11 drives drawn with drag, the rise 53-144 ms: bench_adaptation.py)
 RISE_TIME_SHARE = 0.2
 #: A step found on the detector's wide scale is the drive's crossing only where the
 #: estimate's torque demand T + c omega4 + J alpha4 is within this many of its standard

@@ -523,7 +523,7 @@ def _look(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay, t_a
         # the path grows linearly from zero there (a cube), until with drag it coasts at
         # -T/c after J/c (a square): from the rise's ONSET_SHARE and middle crossings back
         # to where a cube starts (a square's start comes 0.2 of the float early; measured
-        # on drawn drives: docs/adaptation-log.md, RISE_TIME_SHARE)
+        # on the drawn drives of benchmarks/bench_adaptation.py, RISE_TIME_SHARE)
         t_s = _rise_before(a, k0, n, centre, t_c, dl, kl, ONSET_SHARE * step)
         t_0 = t_s - (t_c - t_s) / _CUBE_SPAN if t_s > -np.inf else t_c
         t_0 = max(t_0, a[k0, 0] - centre)
