@@ -34,6 +34,7 @@ import re
 import resource
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -96,21 +97,40 @@ def _directory_bytes(path: Path) -> int:
     return total
 
 
+def _stop_group(proc: subprocess.Popen) -> tuple[str, str]:
+    """SIGINT to the example's process group, SIGKILL 10 s later; what it printed."""
+    for sig, wait in ((signal.SIGINT, 10.0), (signal.SIGKILL, 10.0)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            pass
+        try:
+            return proc.communicate(timeout=wait)
+        except subprocess.TimeoutExpired:
+            continue
+    return '', ''
+
+
 def _run(example: Example, argv: list[str]) -> str | None:
     """Run one block; None when it succeeded, else the failure's text."""
     work = example.namespace['work']
     source = str(example.parsed)
     env = _environment(source)
     env.update(directives(example.document.text, example.region.start).get('env', {}))
-    try:
-        proc = subprocess.run(argv + [source], cwd=work, env=env, text=True,
-                              capture_output=True, timeout=TIMEOUT_S,
-                              preexec_fn=_limit_file_size)
-    except subprocess.TimeoutExpired:
-        return f'still running after {TIMEOUT_S:.0f} s: an example must finish in seconds'
+    # its own session: at the timeout every process it started is stopped, not only the shell
+    with subprocess.Popen(argv + [source], cwd=work, env=env, text=True,
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                          preexec_fn=_limit_file_size, start_new_session=True) as proc:
+        try:
+            stdout, stderr = proc.communicate(timeout=TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            stdout, stderr = _stop_group(proc)
+            return (f'still running after {TIMEOUT_S:.0f} s: an example must finish in '
+                    f'seconds\n--- stdout (end) ---\n{stdout[-3000:]}\n'
+                    f'--- stderr (end) ---\n{stderr[-3000:]}')
     if proc.returncode != 0:
-        return (f'exit status {proc.returncode}\n--- stdout (end) ---\n{proc.stdout[-3000:]}\n'
-                f'--- stderr (end) ---\n{proc.stderr[-3000:]}')
+        return (f'exit status {proc.returncode}\n--- stdout (end) ---\n{stdout[-3000:]}\n'
+                f'--- stderr (end) ---\n{stderr[-3000:]}')
     written = _directory_bytes(work)
     if written > MAX_DIR_BYTES:
         return (f'the examples wrote {written / 2**20:.1f} MiB: a documented example writes at '

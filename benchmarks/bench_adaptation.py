@@ -70,7 +70,7 @@ the ratio of the p99 lateness on / off per round (target <= 1.5).
 
 First encoder sample (``--first-sample-runs``): in fresh processes built as the node builds
 its pipeline, the work of the sample at which the first encoder sample enters the estimate,
-with the node's warm-up before "ready" (:mod:`worm_gear_sim.warmup`) and without it.
+with the node's warm-up before "ready" (:mod:`worm_gear_sim.adaptation.warmup`) and without it.
 """
 
 from __future__ import annotations
@@ -89,18 +89,18 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from worm_gear_sim.adaptation.live import LiveAdaptation, in_slices, in_worker  # noqa: E402
-from worm_gear_sim.adaptation.twin import (  # noqa: E402
+from worm_gear_sim.config.usable import Config  # noqa: E402
+from worm_gear_sim.dynamics.inverse import gear_torque_demand  # noqa: E402
+from worm_gear_sim.dynamics.model import DriveModel  # noqa: E402
+from worm_gear_sim.dynamics.simulation import Simulator  # noqa: E402
+from worm_gear_sim.realtime.predictor import RealtimePredictor  # noqa: E402
+from worm_gear_sim.schema.validation import ConfigError  # noqa: E402
+from worm_gear_sim.studies.adaptation_twin import (  # noqa: E402
     BASE_NS,
     prepare_start,
     run_twin,
     scenario,
 )
-from worm_gear_sim.dynamics.inverse import gear_torque_demand  # noqa: E402
-from worm_gear_sim.dynamics.model import DriveModel  # noqa: E402
-from worm_gear_sim.dynamics.simulation import Simulator  # noqa: E402
-from worm_gear_sim.params import Config  # noqa: E402
-from worm_gear_sim.realtime.predictor import RealtimePredictor  # noqa: E402
-from worm_gear_sim.validation import ConfigError  # noqa: E402
 
 ARCMIN = math.pi / 180.0 / 60.0
 
@@ -429,10 +429,10 @@ FIRST_SAMPLE = r'''
 import sys, time
 sys.path.insert(0, sys.argv[2])
 from worm_gear_sim.adaptation.live import LiveAdaptation, in_slices
-from worm_gear_sim.adaptation.twin import BASE_NS, prepare_start, scenario
-from worm_gear_sim.params import Config
+from worm_gear_sim.studies.adaptation_twin import BASE_NS, prepare_start, scenario
+from worm_gear_sim.config.usable import Config
 from worm_gear_sim.realtime.predictor import RealtimePredictor
-from worm_gear_sim.warmup import warm_up
+from worm_gear_sim.adaptation.warmup import warm_up
 cfg = prepare_start(Config())
 pred = RealtimePredictor(cfg, apply_compensation=True, base_ns=BASE_NS)
 if sys.argv[1] == 'warm':

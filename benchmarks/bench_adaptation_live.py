@@ -8,7 +8,7 @@
 The drives are bench_adaptation.py's (the same generator and seed: drive i here is drive i
 there).  Each drive runs twice from the NOMINAL model, with the same encoder seed:
 
-* the offline twin (``worm-gear-sim adapt``, :func:`~worm_gear_sim.adaptation.twin.
+* the offline twin (``worm-gear-sim adapt``, :func:`~worm_gear_sim.studies.adaptation_twin.
   run_twin`);
 * live (:func:`~worm_gear_sim.ros.live_adaptation.run_live`): the node and the plant node as
   processes, this process streaming the scenario at 1 kHz in real time (ROS_DOMAIN_ID from
@@ -44,8 +44,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_adaptation import ARCMIN, drive, rms, two_revolutions  # noqa: E402
 
-from worm_gear_sim.adaptation.twin import TwinRun, run_twin  # noqa: E402
-from worm_gear_sim.params import Config  # noqa: E402
+from worm_gear_sim.config.usable import Config  # noqa: E402
+from worm_gear_sim.studies.adaptation_twin import TwinRun, run_twin  # noqa: E402
 
 KEYS = ('x_10_20', 'x_last_10', 'x_all', 'worst_1s')
 #: The issue's targets on the ratios (at least).

@@ -41,8 +41,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_adaptation import drive, rms, two_revolutions  # noqa: E402
 
-from worm_gear_sim.adaptation.twin import run_twin  # noqa: E402
-from worm_gear_sim.params import Config  # noqa: E402
+from worm_gear_sim.config.usable import Config  # noqa: E402
+from worm_gear_sim.studies.adaptation_twin import run_twin  # noqa: E402
 
 TARGETS = (('x_10_20', 10.0, '10-20 s'), ('x_last', 30.0, 'last 10 s'),
            ('worst_1s', 1.0, 'worst 1 s'))

@@ -1,7 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """Batch throughput: N drives (parameter sets) simulated as N serial ``simulate`` calls, as one
-``simulate_batch`` call on threads (worm_gear_sim.dynamics.batch), as a numba ``prange`` loop
+``simulate_batch`` call on threads (worm_gear_sim.parallel.threads), as a numba ``prange`` loop
 over the kernel with per-drive packed parameter rows, and on a pool of processes; side by side
 in one run, each checked bit for bit against the serial results.
 
@@ -36,9 +36,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from worm_gear_sim.dynamics.batch import simulate_batch  # noqa: E402
+from worm_gear_sim.config.usable import Config  # noqa: E402
 from worm_gear_sim.dynamics.simulation import Simulator, simulate  # noqa: E402
-from worm_gear_sim.params import Config  # noqa: E402
+from worm_gear_sim.parallel.threads import simulate_batch  # noqa: E402
 
 FIELDS = ('t', 'theta1', 'theta1_dot', 'theta', 'omega', 'alpha', 'aux')
 
@@ -120,7 +120,7 @@ def prange_batch(models, profile, t_end: float, stride: int, workers: int):
     from numba import njit, prange
 
     from worm_gear_sim.dynamics.integrator import advance
-    from worm_gear_sim.dynamics.model import N_AUX
+    from worm_gear_sim.dynamics.layout import N_AUX
 
     @njit(parallel=True, cache=False)
     def advance_many(P, C, U, V, A, TH, TD, dt, stride, RU, RV, RA, RAUX, ST, CTL, load, out):
@@ -167,7 +167,7 @@ _BASE: Config | None = None
 
 def _proc_init(base_nested: dict) -> None:
     global _BASE
-    from worm_gear_sim.params import config_from_mapping
+    from worm_gear_sim.config.usable import config_from_mapping
     _BASE = config_from_mapping(base_nested)
 
 

@@ -10,8 +10,11 @@ Prints, in one run:
     real-time factor;
   * mean Newton solves and force evaluations per step (what bounds the time);
   * the cost of one force evaluation (the transcendental-heavy part) and of one 1 kHz tick
-    through Simulator.advance_to (what the node pays per tick), old and new side by side;
-  * pointwise accuracy of theta2/theta4 at the node step and the antenna ring-down;
+    through Simulator.advance_to (what the node pays per tick), old, new and the variable
+    step side by side;
+  * pointwise accuracy of theta2/theta4 at the node step, of the fixed and the variable step
+    against the event-driven Radau solution of test_against_radau, and the antenna
+    ring-down;
   * the speed-up over scipy's Radau at equal accuracy of the antenna angle theta4;
   * the floor: the same step written plainly (kernel_floor.py: the default model's
     equations in slip, one or two force evaluations per step, no branches) on the same
@@ -20,6 +23,11 @@ Prints, in one run:
     python benchmarks/bench_core.py            # full run (~2-4 min)
     python benchmarks/bench_core.py --quick    # skip the Radau comparison
     python benchmarks/bench_core.py --step-limit   # only: what sets the step (below)
+    python benchmarks/bench_core.py --adaptive     # only: the variable step beside the fixed
+
+The variable step (``integrator.method: adaptive``) beside the fixed one, on the 18-step move
+and a +-5 deg sector scan, alternating (``benchmarks/adaptive_steps.py``: the same table, and
+the step-size history as a figure), is part of the run.
 
 ``--step-limit`` prints the pointwise theta2 / theta4 accuracy of the default move at 4-10 us
 with each ingredient of the model switched off in turn (the friction law, its Stribeck
@@ -43,9 +51,9 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from worm_gear_sim import Config, Simulator, make_profile, simulate  # noqa: E402
+from worm_gear_sim.dynamics.equations import mesh_forces  # noqa: E402
 from worm_gear_sim.dynamics.integrator import N_STATS, S_EVALS, S_SOLVES, advance  # noqa: E402
 from worm_gear_sim.dynamics.modal import StepResolutionWarning  # noqa: E402
-from worm_gear_sim.dynamics.model import mesh_forces  # noqa: E402
 
 OLD = {'friction.direction': 'regularized', 'integrator.worm_frequency_matching': False,
        'integrator.time_step': 1e-5}
@@ -59,6 +67,7 @@ ROWS = [
     ('linear, constant mu', {'mesh.stiffness_model': 'linear', 'friction.model': 'constant'}),
     ('linear, frictionless', {'mesh.stiffness_model': 'linear', 'friction.model': 'off'}),
 ]
+ADAPTIVE = {'integrator.method': 'adaptive'}
 SLEW = {'input.profile': 'ramp', 'input.target_angle': 4.0, 'input.move_time': 2.0}
 MODELS = {
     'nonlinear (default)': {},
@@ -137,6 +146,32 @@ def pointwise_accuracy(over: dict) -> tuple[float, float]:
     from bench_step import errors
     dt = Config().replace(over).integrator.time_step
     return errors(over, steps=(dt,))[0][dt]
+
+
+def radau_pointwise(over: dict, t_end: float = 0.024) -> tuple[float, float, int]:
+    """(theta2, theta4 error as fractions of their oscillation amplitudes, steps checked):
+    max over every step of the 18-step move and 4 ms of ringing against the event-driven
+    Radau solution of test_against_radau (the reference its pointwise-target test uses);
+    the variable step recorded on 1 ms ticks, checked at every step it took (its log)."""
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'test'))
+    from test_against_radau import radau_set_valued
+    cfg = Config().replace(over)
+    prof = make_profile(cfg.input)
+    if cfg.integrator.method == 'fixed':
+        tr = simulate(cfg, t_end=t_end)
+        t, theta = tr.t, tr.theta
+    else:
+        sim = Simulator(cfg)
+        sim.log_steps(100_000)
+        sim.run(prof, t_end, record_every=int(round(1e-3 / cfg.integrator.time_step)))
+        t, theta = sim.step_log['t'], sim.step_log['theta']
+    th1 = prof.theta1(t)
+    ref, _ = radau_set_valued(cfg, t, t_end)
+    ratio = Simulator(cfg).derived.output_per_input
+    osc2 = np.abs(ref[:, 0] - th1).max()
+    osc4 = np.abs(ref[:, 2] - th1 * ratio).max()
+    return (float(np.abs(theta[:, 0] - ref[:, 0]).max() / osc2),
+            float(np.abs(theta[:, 2] - ref[:, 2]).max() / osc4), len(t))
 
 
 def ring_down_of(over: dict, horizon: float = 0.5) -> float:
@@ -296,11 +331,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--quick', action='store_true', help='skip the Radau comparison')
     ap.add_argument('--step-limit', action='store_true', help='only what sets the step')
+    ap.add_argument('--adaptive', action='store_true',
+                    help='only the variable step beside the fixed one')
     args = ap.parse_args(argv)
     # the coarse rows are deliberate: the tables report each step's resolution themselves
     warnings.simplefilter('ignore', StepResolutionWarning)
     if args.step_limit:
         step_limit()
+        return 0
+    from adaptive_steps import side_by_side
+    if args.adaptive:
+        side_by_side()
         return 0
     print(f'# worm_gear_sim kernel benchmark  ({platform.processor() or platform.machine()}, '
           f'{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}, python '
@@ -323,6 +364,9 @@ def main(argv=None) -> int:
     for name, over in ROWS[:3]:
         ticks[name] = min(advance_to_call_us(Config().replace(over)) for _ in range(3))
         print(f'  {name:28s} {ticks[name]:7.1f} us  (target <= 30 us)')
+    ticks['adaptive'] = min(advance_to_call_us(Config().replace(ADAPTIVE)) for _ in range(3))
+    print(f'  {"variable step (adaptive)":28s} {ticks["adaptive"]:7.1f} us  (target <= 30 us;'
+          f' default / adaptive {ticks[ROWS[2][0]] / ticks["adaptive"]:.2f})')
     a, b, c = (ticks[n] for n, _ in ROWS[:3])
     print(f'  ratio to the old setting: set-valued at 10 us {b / a:.2f}, default (4 us) '
           f'{c / a:.2f}; default / set-valued at 10 us {c / b:.2f}')
@@ -337,6 +381,8 @@ def main(argv=None) -> int:
           'leaves state and control unchanged is repeated, not computed again)')
     floor_rows()
     print()
+    side_by_side()
+    print()
     print('# accuracy at the node step, pointwise at every step over 25 ms (move + 5 ms '
           'ringing) against Newmark at 0.05 us of the same model, fraction of the oscillation '
           'amplitude (targets theta2 <= 0.05, theta4 <= 0.001)')
@@ -347,6 +393,14 @@ def main(argv=None) -> int:
                 o.update({'mesh.stiffness_model': 'linear', 'friction.model': 'constant'})
             e2, e4 = pointwise_accuracy(o)
             print(f'  {name:28s} {mesh:9s} theta2 {e2:.4f}  theta4 {e4:.2e}')
+    print('# accuracy against the event-driven Radau solution, pointwise at every step over '
+          '24 ms (move + 4 ms ringing), set-valued friction, fraction of the oscillation '
+          'amplitude (targets theta2 <= 0.05, theta4 <= 0.001)')
+    for name, over in (('default (4 us)', {}), ('variable step (adaptive)', ADAPTIVE)):
+        for mesh, m in (('linear', {'mesh.stiffness_model': 'linear',
+                                    'friction.model': 'constant'}), ('nonlinear', {})):
+            e2, e4, n = radau_pointwise(dict(over, **m))
+            print(f'  {name:28s} {mesh:9s} theta2 {e2:.4f}  theta4 {e4:.2e}  ({n} steps)')
     print('# antenna ring-down over 0.5 s after the move (exact-stick limit: tanh as v_eps -> 0,'
           ' test_integrator)')
     for name, over in (('old default (tanh 1e-4, 10 us)', OLD),

@@ -7,8 +7,8 @@ stamped 1 kHz stream with encoder samples from its first sample on.
 
 The node (``python -m worm_gear_sim.ros``, a process, ``adaptation.enabled`` and
 ``node.compensation_applied`` true) starts with ``NUMBA_CACHE_DIR`` an empty temporary
-folder: every kernel compiles before it says "ready" (:mod:`worm_gear_sim.warmup`).  Then
-this process (rclpy) waits until it is connected, streams stamped references at 1 kHz on
+folder: every kernel compiles before it says "ready" (:mod:`worm_gear_sim.adaptation.warmup`).
+Then this process (rclpy) waits until it is connected, streams stamped references at 1 kHz on
 ``worm_angle_reference`` (a slow sine, stamps of its own clock) for ``--seconds`` and sends
 an encoder sample (``measured_joint_states``, the answer's stamp) back for each answer on
 ``~/compensated_command``.  Printed: the start to "ready" [s]; the first sample's answer

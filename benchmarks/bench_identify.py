@@ -177,7 +177,7 @@ def compare(args) -> None:
 
 
 def coverage(args) -> None:
-    """Calibration of the 95 % intervals: the drive of test/test_identification.py (K_g x 1.3,
+    """Calibration of the 95 % intervals: the drive of test/identification/test_fit.py (K_g x 1.3,
     zeta_1 = 0.01) fitted (K_g, zeta_1) from ``--realisations`` noise draws, with Gaussian
     noise and with a 20-bit encoder on top of 1 urad noise."""
     base = load_config(args.config) if args.config else load_config()
@@ -262,7 +262,7 @@ def timing(args) -> None:
           + '; target <= 5 s')
     if not args.dask:
         return
-    from worm_gear_sim.studies import local_cluster_client
+    from worm_gear_sim.parallel.cluster import local_cluster_client
     for label, opt in ((f'Dask LocalCluster, {args.workers or os.cpu_count()} workers, '
                         'incl. start-up', FitOptions(workers=args.workers)),
                        ('Dask LocalCluster, running', None)):

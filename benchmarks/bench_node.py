@@ -146,8 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     probe.create_subscription(JointState, 'joint_states', on_js, QoSProfile(depth=100))
     if args.feedforward:
         probe.create_subscription(
-            Float64, '/worm_gear_sim/feedforward',
-            lambda m: state['measuring'] and ff.append((time.monotonic(), m.data)),
+            JointState, '/worm_gear_sim/feedforward',
+            lambda m: state['measuring'] and ff.append((time.monotonic(), m.position[0])),
             QoSProfile(depth=100))
     probe.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     # The probe runs on the EventsExecutor (bounded spin slices, as the node does): a 1 kHz

@@ -50,7 +50,7 @@ def stamped_main(args: argparse.Namespace) -> int:
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
 
-    from worm_gear_sim.config_io import load_config
+    from worm_gear_sim.config.files import load_config
     from worm_gear_sim.realtime import feedforward_series
     from worm_gear_sim.ros.run import make_executor
 
@@ -92,7 +92,7 @@ def stamped_main(args: argparse.Namespace) -> int:
                               QoSProfile(depth=100))
     probe.create_subscription(JointState, '/float64/joint_states', counter('js_float64'),
                               QoSProfile(depth=100))
-    probe.create_subscription(Float64, '/float64/worm_gear_sim/feedforward',
+    probe.create_subscription(JointState, '/float64/worm_gear_sim/feedforward',
                               counter('ff_float64'), QoSProfile(depth=100))
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient
@@ -208,5 +208,5 @@ def stamped_main(args: argparse.Namespace) -> int:
               f'samples), elsewhere {np.percentile(lat[far], 99):.3f} ms; max '
               f'{lat[near].max():.2f} / {lat[far].max():.2f} ms')
     print(f'  joint_states received: stamped {count["js_stamped"]}, Float64 '
-          f'{count["js_float64"]}; Float64 ~/feedforward {count["ff_float64"]}')
+          f'{count["js_float64"]}; Float64 node\'s ~/feedforward {count["ff_float64"]}')
     return 0

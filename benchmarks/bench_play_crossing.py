@@ -19,11 +19,11 @@ import os
 import time
 
 from worm_gear_sim import Config
+from worm_gear_sim.compensation.play_crossing import flank_series, soft_feedforward_series
 from worm_gear_sim.dynamics.model import DriveModel
-from worm_gear_sim.play_crossing import flank_series, soft_feedforward_series
+from worm_gear_sim.joint_trajectory.compensate import trajectory_model
 from worm_gear_sim.realtime import feedforward_series
 from worm_gear_sim.studies.mismatch import sector_scan
-from worm_gear_sim.trajectory_compensation import trajectory_model
 
 ARCMIN = math.pi / (180 * 60)
 

@@ -48,8 +48,8 @@ import time
 import numpy as np
 
 from worm_gear_sim import Config
-from worm_gear_sim.compensation import Compensator
-from worm_gear_sim.dynamics.model import friction_coefficient, mesh_compliance
+from worm_gear_sim.compensation.streaming import Compensator
+from worm_gear_sim.dynamics.equations import friction_coefficient, mesh_compliance
 from worm_gear_sim.dynamics.simulation import Simulator
 from worm_gear_sim.realtime import RealtimePredictor
 

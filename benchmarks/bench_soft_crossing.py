@@ -18,10 +18,10 @@ import numpy as np
 from bench_adaptation import drive
 
 from worm_gear_sim import Config
-from worm_gear_sim.adaptation.twin import prepare_start, scenario
-from worm_gear_sim.play_crossing import soft_feedforward_series
+from worm_gear_sim.compensation.play_crossing import soft_feedforward_series
+from worm_gear_sim.joint_trajectory.compensate import antenna_error
 from worm_gear_sim.realtime import feedforward_series
-from worm_gear_sim.trajectory_compensation import antenna_error
+from worm_gear_sim.studies.adaptation_twin import prepare_start, scenario
 
 
 def main() -> int:

@@ -1,7 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """Sweep throughput: a 200-case sweep in this process, on 1 and 2 threads of this process
-(the default engine, worm_gear_sim.dynamics.batch.map_batch) and on a Dask LocalCluster with 1
+(the default engine, worm_gear_sim.parallel.threads.map_batch) and on a Dask LocalCluster with 1
 worker and with 2 workers; cases/second, scaling, and per-case overhead beyond the kernel
 time.
 
@@ -25,7 +25,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from worm_gear_sim import studies as S  # noqa: E402
-from worm_gear_sim.params import Config  # noqa: E402
+from worm_gear_sim.config.usable import Config  # noqa: E402
+from worm_gear_sim.parallel.cluster import local_cluster_client, warm_worker  # noqa: E402
 
 
 def _load() -> str:
@@ -68,7 +69,7 @@ def main() -> int:
     print(f'{args.cases} cases of {args.end_time:g} s simulated at dt = '
           f'{base.integrator.time_step:g} s ({round(args.end_time / base.integrator.time_step)} '
           f'steps each); {_load()}')
-    S.warm_up()
+    warm_worker()
     res = {}
     if not args.no_serial:
         t0, c0 = time.perf_counter(), time.process_time()
@@ -91,8 +92,8 @@ def main() -> int:
             print(f'{"":26s} amplitudes identical to the serial run: {same}')
     for n in (int(w) for w in args.workers.split(',')):
         t0 = time.perf_counter()
-        with S.local_cluster_client(n) as client:
-            client.run(S.warm_up)
+        with local_cluster_client(n) as client:
+            client.run(warm_worker)
             startup = time.perf_counter() - t0
             t1, c1 = time.perf_counter(), time.process_time()
             rows = S.run_cases(base, cases, client=client)

@@ -1,7 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """The stamped path of a drive node *process* while long trajectories are compensated:
-the case of test_hostile_node.py measured, with the overruns the test does not check.
+the case of test/ros/test_hostile_node.py measured, with the overruns the test does not check.
 
 A node process (the package's params file) and a probe over DDS (localhost): the probe
 streams 1 kHz stamped samples; after 0.1 s of each run it sends a ``--points``-waypoint

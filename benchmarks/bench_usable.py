@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Cost of proving a parameter set usable (:func:`worm_gear_sim.params.check_usable`).
+"""Cost of proving a parameter set usable (:func:`worm_gear_sim.config.usable.check_usable`).
 
 Side by side in one run: building a Config from overrides without the check
 (``config_from_mapping(..., usable=False)``), the check of a new set (each set distinct, so
@@ -19,7 +19,7 @@ import os
 import statistics
 import time
 
-from worm_gear_sim.params import Config, check_usable, config_from_mapping
+from worm_gear_sim.config.usable import Config, check_usable, config_from_mapping
 
 
 def _sets(n: int, offset: int) -> list[dict]:

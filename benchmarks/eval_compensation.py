@@ -34,9 +34,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from worm_gear_sim.compensation import Compensator  # noqa: E402
+from worm_gear_sim.compensation.streaming import Compensator  # noqa: E402
+from worm_gear_sim.config.usable import Config  # noqa: E402
 from worm_gear_sim.dynamics.stepping import SimulationError  # noqa: E402
-from worm_gear_sim.params import Config  # noqa: E402
 from worm_gear_sim.studies.compensation_eval import (  # noqa: E402
     METRIC_FLOOR,
     METRICS,

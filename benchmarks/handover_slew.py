@@ -31,7 +31,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from worm_gear_sim import Config, RampProfile, simulate  # noqa: E402
-from worm_gear_sim.derived import derive  # noqa: E402
+from worm_gear_sim.dynamics.derived import derive  # noqa: E402
 
 
 def run(mapping: str, rate: float, torque: float, duration: float, dt: float,

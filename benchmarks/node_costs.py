@@ -55,7 +55,7 @@ def breakdown(n_ticks: int = 2000) -> dict[str, float]:
         out[f'  Simulator.advance_to ({steps} Newmark steps)'] = \
             (time.perf_counter() - a) / n_ticks * 1e6
         if comp is not None:
-            from worm_gear_sim.compensation import Compensator
+            from worm_gear_sim.compensation.streaming import Compensator
             c = Compensator(node.config)
             c.reset(slew(0.0), 0.0)
             t, a = 0.0, time.perf_counter()
@@ -71,9 +71,9 @@ def breakdown(n_ticks: int = 2000) -> dict[str, float]:
             return (time.perf_counter() - a) / n_ticks * 1e6
         out['  state + joint_torques'] = per(lambda: (sim.state, sim.joint_torques()))
         pubs = node.publishing
-        out['  4 publishes (JointState + 3 Float64)'] = per(lambda: (
-            pubs._pub_js.publish(pubs._js), pubs._pub_err.publish(pubs._f_err),
-            pubs._pub_worm.publish(pubs._f_worm), pubs._pub_ff.publish(pubs._f_ff)))
+        out['  4 publishes (joint_states + 3 one-joint answers)'] = per(lambda: (
+            pubs._pub_js.publish(pubs._js), pubs._err.pub.publish(pubs._err.msg),
+            pubs._worm.pub.publish(pubs._worm.msg), pubs._ff.pub.publish(pubs._ff.msg)))
         out['  clock.now()'] = per(lambda: node.get_clock().now())
     finally:
         node.destroy_node()

@@ -30,8 +30,8 @@ if [ "$workers" = 1 ]; then
 fi
 # One BLAS thread per worker: N workers on N cores each with N BLAS threads oversubscribe the
 # cores (the fits' linear algebra).  Measured 2026-11-28 on 2 cores, nothing else running:
-#   pytest -n 2 --dist loadfile test/test_identification.py test/test_calibrate.py \
-#          test/test_backlash.py test/test_calibration_play.py
+#   pytest -n 2 --dist loadfile test/identification/test_fit.py test/cli/test_calibrate_cli.py \
+#          test/dynamics/test_backlash.py test/identification/test_direct.py
 # 63.0 and 65.3 s with OPENBLAS_NUM_THREADS=1, 67.1 and 73.3 s without (alternating order).
 export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
 # --dist loadfile: a module's tests stay on one worker, so module-scoped fixtures run once.

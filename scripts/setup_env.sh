@@ -51,5 +51,5 @@ fi
 # numba's on-disk cache (cache=True) is checked against the file of each compiled function
 # only: a kernel whose callee changed in another module would load stale machine code.  Any
 # change to the package's sources clears the package's numba cache (the package does the same
-# when it is first imported: worm_gear_sim/kernel_cache.py).
-"$VENV/bin/python" -c "from worm_gear_sim.kernel_cache import ensure_fresh_cache as f; f()"
+# when it is first imported: worm_gear_sim/_support/kernel_cache.py).
+"$VENV/bin/python" -c "from worm_gear_sim._support.kernel_cache import ensure_fresh_cache as f; f()"

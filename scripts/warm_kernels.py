@@ -10,9 +10,10 @@ cost.  Two processes compile disjoint paths side by side:
     python scripts/warm_kernels.py          # both paths, in two processes
     python scripts/warm_kernels.py sim      # one path in this process (sim | comp)
 
-``sim``: the Newmark kernel called from Python (``simulate``) and every kernel a node warms
-before it says "ready" (``worm_gear_sim.warmup``: pipeline, adaptation); ``comp``: the
-compensator's kernel and the model inverse, a known trajectory's correction (the node's
+``sim``: the Newmark kernel called from Python (``simulate``, with the fixed and the
+variable step) and every kernel a node warms before it says "ready"
+(``worm_gear_sim.adaptation.warmup``: pipeline, adaptation; for each integrator method); ``comp``:
+the compensator's kernel and the model inverse, a known trajectory's correction (the node's
 trajectory worker) without and with play, and the adaptation's estimator.
 Each process compiles only what its path calls; what one compiled the other loads from the
 cache.  Nothing here is checked: the tests check the results.
@@ -27,16 +28,18 @@ import time
 
 def _sim() -> None:
     from worm_gear_sim import Config
+    from worm_gear_sim.adaptation.warmup import warm_up
     from worm_gear_sim.dynamics.simulation import simulate
-    from worm_gear_sim.warmup import warm_up
     cfg = Config()
     simulate(cfg, t_end=0.002)
-    warm_up(cfg.replace({'adaptation.enabled': True}))   # what a node warms before "ready"
+    simulate(cfg.replace({'integrator.method': 'adaptive'}), t_end=0.002)
+    for method in ('fixed', 'adaptive'):   # what a node warms before "ready"
+        warm_up(cfg.replace({'adaptation.enabled': True, 'integrator.method': method}))
 
 
 def _comp() -> None:
     from worm_gear_sim import Config
-    from worm_gear_sim.compensation import Compensator
+    from worm_gear_sim.compensation.streaming import Compensator
     c = Compensator(Config())
     c.reset(0.0, 0.0)
     for k in range(1, 4):
@@ -44,12 +47,12 @@ def _comp() -> None:
     # a known trajectory (the node's trajectory worker), without and with play
     import numpy as np
 
-    from worm_gear_sim.play_crossing import trajectory_feedforward
+    from worm_gear_sim.joint_trajectory.compensate import trajectory_feedforward
     t = np.arange(20) * 1e-3
     for cfg in (Config(), Config().replace({'mesh.backlash': 2e-4})):
         trajectory_feedforward(cfg, t, 0.5 * t)
     # the adaptation's estimator (the twin: the node's adapting loop offline)
-    from worm_gear_sim.adaptation.twin import run_twin
+    from worm_gear_sim.studies.adaptation_twin import run_twin
     run_twin(Config(), Config().replace({'adaptation.window': 0.2}), 'sector', 0.3)
 
 

@@ -16,12 +16,23 @@ fixtures; rclpy is imported lazily, so non-ROS tests run without it.
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
 from hypothesis import settings
+
+# The tests mirror the package (test/<folder>/test_<module>.py); the helpers they share
+# (processes.py, methods.py, ...) sit in test/ itself, and a few tests reuse another
+# folder's cases: every test folder is importable by module name (names are unique).
+_TESTS = Path(__file__).resolve().parent
+for _folder in [_TESTS, *sorted(p for p in _TESTS.iterdir()
+                                if p.is_dir() and p.name not in ('data', '__pycache__'))]:
+    if str(_folder) not in sys.path:
+        sys.path.insert(0, str(_folder))
 
 # CI (CI=true) replays the same property-based examples on every run (reproducible failures);
 # locally each run explores new ones.  Tests keep their own max_examples/deadline.
@@ -157,18 +168,21 @@ class RosHarness:
         self.compensated: list[Any] = []
         self.clock_pub = self.probe.create_publisher(Clock, '/clock', QoSProfile(depth=10))
         self.joint_states: list[Any] = []
+        # the node's scalar answers: their values, and the stamps of the samples they answer
+        # (stamped one-joint JointStates; Float64 without stamps with node.float64_outputs)
         self.positioning_error: list[float] = []
         self.worm_error: list[float] = []
         self.feedforward: list[float] = []
+        self.answer_stamps: dict[str, list[int]] = {
+            'positioning_error': [], 'worm_error': [], 'feedforward': []}
         self.diagnostics: list[Any] = []
         p = self.probe
         p.create_subscription(JointState, 'joint_states', self.joint_states.append, 1000)
-        p.create_subscription(Float64, '/worm_gear_sim/positioning_error',
-                              lambda m: self.positioning_error.append(m.data), 1000)
-        p.create_subscription(Float64, '/worm_gear_sim/worm_error',
-                              lambda m: self.worm_error.append(m.data), 1000)
-        self.ff_sub = p.create_subscription(Float64, '/worm_gear_sim/feedforward',
-                                            lambda m: self.feedforward.append(m.data), 1000)
+        float64 = bool((overrides or {}).get('node.float64_outputs'))
+        subs = {name: self._answer(name, values, float64) for name, values in (
+            ('positioning_error', self.positioning_error), ('worm_error', self.worm_error),
+            ('feedforward', self.feedforward))}
+        self.ff_sub = subs['feedforward']
         p.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
         p.create_subscription(JointState, '/worm_gear_sim/compensated_command',
                               self.compensated.append, 1000)
@@ -176,6 +190,19 @@ class RosHarness:
         assert self.spin_until(lambda: self.cmd_pub.get_subscription_count() > 0
                                and self.node.count_publishers('/clock') > 0), \
             'probe and node did not match'
+
+    def _answer(self, name: str, values: list[float], float64: bool) -> Any:
+        """Subscribe the probe to the node's answer ``~/<name>``."""
+        stamps = self.answer_stamps[name]
+        topic = f'/worm_gear_sim/{name}'
+        if float64:
+            return self.probe.create_subscription(
+                self.Float64, topic, lambda m: values.append(m.data), 1000)
+
+        def take(m: Any) -> None:
+            values.append(m.position[0])
+            stamps.append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec)
+        return self.probe.create_subscription(self.JointState, topic, take, 1000)
 
     # ---- waiting ----------------------------------------------------------------------
     def spin_until(self, pred: Callable[[], bool], timeout: float = WAIT) -> bool:

@@ -9,9 +9,9 @@ from __future__ import annotations
 import math
 
 from worm_gear_sim import load_config
+from worm_gear_sim.config.usable import Config
 from worm_gear_sim.dynamics.profiles import TrapezoidalProfile
 from worm_gear_sim.identification import Record, record_from_model
-from worm_gear_sim.params import Config
 
 KG = 'materials.gear_shaft_shear_modulus'
 ZETA = 'damping.modal_damping_ratios[0]'

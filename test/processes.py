@@ -45,7 +45,7 @@ def stop_and_read(proc: subprocess.Popen, log: IO[str], sig: int = signal.SIGTER
 def cli_in_process(*args: object) -> subprocess.CompletedProcess:
     """``worm-gear-sim ARGS`` through its whole entry point (``cli.main``: parsing, the run,
     the one-line errors and exit codes) in this process: what a process would show, without
-    the interpreter's start (~3 s a call).  test_cli.py runs the executable itself."""
+    the interpreter's start (~3 s a call).  test/cli/test_cli.py runs the executable itself."""
     import contextlib
     import io
 

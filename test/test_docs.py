@@ -20,6 +20,10 @@ PAGES = [ROOT / 'README.md', *sorted(DOCS.glob('*.md'))]
 MAX_DOCS_LINES = 3500
 
 
+#: The folder beside a clone that a page must never point to (a clone has no such folder).
+OUTSIDE = '../' + 'shared'
+
+
 def _sphinx(source: Path, out: Path, conf: Path) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, '-m', 'sphinx', '-W', '--keep-going', '-q', '-b', 'html',
@@ -63,7 +67,7 @@ def test_the_docs_are_a_manual():
             for pattern in (banned, tracker):
                 if pattern.search(line):
                     found.append(f'{page.relative_to(ROOT)}:{number}: {line.strip()[:80]}')
-            if '../shared' in line:
+            if OUTSIDE in line:
                 found.append(f'{page.relative_to(ROOT)}:{number}: links out of the repository')
     assert not found, '\n'.join(found)
 
@@ -88,6 +92,26 @@ def test_every_doc_the_code_names_exists():
                     if not (DOCS / name).is_file():
                         missing.append(f'{path.relative_to(ROOT)}:{number}: docs/{name}')
     assert not missing, 'pages that do not exist:\n' + '\n'.join(missing)
+
+#: A file of the repository named in backquotes (``a/b.py``, ``a/b_*.py``, ``a/b.py:name``).
+FILE_NAMED = re.compile(r'`([\w.*/-]+/[\w.*-]+\.(?:py|sh|yaml|yml|md|png|csv|npz|json|toml|txt))'
+                        r'(?::\w+)?`')
+
+
+def test_every_file_the_docs_name_exists():
+    """A path the pages name in backquotes, under a folder of the repository or of the package
+    (``realtime/predictor.py``), is there (a glob matches at least one file); a path under
+    another folder is an output the page describes (``pass/pass.png``) and is not checked."""
+    package = ROOT / 'worm_gear_sim'
+    missing = []
+    for page in PAGES:
+        for name in FILE_NAMED.findall(page.read_text()):
+            first = name.split('/', 1)[0]
+            bases = [b for b in (ROOT, package) if (b / first).is_dir()]
+            if bases and not any(any(b.glob(name)) for b in bases):
+                missing.append(f'{page.relative_to(ROOT)}: {name}')
+    assert not missing, 'files that do not exist:\n' + '\n'.join(missing)
+
 
 DEV_TOOLS = {'pytest', 'pytest-xdist', 'hypothesis', 'mypy', 'ruff', 'colcon-core', 'sphinx',
              'myst-parser', 'sybil'}

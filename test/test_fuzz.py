@@ -20,13 +20,13 @@ import pytest
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
+from worm_gear_sim.config.usable import Config, config_from_mapping
 from worm_gear_sim.dynamics.modal import modes
 from worm_gear_sim.dynamics.profiles import make_profile
 from worm_gear_sim.dynamics.simulation import Simulator
 from worm_gear_sim.dynamics.stepping import SimulationError
-from worm_gear_sim.params import Config, config_from_mapping
-from worm_gear_sim.schema import ANGLE_LIMIT
-from worm_gear_sim.validation import ConfigError
+from worm_gear_sim.schema.sections import ANGLE_LIMIT
+from worm_gear_sim.schema.validation import ConfigError
 
 EXAMPLES = int(os.environ.get('WGS_FUZZ_EXAMPLES', '0') or 0)
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 from processes import start_logged, stop_and_read
 
-from worm_gear_sim.config_io import load_config
+from worm_gear_sim.config.files import load_config
 
 ROOT = Path(__file__).resolve().parent.parent
 PKG = 'worm_gear_sim'
@@ -110,7 +110,7 @@ def test_colcon_install_layout_resolves_like_ros2_run(colcon_install, monkeypatc
 
 def test_launch_file_installed_with_what_it_names(colcon_install):
     """share/worm_gear_sim/launch/worm_gear_sim.launch.py is installed and every file and
-    executable it names (test_node_launch.py checks the names against setup.py) is where
+    executable it names (test/ros/test_node_launch.py checks the names against setup.py) is where
     `ros2 launch` will look for it."""
     prefix = colcon_install / PKG
     share = prefix / 'share' / PKG
@@ -135,10 +135,10 @@ def _share_kernel_cache(installed: Path) -> int:
     executable, not the compiler).  numba validates each entry against its source file
     (numba 0.68: a SHA-256 of its contents; the install copies the files unchanged) and the
     CPU: an entry that does not match is simply compiled again.  The package's stamp of its
-    sources goes along (:mod:`worm_gear_sim.kernel_cache`): without it the installed
+    sources goes along (:mod:`worm_gear_sim._support.kernel_cache`): without it the installed
     package's first import took the copied cache for a stale one and deleted it, and every
     kernel was compiled again (the test took 46-53 s).  Returns the number of files copied."""
-    from worm_gear_sim.kernel_cache import STAMP
+    from worm_gear_sim._support.kernel_cache import STAMP
     if (ROOT / PKG / STAMP).is_file():
         (installed / STAMP).parent.mkdir(exist_ok=True)
         shutil.copy2(ROOT / PKG / STAMP, installed / STAMP)
@@ -228,7 +228,8 @@ def _imports(paths: list[Path]) -> set[str]:
                   ('importorskip', 'import_module') and node.args
                   and isinstance(node.args[0], ast.Constant)):
                 names.add(str(node.args[0].value).split('.')[0])
-    local = {p.stem for p in (ROOT / 'test').glob('*.py')}   # the tests' own helpers
+    # the tests' own helpers and the benchmarks a test runs
+    local = {p.stem for d in ('test', 'benchmarks') for p in (ROOT / d).rglob('*.py')}
     return {n for n in names if n not in sys.stdlib_module_names and n != PKG
             and n not in local}
 

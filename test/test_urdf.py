@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from worm_gear_sim.config_io import load_config
+from worm_gear_sim.config.files import load_config
 
 ROOT = Path(__file__).resolve().parent.parent
 URDF = ROOT / 'urdf' / 'worm_gear_drive.urdf'

@@ -2,7 +2,7 @@
 # Licensed under the Apache License, Version 2.0
 """A drive node process and a probe that talks to it over DDS: trajectories in, the
 compensated trajectories, the compensated commands and /diagnostics out, and a 1 kHz
-stamped reference stream.  Shared by test_hostile_node.py (the checks) and
+stamped reference stream.  Shared by test/ros/test_hostile_node.py (the checks) and
 benchmarks/bench_trajectory_node.py (the overrun figures)."""
 
 from __future__ import annotations
@@ -51,8 +51,8 @@ def big_trajectory(stamp_ns: int, n: int = 100_000, period: float = 1e-3,
     interpreter (and its 1 kHz stream) for a second while it is published."""
     from std_msgs.msg import Header
 
+    from worm_gear_sim.joint_trajectory.compensate import JointTrajectoryData
     from worm_gear_sim.ros.trajectory_cdr import serialize_trajectory
-    from worm_gear_sim.trajectory_compensation import JointTrajectoryData
     header = Header()
     header.stamp.sec, header.stamp.nanosec = stamp_ns // 10**9, stamp_ns % 10**9
     t = np.arange(1, n + 1) * period

@@ -16,10 +16,10 @@ their signal handlers before the heavy imports start.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from . import kernel_cache as _kernel_cache
+from ._support import kernel_cache as _kernel_cache
+from ._support.lazy import lazy_exports
 
 __version__ = '0.1.0'
 
@@ -28,24 +28,25 @@ _kernel_cache.ensure_fresh_cache()   # before any kernel is compiled or loaded
 
 #: public name -> submodule that defines it
 _EXPORTS: dict[str, str] = {
-    'ModalResult': 'dynamics.modal', 'damping_matrix': 'dynamics.modal',
-    'modes': 'dynamics.modal', 'static_equilibrium': 'dynamics.modal',
-    'DriveModel': 'dynamics.model',
-    'Config': 'params', 'ConfigError': 'validation', 'Derived': 'derived',
-    'default_config': 'params', 'derive': 'derived', 'load_config': 'config_io',
-    'check_usable': 'params',
-    'Profile': 'dynamics.profiles', 'RampProfile': 'dynamics.profiles',
-    'SampledProfile': 'dynamics.profiles', 'SCurveProfile': 'dynamics.profiles',
-    'StepProfile': 'dynamics.profiles', 'TrapezoidalProfile': 'dynamics.profiles',
-    'make_profile': 'dynamics.profiles',
-    'SimState': 'dynamics.trajectory', 'Trajectory': 'dynamics.trajectory',
-    'SimulationError': 'dynamics.stepping', 'Simulator': 'dynamics.simulation',
-    'simulate': 'dynamics.simulation', 'simulate_to_csv': 'dynamics.simulation',
-    'simulate_batch': 'dynamics.batch', 'map_batch': 'dynamics.batch',
-    'BatchError': 'dynamics.batch', 'BatchFailure': 'dynamics.batch',
-    'Compensator': 'compensation', 'feedforward_series': 'realtime',
-    'RealtimePredictor': 'realtime',
-    'resolve_config': 'config_io', 'params_document': 'config_io',
+    'ModalResult': '.dynamics.modal', 'damping_matrix': '.dynamics.modal',
+    'modes': '.dynamics.modal', 'static_equilibrium': '.dynamics.modal',
+    'DriveModel': '.dynamics.model',
+    'Config': '.config.usable', 'ConfigError': '.schema.validation',
+    'Derived': '.dynamics.derived', 'default_config': '.config.usable',
+    'derive': '.dynamics.derived', 'load_config': '.config.files',
+    'check_usable': '.config.usable',
+    'Profile': '.dynamics.profiles', 'RampProfile': '.dynamics.profiles',
+    'SampledProfile': '.dynamics.profiles', 'SCurveProfile': '.dynamics.profiles',
+    'StepProfile': '.dynamics.profiles', 'TrapezoidalProfile': '.dynamics.profiles',
+    'make_profile': '.dynamics.profiles',
+    'SimState': '.dynamics.trajectory', 'Trajectory': '.dynamics.trajectory',
+    'SimulationError': '.dynamics.stepping', 'Simulator': '.dynamics.simulation',
+    'simulate': '.dynamics.simulation', 'simulate_to_csv': '.dynamics.simulation',
+    'simulate_batch': '.parallel.threads', 'map_batch': '.parallel.threads',
+    'BatchError': '.parallel.threads', 'BatchFailure': '.parallel.threads',
+    'Compensator': '.compensation.streaming', 'feedforward_series': '.realtime',
+    'RealtimePredictor': '.realtime',
+    'resolve_config': '.config.files', 'params_document': '.config.files',
 }
 
 __all__ = [
@@ -60,10 +61,10 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # static analysers see the eager imports
-    from .compensation import Compensator
-    from .config_io import load_config, params_document, resolve_config
-    from .derived import Derived, derive
-    from .dynamics.batch import BatchError, BatchFailure, map_batch, simulate_batch
+    from .compensation.streaming import Compensator
+    from .config.files import load_config, params_document, resolve_config
+    from .config.usable import Config, check_usable, default_config
+    from .dynamics.derived import Derived, derive
     from .dynamics.modal import ModalResult, damping_matrix, modes, static_equilibrium
     from .dynamics.model import DriveModel
     from .dynamics.profiles import (
@@ -78,19 +79,8 @@ if TYPE_CHECKING:  # static analysers see the eager imports
     from .dynamics.simulation import Simulator, simulate, simulate_to_csv
     from .dynamics.stepping import SimulationError
     from .dynamics.trajectory import SimState, Trajectory
-    from .params import Config, check_usable, default_config
+    from .parallel.threads import BatchError, BatchFailure, map_batch, simulate_batch
     from .realtime import RealtimePredictor, feedforward_series
-    from .validation import ConfigError
+    from .schema.validation import ConfigError
 
-
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
-    value = getattr(importlib.import_module(f'.{module}', __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

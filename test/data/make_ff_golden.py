@@ -2,9 +2,9 @@
 # Licensed under the Apache License, Version 2.0
 """Golden feed-forward corrections of the drive without play, written by the code before
 the backlash inverse existed (commit 6f642f2): ``python test/data/make_ff_golden.py
-test/data/ff_golden.npz``.  test_backlash_inverse.py checks that with ``mesh.backlash: 0``
-the compensator (``compensation.backlash_inverse`` on or off) reproduces them within a
-stated rounding tolerance (numba compiles for the host CPU; other CPUs round otherwise):
+test/data/ff_golden.npz``.  test/compensation/test_backlash_inverse.py checks that with
+``mesh.backlash: 0`` the compensator (``compensation.backlash_inverse`` on or off) reproduces them
+within a stated rounding tolerance (numba compiles for the host CPU; other CPUs round otherwise):
 the paper's move and the radar slew under the radar load, both friction laws, causal and
 with a preview, and with the dynamic inverse."""
 import sys

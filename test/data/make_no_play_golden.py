@@ -8,7 +8,7 @@ changed the numerics at the Newton tolerance: the trajectories agree to 1e-9 of 
 column's largest value until a stick-slip decision of the ring-down flips, after which they
 differ by up to 5.5e-4 (angles) and 8.3e-3 (speeds); against a 0.25 us reference the new
 records are as close as the old ones or closer (set-valued slew: theta4 1.6e-5 against
-3.2e-5 of its largest value).  test_backlash.py checks that ``mesh.backlash: 0``
+3.2e-5 of its largest value).  test/dynamics/test_backlash.py checks that ``mesh.backlash: 0``
 reproduces them within a stated rounding tolerance (numba compiles for the host
 CPU; other CPUs round otherwise): every 25th step of the paper's move and of a slew with
 reversals under load, both friction laws: theta and omega)."""

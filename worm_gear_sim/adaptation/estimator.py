@@ -3,85 +3,15 @@
 """Online estimation of the drive's slowly changing parameters from the encoders, and the
 rule that lets an adapted set replace the model in use.
 
-**What is estimated** (``adaptation.keys``): the periodic transmission error's harmonics
-(``mesh.worm_error_harmonics``, ``mesh.gear_error_harmonics``; ``adaptation.*_orders``
-orders), the load torque ``load.output_torque``, the antenna drag
-``load.output_viscous_coefficient`` and the play ``mesh.backlash``.
-
-**Measurement.**  The residual r = theta4_meas - theta4_pred between the encoder and the
-model's prediction of the same instant (same command).  For small parameter errors it is
-linear in them, with the model's sensitivities of theta4 at a fixed command as regressors:
-
-* harmonics: sin k theta2, cos k theta2, sin m theta3, cos m theta3 (the error enters the
-  approach q = l_w theta2 - r_g theta3 + r_g e, Eq. 8, so theta3 moves by +e);
-* load torque T: -C (the static wind-up of the chain at the antenna, C [rad/(N m)] from the
-  model's inverse, per sliding direction, averaged over a mesh cycle);
-* drag c: -C omega4 (the wind-up of the drag torque);
-* play b: -f / 2, f = +1 on the drive flank, -1 on the coast flank: the sign of the mesh
-  torque demand tau = (J_g + J_4) alpha4 + c omega4 + T.  The estimate knows tau with its
-  covariance, so f is taken as its mean, erf(tau / (sqrt 2 sigma_tau)), and the unknown
-  sign's share of the play, (1 - f^2) E[b^2] / 4, is added to the measurement noise: at the
-  start (load and drag unknown) the play is a noise, not a wrong regressor; as load and drag
-  settle the flank becomes sure and the play is learnt.  (A hard flank from a wrong start
-  leads the estimate into a wrong basin: play explained as load, drag and harmonics.)
-
-The estimator works on y = r + phi^T theta_model (theta_model: the values of the model that
-made the prediction; its play on its own flank), i.e. on the parameters themselves, so
-switching the model does not disturb it.  Samples within ``FLANK_HOLD_OFF`` of a flank
-change (past or ahead, by the estimate or by the model in use) or of a step applied to the
-model are skipped: while the worm crosses the play, or the prediction settles on the
-changed model, the residual is a transient the linear picture does not hold.  An
-innovation beyond ``HUBER_SIGMAS`` times its predicted standard deviation is down-weighted
-(Huber's weight, the covariance kept consistent): one transient cannot throw the estimate,
-a lasting change still gets through.
-
-**The instant of a flank change** is what the crossing of the play needs most (a load
-error of 0.1 N m moves it by tens of ms on a scan with drag, and for that long the antenna
-is off by the whole play), and the wind-up alone cannot pin the load that finely.
-:mod:`.flank_timing` measures it from the residual (around the model's own crossing, or
-as a step of the residual while the model does not cross) and the filter takes "the
-drive's torque demand was zero then" as one more linear measurement of load and drag (and
-a step's size as one of the play).  The detector finds a step 0.1-0.3 s after the drive
-crossed; the samples in between entered as if on the old flank and the step went into the
-estimate (measured: a play estimate from 0.9' to -5' within 0.3 s).  So the detector judges
-its window by the estimate from before the window, and a crossing found rolls the estimate
-and the window's sums back to a copy from before the crossing (:mod:`.history`) before its
-measurements go in.  A model flank change that a step applied to the model makes at once
-(its load or drag changed, not the motion) is no crossing of the model: no event, no block
-of the detector, which allows for the model's play in the residual's step instead.
-
-**Why a Kalman filter with random-walk parameters, not RLS with a forgetting factor.**  The
-problem is linear in the parameters (the flank aside, above), so both are the same
-recursion on a well-excited record.  They differ where the motion does not excite a
-direction: a sector scan hardly separates the gear's first harmonic cos theta3 (theta3 spans
-+-5 deg) from the load torque, and a load that keeps the teeth on one flank makes the play a
-constant like the load.  With exponential forgetting the covariance of such a direction
-grows without bound (wind-up), and a burst of noise then moves the estimate anywhere.  The
-Kalman form states per parameter a prior (sigma_i, :data:`~.layout.PRIOR_STD`) and how it may
-drift: the process noise q_i = P_ii dt / ``memory`` makes each variance forget like RLS
-with the time constant ``memory`` (the estimate averages over that long, whatever the size
-of the regressor), and each variance is capped at its prior, so the covariance of an
-unexcited direction grows only back to the prior and the estimate stays near its start
-there instead of wandering.  The prior also gives the soft flank its sigma_tau.  The cost
-per sample is an n x n update (n <= 2 (8 + 8) + 3), compiled.
-
-**When an adapted set is applied** (:meth:`Adapter.poll`, every ``step_interval``): the
-windowed mean square of the linearised residual (exponential window ``window``, kept as a
-triangular factor: exact whatever the rows' sizes), plus the error a set would make by
-crossing the play at the wrong time at the measured flank changes, is computed for the
-current estimate, the model in use and the nominal (start) set; the estimate becomes the
-target only if it lowers the mean square by ``min_improvement`` against the model in use,
-is not worse than the nominal one and is plausible (:mod:`.plausibility`), after one window
-of data.  A noise-only residual gives no such gain (the in-sample gain of fitting n
-parameters to N samples of noise is n/N), so it changes nothing.  A play or drag estimate
-below zero within ``BOUND_SIGMAS`` standard deviations is taken as zero; further below,
-the target is refused (the reason is kept).  The model then moves to the target in
-steps: each step changes the static correction of the command by at most ``max_step`` [rad
-at the worm] (bounded with the sensitivities above), one step per ``step_interval``: no
-jump in the command.  A step spends that bound on the load and the drag first (they decide
-when the model crosses its play), then the harmonics, the play last: on the straight line
-from a set that keeps one flank to one that crosses, the sets between hold a growing play
-on the wrong flank.
+This module contains :class:`Adapter`: a Kalman filter with random-walk parameters on the
+residual theta4_meas - theta4_pred, linear in the periodic error's harmonics, the load
+torque, the antenna drag and the play (their sensitivities at a fixed command; the play's
+through the flank, the estimate's mean sign); the drive's flank changes, measured by
+:mod:`.flank_timing`, as measurements of load, drag and play; and the switching rule
+(:meth:`Adapter.poll`: the windowed residual of the estimate against the model in use and
+the nominal set, then bounded steps towards the target, :mod:`.switching`).  Also
+:func:`output_compliance`, the static wind-up behind the load's sensitivity.  The design
+and its measurements: docs/adaptation.md.
 """
 
 from __future__ import annotations
@@ -93,16 +23,17 @@ from typing import Any
 
 import numpy as np
 
+from ..config.usable import Config
 from ..dynamics.inverse import inverse_theta1
 from ..dynamics.model import DriveModel, with_load_torque
-from ..params import Config
 from . import per_sample as ps
 from .flank_timing import STEP_GAP_WIDE, STEP_SIDE_WIDE, WINDOW, FlankTiming
 from .history import EstimateHistory
-from .layout import DRAG_KEY, LOAD_KEY, PLAY_KEY, Layout
+from .layout import DRAG_KEY, LOAD_KEY, Layout
 from .per_sample import _kalman_step, least_step, sample_head, sample_tail, window_norm
 from .plausibility import values_problem
 from .slots import Slot
+from .switching import bounded_candidate, correction_bound, step_towards
 
 __all__ = ['FLANK_HOLD_OFF', 'output_compliance', 'Adapter', 'Decision']
 
@@ -112,8 +43,6 @@ FLANK_HOLD_OFF = 0.15
 ACCEL_TIME_CONSTANT = 0.02
 #: Innovations beyond this many predicted standard deviations are down-weighted (Huber).
 HUBER_SIGMAS = 4.0
-#: A play or drag estimate below zero by more than this many standard deviations is refused.
-BOUND_SIGMAS = 3.0
 #: Timing uncertainty of a measured flank change [s] and a torque floor [N m]: the noise
 #: of the flank-change measurement is SWITCH_TIME_SD |c alpha4| + SWITCH_TORQUE_SD.
 SWITCH_TIME_SD = 2e-3
@@ -495,62 +424,24 @@ class Adapter:
                             f'against {cur:.3g} rad (model in use), {nom:.3g} rad (nominal)')
         if self.target is None or np.array_equal(self.target, self.applied_x):
             return Decision(note=note)
-        delta = self.target - self.applied_x
         budget = s.max_step * self._ratio         # max_step at the worm -> antenna
-        step = self.applied_x.copy()
         # the load and drag first (they decide when the model crosses its play), then the
         # harmonics, the play last: a straight line from a set that keeps one flank to one
         # that crosses passes through sets that hold the play on the wrong flank
-        for part in self._step_order:
-            d = np.zeros_like(delta)
-            d[part] = delta[part]
-            bound = self._correction_bound(d)
-            if bound <= budget:
-                step[part] = self.target[part]
-                budget -= bound
-            else:
-                step[part] += budget / bound * d[part]
-                break
+        step = step_towards(self.target, self.applied_x, budget, self._step_order,
+                            self._correction_bound)
         return Decision(step, self.layout.overrides(step), note)
 
     def bounded(self, x: np.ndarray) -> tuple[np.ndarray, str]:
-        """The candidate of estimate ``x``: a play or drag below zero by less than
-        ``BOUND_SIGMAS`` standard deviations is set to zero (zero is within its
-        uncertainty), the other values conditioned on it (x - P[:, i] x_i / P_ii: those it
-        is correlated with take what it gave, e.g. the load the play's share of one offset
-        on a drive that keeps one flank); one further below is refused (the reason)."""
-        cand = x.copy()
-        P = self.P.copy()
-        for i, key in ((self.layout.i_play, PLAY_KEY), (self.layout.i_drag, DRAG_KEY)):
-            if i >= 0 and cand[i] < 0.0:
-                sd = math.sqrt(max(P[i, i], 0.0))
-                if cand[i] < -BOUND_SIGMAS * sd:
-                    return cand, (f'{key} estimate {cand[i]:.3g} is negative (beyond '
-                                  f'{BOUND_SIGMAS:g} standard deviations, {sd:.2g}): not '
-                                  'applied')
-                if P[i, i] > 0.0:
-                    gain = P[:, i] / P[i, i]
-                    cand -= gain * cand[i]
-                    P -= np.outer(gain, P[i, :])
-                cand[i] = 0.0
-        return cand, ''
+        """The candidate of estimate ``x`` (:func:`~.switching.bounded_candidate`, with the
+        estimate's covariance): a play or drag a little below zero taken as zero, one
+        further below refused (the reason)."""
+        return bounded_candidate(x, self.P, self.layout)
 
     def _correction_bound(self, delta: np.ndarray) -> float:
         """Bound of the change of the static antenna correction a parameter change makes
-        (the sensitivities of the module docstring) [rad]."""
-        lay = self.layout
-        c = max(abs(self._compliance[0]), abs(self._compliance[1]))
-        out = 0.0
-        if lay.i_load >= 0:
-            out += c * abs(delta[lay.i_load])
-        if lay.i_drag >= 0:
-            out += c * self._w_max * abs(delta[lay.i_drag])
-        if lay.i_play >= 0:
-            out += 0.5 * abs(delta[lay.i_play])
-        for i0, k in ((lay.worm0, lay.worm_orders), (lay.gear0, lay.gear_orders)):
-            if i0 >= 0:
-                out += float(np.sum(np.abs(delta[i0:i0 + 2 * k])))
-        return out
+        [rad] (:func:`~.switching.correction_bound`)."""
+        return correction_bound(delta, self.layout, self._compliance, self._w_max)
 
     def applied(self, step: np.ndarray, model: DriveModel, at: float | None = None) -> None:
         """The caller applied ``step`` (a Decision's) to the model in use; ``at``: the time

@@ -1,57 +1,19 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""When did the drive change flank?  A measurement of the instant the mesh torque of the
-real drive crossed zero, from the residual around the model's own flank change.
+"""When did the drive change flank: the instant the real drive's mesh torque crossed zero,
+measured from the residual around the model's own flank change (:class:`FlankTiming`).
 
-Why: with play, the feed-forward crosses the play when the model's mesh torque demand
-(J_g + J_4) alpha4 + c omega4 + T changes sign.  On a sector scan with drag the sign changes
-at omega4 = -T / c, and the instant moves by dT / (c alpha4) per N m of load error: 0.25 s per
-N m at c = 20 N m s/rad and the scan's 0.2 rad/s^2.  A load error of 0.1 N m shifts the
-crossing by 25 ms, and for those 25 ms the antenna is off by the whole play.  The wind-up
-alone (C dT = 4 urad per N m) cannot pin T that finely; the residual's step can.
-
-How: the residual r = theta4_meas - theta4_pred steps by s b (plant, play b, at its crossing
-t_p) and by -s b_m (the prediction, play b_m in the model, at t_m), s = +1 from the drive to
-the coast flank, -1 back.  Over [t_m - W, t_m + W], with the level r_pre before and the
-step dr = r_post - r_pre = s (b - b_m):
-
-    I = integral (r - r_pre) dt,   t_p - t_m = -(I - dr (t_m + W - t_m)) / (s b).
-
-That holds when the model crosses first (the worm leaves the drive and the gear falls
-behind by the play until the drive's torque changes sign).  When the drive crosses first
-(the model's load or drag too large on the side where its crossing is late) the gear
-leaves its flank at t_p and floats: with drag it runs at its terminal speed -T/c while the
-trajectory accelerates on, so it moves off the prediction as a parabola,
-|r - r_pre| = |alpha4| (t - t_p - J/c)^2 / 2 (J/c the gear's own time constant), until the
-worm crosses at t_m.  The area of that parabola is |alpha4| dt^3 / 6, not b dt: the area
-formula put t_p near t_m whatever the load (measured: the crossings where the model was
-late confirmed the model).  So when the residual leaves its level before t_m towards the
-coming step (s), t_p is the zero of the line fitted to sqrt|r - r_pre| over that rise
-(:func:`float_onset`), less J/c.  When the model crosses first by dt, the worm leaves the
-gear early and the gear, free, floats at -T/c while the trajectory's rate passes that value
-at t_p: relative to the prediction it draws an arch, |alpha4| (dt^2 - (t - t_p)^2) / 2,
-from t_m to t_p + dt, back onto the new flank; the arch's top (opposite to the step, -s) is
-t_p (:func:`arch_top`).  Neither seen (a shift too small for its rise to stand out of the
-noise): the area formula.
-
-At t_p the real drive's torque is zero: T + c omega4(t_p) = -J alpha4(t_p), a measurement
-linear in (T, c) that :class:`~.estimator.Adapter` adds to its Kalman filter.  An event
-with another flank change inside its window, or a play too small to see, gives nothing.
-
-While the model does not cross (at the start its play is zero, or its load keeps it on one
-flank) the drive's own crossings are steps of the residual: :meth:`FlankTiming.detect` finds
-them (lines fitted each side of a gap), giving the same torque measurement at the step's
-middle and the step's size, the play.  The step it measures is linear in the residual, so
-the part of it that the periodic error not yet learnt makes (the residual holds the drive's
-harmonics less the model's) is known with the estimate's covariance: the harmonics' share
-Delta phi^T (theta - theta_model) is taken off the step, and a step within ``SMOOTH_SIGMAS``
-standard deviations sqrt(Delta phi^T P Delta phi) of it is no crossing (measured: 100 urad
-harmonics not yet learnt made a "step" of 67 urad where the drive did not cross).
+At that instant T + c omega4 = -J alpha4, a measurement linear in load and drag that the
+adapter's Kalman filter takes.  The instant comes from the residual's step area, the onset
+of a floating gear (:func:`float_onset`) or the top of its arch (:func:`arch_top`); while
+the model does not cross, :meth:`FlankTiming.detect` finds the drive's own steps (the
+play).  The method: docs/adaptation.md ("What is estimated, from what").
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -366,6 +328,36 @@ class FlankTiming:
         return (t_p, *path_rates(ts, a[:, 2], t_p), 'area')
 
 
+class Look(NamedTuple):
+    """When and against what the step detector looks: at ``t``, the encoder's noise, the
+    model's last crossing ``t_model``, the last step found, the least step, and the last
+    step applied to the model (at ``t_applied``, its bound ``applied_bound``)."""
+    t: float
+    noise: float
+    t_model: float
+    last_step: float
+    least: float
+    t_applied: float
+    applied_bound: float
+
+
+class Estimates(NamedTuple):
+    """The estimate (``theta``, its covariance ``P``; empty: none) against the model in use
+    (``applied``), on the adapter's layout ``lay``."""
+    theta: np.ndarray
+    P: np.ndarray
+    applied: np.ndarray
+    lay: np.ndarray
+
+
+class Scale(NamedTuple):
+    """A scale of the look: lines over ``side`` s each side of a ``gap`` s gap; ``onset``:
+    t_p where the rise leaves the line before it (else where a cube through it starts)."""
+    side: float
+    gap: float
+    onset: bool
+
+
 @njit(cache=True)
 def _crossing_at(a, k0, n, centre, half, dl, kl, level0):
     """Where the residual first crosses the left line + ``level0`` in the gap (time from
@@ -389,11 +381,14 @@ def _sign(x):
 
 
 @njit(cache=True)
-def _harmonic_share(a, k0, n, centre, half, ml, mr, xl, xr, sxxl, sxxr, theta, applied, P,
-                    lay):
+def _harmonic_share(a, k0, n, centre, half, left, right, est):
     """(share, sd): what the step's statistic (the right line's value at the centre less
-    the left one's, a weighted sum g . r of the rows) makes of the harmonics the estimate
-    has and the model in use lacks, and its sd from the estimate's covariance."""
+    the left one's, a weighted sum g . r of the rows; ``left``, ``right``: the lines of
+    :func:`_side_line`) makes of the harmonics the estimate has and the model in use lacks
+    (:class:`Estimates` ``est``), and its sd from the estimate's covariance."""
+    ml, _, _, xl, sxxl = left
+    mr, _, _, xr, sxxr = right
+    theta, P, applied, lay = est
     nw, ng = lay[4], lay[6]
     nh = 2 * (nw + ng)
     if nh == 0 or theta.size == 0:
@@ -462,24 +457,25 @@ def detect_core(a, n, t, noise, t_model, last_step, least, theta, applied, P, la
     (STEP_SIDE_WIDE, STEP_GAP_WIDE: a drive that crosses near its top speed floats across
     its play for ~0.1 s, no cube), t_p where the residual leaves the line before it by
     ONSET_SHARE of the step.  ``rise``: from t_p to the step's middle."""
-    found, t_p, w_p, a_p, step, rise = _look(a, n, t, noise, t_model, last_step, least,
-                                             theta, applied, P, lay, t_applied,
-                                             applied_bound, STEP_SIDE, STEP_GAP, False)
+    look = Look(t, noise, t_model, last_step, least, t_applied, applied_bound)
+    est = Estimates(theta, P, applied, lay)
+    found, t_p, w_p, a_p, step, rise = _look(a, n, look, est,
+                                             Scale(STEP_SIDE, STEP_GAP, False))
     if found:
         return True, t_p, w_p, a_p, step, False, rise
-    found, t_p, w_p, a_p, step, rise = _look(a, n, t, noise, t_model, last_step, least,
-                                             theta, applied, P, lay, t_applied,
-                                             applied_bound, STEP_SIDE_WIDE, STEP_GAP_WIDE,
-                                             True)
+    found, t_p, w_p, a_p, step, rise = _look(a, n, look, est,
+                                             Scale(STEP_SIDE_WIDE, STEP_GAP_WIDE, True))
     return found, t_p, w_p, a_p, step, found, rise
 
 
 @njit(cache=True)
-def _look(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay, t_applied,
-          applied_bound, side, gap, onset):
-    """One scale of :func:`detect_core`: lines over ``side`` s each side of a ``gap`` s gap
-    ending at ``t``; t_p where a cube through the step's rise starts, or (``onset``) where
-    the rise leaves the line before it."""
+def _look(a, n, look, est, scale):
+    """One :class:`Scale` of :func:`detect_core` (:class:`Look` ``look``,
+    :class:`Estimates` ``est``): lines over ``side`` s each side of a ``gap`` s gap ending
+    at ``t``; t_p where a cube through the step's rise starts, or (``onset``) where the
+    rise leaves the line before it."""
+    t, noise, t_model, last_step, least, t_applied, applied_bound = look
+    side, gap, onset = scale
     nothing = (False, 0.0, 0.0, 0.0, 0.0, 0.0)
     span = 2 * side + gap
     centre = t - 0.5 * span
@@ -492,8 +488,10 @@ def _look(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay, t_a
         return nothing
     k0 = np.searchsorted(a[:n, 0], t0)
     half = 0.5 * gap
-    ml, kl, dl, xl, sxxl = _side_line(a, k0, n, centre, -np.inf, -half)
-    mr, kr, dr, xr, sxxr = _side_line(a, k0, n, centre, half, np.inf)
+    left = _side_line(a, k0, n, centre, -np.inf, -half)
+    right = _side_line(a, k0, n, centre, half, np.inf)
+    ml, kl, dl, _, _ = left
+    mr, kr, dr, _, _ = right
     if ml < 4 or mr < 4:
         return nothing
     step = dr - dl
@@ -501,8 +499,7 @@ def _look(a, n, t, noise, t_model, last_step, least, theta, applied, P, lay, t_a
     if not (abs(step) > max(STEP_NOISES * noise, least) + extra
             and abs(step) > 2.0 * drift + extra):
         return nothing
-    share, sd = _harmonic_share(a, k0, n, centre, half, ml, mr, xl, xr, sxxl, sxxr, theta,
-                                applied, P, lay)
+    share, sd = _harmonic_share(a, k0, n, centre, half, left, right, est)
     step -= share
     if not (abs(step) > max(STEP_NOISES * noise, least, SMOOTH_SIGMAS * sd) + extra
             and abs(step) > 2.0 * drift + extra):

@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from ..schema import ADAPTABLE_KEYS, MAX_ERROR_ORDERS, Parameters
+from ..schema.parameters import Parameters
+from ..schema.sections import ADAPTABLE_KEYS, MAX_ERROR_ORDERS
 
 __all__ = ['PRIOR_STD', 'Layout', 'shared_indices', 'LOAD_KEY', 'DRAG_KEY', 'PLAY_KEY',
            'WORM_KEY', 'GEAR_KEY']

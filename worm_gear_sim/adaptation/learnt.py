@@ -2,22 +2,10 @@
 # Licensed under the Apache License, Version 2.0
 """What live adaptation has learnt, kept through what an operator does (pure core).
 
-The model in use is the operator's set (the declared parameters: the nominal set) with the
-adapted values of the estimated keys on top.  :class:`~.live.LiveAdaptation` applies these
-rules (docs/adaptation.md, "What is kept"):
-
-* a parameter set that leaves the estimator's inputs as they were (:data:`NEUTRAL_PREFIXES`,
-  :data:`NEUTRAL_KEYS`, or values set to what they already are) keeps the adapter as it is:
-  estimate, covariance, window, target, and the adapted values stay applied on the new set;
-* any other set keeps what the old and the new estimator share (:func:`carried_values`,
-  :func:`carried_adapter`): the values in use, the estimate, its covariance and the target
-  of each key estimated before and after (of a harmonic key, the orders both estimate); the
-  window and the flank timing start afresh;
-* a key the operator sets explicitly (an estimated one, even to the value it had) takes the
-  operator's value: it becomes that key's nominal value and value in use, and its estimate
-  restarts there with the prior (the other keys keep theirs);
-* a key no longer estimated (taken out of ``adaptation.keys``, or orders of a harmonic key
-  dropped) returns to the operator's value; each such loss is said (:func:`carry_notes`).
+The rules ``LiveAdaptation`` applies when a parameter set comes in: which sets leave the
+adapter as it is (:data:`NEUTRAL_PREFIXES`, :data:`NEUTRAL_KEYS`), what the old and new
+estimator share (:func:`carried_values`, :func:`carried_adapter`) and what is lost
+(:func:`carry_notes`).  docs/adaptation.md ("In the node").
 """
 
 from __future__ import annotations
@@ -27,9 +15,10 @@ from typing import Any
 
 import numpy as np
 
+from ..config.usable import Config
 from ..dynamics.model import DriveModel
-from ..params import Config
-from ..schema import ADAPTABLE_KEYS, Parameters
+from ..schema.parameters import Parameters
+from ..schema.sections import ADAPTABLE_KEYS
 from .estimator import Adapter
 from .layout import Layout, shared_indices
 

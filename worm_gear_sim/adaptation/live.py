@@ -1,73 +1,14 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""The adaptation loop the node and the offline twin share (pure core, no rclpy).
+"""The adaptation loop the node and the offline twin share (pure core, no rclpy):
+:class:`LiveAdaptation`.
 
-:class:`LiveAdaptation` sits beside a :class:`~worm_gear_sim.realtime.predictor.RealtimePredictor`
-(compensation applied to its simulated drive).  The caller hands it
-
-* every prediction (stamp, theta2..theta4) -> :meth:`predicted`;
-* every encoder message (stamp, joint names, positions) -> :meth:`measured`: admitted by
-  the rule the live model check applies too
-  (:class:`~worm_gear_sim.realtime.encoder_admission.EncoderAdmission`, on the antenna
-  joint: non-finite, out of order, more than one per command period, malformed, no antenna
-  joint, outside the stored predictions, farther than ``node.residual_plausible_max`` from
-  the prediction: rejected and counted by reason, the estimate untouched), then it waits
-  with the prediction of its stamp (which does not change later) for its entry (below);
-
-and every time a prediction has been handed over, :meth:`step` with its stamp: the waiting
-samples enter the estimate, then the adapter may decide.
-
-**What a decision sees depends on the stamps only.**  An encoder sample stamped s enters
-the :class:`~.estimator.Adapter` (the residual measured - predicted theta4) at the first
-:meth:`step` stamped >= s + ``adaptation.sample_delay`` (D), before that step's decision.
-The twin hands each sample over right after the prediction of its stamp; the node gets it
-back from the drive a transport delay later (live with a plant node: a few ms to a few
-tens of ms of stream time).  Either way it enters at the same step, so the node equals the
-twin exactly whenever the encoder comes back within D.  A sample that comes after its
-entry step has passed enters at once and is counted (``late_samples``): only then do the
-node and the twin see different sets of samples at a decision.  The adapter runs on the
-samples' clock, D behind the predictions: at the step stamped T it decides as of T - D
-(:meth:`~.estimator.Adapter.poll` at T - D, nothing before the first prediction + D), so
-each decision has the samples up to its own time, as it had before the delay, one delay
-later (docs/adaptation.md: deciding at T with the samples up to T - D only moved every
-decision D earlier against the data).
-
-The adapter's decisions are applied off the sample path, at a stamp fixed when they are
-taken:
-
-* at the prediction stamped t (its decision as of t - D) the adapter decides a step; its
-  preparation (the overrides
-  made a Config, validated by :meth:`~worm_gear_sim.params.Config.replace`; the model and
-  the compensator designed by
-  :meth:`~worm_gear_sim.realtime.predictor.RealtimePredictor.prepare`, with the simulator's
-  usable check: 1.5 ms on an idle core, a few ms under load) is handed to ``submit`` as
-  steps (:mod:`worm_gear_sim.stepwise`; the node: :func:`in_slices`, a slice of at most
-  ~0.3 ms at each later :meth:`LiveAdaptation.step`, on the sample thread after the
-  sample's answers; the twin: done at once) and nothing else is decided while it is
-  pending;
-* it is swapped in (:meth:`~worm_gear_sim.realtime.predictor.RealtimePredictor.reconfigure`,
-  keeping time, state and the reference history: ~0.1 ms) at the first prediction stamped
-  at or after t + :data:`APPLY_LEAD`.  The stamp depends on the samples only, so the node
-  and the twin apply the same step at the same sample;
-* if the preparation is not done by then (a starved worker thread), the swap moves to the
-  next fixed stamp t + 2 APPLY_LEAD, t + 3 APPLY_LEAD, ... and each such miss is counted
-  (``late_steps``).  The sample path never waits for it.  The twin's preparation is always
-  done, so the node equals the twin exactly while ``late_steps`` is 0; a late step only
-  moves the step's instant (by whole leads), never its values.
-
-So the node equals the twin bit for bit (same samples, same machine) while ``late_samples``
-and ``late_steps`` are both 0.  The samples predicted before a step and entering after it
-(those of the last D) are held off with the step's transient: the hold-off
-(:data:`~.estimator.FLANK_HOLD_OFF`, 0.15 s from the last sample entered) is longer than D
-(``adaptation.sample_delay`` <= 0.1 s).
-
-A set refused on the way (a ConfigError, an unusable set, a negative play) is never
-applied: the model in use stays, the reason is kept in :attr:`LiveAdaptation.last_refusal`
-and returned once per new reason (the node logs it, throttled).
-
-What was learnt is kept through the operator's parameter sets (:meth:`LiveAdaptation.
-carried_values` and :meth:`~LiveAdaptation.carry_over`, the rules in :mod:`.learnt`) and
-forgotten only by :meth:`~LiveAdaptation.forget` (the node's ``~/reset_adaptation``).
+Beside a ``RealtimePredictor``, it takes every prediction (:meth:`~LiveAdaptation.predicted`)
+and every encoder message (:meth:`~LiveAdaptation.measured`), and at each :meth:`step` lets
+the samples enter the estimate and the adapter decide.  A sample enters at a step fixed by
+its stamp (``adaptation.sample_delay``) and a decided step is swapped in at a fixed stamp
+(:data:`APPLY_LEAD` later; :func:`in_slices` prepares it in slices), so the node equals the
+twin while ``late_samples`` and ``late_steps`` are 0.  docs/adaptation.md.
 """
 
 from __future__ import annotations
@@ -82,29 +23,29 @@ from typing import Any
 
 import numpy as np
 
-from ..params import Config, config_from_mapping
+from .._support.stepwise import SLICE_BUDGET, Steps, Stepwise, run_steps
+from ..config.usable import Config, config_from_mapping
 from ..realtime.encoder_admission import ENCODER_REASONS, EncoderAdmission
 from ..realtime.predictor import Prepared, RealtimePredictor
 from ..realtime.preparation import prepare_steps
 from ..realtime.switch_interval import short_switch_interval
-from ..schema import Parameters
-from ..stepwise import SLICE_BUDGET, Steps, Stepwise, run_steps
+from ..schema.parameters import Parameters
 from .estimator import Adapter
 from .learnt import carried_adapter, carried_values, carry_notes, format_value, touches_estimator
 from .plausibility import estimate_problem
 
 __all__ = ['LiveAdaptation', 'REJECT_REASONS', 'APPLY_LEAD', 'Submit', 'run_now',
-           'in_worker', 'in_slices']
+           'in_worker', 'in_slices', 'swap_back']
 
 #: A step's correction is blended in over this many periods of the antenna mode of the
 #: model it brings (at most one ``adaptation.step_interval``): a drive without drag rings
-#: for ever after a step of the command (:mod:`~worm_gear_sim.realtime.blend`).
+#: for ever after a step of the command (:mod:`~worm_gear_sim.compensation.blend`).
 BLEND_PERIODS = 5.0
 #: A step decided at the prediction stamped t is applied at the first prediction stamped
 #: >= t + APPLY_LEAD [s] (module docstring): time for the worker to prepare it (5-15 ms
 #: measured under load) with margin; small against the hold-offs of the estimate (0.15 s).
 APPLY_LEAD = 0.05
-#: Runs a preparation (a function that returns its steps, :mod:`worm_gear_sim.stepwise`):
+#: Runs a preparation (a function that returns its steps, :mod:`worm_gear_sim._support.stepwise`):
 #: returns a future-like object (``done()``, ``result()``; ``advance()`` when it runs in
 #: slices on the caller's thread).
 Submit = Callable[[Callable[[], Steps[Any]]], Any]
@@ -157,6 +98,7 @@ class LiveAdaptation:
         self.pending: _Pending | None = None
         self._pipeline_counters = predictor.counters
         self._starts = _pipeline_starts(predictor.counters)
+        self._retractions = predictor.counters['stale_retractions']
         self._pred_ns = 0                     # the stamp of the last prediction
 
     def _restart(self) -> None:
@@ -181,11 +123,22 @@ class LiveAdaptation:
         """A prediction of the drive (theta2, theta3, theta4) at ``stamp_ns``; the first
         after a restart of the pipeline restarts the adaptation (:meth:`_restart`)."""
         stamp_ns = int(stamp_ns)
-        starts = _pipeline_starts(self._pipeline_counters)
+        counters = self._pipeline_counters
+        starts = _pipeline_starts(counters)
+        retractions = counters['stale_retractions']
+        if starts == self._starts and retractions != self._retractions:
+            # a stale hold retracted by a late sample (the same stream, taken as if in
+            # time): its held predictions are dropped, the estimate goes on
+            self._retractions = retractions
+            if self._base_ns is not None and stamp_ns <= self._pred_ns:
+                self.history.truncate(self._seconds(stamp_ns))
+                self._step_ns = min(self._step_ns, stamp_ns)
+                self._pred_ns = stamp_ns
         if starts != self._starts or stamp_ns < self._pred_ns:
             # (a prediction going back: the new stream's, after the old stream's last ones
             # released at a resync)
             self._starts = starts
+            self._retractions = retractions
             self._restart()
         self._pred_ns = stamp_ns
         if self._base_ns is None:
@@ -291,7 +244,10 @@ class LiveAdaptation:
         advance = getattr(p.future, 'advance', None)
         if advance is not None:               # in slices (in_slices): one, on this thread
             advance()
-        if stamp_ns < p.apply_ns:
+        if stamp_ns < p.apply_ns or self.predictor.stale:
+            # (held as stale: the step waits for the stream.  Swapped in on a held
+            # prediction, it would end the hold's retraction: the late samples of a stalled
+            # transport would be rejected as out of order, never answered)
             return []
         if not p.future.done():
             self.counters['late_steps'] += 1
@@ -373,8 +329,9 @@ class LiveAdaptation:
         return self.carry_over(declared, overrides.keys())
 
     def reset(self) -> str:
-        """:meth:`forget`, the pipeline returned to the operator's set at once."""
-        self.predictor.reconfigure(self.declared)
+        """:meth:`forget`, the pipeline returned to the operator's set at once
+        (:func:`swap_back`)."""
+        swap_back(self.predictor, self.predictor.prepare(self.declared))
         return self.forget()
 
     # ---- read-out ----------------------------------------------------------------------
@@ -442,6 +399,16 @@ def blend_time(compensator: Any, most: float) -> float:
     return min(BLEND_PERIODS / f0, most) if f0 > 0.0 and math.isfinite(f0) else most
 
 
+def swap_back(predictor: RealtimePredictor, prepared: Prepared) -> None:
+    """Swap the operator's set ``prepared`` back in (a reset) as gently as a step: the
+    simulated drive reseated (its forces kept: the load and drag released would set it
+    ringing) and the correction blended (:func:`blend_time`).  A drive without drag rings
+    for ever after a jolt; its estimate, at neither load nor drag, takes its flank from
+    that ringing and uses no sample."""
+    blend = blend_time(prepared.compensator, prepared.config.adaptation.step_interval)
+    predictor.reconfigure(prepared, blend=blend, reseat=True)
+
+
 def run_now(prepare: Callable[[], Steps[Any]]) -> Future:
     """A :data:`Submit` that prepares at once (the twin): a done future (its result, or the
     exception the preparation raised)."""
@@ -504,6 +471,12 @@ class _Predictions:
             del self._x[:self._cap]
         ts.append(t)
         self._x.append(tuple(theta))          # type: ignore[arg-type]
+
+    def truncate(self, t: float) -> None:
+        """Drop the predictions at ``t`` and after (a stale hold's, retracted)."""
+        k = bisect.bisect_left(self._t, t)
+        del self._t[k:]
+        del self._x[k:]
 
     def at(self, t: float) -> tuple[float, float, float] | None:
         ts = self._t

@@ -1,22 +1,18 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""The adapter's per-sample work, compiled (:class:`~.estimator.Adapter`; :mod:`.estimator`'s
-docstring for what it computes): the regressors, the Kalman step, the window (its triangular
-factor, :func:`_window_step`), and an encoder sample in one call (:func:`sample_head`,
-which ends with :func:`sample_tail`), or in two with the adapter's Python between them when
-the sample needs it (a flank-change event to measure, a step the detector found: a few per
-scan period).
+"""The adapter's per-sample work, compiled (:class:`~.estimator.Adapter`): the regressors,
+the Kalman step, the window (:func:`_window_step`) and an encoder sample in one call
+(:func:`sample_head`, ending with :func:`sample_tail`) or in two with the adapter's Python
+between them (a flank-change event, a detected step: a few per scan period).
 
-The adapter's per-sample scalars (the rates, the flanks, the hold-offs, the counts) live in
-one float array (``Adapter._st``, indices ``S_*``; ``X_*``: the head's values for the tail)
-and those of its :class:`~.flank_timing.FlankTiming` in another (``_ts``, indices ``T_*``),
-read and written as attributes by :class:`~.slots.Slot`: the compiled sample and the
-adapter's Python work on the same numbers.
+The per-sample scalars live in float arrays (``Adapter._st``, indices ``S_*`` and ``X_*``;
+the flank timing's ``_ts``, ``T_*``), read as attributes through :class:`~.slots.Slot`.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -37,9 +33,49 @@ SKIPPED, USED, NEED_ROOM, PYTHON, CROSSED = range(5)
 L_LOAD, L_DRAG, L_PLAY, L_WORM0, L_NW, L_GEAR0, L_NG, N_LAY = range(8)
 
 
+class Estimate(NamedTuple):
+    """The arrays one sample writes in place: the estimate ``theta``, its covariance ``P``
+    (each variance capped at ``std2``), the regressor's scratch ``phi``, the window's
+    triangular factor ``R`` and its sum of weights ``sc`` (:func:`_window_step`)."""
+    theta: np.ndarray
+    P: np.ndarray
+    std2: np.ndarray
+    phi: np.ndarray
+    R: np.ndarray
+    sc: np.ndarray
+
+
+class Reading(NamedTuple):
+    """One sample as the filter takes it: the prediction's angles theta2, theta3, the rate
+    omega4, the flank of the estimate and of the model in use, the estimate's torque
+    demand, the compliance on the present flank and the residual (measured - predicted
+    theta4)."""
+    th2: float
+    th3: float
+    w4: float
+    flank: float
+    flank_m: float
+    torque: float
+    compliance: float
+    resid: float
+
+
+class Weighing(NamedTuple):
+    """How a sample is weighed: the random walk's share ``forget`` of each variance, the
+    window's weight ``lam`` of the rows so far, the measurement's variance ``r_var``, the
+    Huber bound (in predicted standard deviations) and whether the flank is sure."""
+    forget: float
+    lam: float
+    r_var: float
+    huber: float
+    sure: bool
+
+
 @njit(cache=True)
-def _regressor(phi, i_load, i_drag, i_play, worm0, nw, gear0, ng, th2, th3, w4, flank,
-               compliance):
+def _regressor(phi, lay, th2, th3, w4, flank, compliance):
+    """The regressors of a sample into ``phi`` (``lay``: the layout, indices ``L_*``)."""
+    i_load, i_drag, i_play = lay[L_LOAD], lay[L_DRAG], lay[L_PLAY]
+    worm0, nw, gear0, ng = lay[L_WORM0], lay[L_NW], lay[L_GEAR0], lay[L_NG]
     phi[:] = 0.0
     if i_load >= 0:
         phi[i_load] = -compliance
@@ -95,16 +131,19 @@ def _kalman_step(theta, P, q, p_max, phi, y, r_var, huber):
 
 
 @njit(cache=True)
-def _sample_step(th, P, std2, phi, applied, R, sc, i_load, i_drag, i_play, worm0, nw,
-                 gear0, ng, th2, th3, w4, flank, flank_m, torque, compliance, resid, forget,
-                 lam, r_var, huber, sure):
-    """One encoder sample into the estimate and the window (module docstring): the soft
-    flank from the estimate's covariance, the regressors, y = r + phi^T theta_model (the
-    model's play on its own flank), forgetting, the Kalman step; the window's row with the
-    estimate's hard flank (where it agrees with the model's, the model in use's linearised
-    residual is the residual itself)."""
+def _sample_step(est, applied, lay, rd, wg):
+    """One encoder sample (:class:`Reading` ``rd``, weighed as :class:`Weighing` ``wg``)
+    into the estimate and the window (:class:`Estimate` ``est``; module docstring): the
+    soft flank from the estimate's covariance, the regressors, y = r + phi^T theta_model
+    (the model's play on its own flank), forgetting, the Kalman step; the window's row with
+    the estimate's hard flank (where it agrees with the model's, the model in use's
+    linearised residual is the residual itself)."""
+    th, P, phi = est.theta, est.P, est.phi
+    i_load, i_drag, i_play = lay[L_LOAD], lay[L_DRAG], lay[L_PLAY]
+    w4, flank, torque = rd.w4, rd.flank, rd.torque
+    r_var = wg.r_var
     soft = flank
-    if i_play >= 0 and not sure:
+    if i_play >= 0 and not wg.sure:
         var = 0.0
         if i_load >= 0:
             var += P[i_load, i_load]
@@ -116,20 +155,21 @@ def _sample_step(th, P, std2, phi, applied, R, sc, i_load, i_drag, i_play, worm0
             soft = math.erf(torque / math.sqrt(2.0 * var))
             bp = th[i_play]
             r_var += 0.25 * (1.0 - soft * soft) * (bp * bp + P[i_play, i_play])
-    _regressor(phi, i_load, i_drag, i_play, worm0, nw, gear0, ng, th2, th3, w4, soft,
-               compliance)
-    y = resid
+    _regressor(phi, lay, rd.th2, rd.th3, w4, soft, rd.compliance)
+    y = rd.resid
     for i in range(phi.size):
         y += phi[i] * applied[i]
     if i_play >= 0:
-        y += (0.5 * soft - 0.5 * flank_m) * applied[i_play]
+        y += (0.5 * soft - 0.5 * rd.flank_m) * applied[i_play]
     q = np.empty(phi.size)
     for i in range(phi.size):
-        q[i] = P[i, i] * forget
-    _kalman_step(th, P, q, std2, phi, y, r_var, huber)
+        q[i] = P[i, i] * wg.forget
+    _kalman_step(th, P, q, est.std2, phi, y, r_var, wg.huber)
+    # the window judges sets by the hard flank: for the model in use (same flank)
+    # y - phi x is r itself
     if i_play >= 0:
-        phi[i_play] = -0.5 * flank     # the window judges sets by the hard flank: for the
-    _window_step(R, sc, phi, y, lam)   # model in use (same flank) y - phi x is r itself
+        phi[i_play] = -0.5 * flank
+    _window_step(est.R, est.sc, phi, y, wg.lam)
 
 
 @njit(cache=True)
@@ -299,7 +339,7 @@ def sample_tail(st, theta, P, std2, phi, applied, R, sc, lay, t, meas, th2, th3,
     """The rest of :func:`sample_head`'s sample (its values in ``st[X_*]``): skipped near a
     flank change (past, ahead, or a step of the model's hold-off), else into the filter
     and the window.  Returns USED or SKIPPED."""
-    i_load, i_drag, i_play = lay[L_LOAD], lay[L_DRAG], lay[L_PLAY]
+    i_play = lay[L_PLAY]
     w4, a4 = st[S_W4], st[S_A4]
     load, drag, torque = st[X_LOAD], st[X_DRAG], st[X_TORQUE]
     drag_m, torque_m = st[X_DRAG_M], st[X_TORQUE_M]
@@ -322,10 +362,10 @@ def sample_tail(st, theta, P, std2, phi, applied, R, sc, lay, t, meas, th2, th3,
     # load's own uncertainty wide and the soft flank the play a noise for ever
     sure = i_play >= 0 and t - st[S_CROSS_T] > window and abs(load) > 2.0 * (
         max(drag, 0.0) * st[S_W_MAX] + st[S_INERTIA] * st[S_A_MAX])
-    _sample_step(theta, P, std2, phi, applied, R, sc, i_load, i_drag, i_play,
-                 lay[L_WORM0], lay[L_NW], lay[L_GEAR0], lay[L_NG], th2, th3, w4,
-                 st[S_FLANK], st[S_FLANK_M], torque, compliance, meas - th4,
-                 dt / st[S_MEMORY], lam, st[S_NOISE2], st[S_HUBER], sure)
+    _sample_step(Estimate(theta, P, std2, phi, R, sc), applied, lay,
+                 Reading(th2, th3, w4, st[S_FLANK], st[S_FLANK_M], torque, compliance,
+                         meas - th4),
+                 Weighing(dt / st[S_MEMORY], lam, st[S_NOISE2], st[S_HUBER], sure))
     st[S_W_MAX] = max(abs(w4), st[S_W_MAX] * lam)
     st[S_A_MAX] = max(abs(a4), st[S_A_MAX] * lam)
     if math.isnan(st[S_FIRST_T]):

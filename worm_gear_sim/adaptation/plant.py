@@ -19,8 +19,8 @@ import math
 
 import numpy as np
 
+from ..config.usable import Config
 from ..dynamics.simulation import Simulator
-from ..params import Config
 
 __all__ = ['EncoderPlant', 'encoder_resolution']
 

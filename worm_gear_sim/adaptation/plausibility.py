@@ -1,44 +1,41 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Whether an estimate of the live adaptation is plausible, said with the estimate wherever it
-is published (``~/adapted_parameters``, the ``adaptation`` status) and required of every
-target the adapter takes (:meth:`~.estimator.Adapter.poll`: an implausible estimate is never
-applied).
+"""Whether an estimate of the live adaptation is plausible: said wherever it is published and
+required of every target the adapter takes (an implausible estimate is never applied).
 
-An estimate is plausible when, taken as the switching rule takes it
-(:meth:`~.estimator.Adapter.bounded`: a play or drag below zero within its uncertainty
-taken as zero, one further below refused):
-
-* its values make a valid parameter set with the model in use's other values: each within
-  its range, the play within half a tooth pitch, the periodic error within its slope bound
-  (:func:`~worm_gear_sim.schema.replaced`, the checks every parameter set passes);
-* its load winds the antenna up by no more than ``load.max_elastic_windup``
-  (:func:`~worm_gear_sim.dynamics.load.elastic_load_limit`: beyond it the drive does not carry
-  the load elastically, and an estimate there explains something else, e.g. an encoder
-  offset, as load);
-* and, for the estimate as published, its windowed residual is not worse than the model in
-  use's by the margin that decides a switch: the model in use would not be taken over it
-  (its mean square lower by ``adaptation.min_improvement``).  An estimate as good as the
-  model in use, within noise, is plausible; the adapter takes only one that is better by
-  that margin.
+Plausible: its values make a valid parameter set with the model in use's others, its load
+stays within ``load.max_elastic_windup``, and its windowed residual is not worse than the
+model in use's by the switching margin.  docs/adaptation.md.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
+
+import numpy as np
 
 from ..dynamics.load import elastic_load_limit
 from ..dynamics.model import DriveModel
-from ..schema import replaced
-
-if TYPE_CHECKING:
-    from .estimator import Adapter
+from ..schema.parameters import replaced
 
 __all__ = ['values_problem', 'estimate_problem']
 
 #: The last model and its elastic load limit (one tuple, replaced whole: thread safe).
 _LIMIT: tuple[Any, float] = (None, 0.0)
+
+
+class Estimating(Protocol):
+    """What :func:`estimate_problem` reads of an estimator (:class:`~.estimator.Adapter`)."""
+
+    theta: np.ndarray
+    model: DriveModel
+    layout: Any
+    settings: Any
+
+    def bounded(self, x: np.ndarray) -> tuple[np.ndarray, str]: ...
+
+    def window_rms(self) -> dict[str, float]: ...
 
 
 def values_problem(model: DriveModel, overrides: Mapping[str, Any]) -> str:
@@ -63,7 +60,7 @@ def values_problem(model: DriveModel, overrides: Mapping[str, Any]) -> str:
     return ''
 
 
-def estimate_problem(adapter: Adapter) -> str:
+def estimate_problem(adapter: Estimating) -> str:
     """Why ``adapter``'s current estimate is implausible ('' when it is plausible): the
     rules of the module docstring."""
     cand, why = adapter.bounded(adapter.theta)

@@ -5,7 +5,7 @@
 One module per command group, each with a ``register(subparsers)`` function; a new command
 group is one more name in :data:`COMMAND_MODULES`.  Every command takes ``--config`` (YAML
 in the ROS layout or plain sections, or a JSON written by ``params``) and repeatable
-``--set key=value`` dotted overrides (:mod:`worm_gear_sim.config_io`).  Errors are reported
+``--set key=value`` dotted overrides (:mod:`worm_gear_sim.config.files`).  Errors are reported
 as one line on stderr with a non-zero exit status (2: bad usage or input, 1: the run failed);
 ``--debug`` shows the traceback instead.  See docs/studies.md.
 """
@@ -17,19 +17,19 @@ import importlib
 import sys
 from collections.abc import Sequence
 
-from ..config_io import (
+from .._support.kernel_cache import take_note
+from ..config.files import (
     PARAMS_FORMAT,
     load_params_json,
     params_document,
     parse_set,
     resolve_config,
 )
-from ..kernel_cache import take_note
-from ..validation import ConfigError
+from ..schema.validation import ConfigError
 from .common import PROG, CliError, Parser
 
 __all__ = ['main', 'build_parser', 'resolve_config', 'parse_set', 'params_document',
-           'load_params_json', 'CliError', 'PARAMS_FORMAT', 'COMMAND_MODULES']
+           'load_params_json', 'CliError', 'PARAMS_FORMAT', 'COMMAND_MODULES', 'COMMANDS']
 
 #: The command groups, in --help order: modules of this package with ``register(sub)``.
 COMMAND_MODULES: tuple[str, ...] = (
@@ -42,10 +42,18 @@ COMMAND_MODULES: tuple[str, ...] = (
     'tracking_pass',  # pass
     'adapt',         # adapt
 )
+#: Each command's module: a command line that names one imports only that module (the others
+#: pull in identification, Dask or matplotlib; a process pays for what it runs).
+COMMANDS: dict[str, str] = {
+    'simulate': 'simulate', 'experiment': 'studies', 'sweep': 'studies', 'modes': 'modes',
+    'params': 'modes', 'compensate': 'compensate', 'identify': 'identify',
+    'calibrate': 'calibrate', 'pass': 'tracking_pass', 'adapt': 'adapt',
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argparse tree of ``worm-gear-sim`` (subcommands set ``func``)."""
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The argparse tree of ``worm-gear-sim`` (subcommands set ``func``): every command's,
+    or, when ``argv`` names a command, that command's only (:data:`COMMANDS`)."""
     from .. import __version__
     parser = Parser(prog=PROG, description='Offline studies of the Chung & Shaw (2007) '
                     'worm-gear model: simulate, reproduce the experiment and parametric '
@@ -55,9 +63,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help='show the full traceback on errors')
     parser.add_argument('--quiet', '-q', action='store_true', help='print less')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=Parser)
-    for name in COMMAND_MODULES:
+    named = [a for a in (argv or ()) if a in COMMANDS][:1]
+    modules = [COMMANDS[named[0]]] if named else COMMAND_MODULES
+    for name in modules:
         importlib.import_module(f'{__name__}.{name}').register(sub)
-    parser.set_defaults(func=None, commands=tuple(sub.choices))
+    parser.set_defaults(func=None, commands=tuple(COMMANDS))
     return parser
 
 
@@ -74,7 +84,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if note:
         print(note, file=sys.stderr)
     try:
-        parser = build_parser()
+        parser = build_parser(argv)
         args = parser.parse_args(argv)
         if not getattr(args, 'func', None):
             raise CliError(f'a command is required ({", ".join(args.commands)}); '

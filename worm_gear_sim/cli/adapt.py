@@ -1,19 +1,12 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """``adapt`` command: the offline twin of the node's live adaptation
-(:mod:`worm_gear_sim.adaptation.twin`).
+(:mod:`worm_gear_sim.studies.adaptation_twin`).
 
-    worm-gear-sim adapt --plant PLANT.yaml [--config START.yaml] [--set KEY=VALUE ...]
-                        --scenario sector|slew|pass --duration S -o OUT.csv
-                        [--noise RAD] [--encoder-bits N] [--seed N] [--preview S]
-                        [--no-adapt] [--no-plot]
+    worm-gear-sim adapt --plant PLANT.yaml --scenario sector|slew|pass --duration S -o OUT.csv
 
-``--plant``: the simulated drive standing in for the real one (a params file, as for
-``calibrate --plant``); ``--config``/``--set``: the model the node starts from (default:
-the package's).  Writes OUT.csv (``t, theta1_ref, error_uncompensated,
-error_compensated`` [s, rad]: antenna error theta4 - theta1_ref l_w / r_g of the plant
-without and with the adapting feed-forward), OUT.png, and prints the RMS per window and
-the estimates.
+Writes OUT.csv and OUT.png and prints the RMS per window and the estimates
+(``worm-gear-sim adapt --help``; docs/adaptation.md).
 """
 
 from __future__ import annotations
@@ -26,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from ..config_io import load_config
-from ..validation import ConfigError
+from ..config.files import load_config
+from ..schema.validation import ConfigError
 from .common import CliError, add_config_options, config_from_args, header, say
 
 __all__ = ['register', 'cmd_adapt', 'window_rms']
@@ -38,7 +31,7 @@ MAX_DURATION = 3600.0
 
 def register(subparsers: Any) -> None:
     """Add the ``adapt`` command."""
-    from ..adaptation.twin import SCENARIOS
+    from ..studies.adaptation_twin import SCENARIOS
     p = subparsers.add_parser(
         'adapt', help='offline twin of live adaptation: scenario -> adapting feed-forward '
         '-> plant -> encoder -> adapter',
@@ -74,7 +67,7 @@ def window_rms(t: np.ndarray, e: np.ndarray, start: float, end: float) -> float:
 
 
 def cmd_adapt(args: argparse.Namespace) -> int:
-    from ..adaptation.twin import run_twin
+    from ..studies.adaptation_twin import run_twin
     out = Path(args.output)
     if out.suffix.lower() != '.csv':
         raise CliError(f'-o {out}: the output must end in .csv')

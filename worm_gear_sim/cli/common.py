@@ -8,12 +8,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ..config_io import parse_set, resolve_config
-from ..params import Config
+from ..config.files import parse_set, resolve_config
+from ..config.usable import Config
 
 PROG = 'worm-gear-sim'
 
@@ -89,18 +89,3 @@ def say(args: argparse.Namespace, msg: str) -> None:
     """Print unless ``--quiet``."""
     if not getattr(args, 'quiet', False):
         print(msg)
-
-
-def fmt_table(rows: Sequence[Mapping[str, Any]], cols: Sequence[tuple[str, str, str]]) -> str:
-    """A right-aligned text table: ``cols`` are (key, heading, float format)."""
-    head = [h for _, h, _ in cols]
-    body = []
-    for r in rows:
-        line = []
-        for key, _, fmt in cols:
-            v = r.get(key, '')
-            line.append(format(v, fmt) if isinstance(v, float) else str(v))
-        body.append(line)
-    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
-    fmt_line = lambda cells: '  '.join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
-    return '\n'.join([fmt_line(head)] + [fmt_line(b) for b in body])

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from ..compensation import Compensator
-from ..config_io import resolve_config
+from ..compensation.streaming import Compensator
+from ..config.files import resolve_config
 from ..dynamics.model import DriveModel
 from ..dynamics.profiles import make_profile, motion_span
 from ..records import write_csv_columns
@@ -42,7 +42,7 @@ def register(sub: Any) -> None:
     p = sub.add_parser(
         'compensate', help='a move with and without feed-forward compensation: CSV + PNG',
         description='Run a reference move on the nonlinear model (plant, optionally detuned) '
-        'with and without the feed-forward correction of worm_gear_sim.compensation '
+        'with and without the feed-forward correction of worm_gear_sim.compensation.streaming '
         '(designed on the nominal config), stream the reference at node.publish_rate_hz, '
         'and write both runs as CSV plus a PNG plot. Prints residual oscillation, '
         'settling time (10 urad), static error and constant-rate RMS tracking error.')

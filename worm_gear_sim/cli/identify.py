@@ -23,7 +23,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..config_io import params_document, params_yaml_text
+from ..config.files import write_params_yaml
+from ..config.usable import Config
 from ..identification import (
     MAX_FIT_SAMPLES,
     MIN_SAMPLES,
@@ -35,11 +36,11 @@ from ..identification import (
     identify,
     prediction_errors,
 )
-from ..params import Config
+from ..identification.report import jsonable
 from ..records import Record, read_record
 from .common import CliError, add_config_options, config_from_args, fit_in_process, say
 
-__all__ = ['register', 'cmd_identify', 'parse_bounds', 'write_params_yaml']
+__all__ = ['register', 'cmd_identify', 'parse_bounds']
 
 
 def register(subparsers: Any) -> None:
@@ -162,36 +163,14 @@ def _fmt_errors(rows: list[dict[str, Any]]) -> list[str]:
     return out
 
 
-def write_params_yaml(cfg: Config, path: Path, header: Sequence[str]) -> None:
-    """The node's params file (every parameter, as ``params --format yaml``) with ``header``
-    as comments on top."""
-    Path(path).write_text(''.join(f'# {h}\n' for h in header)
-                          + params_yaml_text(params_document(cfg)))
-
-
 def cmd_identify(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     keys = [k.strip() for item in args.fit for k in item.split(',') if k.strip()]
-    out = Path(args.output)
-    if out.suffix.lower() not in ('.yaml', '.yml'):
-        raise CliError(f'-o {out}: the fitted parameter file must end in .yaml')
-    if args.serial and args.scheduler:
-        raise CliError('--serial and --scheduler exclude each other')
-    if args.workers is not None and args.workers < 1:
-        raise CliError('--workers must be >= 1 (use --serial to run in this process)')
-    if args.starts is not None and args.starts < 1:
-        raise CliError('--starts must be >= 1')
-    if args.max_nfev < 2:
-        raise CliError('--max-nfev must be >= 2')
+    out = _checked_output(args)
     bounds = parse_bounds(args.bounds)
     records = _read(args.data, args, cfg, 'DATA')
     held = _read(args.validate, args, cfg, '--validate')
-    for r in records + held:
-        say(args, f'read {r.describe()}')
-        every = decimation(len(r.t))
-        if every > 1:
-            say(args, f'  {len(r.t)} samples: the fit uses every {every}th '
-                f'(at most {MAX_FIT_SAMPLES} per record)')
+    _say_records(args, records + held)
     opt = FitOptions(strategy=args.strategy, n_starts=args.starts, seed=args.seed,
                      max_nfev=args.max_nfev, workers=args.workers, scheduler=args.scheduler,
                      serial=fit_in_process(args), progress=not (args.no_progress or args.quiet))
@@ -212,40 +191,15 @@ def cmd_identify(args: argparse.Namespace) -> int:
                   data=[str(p) for p in args.data], validate=[str(p) for p in args.validate],
                   output_yaml=None, base_config=args.config or 'package default')
     if held:
-        v_before = prediction_errors(cfg, held)
-        v_after = prediction_errors(res.config, held)
-        report['validation'] = {'before': v_before, 'after': v_after}
-        say(args, 'held-out records, before the fit:')
-        say(args, '\n'.join(_fmt_errors(v_before)))
-        say(args, 'held-out records, fitted model:')
-        say(args, '\n'.join(_fmt_errors(v_after)))
+        report['validation'] = _validation(args, cfg, res.config, held)
     out.parent.mkdir(parents=True, exist_ok=True)
     stem = out.with_suffix('')
-    figures = []
-    if not args.no_plot:
-        from ..identification.plot import plot_fit
-        figures.append(str(plot_fit(records, cfg, res.config, stem.with_suffix('.png'),
-                                    'identify: training records')))
-        if held:
-            figures.append(str(plot_fit(held, cfg, res.config,
-                                        Path(f'{stem}_validation.png'),
-                                        'identify: held-out records')))
+    figures = [] if args.no_plot else _plot_fits(records, held, cfg, res.config, stem)
     report['figures'] = figures
     json_path = stem.with_suffix('.json')
     if res.trustworthy or args.force:
-        header = [f'worm_gear_sim parameters fitted by: worm-gear-sim {report["command"]}',
-                  f'data: {", ".join(report["data"])}',
-                  f'base: {report["base_config"]}; created {time.strftime("%Y-%m-%d %H:%M:%S")}']
-        for k, v, (lo, hi) in zip(res.keys, res.values, res.ci95):
-            header.append(f'{k} = {v:.9g}  (95 % interval {lo:.6g} .. {hi:.6g})')
-        for out_name, verdict in res.output_verdicts.items():
-            header.append(verdict if verdict.startswith(out_name) else
-                          f'{out_name}: {verdict}')
-        if not res.trustworthy:
-            header.append('NOT TRUSTWORTHY (written with --force): ' + '; '.join(res.problems))
-        write_params_yaml(res.config, out, header)
-        report['output_yaml'] = str(out)
-    json_path.write_text(json.dumps(_jsonable(report), indent=2, allow_nan=True) + '\n')
+        _write_fitted_yaml(res, report, out)
+    json_path.write_text(json.dumps(jsonable(report), indent=2, allow_nan=True) + '\n')
     say(args, f'wrote {json_path}' + (f', {out}' if report['output_yaml'] else '')
         + (f', {", ".join(figures)}' if figures else ''))
     if not res.trustworthy and not args.force:
@@ -254,17 +208,70 @@ def cmd_identify(args: argparse.Namespace) -> int:
     return 0
 
 
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if hasattr(obj, 'item'):
-        return _jsonable(obj.item())
-    return obj
+def _checked_output(args: argparse.Namespace) -> Path:
+    """The fitted parameter file, the run's options checked."""
+    out = Path(args.output)
+    if out.suffix.lower() not in ('.yaml', '.yml'):
+        raise CliError(f'-o {out}: the fitted parameter file must end in .yaml')
+    if args.serial and args.scheduler:
+        raise CliError('--serial and --scheduler exclude each other')
+    if args.workers is not None and args.workers < 1:
+        raise CliError('--workers must be >= 1 (use --serial to run in this process)')
+    if args.starts is not None and args.starts < 1:
+        raise CliError('--starts must be >= 1')
+    if args.max_nfev < 2:
+        raise CliError('--max-nfev must be >= 2')
+    return out
 
+
+def _say_records(args: argparse.Namespace, records: list[Any]) -> None:
+    """Each record read, and how the fit thins a long one."""
+    for r in records:
+        say(args, f'read {r.describe()}')
+        every = decimation(len(r.t))
+        if every > 1:
+            say(args, f'  {len(r.t)} samples: the fit uses every {every}th '
+                f'(at most {MAX_FIT_SAMPLES} per record)')
+
+
+def _validation(args: argparse.Namespace, cfg: Any, fitted: Any, held: list[Any]
+                ) -> dict[str, Any]:
+    """The prediction errors on the held-out records before and after the fit."""
+    v_before = prediction_errors(cfg, held)
+    v_after = prediction_errors(fitted, held)
+    say(args, 'held-out records, before the fit:')
+    say(args, '\n'.join(_fmt_errors(v_before)))
+    say(args, 'held-out records, fitted model:')
+    say(args, '\n'.join(_fmt_errors(v_after)))
+    return {'before': v_before, 'after': v_after}
+
+
+def _plot_fits(records: list[Any], held: list[Any], cfg: Any, fitted: Any, stem: Path
+               ) -> list[str]:
+    """Figures of the fit on the training and the held-out records."""
+    from ..identification.plot import plot_fit
+    figures = [str(plot_fit(records, cfg, fitted, stem.with_suffix('.png'),
+                            'identify: training records'))]
+    if held:
+        figures.append(str(plot_fit(held, cfg, fitted, Path(f'{stem}_validation.png'),
+                                    'identify: held-out records')))
+    return figures
+
+
+def _write_fitted_yaml(res: Any, report: dict[str, Any], out: Path) -> None:
+    """The fitted set as YAML, its header saying how it was made and how good it is."""
+    header = [f'worm_gear_sim parameters fitted by: worm-gear-sim {report["command"]}',
+              f'data: {", ".join(report["data"])}',
+              f'base: {report["base_config"]}; created {time.strftime("%Y-%m-%d %H:%M:%S")}']
+    for k, v, (lo, hi) in zip(res.keys, res.values, res.ci95):
+        header.append(f'{k} = {v:.9g}  (95 % interval {lo:.6g} .. {hi:.6g})')
+    for out_name, verdict in res.output_verdicts.items():
+        header.append(verdict if verdict.startswith(out_name) else
+                      f'{out_name}: {verdict}')
+    if not res.trustworthy:
+        header.append('NOT TRUSTWORTHY (written with --force): ' + '; '.join(res.problems))
+    write_params_yaml(res.config, out, header)
+    report['output_yaml'] = str(out)
 
 
 def _identify_harmonics(args: argparse.Namespace, cfg: Config, records: list, keys: list,
@@ -294,6 +301,6 @@ def _identify_harmonics(args: argparse.Namespace, cfg: Config, records: list, ke
     header += [f'{n} = {v:.9g}  ({fit.verdicts[n]})' for n, v in zip(fit.names, fit.values)]
     write_params_yaml(fit.config, out, header)
     json_path = out.with_suffix('.json')
-    json_path.write_text(json.dumps(_jsonable(report), indent=2, allow_nan=True) + '\n')
+    json_path.write_text(json.dumps(jsonable(report), indent=2, allow_nan=True) + '\n')
     say(args, f'wrote {json_path}, {out}')
     return 0

@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..config_io import params_document, params_json_dump, params_yaml_text
+from ..config.files import params_document, params_json_dump, params_yaml_text
 from .common import CliError, add_config_options, config_from_args
 
 

@@ -1,7 +1,8 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""PNG figures for the CLI (matplotlib's Agg canvas; pyplot and its global backend state are
-never touched, so importing this module is safe anywhere)."""
+"""PNG figures for the CLI (on the Agg canvas of :mod:`worm_gear_sim.studies.figures`; pyplot
+and its global backend state are never touched, so importing this module is safe
+anywhere)."""
 
 from __future__ import annotations
 
@@ -11,29 +12,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+
+from ..studies.figures import error_magnitudes, new_figure, save_figure
 
 __all__ = ['plot_adaptation', 'plot_trajectory', 'trajectory_figure', 'mesh_zoom_window',
            'plot_experiment', 'plot_sweep', 'plot_modes',
-           'plot_traces', 'plot_pass']
+           'plot_traces']
 
-_DPI = 100
 _STYLES = ('-o', '-s', '-^', '-D', '-v', '-x', '-*', '-P')
-
-
-def _new(nrows: int, ncols: int, size: tuple[float, float]):
-    fig = Figure(figsize=size, layout='constrained')
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(nrows, ncols, squeeze=False)
-    return fig, axes
-
-
-def _save(fig: Figure, path: str | Path) -> Path:
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(p, dpi=_DPI, format='png')
-    return p
 
 
 #: Periods of the mesh load's oscillation shown in the zoom of :func:`plot_trajectory`, and
@@ -45,7 +32,7 @@ ENVELOPE_BINS = 200
 def _mesh_oscillation(traj: Any) -> tuple[float, float]:
     """(the instant the command stops, the normal force's dominant frequency after it [Hz]
     or nan); from the start when the command moves over the last tenth of the run."""
-    from ..studies import dominant_frequency
+    from ..dynamics.spectrum import dominant_frequency
     t, wn = np.asarray(traj.t, float), np.asarray(traj.normal_force, float)
     moving = np.flatnonzero(np.diff(np.asarray(traj.theta1, float)) != 0.0)
     start = float(t[moving[-1] + 1]) if moving.size else float(t[0])
@@ -73,7 +60,7 @@ def trajectory_figure(traj: Any, title: str = '') -> Figure:
     normal force's range over the run (it changes flank at the antenna's ringing, a
     barcode at full length) and a zoom on ZOOM_CYCLES periods with the friction
     coefficient (:func:`mesh_zoom_window`)."""
-    fig, ax = _new(4, 1, (8.0, 10.5))
+    fig, ax = new_figure(4, 1, (8.0, 10.5))
     t = traj.t
     ratio = traj.output_per_input
     a = ax[0, 0]
@@ -126,7 +113,7 @@ def trajectory_figure(traj: Any, title: str = '') -> Figure:
 def plot_trajectory(traj: Any, path: str | Path, title: str = '') -> Path:
     """Angles, errors and mesh quantities of one run (simulate): :func:`trajectory_figure`
     as a PNG."""
-    return _save(trajectory_figure(traj, title), path)
+    return save_figure(trajectory_figure(traj, title), path)
 
 
 def plot_experiment(trajs: Mapping[str, Any], rows: Sequence[Mapping[str, Any]],
@@ -135,7 +122,7 @@ def plot_experiment(trajs: Mapping[str, Any], rows: Sequence[Mapping[str, Any]],
     nonlinear (solid) vs linear (dashed), one column per lead convention; rows 2 and 4 zoom
     on the ``zoom`` seconds after the move."""
     convs = sorted({k.split('/')[1] for k in trajs}, key=lambda c: c != 'kinematic')
-    fig, ax = _new(4, len(convs), (6.0 * len(convs), 12.0))
+    fig, ax = new_figure(4, len(convs), (6.0 * len(convs), 12.0))
     panels = (('worm_error', 1e6, 'theta2 - theta1 [urad]', False),
               ('worm_error', 1e6, 'theta2 - theta1 [urad]', True),
               ('output_error', 1e3, 'theta4 - theta1 l_w/r_g [mrad]', False),
@@ -163,7 +150,7 @@ def plot_experiment(trajs: Mapping[str, Any], rows: Sequence[Mapping[str, Any]],
         ax[3, j].set_xlabel('t [ms]')
     fig.suptitle('18-step move: oscillating parts (paper Figs. 10-11); dotted: end of move',
                  fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _series(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[str, Any]]]:
@@ -176,7 +163,7 @@ def _series(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[Mapping[str, An
 def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | Path, title: str,
                x_label: str, x_log: bool = False, categorical: bool = False) -> Path:
     """Max oscillation amplitudes of theta2 and theta4 per case (paper Figs. 14-18)."""
-    fig, ax = _new(1, 2, (11.0, 4.4))
+    fig, ax = new_figure(1, 2, (11.0, 4.4))
     groups = _series(rows)
     for i, (key, label) in enumerate((('amp2', 'theta2 (worm)'), ('amp4', 'theta4 (antenna)'))):
         a = ax[0, i]
@@ -207,13 +194,13 @@ def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | Path, title: str,
         a.grid(True, alpha=0.3, which='both')
         a.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_traces(trajs: Mapping[str, Any], path: str | Path, title: str,
                 t_move: float = 0.0) -> Path:
     """Oscillating parts of a few runs on common axes (paper Figs. 12-13 style)."""
-    fig, ax = _new(2, 1, (8.0, 6.5))
+    fig, ax = new_figure(2, 1, (8.0, 6.5))
     for k, (name, tr) in enumerate(trajs.items()):
         ax[0, 0].plot(tr.t * 1e3, tr.worm_error * 1e6, lw=0.7, label=name, color=f'C{k}')
         ax[1, 0].plot(tr.t * 1e3, tr.output_error * 1e6, lw=0.7, label=name, color=f'C{k}')
@@ -226,13 +213,13 @@ def plot_traces(trajs: Mapping[str, Any], path: str | Path, title: str,
         if t_move > 0:
             a.axvline(t_move * 1e3, color='0.6', lw=0.8, ls=':')
     fig.suptitle(title, fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_modes(result: Any, path: str | Path, title: str = '') -> Path:
     """Mode shapes (theta2, theta3, theta4) as bars, one panel per mode."""
     n = len(result.undamped_hz)
-    fig, ax = _new(1, n, (3.6 * n, 3.4))
+    fig, ax = new_figure(1, n, (3.6 * n, 3.4))
     names = ('theta2', 'theta3', 'theta4')
     for i in range(n):
         a = ax[0, i]
@@ -243,14 +230,14 @@ def plot_modes(result: Any, path: str | Path, title: str = '') -> Path:
                     f'zeta {result.damping_ratios[i]:.2e}', fontsize=9)
         a.grid(True, alpha=0.3)
     fig.suptitle(title or 'Linearised modes (max |entry| = 1)', fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_error_study(rows: Sequence[Mapping[str, Any]], path: str | Path, title: str,
                      x_label: str) -> Path:
     """Antenna error RMS (whole run, reversal) and static error per case, one line per
     series (uncompensated / compensated): ``sweep play`` and ``sweep gust``."""
-    fig, ax = _new(1, 3, (13.0, 4.2))
+    fig, ax = new_figure(1, 3, (13.0, 4.2))
     series = dict.fromkeys(str(r['series']) for r in rows)
     panels = (('rms_err4', 'RMS antenna error, whole slew [rad]'),
               ('reversal_rms_err4', 'RMS antenna error, reversal [rad]'),
@@ -265,7 +252,7 @@ def plot_error_study(rows: Sequence[Mapping[str, Any]], path: str | Path, title:
         a.grid(True, which='both', alpha=0.3)
         a.legend()
     fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_reversal_study(rows: Sequence[Mapping[str, Any]], path: str | Path,
@@ -273,7 +260,7 @@ def plot_reversal_study(rows: Sequence[Mapping[str, Any]], path: str | Path,
     """``sweep reversal``: the reversal-window RMS antenna error of each series, one panel
     per move, one line per load and preview (:mod:`worm_gear_sim.studies.backlash_reversal`)."""
     moves = list(dict.fromkeys(str(r['move']) for r in rows))
-    fig, ax = _new(1, len(moves), (6.5 * len(moves), 4.6))
+    fig, ax = new_figure(1, len(moves), (6.5 * len(moves), 4.6))
     for a, mv in zip(ax[0], moves):
         rs = [r for r in rows if r['move'] == mv]
         series = list(dict.fromkeys(str(r['series']) for r in rs))
@@ -288,39 +275,14 @@ def plot_reversal_study(rows: Sequence[Mapping[str, Any]], path: str | Path,
         a.grid(True, which='both', alpha=0.3)
         a.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
-    return _save(fig, path)
-
-
-def plot_pass(result: Any, path: str | Path, title: str = '') -> Path:
-    """A tracking pass (:mod:`worm_gear_sim.studies.tracking_pass`): per axis, the antenna
-    angle, the pointing error with and without compensation, and the compensated error on
-    its own scale."""
-    joints = list(result.raw_error)
-    fig, ax = _new(3, len(joints), (5.0 * len(joints), 8.5))
-    t = result.t
-    for k, j in enumerate(joints):
-        a = ax[0, k]
-        a.plot(t, result.reference[j], lw=1, color='k')
-        a.set_ylabel('antenna reference [rad]')
-        a.set_title(f'{j}', fontsize=9)
-        a = ax[1, k]
-        a.plot(t, result.raw_error[j] * 1e6, lw=0.8, label='raw trajectory')
-        a.plot(t, result.compensated_error[j] * 1e6, lw=0.8, label='compensated')
-        a.set_ylabel('pointing error [urad]')
-        a.legend(loc='best', fontsize=8)
-        a = ax[2, k]
-        a.plot(t, result.compensated_error[j] * 1e6, lw=0.8, color='C1')
-        a.set_ylabel('compensated error [urad]')
-        a.set_xlabel('t [s]')
-    fig.suptitle(title or 'worm_gear_sim: tracking pass', fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_adaptation(run: Any, path: str | Path, title: str = '') -> Path:
-    """The offline adaptation twin (:mod:`worm_gear_sim.adaptation.twin`): the reference,
+    """The offline adaptation twin (:mod:`worm_gear_sim.studies.adaptation_twin`): the reference,
     the antenna error without and with the adapting feed-forward, and the latter on its own
     (log) scale with the times the model was stepped."""
-    fig, ax = _new(3, 1, (9.0, 8.5))
+    fig, ax = new_figure(3, 1, (9.0, 8.5))
     t = run.t
     ax[0, 0].plot(t, run.theta1_ref, lw=1, color='k')
     ax[0, 0].set_ylabel('theta1_ref [rad]')
@@ -329,15 +291,9 @@ def plot_adaptation(run: Any, path: str | Path, title: str = '') -> Path:
     a.plot(t, run.error_compensated * 1e6, lw=0.6, label='adapting feed-forward')
     a.set_ylabel('antenna error [urad]')
     a.legend(loc='best', fontsize=8)
-    a = ax[2, 0]
-    a.semilogy(t, np.abs(run.error_uncompensated) * 1e6 + 1e-3, lw=0.4, alpha=0.6,
-               label='|uncompensated|')
-    a.semilogy(t, np.abs(run.error_compensated) * 1e6 + 1e-3, lw=0.4,
-               label='|adapting feed-forward|')
-    for ts, _ in run.steps:
-        a.axvline(ts, color='0.7', lw=0.5)
-    a.set_ylabel('|error| [urad] (grey: model steps)')
-    a.set_xlabel('t [s]')
-    a.legend(loc='best', fontsize=8)
+    error_magnitudes(ax[2, 0], t, [(run.error_uncompensated, '|uncompensated|',
+                                    {'alpha': 0.6}),
+                                   (run.error_compensated, '|adapting feed-forward|', {})],
+                     run.steps, color='0.7', lw=0.5)
     fig.suptitle(title or 'worm_gear_sim: live adaptation (offline twin)', fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)

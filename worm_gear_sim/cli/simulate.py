@@ -82,8 +82,9 @@ def register(sub: Any) -> None:
                    'without .csv, plus _bag); an existing bag there is replaced')
     g.add_argument('--bag-storage', choices=('sqlite3', 'mcap'), default='sqlite3',
                    help='storage of the prediction bag (default: %(default)s)')
-    g.add_argument('--stamped-outputs', action='store_true', help='errors and feed-forward '
-                   'as stamped one-joint JointStates instead of Float64')
+    g.add_argument('--float64-outputs', action='store_true', help='errors and feed-forward '
+                   'as std_msgs/Float64 (node.float64_outputs) instead of stamped one-joint '
+                   'JointStates')
     g.add_argument('--bag-namespace', default='', metavar='NS', help='put every output '
                    'topic under /NS (to play it beside a recording of the node)')
     g.add_argument('--no-feedforward', action='store_true', help='do not run the '
@@ -155,12 +156,9 @@ def check_output_size(dt: float, t_end: float, stride: int, out: Path, max_gb: f
 def cmd_simulate(args: argparse.Namespace) -> int:
     if args.bag:
         return _simulate_bag(args)
-    from ..dynamics.load import SampledLoad
     from ..dynamics.model import DriveModel
-    from ..dynamics.profiles import Profile, SampledProfile, make_profile
+    from ..dynamics.profiles import Profile, make_profile
     from ..dynamics.simulation import simulate, simulate_to_csv
-    from ..records import read_csv
-    from ..studies import equilibrium, move_end_time, oscillation_metrics
     from .plotting import plot_trajectory
     if args.column and not args.input_csv:
         raise CliError('--column needs --csv')
@@ -173,24 +171,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     note = ''
     profile: Profile
     if cfg.input.profile == 'csv':
-        rec = read_csv(cfg.input.csv_path, columns=_columns(args.column))
-        profile = SampledProfile(rec.t, rec.theta1, source=cfg.input.csv_path)
-        say(args, f'input: {rec.describe()}')
-        if rec.load_torque is not None:
-            if load is not None:
-                raise CliError(f'--wind and the load_torque column of {cfg.input.csv_path}: '
-                               'give one load')
-            load = SampledLoad(rec.t, rec.load_torque, source=cfg.input.csv_path)
-        cols = ', '.join(f'{r} = {c!r}' for r, c in rec.source['columns'].items())
-        say(args, f'columns: {cols}' + (f'; ignored: {", ".join(rec.source["ignored_columns"])}'
-                                        if rec.source['ignored_columns'] else ''))
-        t_end = rec.duration if args.end_time is None else args.end_time
-        if args.end_time is not None and args.end_time > rec.duration:
-            say(args, f'--end-time {args.end_time:g} s is past the record '
-                f'({rec.duration:.6g} s): theta1 held at its last value after it')
-        elif args.end_time is not None and args.end_time < rec.duration:
-            say(args, f'--end-time {args.end_time:g} s cuts the record ({rec.duration:.6g} s)')
-        note = f'\ninput t = 0 at t0_ns = {rec.t0_ns} on the record\'s clock'
+        profile, load, t_end, note = _csv_input(args, cfg, load)
     else:
         profile = make_profile(cfg.input)
         t_end = cfg.input.end_time
@@ -221,16 +202,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         f'({traj.stats.get("steps", 0)} steps, '
         f'{traj.stats.get("subdivision_events", 0)} subdivision events); CSV rows at '
         f'{rate_text}')
-    try:
-        t_move = move_end_time(cfg, profile)
-        if traj.t[-1] > t_move and load is None:   # the rest is the constant load's
-            eq = equilibrium(model, float(traj.theta1[-1]))
-            m = oscillation_metrics(traj, t_move, eq)
-            say(args, f'after the move (t >= {t_move:g} s): max |theta2 - eq| = '
-                f'{m["amp2"]:.4e} rad, max |theta4 - eq| = {m["amp4"]:.4e} rad, theta4 '
-                f'rings at {m["freq4_hz"]:.2f} Hz')
-    except ValueError:
-        pass
+    if load is None:
+        _say_move_metrics(args, cfg, model, profile, traj)
     if len(traj.t) < rows:
         say(args, f'{rows} rows in the CSV; plot and metrics from {len(traj.t)} of them '
             '(every k-th row)')
@@ -240,12 +213,52 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _csv_input(args: argparse.Namespace, cfg: Any, load: Any) -> tuple[Any, Any, float, str]:
+    """The --csv record as the input: (profile, load (its load_torque column), end time,
+    note for the CSV header)."""
+    from ..dynamics.load import SampledLoad
+    from ..dynamics.profiles import SampledProfile
+    from ..records import read_csv
+    rec = read_csv(cfg.input.csv_path, columns=_columns(args.column))
+    profile = SampledProfile(rec.t, rec.theta1, source=cfg.input.csv_path)
+    say(args, f'input: {rec.describe()}')
+    if rec.load_torque is not None:
+        if load is not None:
+            raise CliError(f'--wind and the load_torque column of {cfg.input.csv_path}: '
+                           'give one load')
+        load = SampledLoad(rec.t, rec.load_torque, source=cfg.input.csv_path)
+    cols = ', '.join(f'{r} = {c!r}' for r, c in rec.source['columns'].items())
+    say(args, f'columns: {cols}' + (f'; ignored: {", ".join(rec.source["ignored_columns"])}'
+                                    if rec.source['ignored_columns'] else ''))
+    t_end = rec.duration if args.end_time is None else args.end_time
+    if args.end_time is not None and args.end_time > rec.duration:
+        say(args, f'--end-time {args.end_time:g} s is past the record '
+            f'({rec.duration:.6g} s): theta1 held at its last value after it')
+    elif args.end_time is not None and args.end_time < rec.duration:
+        say(args, f'--end-time {args.end_time:g} s cuts the record ({rec.duration:.6g} s)')
+    return profile, load, t_end, f'\ninput t = 0 at t0_ns = {rec.t0_ns} on the record\'s clock'
+
+
+def _say_move_metrics(args: argparse.Namespace, cfg: Any, model: Any, profile: Any,
+                      traj: Any) -> None:
+    """The oscillation after the move (none when the run ends before the move does)."""
+    from ..studies import equilibrium, move_end_time, oscillation_metrics
+    try:
+        t_move = move_end_time(cfg, profile)
+        if traj.t[-1] > t_move:                     # the rest is the constant load's
+            eq = equilibrium(model, float(traj.theta1[-1]))
+            m = oscillation_metrics(traj, t_move, eq)
+            say(args, f'after the move (t >= {t_move:g} s): max |theta2 - eq| = '
+                f'{m["amp2"]:.4e} rad, max |theta4 - eq| = {m["amp4"]:.4e} rad, theta4 '
+                f'rings at {m["freq4_hz"]:.2f} Hz')
+    except ValueError:
+        pass
+
+
 def _simulate_bag(args: argparse.Namespace) -> int:
     """Replay a bag's command stream through the node's pipeline
     (worm_gear_sim.realtime.replay)."""
-    import numpy as np
-
-    from ..realtime.replay import compare_with_recorded, replay
+    from ..realtime.replay import compare_with_recorded
     from ..records import read_bag
     if args.column:
         raise CliError('--column applies to --csv, not --bag')
@@ -274,6 +287,30 @@ def _simulate_bag(args: argparse.Namespace) -> int:
             'before the servo streams), so the replay, which starts at rest at the first '
             'recorded sample, cannot equal the live node')
     t0 = time.perf_counter()
+    rep = _replayed(args, cfg, rec, recorded, float64)
+    _say_replay(args, rep, time.perf_counter() - t0)
+    _say_comparison(args, compare_with_recorded(rep, args.bag, args.joint_states_topic,
+                                                names))
+    files = rep.write_csv(out, header_comment=header(args))
+    rep.write_bag(bag_out, joint_names=names, storage=args.bag_storage,
+                  float64_outputs=args.float64_outputs, namespace=args.bag_namespace,
+                  overwrite=True)
+    files.append(bag_out)
+    if not args.no_plot:
+        png = Path(args.plot) if args.plot else out.with_suffix('.png')
+        files.append(_plot_replay(rep, png))
+    say(args, f'final errors: theta2 - theta1 = {rep.worm_error[-1]:.4e} rad, '
+        f'positioning error = {rep.positioning_error[-1]:.4e} rad')
+    say(args, 'wrote ' + ', '.join(str(f) for f in files))
+    return 0
+
+
+def _replayed(args: argparse.Namespace, cfg: Any, rec: Any, recorded: Any,
+              float64: bool) -> Any:
+    """The bag replayed, its ticks (Float64) or holds (stamped) where the live node's were."""
+    import numpy as np
+
+    from ..realtime.replay import replay
     rep = replay(cfg, rec, compensate=not args.no_feedforward, end_time=args.end_time,
                  tick_stamps_ns=recorded if float64 else None,
                  hold_stamps_ns=np.zeros(0, np.int64) if recorded is not None and not float64
@@ -285,7 +322,11 @@ def _simulate_bag(args: argparse.Namespace) -> int:
         if held.size:
             rep = replay(cfg, rec, compensate=not args.no_feedforward,
                          end_time=args.end_time, hold_stamps_ns=held)
-    wall = time.perf_counter() - t0
+    return rep
+
+
+def _say_replay(args: argparse.Namespace, rep: Any, wall: float) -> None:
+    """What the replay produced and rejected, and its first events."""
     c = rep.counters
     rejected = {k[9:]: v for k, v in c.items()
                 if k.startswith('rejected_') and k != 'rejected_samples' and v}
@@ -302,11 +343,17 @@ def _simulate_bag(args: argparse.Namespace) -> int:
         say(args, f'event: {e}')
     if len(rep.events) > 5:
         say(args, f'... {len(rep.events) - 5} more events')
-    cmp = compare_with_recorded(rep, args.bag, args.joint_states_topic, names)
+
+
+def _say_comparison(args: argparse.Namespace, cmp: Any) -> None:
+    """The replay against the live node's recorded predictions, when the bag has them."""
     if cmp and cmp['stamps_compared']:
         say(args, f'max |replay - recorded {cmp["topic"]}| = {cmp["max_abs_diff"]:.3e} rad '
             f'(theta2..theta4) over {cmp["stamps_compared"]} equal stamps '
             f'({cmp["live_stamps"]} recorded, {cmp["replay_stamps"]} replayed)')
+        for name, a in cmp['answers'].items():
+            say(args, f'max |replay - recorded ~/{name}| = {a["max_abs_diff"]:.3e} rad over '
+                f'{a["stamps_compared"]} equal stamps')
         if cmp['replay_only'] or cmp['recorded_only']:
             say(args, f'warning: {cmp["replay_only"]} replayed prediction(s) inside the '
                 f'recorded span were not recorded and {cmp["recorded_only"]} recorded '
@@ -315,18 +362,6 @@ def _simulate_bag(args: argparse.Namespace) -> int:
     elif cmp:
         say(args, f'the bag\'s {cmp["topic"]} has no stamp in common with the replay: '
             'not compared')
-    files = rep.write_csv(out, header_comment=header(args))
-    rep.write_bag(bag_out, joint_names=names, storage=args.bag_storage,
-                  stamped=args.stamped_outputs, namespace=args.bag_namespace,
-                  overwrite=True)
-    files.append(bag_out)
-    if not args.no_plot:
-        png = Path(args.plot) if args.plot else out.with_suffix('.png')
-        files.append(_plot_replay(rep, png))
-    say(args, f'final errors: theta2 - theta1 = {rep.worm_error[-1]:.4e} rad, '
-        f'positioning error = {rep.positioning_error[-1]:.4e} rad')
-    say(args, 'wrote ' + ', '.join(str(f) for f in files))
-    return 0
 
 
 def _recorded_stamps(args: argparse.Namespace, names: tuple) -> Any:

@@ -14,17 +14,23 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ..config_io import check_key, params_document, params_json_dump, typed_value
-from ..params import Config
+from ..config.files import check_key, params_document, params_json_dump, typed_value
+from ..config.usable import Config
 from ..records import write_csv_columns
 from ..studies import PAPER_STUDIES
 from ..studies.engine import DEFAULT_ENGINE, ENGINE_TEXT, ENGINES
-from .common import PROG, CliError, add_config_options, config_from_args, fmt_table, say
+from ..studies.metrics import fmt_table
+from .common import PROG, CliError, add_config_options, config_from_args, say
 from .limits import CALIBRATION_S_PER_DRIVE, MAX_MISMATCH_DRIVES, check_work, duration_text
 
 
 def register(sub: Any) -> None:
     """Add the ``experiment`` and ``sweep`` commands to the subparsers ``sub``."""
+    _register_experiment(sub)
+    _register_sweep(sub)
+
+
+def _register_experiment(sub: Any) -> None:
     p = sub.add_parser('experiment', help="the paper's Sec. 3 experiment (Figs. 9-11)",
                        description='18-step move: nonlinear model vs the linear model '
                        '(constant tooth stiffness 3.5e8/2.5e8 N/m, mu 0.145) in the '
@@ -40,6 +46,8 @@ def register(sub: Any) -> None:
                    'the paper sampled at 25 us)')
     p.set_defaults(func=cmd_experiment)
 
+
+def _register_sweep(sub: Any) -> None:
     p = sub.add_parser('sweep', help="the paper's Sec. 4 parametric studies, in parallel",
                        description='Parametric studies (paper Figs. 12-18) or a sweep of any '
                        'parameter. Output per study: <study>.csv (max oscillation amplitudes '
@@ -82,6 +90,11 @@ def register(sub: Any) -> None:
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
     p.add_argument('--traces', action='store_true', help='also plot the time traces of '
                    'studies with at most 8 cases (e.g. flywheel, Figs. 12-13)')
+    _add_crossing_mismatch_options(p)
+    p.set_defaults(func=cmd_sweep)
+
+
+def _add_crossing_mismatch_options(p: Any) -> None:
     g = p.add_argument_group('crossing and mismatch (docs/compensation.md)')
     g.add_argument('--plays', metavar='A1,A2,...', help='crossing: plays [arcmin] '
                    '(default: 0.5,1,2,5)')
@@ -108,7 +121,6 @@ def register(sub: Any) -> None:
                    'load.output_viscous_coefficient, mesh.gear_tooth_stiffness_multiplier)')
     g.add_argument('--fit-strategy', default='robust', metavar='NAME',
                    help="mismatch: the calibration fit's strategy (default: %(default)s)")
-    p.set_defaults(func=cmd_sweep)
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
@@ -408,9 +420,6 @@ def _error_studies(args: argparse.Namespace, cfg: Config, names: list[str]) -> N
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from ..dynamics.batch import default_workers
-    from ..studies import ENVELOPE_COLUMNS, envelope_rows, rows_to_csv, run_cases
-    from .plotting import plot_sweep
     cfg = config_from_args(args)
     if args.workers is not None and args.workers < 1:
         raise CliError('--workers must be >= 1 (use --serial to run in this process)')
@@ -424,9 +433,24 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         _error_studies(args, cfg, list(dict.fromkeys(special)))
         return 0
     studies = _sweep_studies(args, cfg)
+    outdir = Path(args.out_dir)
+    rows, wall = _run_sweep(args, cfg, studies, outdir)
+    params_json_dump(params_document(cfg), outdir / 'sweep_params.json')
+    k = 0
+    for st in studies:
+        _write_study(args, cfg, st, rows[k:k + len(st.cases)], outdir)
+        k += len(st.cases)
+    return _sweep_summary(args, rows, wall)
+
+
+def _run_sweep(args: argparse.Namespace, cfg: Config, studies: list, outdir: Path
+               ) -> tuple[list[dict[str, Any]], float]:
+    """Every case of ``studies`` run (a refused one gets its failed row): the rows in
+    order and the wall time [s]."""
+    from ..parallel.threads import default_workers
+    from ..studies import run_cases
     all_cases = [c for st in studies for c in st.cases]
     refused = _refused(cfg, studies)
-    outdir = Path(args.out_dir)
     outdir.mkdir(parents=True, exist_ok=True)
     n_workers = args.workers or default_workers()
     engine = ('this process' if args.serial else f'Dask scheduler {args.scheduler}'
@@ -446,46 +470,61 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     for r in rows:
         if r.get('error'):
             r.update({k: math.nan for k in _METRICS if k not in r})
-    wall = time.perf_counter() - t0
-    params_json_dump(params_document(cfg), outdir / 'sweep_params.json')
-    k = 0
-    for st in studies:
-        part = rows[k:k + len(st.cases)]
-        k += len(st.cases)
-        csv_path = outdir / f'{st.name}.csv'
-        png_path = outdir / f'{st.name}.png'
-        rows_to_csv(part, SWEEP_COLUMNS, csv_path)
-        plot_sweep(part, png_path, st.title, st.x_label, st.x_log, st.categorical)
-        say(args, f'\n{st.title}')
-        cols = [('series', 'series', ''), ('label', 'case', ''),
-                ('amp2', 'amp theta2 [rad]', '.4e'), ('amp4', 'amp theta4 [rad]', '.4e'),
-                ('freq4_hz', 'f4 [Hz]', '.2f'), ('max_err4', 'max|err4| [rad]', '.4e')]
-        if any(r.get('error') for r in part):
-            cols.append(('failed', 'error', ''))
-        say(args, fmt_table([{**r, 'failed': _short(r.get('error', ''))} for r in part],
-                            cols))
-        say(args, f'wrote {csv_path}, {png_path}')
-        if args.compare:
-            env = envelope_rows(part)
-            env_csv, env_png = outdir / f'{st.name}_envelope.csv', \
-                outdir / f'{st.name}_envelope.png'
-            rows_to_csv(env, ENVELOPE_COLUMNS, env_csv)
-            key, _, vals = args.compare.partition('=')
-            plot_sweep(env, env_png, f'{st.title}: worst case over '
-                       f'{len(vals.split(","))} values of {key}', st.x_label, st.x_log,
-                       st.categorical)
-            say(args, f'worst case over {args.compare}:')
-            say(args, fmt_table(env, [('series', 'series', ''), ('label', 'case', ''),
-                                        ('amp2', 'amp theta2 [rad]', '.4e'),
-                                        ('amp2_at', 'at', ''),
-                                        ('amp4', 'amp theta4 [rad]', '.4e'),
-                                        ('amp4_at', 'at', '')]))
-            say(args, f'wrote {env_csv}, {env_png}')
-        ok = [c for c, r in zip(st.cases, part) if not r.get('error')]
-        if args.traces and ok and len(st.cases) <= 8:
-            _sweep_traces(cfg, dataclasses.replace(st, cases=tuple(ok)),
-                          outdir / f'{st.name}_traces.png')
-            say(args, f'wrote {outdir / (st.name + "_traces.png")}')
+    return rows, time.perf_counter() - t0
+
+
+def _write_study(args: argparse.Namespace, cfg: Config, st: Any, part: list[dict[str, Any]],
+                 outdir: Path) -> None:
+    """One study's CSV, plot and table (with --compare its envelope, with --traces its
+    time traces)."""
+    from ..studies import rows_to_csv
+    from .plotting import plot_sweep
+    csv_path = outdir / f'{st.name}.csv'
+    png_path = outdir / f'{st.name}.png'
+    rows_to_csv(part, SWEEP_COLUMNS, csv_path)
+    plot_sweep(part, png_path, st.title, st.x_label, st.x_log, st.categorical)
+    say(args, f'\n{st.title}')
+    cols = [('series', 'series', ''), ('label', 'case', ''),
+            ('amp2', 'amp theta2 [rad]', '.4e'), ('amp4', 'amp theta4 [rad]', '.4e'),
+            ('freq4_hz', 'f4 [Hz]', '.2f'), ('max_err4', 'max|err4| [rad]', '.4e')]
+    if any(r.get('error') for r in part):
+        cols.append(('failed', 'error', ''))
+    say(args, fmt_table([{**r, 'failed': _short(r.get('error', ''))} for r in part],
+                        cols))
+    say(args, f'wrote {csv_path}, {png_path}')
+    if args.compare:
+        _write_envelope(args, st, part, outdir)
+    ok = [c for c, r in zip(st.cases, part) if not r.get('error')]
+    if args.traces and ok and len(st.cases) <= 8:
+        _sweep_traces(cfg, dataclasses.replace(st, cases=tuple(ok)),
+                      outdir / f'{st.name}_traces.png')
+        say(args, f'wrote {outdir / (st.name + "_traces.png")}')
+
+
+def _write_envelope(args: argparse.Namespace, st: Any, part: list[dict[str, Any]],
+                    outdir: Path) -> None:
+    """The worst case over the --compare values: CSV, plot and table."""
+    from ..studies import ENVELOPE_COLUMNS, envelope_rows, rows_to_csv
+    from .plotting import plot_sweep
+    env = envelope_rows(part)
+    env_csv, env_png = outdir / f'{st.name}_envelope.csv', \
+        outdir / f'{st.name}_envelope.png'
+    rows_to_csv(env, ENVELOPE_COLUMNS, env_csv)
+    key, _, vals = args.compare.partition('=')
+    plot_sweep(env, env_png, f'{st.title}: worst case over '
+               f'{len(vals.split(","))} values of {key}', st.x_label, st.x_log,
+               st.categorical)
+    say(args, f'worst case over {args.compare}:')
+    say(args, fmt_table(env, [('series', 'series', ''), ('label', 'case', ''),
+                                ('amp2', 'amp theta2 [rad]', '.4e'),
+                                ('amp2_at', 'at', ''),
+                                ('amp4', 'amp theta4 [rad]', '.4e'),
+                                ('amp4_at', 'at', '')]))
+    say(args, f'wrote {env_csv}, {env_png}')
+
+
+def _sweep_summary(args: argparse.Namespace, rows: list[dict[str, Any]], wall: float) -> int:
+    """The run's totals and each failed case on stderr; the exit status."""
     kernel = sum(r.get('kernel_s', 0.0) for r in rows)
     say(args, f'\n{len(rows)} cases in {wall:.2f} s wall ({len(rows) / wall:.2f} cases/s; '
          f'integration time summed over the cases {kernel:.2f} s)')

@@ -3,7 +3,13 @@
 """``pass``: a satellite's tracking pass over a two-axis pedestal, streamed as overlapping
 trajectories, with and without compensation (:mod:`worm_gear_sim.studies.tracking_pass`):
 a per-axis pointing-error table, a CSV and a figure.  The same pass through the ROS nodes:
-``scripts/run_pass.sh``."""
+``scripts/run_pass.sh``.
+
+``pass --adapt``: the pass streamed to each drive as stamped samples with live adaptation
+on, against a plant per drive (``--plant``, ``--plant-set``), the twin of the pedestal's
+nodes (:mod:`worm_gear_sim.studies.adaptive_pass`): the pointing error over the pass's last
+10 s uncompensated, with the nominal and with the adapting feed-forward.  Live:
+``scripts/run_pass.sh --adapt``."""
 
 from __future__ import annotations
 
@@ -13,24 +19,26 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ..pedestal import load_pedestal
-from ..records import write_csv_columns
-from ..studies.tracking_pass import PassResult, pass_window, stream_pass
+from ..config.pedestal import load_pedestal
+from ..joint_trajectory.compensate import MAX_TRAJECTORY_POINTS
+from ..schema.validation import ConfigError
+from ..studies.adaptive_pass import TAIL_S, pedestal_plants
+from ..studies.pass_report import (
+    adaptive_table,
+    in_use_lines,
+    pass_table,
+    write_adaptive_pass,
+    write_pass,
+)
 from ..studies.tracking_pass import evaluate_pass as _evaluate
-from ..trajectory_compensation import MAX_TRAJECTORY_POINTS
-from .common import CliError, fmt_table, say
+from ..studies.tracking_pass import pass_window, stream_pass
+from .common import CliError, say
 from .limits import MAX_PASS_COMPENSATED_S, MAX_PASS_TRAJECTORIES, check_work
-from .plotting import plot_pass
 
-__all__ = ['register', 'PASS_COLUMNS', 'write_pass', 'pass_table']
+__all__ = ['register', 'not_adapted']
 
-PASS_COLUMNS = [('joint', 'worm input joint', ''), ('rms_raw_urad', 'RMS raw [urad]', '.4g'),
-                ('rms_compensated_urad', 'RMS comp. [urad]', '.4g'),
-                ('max_raw_urad', 'max raw [urad]', '.4g'),
-                ('max_compensated_urad', 'max comp. [urad]', '.4g'),
-                ('rms_ratio', 'RMS ratio', '.4g')]
+#: The trajectory options (the pass with --adapt streams samples, not trajectories).
+TRAJECTORY_OPTIONS = {'chunk': 20.0, 'every': 10.0, 'waypoint_period': 1.0}
 
 
 def register(sub: Any) -> None:
@@ -51,42 +59,71 @@ def register(sub: Any) -> None:
                    help='elevation at culmination (default: %(default)s deg)')
     p.add_argument('--altitude', type=float, default=500e3, metavar='M',
                    help='orbit altitude (default: %(default)g m)')
-    p.add_argument('--chunk', type=float, default=20.0, metavar='S',
-                   help='length of each trajectory sent (default: %(default)s s)')
-    p.add_argument('--every', type=float, default=10.0, metavar='S',
-                   help='a new trajectory every S seconds (default: %(default)s s)')
-    p.add_argument('--waypoint-period', type=float, default=1.0, metavar='S',
-                   help='waypoint spacing (default: %(default)s s)')
+    p.add_argument('--chunk', type=float, metavar='S',
+                   help='length of each trajectory sent (default: 20 s)')
+    p.add_argument('--every', type=float, metavar='S',
+                   help='a new trajectory every S seconds (default: 10 s)')
+    p.add_argument('--waypoint-period', type=float, metavar='S',
+                   help='waypoint spacing (default: 1 s)')
+    g = p.add_argument_group('live adaptation (--adapt)')
+    g.add_argument('--adapt', action='store_true',
+                   help='stream the pass to each drive as stamped samples with live '
+                   'adaptation against a plant per drive; report the last 10 s '
+                   'uncompensated, with the nominal and with the adapting feed-forward')
+    g.add_argument('--plant', metavar='PLANT_PEDESTAL.yaml',
+                   help='the drives\' stand-ins: a pedestal file with a drive of each name '
+                   '(default: the drives\' own sets)')
+    g.add_argument('--plant-set', action='append', default=[], metavar='DRIVE.KEY=VALUE',
+                   help='override one parameter of a drive\'s plant, e.g. '
+                   'azimuth.mesh.backlash=5.8e-4 (repeatable)')
+    g.add_argument('--noise', type=float, default=1e-6, metavar='RAD',
+                   help='encoder noise RMS (default: %(default)g rad)')
+    g.add_argument('--encoder-bits', type=int, default=20, metavar='N',
+                   help='encoder resolution 2 pi / 2^N (default: %(default)s; 0: none)')
+    g.add_argument('--seed', type=int, default=0,
+                   help='noise seed of the first drive (the second: seed + 1)')
+    g.add_argument('--no-nominal', action='store_true',
+                   help='skip the run with the nominal feed-forward (half the time)')
     p.set_defaults(func=cmd_pass)
 
 
-def pass_table(result: PassResult) -> str:
-    return fmt_table(result.table(), PASS_COLUMNS)
-
-
-def write_pass(result: PassResult, out: Path, title: str) -> tuple[Path, Path]:
-    """pass.csv (t, then per axis: antenna reference, raw and compensated error) and
-    pass.png under ``out``."""
-    names, cols = ['t'], [result.t]
-    for j in result.raw_error:
-        names += [f'{j}_antenna_reference', f'{j}_raw_error', f'{j}_compensated_error']
-        cols += [result.reference[j], result.raw_error[j], result.compensated_error[j]]
-    csv = write_csv_columns(out / 'pass.csv', names, np.column_stack(cols),
-                            comment=f'{title}; SI units, rad')
-    return csv, plot_pass(result, out / 'pass.png', title)
+def _check_adapt(args: argparse.Namespace) -> None:
+    """The options of one kind of pass only: an option of the other is an error."""
+    if args.adapt:
+        given = [n for n in TRAJECTORY_OPTIONS if getattr(args, n) is not None]
+        if given:
+            raise CliError(f'--{given[0].replace("_", "-")} sets the trajectories of the '
+                           'pass without --adapt; with --adapt the pass streams samples')
+        if not (math.isfinite(args.noise) and args.noise >= 0):
+            raise CliError(f'--noise {args.noise!r}: a finite value >= 0 rad')
+        if not 0 <= args.encoder_bits <= 40:
+            raise CliError(f'--encoder-bits {args.encoder_bits}: between 0 and 40')
+        return
+    for name, default in TRAJECTORY_OPTIONS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, default)
+    adapt_only = [o for o, v in (('--plant', args.plant), ('--plant-set', args.plant_set),
+                                 ('--no-nominal', args.no_nominal)) if v]
+    if adapt_only:
+        raise CliError(f'{adapt_only[0]} belongs to a pass with --adapt')
 
 
 def _check(args: argparse.Namespace) -> None:
-    for name in ('duration', 'chunk', 'every', 'waypoint_period', 'altitude'):
+    _check_adapt(args)
+    positive = ('duration', 'altitude') if args.adapt else \
+        ('duration', 'chunk', 'every', 'waypoint_period', 'altitude')
+    for name in positive:
         v = getattr(args, name)
         if not (math.isfinite(v) and v > 0):
             raise CliError(f'--{name.replace("_", "-")} = {v!r}: must be > 0')
     if not 0 < args.max_elevation < 90:
         raise CliError(f'--max-elevation = {args.max_elevation!r}: must be in (0, 90) deg')
-    if args.every > args.chunk:
-        raise CliError('--every must not exceed --chunk (trajectories must overlap)')
     if args.duration > 1200:
         raise CliError(f'--duration = {args.duration:g} s: at most 1200 s')
+    if args.adapt:
+        return
+    if args.every > args.chunk:
+        raise CliError('--every must not exceed --chunk (trajectories must overlap)')
     for name in ('duration', 'chunk'):
         if getattr(args, name) < args.waypoint_period:
             raise CliError(f'--{name} = {getattr(args, name):g} s: shorter than '
@@ -105,12 +142,48 @@ def _check(args: argparse.Namespace) -> None:
                's to compensate', work, way_out)
 
 
+def not_adapted(drives: list) -> list[str]:
+    """One line per drive whose ``adaptation.enabled`` the trajectory pass does not honour
+    (it compensates with the set as it is; ``--adapt`` adapts)."""
+    return [f'{d.name}: adaptation.enabled is true; the trajectory pass compensates with the '
+            'drive\'s set as it is (--adapt streams the pass with live adaptation)'
+            for d in drives if d.config.adaptation.enabled]
+
+
+def _adaptive(args: argparse.Namespace, drives: list) -> int:
+    from ..studies.adaptive_pass import run_adaptive_pass
+    try:
+        plants = pedestal_plants(drives, args.plant, args.plant_set)
+    except (ConfigError, OSError) as exc:
+        raise CliError(f'--plant/--plant-set: {exc}') from None
+    t0 = time.perf_counter()
+    axes = run_adaptive_pass(
+        drives, plants, args.duration, max_elevation=math.radians(args.max_elevation),
+        altitude=args.altitude, noise=args.noise, encoder_bits=args.encoder_bits,
+        seed=args.seed, nominal=not args.no_nominal,
+        on_axis=lambda n: say(args, f'{n}: streaming the pass with live adaptation'))
+    tail = min(TAIL_S, args.duration)
+    title = (f'pass with live adaptation: {args.duration:g} s around a '
+             f'{args.max_elevation:g} deg culmination, the last {tail:g} s')
+    csv, png = write_adaptive_pass(axes, Path(args.output), title)
+    say(args, title)
+    say(args, adaptive_table(axes, tail))
+    for line in in_use_lines(axes):
+        say(args, line)
+    say(args, f'wrote {csv} and {png} ({time.perf_counter() - t0:.1f} s)')
+    return 0
+
+
 def cmd_pass(args: argparse.Namespace) -> int:
     _check(args)
     drives = load_pedestal(args.pedestal)
     if len(drives) != 2:
         raise CliError(f'a pass needs a two-axis pedestal (azimuth, elevation); '
                        f'{len(drives)} drives given')
+    if args.adapt:
+        return _adaptive(args, drives)
+    for line in not_adapted(drives):
+        say(args, line)
     models = {d.joint: d.config for d in drives}
     t0 = time.perf_counter()
     t, az, el = pass_window(args.duration, args.altitude, math.radians(args.max_elevation))

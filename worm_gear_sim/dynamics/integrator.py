@@ -1,45 +1,24 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Newmark-beta + Newton-Raphson integrator: compiled hot loop, many steps per call.
+"""Newmark-beta + Newton-Raphson integrator: the compiled hot loop, many steps per call
+(:func:`advance`).
 
-The unknown of each step is the end-of-step position u_{n+1}; acceleration and velocity
-follow from the Newmark relations
-
-    a_{n+1} = (u_{n+1} - u_n - dt v_n - dt^2 (1/2 - beta) a_n) / (beta dt^2)
-    v_{n+1} = v_n + dt ((1 - gamma) a_n + gamma a_{n+1})
-
-and Newton solves  R(u) = M a + C (v - r theta1') - Q(u, v, theta1) = 0  with the analytic
-Jacobian  M/(beta dt^2) + (C - dQ/dv) gamma/(beta dt) - dQ/du.
-
-Convergence: the residual is measured as an acceleration error, |R_i| / J_ii <= atol +
-rtol |a_i| (rad/s^2) plus a round-off floor, so that the accepted position error per step
-shrinks like dt^2 and the method keeps its order at any dt.  At least one Newton solve is
-made every step.  Early exit: after the first solve the remaining residual is predicted
-from the contraction rho = |R_1| / |R_0| measured on the last verified step (as Radau
-carries its Newton rate); when rho |R_0| is far below tolerance and the step is smooth (the
-sliding speed stays outside 10 v_eps on one side, the mesh force keeps its sign, no tooth
-hand-over) the step is accepted without a second force evaluation.  Every 8th step, and
-every non-smooth step, is verified with a fresh residual.
-
-Predictor: the acceleration of the last whole step extrapolated linearly (its change over
-that step, carried in ``ctl``; constant after a subdivided or split step, and with play).
-The set-valued friction law's trials (stick, slip either way; their early exits) are in
-:mod:`~worm_gear_sim.dynamics.set_valued`, the step's shared pieces in
-:mod:`~worm_gear_sim.dynamics.newmark`.
-
-Robustness: when the residual grows the update is halved (damped Newton); an update that
-would carry the sliding speed across zero from outside the friction zone is shortened to
-land on zero; a step that still fails is repeated in 2, 4, ... 2^max_subdivision_level
-sub-steps (theta1 interpolated linearly), each such event counted.
+Newton solves each step's residual with the analytic Jacobian (a damped update, early exit
+on a predicted contraction, every 8th and every non-smooth step verified) and repeats a
+failed step in 2, 4, ... sub-steps, counted.  The set-valued friction trials are in
+:mod:`.set_valued`, the step's shared pieces in :mod:`.newmark`, the variable step in
+:mod:`.adaptive`; the method: docs/model-notes.md.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 from numba import njit
 
-from .model import (
+from .equations import mesh_approach, mesh_forces, mesh_forces_mu
+from .layout import (
     N_AUX,
     P_COSL,
     P_COUT,
@@ -58,14 +37,14 @@ from .model import (
     P_SINL,
     P_TLOAD,
     P_VEPS,
-    mesh_approach,
-    mesh_forces,
-    mesh_forces_mu,
 )
 from .newmark import (
     SMOOTH_ZONE,
     VERIFY_EVERY,
     ZERO3,
+    Control,
+    State,
+    Target,
     _contact_region,
     _in_play,
     _newmark_av,
@@ -80,24 +59,44 @@ from .set_valued import step_set_valued
 S_STEPS, S_SOLVES, S_EVALS, S_SUBDIV_EVENTS, S_SUBSTEPS, S_MAX_SOLVES, S_FAILED = range(7)
 S_VERIFIED = 7
 S_CONTACT_EVENTS = 8          # steps split at a contact event of the mesh clearance
-N_STATS = 9
+# the variable step (dynamics/adaptive.py): accepted and rejected steps, located events, rows
+# of its step log written
+S_ADAPTIVE_STEPS, S_REJECTED, S_EVENTS, S_LOGGED = 9, 10, 11, 12
+N_STATS = 13
 
 # controller state (float64, carried between calls): contraction estimate, steps since verify
 C_RHO, C_SINCE = 0, 1
 C_MODE, C_MU = 2, 3        # set-valued friction: +1/-1 slipping, 0 stuck; last mu_eff
 C_DA = 4                   # 4..6: change of the acceleration over the last whole step
 C_RHO2 = 7                 # contraction of a second Newton solve (set-valued slip)
-N_CTL = 8
+# the variable step: the next step, the last accepted one [s], its error estimate, and the
+# inertia factors of worm and antenna the carried acceleration belongs to (0: not yet), and
+# whether the last step slid (its worm velocity is then in the matched representation)
+C_H, C_HLAST, C_ERR, C_FW, C_FA, C_RING = 8, 9, 10, 11, 12, 13
+N_CTL = 14
 
 STATUS_OK = 0
 STATUS_FAILED = 1          # Newton did not converge even at the finest subdivision
 STATUS_NONFINITE = 2       # NaN/inf input or state
 
 
+class Span(NamedTuple):
+    """The command over a step of ``dt``: theta1 and its rate at its start and its end."""
+    th_a: float
+    th_b: float
+    td_a: float
+    td_b: float
+    dt: float
+
+
 @njit(cache=True, error_model='numpy')
-def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since, da):
-    """One Newmark step from (u0, v0, a0) (3-tuples).  Returns
-    (ok, u, v, a, rho, since, n_solves, n_evals, verified)."""
+def _newmark_step(p, C, s, to, ctl):
+    """One Newmark step from :class:`State` ``s`` to :class:`Target` ``to`` (``ctl``: the
+    :class:`Control` carried in; its friction mode unused).  Returns (ok, u, v, a, rho,
+    since, n_solves, n_evals, verified)."""
+    u0, v0, a0 = s
+    th1, th1dot, dt = to
+    rho, since, _, _, da = ctl
     maxit = int(p[P_MAXIT])
     k_vs2, k_vs3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
     veps = p[P_VEPS]
@@ -121,8 +120,8 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since, da):
         f = mesh_forces(p, x0, x1, x2, w0, w1, w2, th1)
         n_evals += 1
         (finite, R0, R1, R2, j00, j01, j02, j10, j11, j12, j20, j21, j22,
-         r_norm) = _residual_jacobian(p, C, c_a, c_v, x0, x1, x2, w0, w1, w2, a_0, a_1, a_2,
-                                      th1dot, f, f[7], f[8], f[9], f[10])
+         r_norm) = _residual_jacobian(p, C, c_a, c_v, (x0, x1, x2), (w0, w1, w2),
+                                      (a_0, a_1, a_2), th1dot, f, (f[7], f[8], f[9], f[10]))
         if not finite:
             break
         if n_solves == 0:
@@ -139,7 +138,8 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since, da):
             continue
         if n_solves >= maxit:
             break
-        ok, d0, d1, d2 = _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, -R0, -R1, -R2)
+        ok, d0, d1, d2 = _solve3((j00, j01, j02, j10, j11, j12, j20, j21, j22),
+                                 (-R0, -R1, -R2))
         if not ok:
             break
         # Sliding-reversal limiter (like SPICE's junction limiting): an update that carries
@@ -180,16 +180,15 @@ def _newmark_step(p, C, u0, v0, a0, th1, th1dot, dt, rho, since, da):
 
 
 @njit(cache=True, error_model='numpy')
-def _step(p, Ct, u0, v0, a0, th1, th1dot, dt, rho, since, mode, mu, da):
-    """One step with the configured friction law: (ok, u, v, a, rho, since, n_solves,
-    n_evals, verified, mode, mu_eff)."""
+def _step(p, Ct, s, to, ctl):
+    """One step from :class:`State` ``s`` to :class:`Target` ``to`` with the configured
+    friction law (:class:`Control` ``ctl``): (ok, u, v, a, rho, since, n_solves, n_evals,
+    verified, mode, mu_eff)."""
     if p[P_FRIC_SET_VALUED] != 0.0:
-        ok, u, v, a, ns, ne, mode, mu, rho, since, ver = step_set_valued(
-            p, Ct, u0, v0, a0, th1, th1dot, dt, mode, mu, rho, since, da)
+        ok, u, v, a, ns, ne, mode, mu, rho, since, ver = step_set_valued(p, Ct, s, to, ctl)
         return ok, u, v, a, rho, since, ns, ne, ver, mode, mu
-    ok, u, v, a, rho, since, ns, ne, ver = _newmark_step(p, Ct, u0, v0, a0, th1, th1dot, dt,
-                                                         rho, since, da)
-    return ok, u, v, a, rho, since, ns, ne, ver, mode, mu
+    ok, u, v, a, rho, since, ns, ne, ver = _newmark_step(p, Ct, s, to, ctl)
+    return ok, u, v, a, rho, since, ns, ne, ver, ctl.mode, ctl.mu
 
 
 def sliding_speed(p, v) -> float:
@@ -214,13 +213,16 @@ def record_aux(p, u, v, theta1, mu, out):
 
 
 @njit(cache=True, error_model='numpy')
-def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, since, mode,
-                      mu, gap, qa, qb):
-    """Redo a step whose approach q crosses an edge of the clearance (+-gap) as two parts
-    split where it crosses: the crossing fraction by secant iterations on q (q at the end of
-    a part of length f dt), then the rest of the step (with the damping ``Cb`` of the
-    region the step ends in; ``Ct`` that of its start).  Returns (ok, u, v, a, rho, since,
-    mode, mu, n_solves, n_evals); ok False leaves the caller's whole step in force."""
+def _split_at_contact(p, Ct, Cb, s, span, ctl, gap, qa, qb):
+    """Redo a step (:class:`State` ``s``, :class:`Span` ``span``, :class:`Control` ``ctl``)
+    whose approach q crosses an edge of the clearance (+-gap; q from ``qa`` to ``qb``) as
+    two parts split where it crosses: the crossing fraction by secant iterations on q (q at
+    the end of a part of length f dt), then the rest of the step (with the damping ``Cb`` of
+    the region the step ends in; ``Ct`` that of its start).  Returns (ok, u, v, a, rho,
+    since, mode, mu, n_solves, n_evals); ok False leaves the caller's whole step in force."""
+    u0, v0, a0 = s
+    th_a, th_b, td_a, td_b, dt = span
+    rho, since, mode, mu, _ = ctl
     ra = _contact_region(gap, qa)
     if ra != 0:
         edge = gap if ra > 0 else -gap          # leaving a flank
@@ -237,8 +239,8 @@ def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, si
     for _ in range(6):
         f = min(max(f, 1e-6), 1.0 - 1e-6)
         ok, u1, v1, a1, rho1, since1, n1, e1, _, mode1, mu1 = _step(
-            p, Ct, u0, v0, a0, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a), f * dt,
-            rho, since, mode, mu, ZERO3)
+            p, Ct, s, Target(th_a + f * (th_b - th_a), td_a + f * (td_b - td_a), f * dt),
+            Control(rho, since, mode, mu, ZERO3))
         ns += n1
         ne += e1
         if not ok:
@@ -255,7 +257,8 @@ def _split_at_contact(p, Ct, Cb, u0, v0, a0, th_a, th_b, td_a, td_b, dt, rho, si
     if not found:
         return False, u0, v0, a0, rho, since, mode, mu, ns, ne
     ok, u2, v2, a2, rho2, since2, n2, e2, _, mode2, mu2 = _step(
-        p, Cb, u1, v1, a1, th_b, td_b, (1.0 - f) * dt, rho1, since1, mode1, mu1, ZERO3)
+        p, Cb, State(u1, v1, a1), Target(th_b, td_b, (1.0 - f) * dt),
+        Control(rho1, since1, mode1, mu1, ZERO3))
     ns += n2
     ne += e2
     if not ok:
@@ -340,7 +343,8 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                                                          rep_ver, mode, mu)
         else:
             ok, un, vn, an, rho, since, ns, ne, ver, mode_n, mu_n = _step(
-                p, Cs, uu, vv, aa, th_b, td_b, dt, rho, since, mode, mu, da)
+                p, Cs, State(uu, vv, aa), Target(th_b, td_b, dt),
+                Control(rho, since, mode, mu, da))
         n_solves += ns
         n_evals += ne
         n_verified += ver
@@ -358,8 +362,9 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 if varying:
                     p[P_TLOAD] = ld_a + f * (ld_b - ld_a)
                 ok, us, vs, as_, rho, since, ns, ne, ver, mode_n, mu_n = _step(
-                    p, Cs, us, vs, as_, th_a + f * (th_b - th_a), td_a + f * (td_b - td_a),
-                    h, rho, since, mode_n, mu_n, ZERO3)
+                    p, Cs, State(us, vs, as_),
+                    Target(th_a + f * (th_b - th_a), td_a + f * (td_b - td_a), h),
+                    Control(rho, since, mode_n, mu_n, ZERO3))
                 n_solves += ns
                 n_evals += ne
                 n_verified += ver
@@ -384,8 +389,9 @@ def advance(p, C, u, v, a, theta1, theta1_dot, dt, record_stride, rec_u, rec_v, 
                 # step where q crosses the flank's edge, so that each part is smooth (the
                 # trapezoidal rule then neither gains nor loses the contact's energy)
                 ok_e, ue, ve, ae, rho_e, since_e, mode_e, mu_e, ns, ne = _split_at_contact(
-                    p, Cs, Co if rb == 0 else Ct, uu, vv, aa, th_a, th_b, td_a, td_b, dt,
-                    rho, since, mode, mu, gap, qa, qb)
+                    p, Cs, Co if rb == 0 else Ct, State(uu, vv, aa),
+                    Span(th_a, th_b, td_a, td_b, dt), Control(rho, since, mode, mu, ZERO3),
+                    gap, qa, qb)
                 n_solves += ns
                 n_evals += ne
                 if ok_e:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from numba import njit
 
-from .model import (
+from .equations import friction_coefficient, mesh_compliance, transmission_error
+from .layout import (
     P_COSL,
     P_COSPHI,
     P_COUT,
@@ -26,9 +27,6 @@ from .model import (
     P_RW,
     P_SINL,
     P_TLOAD,
-    friction_coefficient,
-    mesh_compliance,
-    transmission_error,
 )
 
 

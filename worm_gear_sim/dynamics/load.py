@@ -1,37 +1,12 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Load torque on the antenna (theta4) that varies in time: T_load(t) [N m], positive
-turning the antenna back (the sign of ``load.output_torque``, Eq. 6 + load).
+"""Load torque on the antenna that varies in time, T_load(t) [N m], positive turning the
+antenna back.
 
-* :class:`SampledLoad`: a recorded or designed series (a CSV column ``load_torque``),
-  linear between samples, held before the first and after the last;
-* :class:`WindLoad`: gusts on a dish from a documented model (below), reproducible from a
-  seed;
-* :func:`elastic_windup` / :func:`elastic_load_limit`: how far a load winds the antenna
-  up against the held worm (the static compliance of Eq. 15's stiffness, play removed),
-  and the load at which that reaches ``load.max_elastic_windup`` (beyond it the model
-  still integrates, but a real drive would no longer be elastic: a warning, not an error).
-
-Both give ``torque(t)`` on arrays; the integrator takes the values on its own grid
-(:func:`worm_gear_sim.dynamics.integrator.advance`, ``load[k+1]`` at the end of step k) and
-:func:`worm_gear_sim.dynamics.simulation.simulate` starts the drive at rest under ``torque(0)``.
-
-Wind model (docs/load.md).  The aerodynamic torque on a dish goes with the square of the
-wind speed, U + u(t), so with the gust ratio x(t) = u(t)/U
-
-    T_load(t) = T_mean (1 + x(t))^2 / (1 + I^2)
-
-whose mean is T_mean.  x is a stationary Gauss-Markov (Ornstein-Uhlenbeck) process of
-standard deviation I (the turbulence intensity sigma_u / U) and correlation time tau (the
-integral length scale over the mean speed, L_u / U): one-sided spectrum
-
-    S_x(f) = 4 I^2 tau / (1 + (2 pi f tau)^2),
-
-the first-order (Dryden-type) gust spectrum.  It is sampled exactly on a grid of
-``tau / 50`` (at most 1 ms): x_{n+1} = a x_n + I sqrt(1 - a^2) e_n, a = exp(-h / tau),
-e_n standard normal from ``numpy.random.default_rng(seed)``, x_0 drawn from the
-stationary law; values in between are linear.  The same seed gives the same gusts
-whatever the span asked and in whatever pieces it is asked.
+:class:`SampledLoad` (a series, linear between samples), :class:`WindLoad` (gusts from a
+seeded Ornstein-Uhlenbeck gust model), :func:`elastic_windup` and
+:func:`elastic_load_limit` (how far a load winds the held antenna up).  The wind model and
+its equations: docs/load.md.
 """
 
 from __future__ import annotations
@@ -41,8 +16,9 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..schema import LOAD_LIMIT
-from .model import DriveModel, linear_stiffness, without_play
+from ..schema.sections import LOAD_LIMIT
+from .equations import linear_stiffness
+from .model import DriveModel, without_play
 
 __all__ = ['LoadSignal', 'SampledLoad', 'WindLoad', 'load_grid', 'elastic_windup',
            'elastic_load_limit', 'ElasticLimitCheck', 'ElasticLoadWarning',

@@ -10,20 +10,17 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from ..schema import ANGLE_LIMIT, Parameters
-from ..stepwise import Steps, run_steps
-from .model import (
-    DriveModel,
+from .._support.stepwise import Steps, run_steps
+from ..schema.parameters import Parameters
+from ..schema.sections import ANGLE_LIMIT
+from .equations import (
     forces,
-    has_periodic_error,
-    has_play,
     linear_stiffness,
     mass_matrix,
-    play_rest_shift,
     rigid_motion_vector,
     transmission_error,
-    without_play,
 )
+from .model import DriveModel, has_periodic_error, has_play, play_rest_shift, without_play
 
 __all__ = ['static_equilibrium', 'ModalResult', 'modes', 'modes_steps', 'natural_modes',
            'damping_matrix',
@@ -133,7 +130,7 @@ def modes(model: DriveModel | Parameters, theta1: float = 0.0, sliding_rate: flo
 
 def modes_steps(model: DriveModel | Parameters, theta1: float = 0.0, sliding_rate: float = 0.0,
                 include_damping: bool = True) -> Steps[ModalResult]:
-    """:func:`modes` in steps (:mod:`worm_gear_sim.stepwise`), its arguments unchecked."""
+    """:func:`modes` in steps (:mod:`worm_gear_sim._support.stepwise`), its arguments unchecked."""
     model = DriveModel.of(model)
     u, K, dQdv, M = _linearised(model.p, theta1, sliding_rate)
     C = damping_matrix(model) - dQdv if include_damping else np.zeros((3, 3))

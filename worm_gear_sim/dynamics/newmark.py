@@ -9,10 +9,12 @@ regions of the mesh clearance."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 from numba import njit
 
-from .model import (
+from .equations import mesh_approach
+from .layout import (
     P_ATOL,
     P_BETA,
     P_COUT,
@@ -28,7 +30,6 @@ from .model import (
     P_PHASE0,
     P_RTOL,
     P_ZG,
-    mesh_approach,
 )
 
 VERIFY_EVERY = 8            # an early-exiting step is verified at least this often
@@ -37,9 +38,38 @@ ZERO3 = (0.0, 0.0, 0.0)
 _EPS = 2.220446049250313e-16
 
 
+class State(NamedTuple):
+    """The state a step starts from: angles, rates, accelerations (3-tuples)."""
+    u: tuple
+    v: tuple
+    a: tuple
+
+
+class Target(NamedTuple):
+    """Where a step goes: the command theta1 and its rate at its end, and its size."""
+    th1: float
+    th1dot: float
+    dt: float
+
+
+class Control(NamedTuple):
+    """The step's controller, carried from step to step: the Newton contractions ``rho``
+    (first and second solve), the steps ``since`` the last verified one, the set-valued
+    friction's ``mode`` (+1/-1 slipping, 0 stuck) and coefficient ``mu``, and the
+    acceleration's change ``da`` over the last whole step (the predictor's)."""
+    rho: tuple
+    since: float
+    mode: int
+    mu: float
+    da: tuple
+
+
 @njit(cache=True, error_model='numpy')
-def _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, b0, b1, b2):
-    """(ok, x) with J x = b for a 3x3 system by cofactors; ok False if singular."""
+def _solve3(J, b):
+    """(ok, x) with J x = b for a 3x3 system by cofactors (``J``: its 9 entries row by row,
+    ``b``: 3); ok False if singular."""
+    j00, j01, j02, j10, j11, j12, j20, j21, j22 = J
+    b0, b1, b2 = b
     c00 = j11 * j22 - j12 * j21
     c01 = j12 * j20 - j10 * j22
     c02 = j10 * j21 - j11 * j20
@@ -96,16 +126,20 @@ def _newmark_start(p, u0, v0, a0, dt, da):
 
 
 @njit(cache=True, error_model='numpy', inline='always')
-def _residual_jacobian(p, C, c_a, c_v, x0, x1, x2, w0, w1, w2, a_0, a_1, a_2, th1dot, f,
-                       g20, g21, g30, g31):
-    """Newton residual R = M a + C (v - r theta1') - Q, its Jacobian
-    M c_a + (C - dQ/dv) c_v - dQ/du (dQ/dv of the mesh given as g20 = dQ2/dv2, g21 = dQ2/dv3,
-    g30 = dQ3/dv2, g31 = dQ3/dv3) and the residual's norm as an acceleration error:
+def _residual_jacobian(p, C, c_a, c_v, x, w, acc, th1dot, f, g):
+    """Newton residual R = M a + C (v - r theta1') - Q at the iterate ``x`` (its velocity
+    ``w`` and acceleration ``acc``: 3-tuples), its Jacobian
+    M c_a + (C - dQ/dv) c_v - dQ/du (dQ/dv of the mesh given as ``g`` = (dQ2/dv2, dQ2/dv3,
+    dQ3/dv2, dQ3/dv3)) and the residual's norm as an acceleration error:
     |R_i| / M_ii against atol + rtol |a_i| with a round-off floor of a few ulps of u_i seen
     through the Jacobian (a massless degree of freedom, J_4 = 0 without flywheel, is
     algebraic: its residual is scaled by j22 beta dt^2, the same acceleration-error measure).
     Returns (finite, R0, R1, R2, j00, ..., j22, r_norm); finite False (r_norm 0) if R is
     not finite."""
+    x0, x1, x2 = x
+    w0, w1, w2 = w
+    a_0, a_1, a_2 = acc
+    g20, g21, g30, g31 = g
     m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
     r3 = p[P_OUTPUT_PER_INPUT]
     Kg, cout = p[P_KG], p[P_COUT]

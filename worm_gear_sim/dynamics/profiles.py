@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..schema import InputProfile
-from ..validation import ConfigError
+from ..schema.sections import InputProfile
+from ..schema.validation import ConfigError
 
 __all__ = ['Profile', 'StepProfile', 'RampProfile', 'TrapezoidalProfile', 'SCurveProfile',
            'SampledProfile', 'make_profile', 'motion_span']
@@ -104,6 +104,11 @@ class TrapezoidalProfile(Profile):
     @property
     def peak_rate(self) -> float:
         return self.amplitude / (self.duration - self.accel_time)
+
+    @property
+    def cruise(self) -> tuple[float, float]:
+        """(start, end) [s] of the constant-rate part, between the two ramps."""
+        return self.t0 + self.accel_time, self.t0 + self.duration - self.accel_time
 
     def theta1(self, t):
         tau = np.clip(np.asarray(t, float) - self.t0, 0.0, self.duration)

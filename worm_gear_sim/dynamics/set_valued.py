@@ -12,7 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .model import (
+from .equations import mesh_approach, mesh_forces_mu, slip_coefficient
+from .layout import (
     P_COSL,
     P_COUT,
     P_GAP_HALF,
@@ -29,9 +30,6 @@ from .model import (
     P_TLOAD,
     P_VCUSP,
     P_VEPS,
-    mesh_approach,
-    mesh_forces_mu,
-    slip_coefficient,
 )
 from .newmark import (
     SMOOTH_ZONE,
@@ -50,8 +48,9 @@ SLIP_EDGE_CUSPS = 10.0      # solves is given up (no slip solution: the edge fal
 
 
 @njit(cache=True, error_model='numpy')
-def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da):
-    """One Newmark step with the set-valued friction law in a fixed mode.
+def _sv_trial(p, C, s, to, mode, lam0, rho, exit_mode, da):
+    """One Newmark step (from :class:`~.newmark.State` ``s`` to
+    :class:`~.newmark.Target` ``to``) with the set-valued friction law in a fixed mode.
 
     mode 0, stick: the sliding speed at the end of the step is zero (a linear constraint on
     u) and mu_eff = lambda is an unknown solved with u in the same Newton iteration.  After a
@@ -78,6 +77,8 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da)
     Returns (ok, u, v, a, mu_eff, n_solves, n_evals, da/dmu of theta2, theta3 (stick),
     rho, verified); ok False also when the slip hypothesis cannot hold (the speed would
     change sign)."""
+    u0, v0, a0 = s
+    th1, th1dot, dt = to
     m0, m1, m2 = p[P_JW_STEP], p[P_JG], p[P_J4]   # worm: frequency-matched inertia
     r3 = p[P_OUTPUT_PER_INPUT]
     maxit = int(p[P_MAXIT])
@@ -114,9 +115,10 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da)
         n_evals += 1
         # dQ/dv through mu(v_s)
         (finite, R0, R1, R2, j00, j01, j02, j10, j11, j12, j20, j21, j22,
-         r_norm) = _residual_jacobian(p, C, c_a, c_v, x0, x1, x2, w0, w1, w2, a_0, a_1, a_2,
-                                      th1dot, f, f[7] * dmu_dv * k2, f[7] * dmu_dv * k3,
-                                      f[8] * dmu_dv * k2, f[8] * dmu_dv * k3)
+         r_norm) = _residual_jacobian(p, C, c_a, c_v, (x0, x1, x2), (w0, w1, w2),
+                                      (a_0, a_1, a_2), th1dot, f,
+                                      (f[7] * dmu_dv * k2, f[7] * dmu_dv * k3,
+                                       f[8] * dmu_dv * k2, f[8] * dmu_dv * k3))
         if not finite:
             break
         if n_solves == 0:
@@ -163,14 +165,14 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da)
             continue
         if n_solves >= maxit:
             break
-        ok, d0, d1, d2 = _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22, -R0, -R1, -R2)
+        J = (j00, j01, j02, j10, j11, j12, j20, j21, j22)
+        ok, d0, d1, d2 = _solve3(J, (-R0, -R1, -R2))
         if not ok:
             break
         de = 0.0
         if stick:
             # J d - q_mu de = -R,  v_s(u + d) = 0:  d = y1 + y2 de
-            ok, y0, y1, y2 = _solve3(j00, j01, j02, j10, j11, j12, j20, j21, j22,
-                                     f[7], f[8], 0.0)
+            ok, y0, y1, y2 = _solve3(J, (f[7], f[8], 0.0))
             den = k2 * y0 + k3 * y1
             if not ok or den == 0.0:
                 break
@@ -226,7 +228,7 @@ def _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt, mode, lam0, rho, exit_mode, da)
 
 
 @njit(cache=True, error_model='numpy')
-def step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since, da):
+def step_set_valued(p, C, s, to, ctl):
     """One step with exact stick-slip: the set-valued law W_f in mu(|v_s|) |W_n| Sgn(v_s)
     resolved by trials (as a return mapping): a slipping contact first tries to keep
     slipping; if its sliding speed would reverse, or the contact was stuck, it tries to
@@ -234,15 +236,19 @@ def step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since, 
     otherwise it slips in the direction of the force the cone cannot hold (then the other
     one).  A contact that stays stuck may end its step without verifying it (early exit of
     :func:`_sv_trial`, every VERIFY_EVERY-th step verified).  Returns (ok, u, v, a, n_solves,
-    n_evals, mode, mu_eff, rho, since, verified)."""
+    n_evals, mode, mu_eff, rho, since, verified); ``s``, ``to``, ``ctl``: the
+    :class:`~.newmark.State` it starts from, its :class:`~.newmark.Target` and the
+    :class:`~.newmark.Control` carried in."""
+    u0, v0, a0 = s
+    dt = to.dt
+    rho, since, mode0, lam0, da = ctl
     mu_s = p[P_MU_STATIC] * (1.0 + 1e-12)
     k2, k3 = p[P_RW] * p[P_COSL], p[P_RG] * p[P_SINL]
     ns = 0
     ne = 0
     if mode0 != 0:
         ok, u, v, a, mu, n1, e1, _, _, rho, ver = _sv_trial(
-            p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho,
-            2 if since < VERIFY_EVERY else 1, da)
+            p, C, s, to, mode0, lam0, rho, 2 if since < VERIFY_EVERY else 1, da)
         ns += n1
         ne += e1
         since = 0.0 if ver else since + 1.0
@@ -250,7 +256,7 @@ def step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since, 
             # (in the play: no friction to slip)
             return True, u, v, a, ns, ne, mode0, mu, rho, since, ver
     ok_st, u_st, v_st, a_st, lam, n1, e1, s0, s1, rho, ver = _sv_trial(
-        p, C, u0, v0, a0, th1, th1dot, dt, np.int64(0), lam0, rho,
+        p, C, s, to, np.int64(0), lam0, rho,
         0 if mode0 != 0 else 2 if since < VERIFY_EVERY else 1, da)
     ns += n1
     ne += e1
@@ -260,16 +266,16 @@ def step_set_valued(p, C, u0, v0, a0, th1, th1dot, dt, mode0, lam0, rho, since, 
         return True, u_st, v_st, a_st, ns, ne, 0, lam, rho, since, ver
     if ok_st:
         sq = 1.0 if mesh_approach(p, u_st[0], u_st[1]) >= 0.0 else -1.0
-        s = 1 if lam * sq > 0.0 else -1
+        s_dir = 1 if lam * sq > 0.0 else -1
     else:
         # no stick solution (no normal force to hold it): slip the way the drive moves
         vs_pred = k2 * (v0[0] + dt * a0[0]) + k3 * (v0[1] + dt * a0[1])
-        s = 1 if vs_pred >= 0.0 else -1
-    for s_try in (s, -s):
+        s_dir = 1 if vs_pred >= 0.0 else -1
+    for s_try in (s_dir, -s_dir):
         if s_try == mode0:
             continue            # tried first
-        ok, u, v, a, mu, n1, e1, _, _, _, _ = _sv_trial(p, C, u0, v0, a0, th1, th1dot, dt,
-                                                        s_try, lam0, rho, np.int64(0), da)
+        ok, u, v, a, mu, n1, e1, _, _, _, _ = _sv_trial(p, C, s, to, s_try, lam0, rho,
+                                                        np.int64(0), da)
         ns += n1
         ne += e1
         if ok and (s_try * (k2 * v[0] + k3 * v[1]) >= 0.0 or _in_play(p, u)):

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..schema import Parameters
+from ..schema.parameters import Parameters
 from .load import ElasticLoadWarning, LoadSignal, elastic_load_warning
 from .modal import StepResolutionWarning, step_resolution_warning
 from .model import DriveModel
@@ -60,13 +60,13 @@ class Simulator(Stepper):
                 warnings.warn(msg, StepResolutionWarning, stacklevel=2)
         super().__init__(model, theta1, t0, interpolation)
 
-    def reconfigure(self, model: DriveModel | Parameters) -> None:
-        """Swap in new (already validated) parameters, keeping time, state and command.
-        The time step cannot change (it is read-only in the node); the set is proven usable
-        first."""
+    def reconfigure(self, model: DriveModel | Parameters, reseat: bool = False) -> None:
+        """Swap in new (already validated) parameters, keeping time, state and command
+        (``reseat``: :meth:`.stepping.Stepper.reconfigure`).  The time step cannot
+        change (it is read-only in the node); the set is proven usable first."""
         self._check_time_step(model)
         check_usable(model.config if isinstance(model, DriveModel) else model)
-        super().reconfigure(model)
+        super().reconfigure(model, reseat)
 
     def _after_kernel(self, done: int, status: int, theta1_last: float,
                       theta1_dot_last: float) -> None:

@@ -3,14 +3,16 @@
 """The stepping integration of the drive: :class:`Stepper`, the Newmark integrator on a fixed
 grid t = t0 + k dt for real time (:meth:`~Stepper.advance_to`) and batch
 (:meth:`~Stepper.run`, :meth:`~Stepper.iter_run`), on the compiled kernel
-(:func:`worm_gear_sim.dynamics.integrator.advance`).  It runs whatever model it is given: proving a
+(:func:`worm_gear_sim.dynamics.integrator.advance`; with ``integrator.method: adaptive`` the
+variable step of :func:`worm_gear_sim.dynamics.adaptive.advance_adaptive`, whose steps end on
+every tick and record point of the grid).  It runs whatever model it is given: proving a
 parameter set usable is the job of :class:`worm_gear_sim.dynamics.simulation.Simulator` (the public
 class: this plus the usable check and the diagnosis of a failed integration), whose check
 runs a short trial on a :class:`Stepper` (:mod:`worm_gear_sim.dynamics.usability`).  What a run
 yields (:class:`Trajectory`, :class:`SimState`, the CSV writer) is in
 :mod:`worm_gear_sim.dynamics.trajectory`.  The real-time segment of :meth:`~Stepper.advance_to`
-(the command on one interpolation segment, then the kernel) is compiled here too:
-:func:`advance_segment`.
+(the command on one interpolation segment, then the kernel) is compiled in
+:mod:`worm_gear_sim.dynamics.segment`.
 """
 
 from __future__ import annotations
@@ -21,24 +23,33 @@ from collections.abc import Callable, Iterator
 from typing import Self
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
 
-from ..derived import Derived
-from ..schema import ANGLE_LIMIT, LOAD_LIMIT, Parameters
+from ..schema.parameters import Parameters
+from ..schema.sections import ANGLE_LIMIT, LOAD_LIMIT
+from .adaptive import advance_adaptive
+from .derived import Derived
+from .equations import generalized_forces, mechanical_energy, mesh_forces_mu
 from .integrator import (
     C_DA,
+    C_FA,
+    C_FW,
     C_MODE,
     C_MU,
     C_RHO,
     C_RHO2,
+    C_RING,
     C_SINCE,
     N_CTL,
     N_STATS,
+    S_ADAPTIVE_STEPS,
     S_CONTACT_EVENTS,
     S_EVALS,
+    S_EVENTS,
     S_FAILED,
+    S_LOGGED,
     S_MAX_SOLVES,
+    S_REJECTED,
     S_SOLVES,
     S_STEPS,
     S_SUBDIV_EVENTS,
@@ -53,53 +64,21 @@ from .integrator import (
 from .integrator import (
     sliding_speed as record_aux_speed,
 )
+from .layout import AUX_FX, AUX_FY, N_AUX
+from .live_load import NO_LOAD, LiveLoad
 from .load import LoadSignal, load_grid
 from .modal import (
     static_equilibrium,
     stepping_damping,
 )
-from .model import (
-    AUX_FX,
-    AUX_FY,
-    N_AUX,
-    DriveModel,
-    generalized_forces,
-    load_torque_of,
-    mechanical_energy,
-    mesh_forces_mu,
-    with_load_torque,
-)
+from .model import DriveModel, load_torque_of, with_load_torque
 from .profiles import Profile
+from .reseat import reseated
+from .segment import advance_segment, advance_segment_adaptive
+from .step_control import N_LOG, adaptive_parameters, step_log_of
 from .trajectory import ROW_BYTES, SimState, Trajectory
 
 __all__ = ['Stepper', 'SimulationError', 'RUN_MEMORY_LIMIT', 'RATE_LIMIT', 'TIME_LIMIT']
-
-
-@njit(cache=True, error_model='numpy', nogil=True)   # a check's trial on a fit's threads
-def advance_segment(p, C, u, v, a, theta1_now, theta1_dot_now, t0, k0, dt, n, cmd_t,
-                    cmd_value, slope, t_end, theta1_end, stats, ctl, load):
-    """Real-time stepping: n steps on the grid t0 + (k0 + j) dt with the command on the
-    segment theta1(t) = cmd_value + slope (t - cmd_t) up to the new sample (t_end,
-    theta1_end) (slope 0: held); ``load``: the load torque at the n + 1 grid points (empty:
-    the model's constant load).  Same arithmetic as SampledProfile's linear interpolation
-    (np.interp), so stepping and batch agree bit for bit: a grid point at or after the
-    sample time takes the sample's value."""
-    th = np.empty(n + 1)
-    td = np.empty(n + 1)
-    th[0] = theta1_now
-    td[0] = theta1_dot_now
-    for j in range(1, n + 1):
-        grid = t0 + float(k0 + j) * dt
-        if slope == 0.0 or grid >= t_end:
-            th[j] = theta1_end if slope != 0.0 else cmd_value
-        else:
-            th[j] = cmd_value + slope * (grid - cmd_t)
-        td[j] = slope
-    empty3 = np.empty((0, 3))
-    # np.int64(0), not 0: a literal argument would make numba compile a second copy of
-    # the whole kernel (the Python callers pass an int64 stride)
-    return advance(p, C, u, v, a, th, td, dt, np.int64(0), empty3, empty3, empty3,
-                   np.empty((0, N_AUX)), stats, ctl, load)
 
 
 class SimulationError(RuntimeError):
@@ -135,7 +114,6 @@ def _finite_vector(name: str, x: ArrayLike, limit: float, unit: str) -> np.ndarr
     return arr
 
 
-_NO_LOAD = np.empty(0)      # the kernel's "the model's constant load"
 
 #: advance_to integrates long spans in chunks of this many steps (1 MB of command samples).
 ADVANCE_CHUNK = 1 << 16
@@ -164,9 +142,11 @@ class Stepper:
         self.dt: float = config.integrator.time_step
         self.interpolation: str = interpolation or config.node.command_interpolation
         self._stats = np.zeros(N_STATS, dtype=np.int64)
-        # Newton controller: contraction, steps since verify; friction mode and mu_eff
+        # Newton controller: contraction, steps since verify; friction mode and mu_eff; the
+        # variable step's controller (integrator.method: adaptive)
         self._ctl = np.zeros(N_CTL)
-        self._load_t, self._load_v = np.empty(0), np.empty(0)   # push_load's samples
+        self._log = np.empty((0, N_LOG))    # the variable step's log (log_steps)
+        self._load = LiveLoad()                 # push_load's samples
         self.reset(theta1, t0)
 
     # ---- state ---------------------------------------------------------------------------
@@ -182,9 +162,9 @@ class Stepper:
         theta1 = _finite_scalar('reset: theta1', theta1, ANGLE_LIMIT, 'rad')
         t0 = _finite_scalar('reset: t0', t0, TIME_LIMIT, 's')
         p = self.p
-        live = self._load_t.size > 0
+        live = self._load.live
         if load_torque is None and live:   # pushed load samples: the load at t0 holds on
-            load_torque = float(self._held_load(np.array([t0]))[0])
+            load_torque = float(self._load.at(np.array([t0]))[0])
         if load_torque is not None:
             p = with_load_torque(p, _finite_scalar('reset: load_torque', load_torque,
                                                    LOAD_LIMIT, 'N m'))
@@ -204,9 +184,7 @@ class Stepper:
         self._k = 0
         self._u, self._v, self._a = u, v, a
         if live:     # the samples before t0 are done with; the later ones stay
-            later = self._load_t > t0
-            self._load_t = np.concatenate(([t0], self._load_t[later]))
-            self._load_v = np.concatenate(([load_torque_of(p)], self._load_v[later]))
+            self._load.restart(t0, load_torque_of(p))
         self._theta1 = theta1
         self._theta1_dot = 0.0
         self._cmd_t = self._t0
@@ -223,6 +201,8 @@ class Stepper:
         new.__dict__.update(self.__dict__)
         new._u, new._v, new._a = self._u.copy(), self._v.copy(), self._a.copy()
         new._ctl, new._stats = self._ctl.copy(), self._stats.copy()
+        new._log = self._log.copy()
+        new._load = copy.copy(self._load)
         new.__dict__.pop('_aux_buf', None)
         return new
 
@@ -242,6 +222,8 @@ class Stepper:
         self.config: Parameters = model.config
         self.p: np.ndarray = model.p          # the packed vector the kernels take
         self.C: np.ndarray = stepping_damping(model) if C is None else C
+        self._ap: np.ndarray | None = adaptive_parameters(model) \
+            if model.config.integrator.method == 'adaptive' else None
 
     @property
     def derived(self) -> Derived:
@@ -252,22 +234,34 @@ class Stepper:
         config = model.config if isinstance(model, DriveModel) else model
         if config.integrator.time_step != self.dt:
             raise ValueError('integrator.time_step cannot change on a running simulator')
+        if config.integrator.method != self.config.integrator.method:
+            raise ValueError('integrator.method cannot change on a running simulator')
 
-    def reconfigure(self, model: DriveModel | Parameters) -> None:
+    def reconfigure(self, model: DriveModel | Parameters, reseat: bool = False) -> None:
         """Swap in new (already validated) parameters, keeping time, state and command.
-        The time step cannot change (it is read-only in the node)."""
+        The time step cannot change (it is read-only in the node).  ``reseat``: the
+        deflections move by the change of the static equilibrium at the current command
+        (:func:`~.reseat.reseated`: the forces kept, the velocities too), so that a large change (a
+        load released) does not set the drive ringing: a drive without drag rings for ever."""
         self._check_time_step(model)
         model = DriveModel.of(model)
         C = stepping_damping(model)
+        u = reseated(self.p, model.p, self._u, self._v, self._theta1) if reseat else self._u
+        if not np.all(np.isfinite(u)):
+            raise ValueError('the new parameters give a non-finite equilibrium')
         a = np.zeros(3)
-        consistent_acceleration(model.p, C, self._u, self._v, self._theta1,
+        consistent_acceleration(model.p, C, u, self._v, self._theta1,
                                 self._theta1_dot, a)
         if not np.all(np.isfinite(a)):
             raise ValueError('the new parameters give a non-finite acceleration')
         self._set_model(model, C)
+        if reseat:
+            self._u[:] = u
         self._a = a
         self._ctl[C_RHO], self._ctl[C_RHO2], self._ctl[C_SINCE] = 1.0, 1.0, 0.0
         self._ctl[C_DA:C_DA + 3] = 0.0       # no extrapolation across the change
+        # the variable step: the acceleration is the new model's, at its inertias
+        self._ctl[C_FW], self._ctl[C_FA], self._ctl[C_RING] = 0.0, 0.0, 0.0
 
     def _slip_mode(self) -> float:
         """Friction mode of the set-valued law at the current state: sign of the sliding
@@ -293,7 +287,21 @@ class Stepper:
                 'subdivision_events': int(s[S_SUBDIV_EVENTS]),
                 'substeps': int(s[S_SUBSTEPS]), 'max_solves_per_step': int(s[S_MAX_SOLVES]),
                 'failed_steps': int(s[S_FAILED]), 'verified_steps': int(s[S_VERIFIED]),
-                'contact_events': int(s[S_CONTACT_EVENTS])}
+                'contact_events': int(s[S_CONTACT_EVENTS]),
+                'adaptive_steps': int(s[S_ADAPTIVE_STEPS]),
+                'rejected_steps': int(s[S_REJECTED]), 'located_events': int(s[S_EVENTS])}
+
+    def log_steps(self, capacity: int) -> None:
+        """With the variable step: keep the next ``capacity`` accepted steps (time, size,
+        friction mode, error, angles, event, evaluations) for :attr:`step_log`."""
+        self._log = np.zeros((int(capacity), N_LOG))
+        self._stats[S_LOGGED] = 0
+
+    @property
+    def step_log(self) -> dict[str, np.ndarray]:
+        """The steps logged since :meth:`log_steps` (:func:`~worm_gear_sim.dynamics.adaptive.
+        step_log_of`)."""
+        return step_log_of(self._log, int(self._stats[S_LOGGED]))
 
     def forces(self) -> dict[str, float]:
         """Mesh quantities at the current state (W_n, mu, stiffnesses, F_X, F_Y, q); with
@@ -370,15 +378,19 @@ class Stepper:
             left = n
             while left > 0:
                 m = min(left, ADVANCE_CHUNK)
-                done, status = advance_segment(
-                    self.p, self.C, self._u, self._v, self._a, self._theta1,
-                    self._theta1_dot, self._t0, self._k, self.dt, m, self._cmd_t,
-                    self._cmd_value if slope != 0.0 else theta1, slope, t_target,
-                    theta1, self._stats, self._ctl, self._load_on_grid(m))
+                args = (self._u, self._v, self._a, self._theta1, self._theta1_dot, self._t0,
+                        self._k, self.dt, m, self._cmd_t,
+                        self._cmd_value if slope != 0.0 else theta1, slope, t_target, theta1,
+                        self._stats, self._ctl, self._load_on_grid(m))
+                if self._ap is None:
+                    done, status = advance_segment(self.p, self.C, *args)
+                else:
+                    done, status = advance_segment_adaptive(self.p, self._ap, self.C, *args,
+                                                            self._log)
                 self._after_kernel(done, status,
                                    self._segment_value(done, theta1, slope, t_target), slope)
                 left -= m
-            self._trim_load()
+            self._load.trim(self.t)
         if t_target > self._cmd_t or n > 0:
             self._cmd_t = max(t_target, self._cmd_t)
             self._cmd_value = theta1
@@ -394,50 +406,24 @@ class Stepper:
         time applies from its time on (returns False: it came late); True otherwise."""
         t = _finite_scalar('push_load: t', t, TIME_LIMIT, 's')
         torque = _finite_scalar('push_load: torque', torque, LOAD_LIMIT, 'N m')
-        lt, lv = self._load_t, self._load_v
-        if lt.size and t <= lt[-1]:
-            raise ValueError(f'push_load: t = {t!r} s is not after the last load sample '
-                             f'({lt[-1]!r} s)')
-        now = self.t
-        if t <= now:           # late: from now on
-            self._load_t, self._load_v = np.array([now]), np.array([torque])
-            return False
-        if not lt.size:        # the constant until the first sample
-            lt, lv = np.array([now]), np.array([self.load_torque])
-        self._load_t, self._load_v = np.append(lt, t), np.append(lv, torque)
-        return True
+        return self._load.push(t, torque, self.t, self.load_torque)
 
     def hold_load(self, torque: float) -> None:
         """The load torque [N m] from the simulator's time on, held (replaces every pushed
         sample)."""
         torque = _finite_scalar('hold_load: torque', torque, LOAD_LIMIT, 'N m')
-        self._load_t, self._load_v = np.array([self.t]), np.array([torque])
+        self._load.hold(torque, self.t)
 
     @property
     def load_torque(self) -> float:
         """The load torque on the antenna at the simulator's time [N m]."""
-        if self._load_t.size:
-            return float(self._held_load(np.array([self.t]))[0])
+        if self._load.live:
+            return float(self._load.at(np.array([self.t]))[0])
         return load_torque_of(self.p)
 
-    def _held_load(self, t: np.ndarray) -> np.ndarray:
-        i = np.searchsorted(self._load_t, t, side='right') - 1
-        return self._load_v[np.clip(i, 0, None)]
-
     def _load_on_grid(self, m: int) -> np.ndarray:
-        if not self._load_t.size:
-            return _NO_LOAD
-        grid = self._t0 + (self._k + np.arange(m + 1)) * self.dt
-        return self._held_load(grid)
-
-    def _trim_load(self) -> None:
-        """Drop the load samples the simulator has passed (keep the one before now)."""
-        lt = self._load_t
-        if lt.size < 2:
-            return
-        i = int(np.searchsorted(lt, self.t, side='right')) - 1
-        if i > 0:
-            self._load_t, self._load_v = lt[i:], self._load_v[i:]
+        """The pushed load at the next m + 1 grid points (NO_LOAD: none pushed)."""
+        return self._load.on_grid(self._t0, self._k, m, self.dt)
 
     def resync(self, t: float) -> None:
         """Jump the simulated clock to ``t`` without integrating (dropped catch-up time)."""
@@ -456,9 +442,14 @@ class Stepper:
     def _run_kernel(self, th: np.ndarray, td: np.ndarray, stride: int, ru: np.ndarray,
                     rv: np.ndarray, ra: np.ndarray, raux: np.ndarray,
                     load: np.ndarray | None = None) -> None:
-        done, status = advance(self.p, self.C, self._u, self._v, self._a, th, td, self.dt,
-                               stride, ru, rv, ra, raux, self._stats, self._ctl,
-                               _NO_LOAD if load is None else load)
+        load = NO_LOAD if load is None else load
+        if self._ap is None:
+            done, status = advance(self.p, self.C, self._u, self._v, self._a, th, td, self.dt,
+                                   stride, ru, rv, ra, raux, self._stats, self._ctl, load)
+        else:
+            done, status = advance_adaptive(self.p, self._ap, self.C, self._u, self._v,
+                                            self._a, th, td, self.dt, self.t, stride, ru, rv,
+                                            ra, raux, self._stats, self._ctl, load, self._log)
         self._after_kernel(done, status, float(th[done]), float(td[done]))
 
     def _after_kernel(self, done: int, status: int, theta1_last: float,

@@ -15,20 +15,10 @@ from typing import TextIO
 import numpy as np
 
 from ..records import write_csv_header
-from ..schema import Parameters
-from .model import (
-    AUX_CGKG,
-    AUX_CWKW,
-    AUX_FX,
-    AUX_FY,
-    AUX_MU,
-    AUX_Q,
-    AUX_VS,
-    AUX_WN,
-    N_AUX,
-    DriveModel,
-    energy_series,
-)
+from ..schema.parameters import Parameters
+from .equations import energy_series
+from .layout import AUX_CGKG, AUX_CWKW, AUX_FX, AUX_FY, AUX_MU, AUX_Q, AUX_VS, AUX_WN, N_AUX
+from .model import DriveModel
 
 __all__ = ['SimState', 'Trajectory', 'TrajectoryCsvWriter', 'CSV_FORMAT', 'ROW_BYTES',
            'csv_bytes_estimate', 'ring_down']

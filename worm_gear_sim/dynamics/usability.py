@@ -1,34 +1,11 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Is a parameter set *usable*: the rules behind :func:`worm_gear_sim.params.check_usable`.
+"""Is a parameter set *usable*: the rules behind ``check_usable`` and :func:`diagnose` (a
+failed integration's likely cause).
 
-Every field of a :class:`~worm_gear_sim.params.Config` can lie inside its declared range while
-the set as a whole cannot be simulated.  The causes found are structural, so they are
-written as rules on the derived quantities, each naming the parameters that set them:
-
-1. **Mesh stiffness over a cycle** (Eqs. 16-17).  Each tooth stiffness varies by a factor
-   e^{360 |b|} over one mesh cycle; the calibration holds its *mean* at the linear value, so a
-   large |b| (``mesh.worm_fit_b = 0.5``: e^180) drives the minimum towards 0 (or overflows the
-   calibration: "math domain error").  A tooth stiffness near 0 (``*_tooth_stiffness_*`` of
-   1e-9 N/m) does the same.
-2. **The spring chain must hold every body.**  The drive is held only through motor -K_w- worm
-   -mesh- gear -K_g- antenna.  Where two springs meet on one body (K_w and l_w^2 k_Y on the
-   worm, r_g^2 k_Y and K_g on the gear) and one is below ``SPRING_RATIO_MIN`` of the other, it
-   is lost in the sum in double precision: the stiffness matrix is singular (LinAlgError) or
-   the equilibrium is meaningless.  Checked at both ends of the mesh cycle.
-3. **The modes** must be computable and finite.
-4. **A trial**: static equilibrium at theta1 = 0 (finite, within ``ANGLE_LIMIT``), the modes,
-   and ``TRIAL_TIME`` of integration through a small command ramp must be computable and
-   finite.  Anything still failing becomes a :class:`ConfigError` naming the keys that were
-   changed (the cause is in them), never a raw numpy error.  When the trial fails and the
-   highest mode is not resolved by the time step (omega dt > pi: a 4e-10 m worm gives
-   omega dt = 3300), the error says so and names the inertia of that mode.  Unresolved
-   modes alone are allowed: the average-acceleration step is unconditionally stable, and
-   the paper's shear-modulus study runs at omega dt = 5.4.
-
-Cost: ``python benchmarks/bench_usable.py`` (about a millisecond per new set); it is pure,
-allocation-light and thread-safe, so the node's parameter bridge can run it off the real-time
-path.
+A set whose every field is in range may still not simulate; the rules (the mesh stiffness
+over a cycle, the spring chain holding every body, the modes, a short trial run) each name
+the parameters that set them.  Cost: ``python benchmarks/bench_usable.py``.
 """
 
 from __future__ import annotations
@@ -36,14 +13,16 @@ from __future__ import annotations
 import math
 import os
 import threading
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..schema import ANGLE_LIMIT, Parameters
-from ..stepwise import Steps, run_steps
-from ..validation import ConfigError
+from .._support.stepwise import Steps, run_steps
+from ..schema.parameters import Parameters
+from ..schema.sections import ANGLE_LIMIT
+from ..schema.validation import ConfigError
 
 if TYPE_CHECKING:
     from .model import DriveModel
@@ -94,7 +73,7 @@ def check_usable(cfg: Parameters, changed: Iterable[str] | None = None) -> None:
 
 
 def check_usable_steps(cfg: Parameters, changed: Iterable[str] | None = None) -> Steps[None]:
-    """:func:`check_usable` in steps (:mod:`worm_gear_sim.stepwise`: the node prepares an
+    """:func:`check_usable` in steps (:mod:`worm_gear_sim._support.stepwise`: the node prepares an
     adapted set a slice at a time); numpy's floating-point errors are ignored inside each
     step only, never in the caller's code between them."""
     if cfg in _USABLE:
@@ -169,9 +148,45 @@ def _blame(cfg: Parameters, changed: Sequence[str], suspects: Sequence[str],
 
 def _check(cfg: Parameters, changed: Sequence[str]) -> Steps[DriveModel]:
     """The rules (module doc), in steps; returns the model it built and ran."""
-    from .model import DriveModel, mesh_stiffness_y, tooth_stiffness
+    subject = _Subject(cfg, changed, _built_model(cfg, changed))
+    yield
+    for rule in _RULES:
+        yield from rule(subject)
+    return subject.model
+
+
+@dataclass
+class _Subject:
+    """The set under check, the keys just changed, its model and (after rule 3) its modes:
+    natural frequencies [Hz] and shapes."""
+
+    cfg: Parameters
+    changed: Sequence[str]
+    model: DriveModel
+    modes: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty((0, 0)))
+
+    def blame(self, suspects: Sequence[str], why: str) -> ConfigError:
+        return _blame(self.cfg, self.changed, suspects, why)
+
+    @property
+    def fit_b(self) -> dict[str, float]:
+        """The exponents of Eqs. 16-17."""
+        return {'worm': self.cfg.mesh.worm_fit_b, 'gear': self.cfg.mesh.gear_fit_b}
+
+    def cycle_states(self) -> list[tuple[float, float]]:
+        """(theta2, theta3) at the mesh phases where the contact position x(s) takes its
+        extremes: 0 and 180 deg (cosine mapping) or 0 and 360 deg (sawtooth)."""
+        two_pi = 2.0 * math.pi
+        # theta2 = 2 (phase - phase_offset) with theta3 = 0 gives that mesh phase
+        return [(2.0 * (phase - self.cfg.mesh.phase_offset), 0.0)
+                for phase in (0.0, 0.5 * two_pi, two_pi * (1.0 - 1e-12))]
+
+
+def _built_model(cfg: Parameters, changed: Sequence[str]) -> DriveModel:
+    """The set's model; a calibration of Eqs. 16-17 that overflows blames the b's."""
+    from .model import DriveModel
     try:
-        model = DriveModel(cfg)
+        return DriveModel(cfg)
     except (ArithmeticError, ValueError):
         # the calibration of Eqs. 16-17 overflows: e^{360 b} too steep
         b_keys = [k for k in ('mesh.worm_fit_b', 'mesh.gear_fit_b') if k in changed] \
@@ -180,25 +195,19 @@ def _check(cfg: Parameters, changed: Sequence[str]) -> Steps[DriveModel]:
                      'e^(360 |b|) over a mesh cycle; this b makes it overflow (the '
                      'paper: |b| < 0.001 1/deg, a factor 1.3)') from None
 
-    yield
 
-    # Rule 1: tooth stiffness over the cycle.  Eqs. 16-17 are exponentials of the contact
-    # position x(s); x takes its extremes at mesh phase 0 and 180 deg (cosine mapping) or 0
-    # and 360 deg (sawtooth): evaluate there.
-    two_pi = 2.0 * math.pi
-    states = []
-    for phase in (0.0, 0.5 * two_pi, two_pi * (1.0 - 1e-12)):
-        # theta2 = 2 (phase - phase_offset) with theta3 = 0 gives that mesh phase
-        states.append((2.0 * (phase - cfg.mesh.phase_offset), 0.0))
-    p = model.p
+def _rule_tooth_stiffness(s: _Subject) -> Steps[None]:
+    """Rule 1: tooth stiffness over the cycle, finite and > 0.  Eqs. 16-17 are
+    exponentials of the contact position x(s): evaluated where x takes its extremes."""
+    from .equations import tooth_stiffness
+    model = s.model
     linear = model.mesh_is_linear
-    b_fit = {'worm': cfg.mesh.worm_fit_b, 'gear': cfg.mesh.gear_fit_b}     # Eqs. 16-17
     if not math.isfinite(model.linear_mesh_compliance):
-        raise _blame(cfg, changed, _TEETH['worm'][2:] + _TEETH['gear'][2:4],
-                     'the linear tooth compliance 1/c_w k_w + 1/c_g k_g (Eq. 7) overflows: '
-                     'a tooth stiffness this small is no mesh')
+        raise s.blame(_TEETH['worm'][2:] + _TEETH['gear'][2:4],
+                      'the linear tooth compliance 1/c_w k_w + 1/c_g k_g (Eq. 7) overflows: '
+                      'a tooth stiffness this small is no mesh')
     for i, side in enumerate(('worm', 'gear')):
-        vals = [tooth_stiffness(p, th2, th3)[i] for th2, th3 in states]
+        vals = [tooth_stiffness(model.p, th2, th3)[i] for th2, th3 in s.cycle_states()]
         if linear:
             vals = [model.linear_tooth_stiffness[i]]
         lo, hi = min(vals), max(vals)
@@ -207,82 +216,95 @@ def _check(cfg: Parameters, changed: Sequence[str]) -> Steps[DriveModel]:
             why = (f'the {side} tooth stiffness {sym} (Eq. {16 if side == "worm" else 17}) '
                    f'spans {lo:.3g} .. {hi:.3g} N/m over a mesh cycle')
             if not linear:
-                factor = math.exp(min(700.0, 360 * abs(b_fit[side])))
+                factor = math.exp(min(700.0, 360 * abs(s.fit_b[side])))
                 why += f' (a factor e^(360 |b|) = {factor:.3g})'
-            raise _blame(cfg, changed, _TEETH[side], why + ': it must stay finite and > 0')
+            raise s.blame(_TEETH[side], why + ': it must stay finite and > 0')
+    yield from ()                           # a check in one step: no pause
 
-    # Rule 2: the spring chain holds every body, at both ends of the cycle.  Seen from the
-    # motor, each body is held by the springs between it and the motor (in series); if that
-    # holding stiffness is lost next to the spring leading further out, the pivot of the
-    # stiffness matrix at the next body cancels to 0: singular.
-    d = model.derived
-    Kw, Kg, lw, rg = d.K_w, d.K_g, d.l_w, cfg.geometry.gear_pitch_radius
-    variation = '' if linear else (
+
+def _rule_spring_chain(s: _Subject) -> Steps[None]:
+    """Rule 2: the spring chain holds every body, at both ends of the cycle.  Seen from the
+    motor, each body is held by the springs between it and the motor (in series); if that
+    holding stiffness is lost next to the spring leading further out, the pivot of the
+    stiffness matrix at the next body cancels to 0: singular."""
+    from .equations import mesh_stiffness_y
+    d, b_fit = s.model.derived, s.fit_b
+    Kw, Kg, lw, rg = d.K_w, d.K_g, d.l_w, s.cfg.geometry.gear_pitch_radius
+    variation = '' if s.model.mesh_is_linear else (
         'over a mesh cycle the tooth stiffnesses of Eqs. 16-17 vary by e^(360 |b|) = '
         f'{math.exp(min(700.0, 360 * abs(b_fit["worm"]))):.3g} (worm), '
         f'{math.exp(min(700.0, 360 * abs(b_fit["gear"]))):.3g} (gear); at its weakest ')
     mesh_keys = _TEETH['worm'] + _TEETH['gear'][:4] + _MESH
-    for th2, th3 in states:
-        kY = mesh_stiffness_y(p, th2, th3)
+    for th2, th3 in s.cycle_states():
+        kY = mesh_stiffness_y(s.model.p, th2, th3)
         springs = {'worm shaft K_w': (Kw, _WORM_SHAFT), 'mesh l_w^2 k_Y': (lw * lw * kY,
                                                                              mesh_keys),
                    'gear shaft K_g': (Kg * (lw / rg) ** 2, _GEAR_SHAFT)}  # at the worm
         for name, (k, keys) in springs.items():
             if not (math.isfinite(k) and k > 0.0):
-                raise _blame(cfg, changed, keys, f'the {name} stiffness is {k:.3g} N m/rad '
-                             '(seen at the worm): it must be finite and > 0')
+                raise s.blame(keys, f'the {name} stiffness is {k:.3g} N m/rad '
+                              '(seen at the worm): it must be finite and > 0')
         held, inner = Kw, 'worm shaft K_w'
         for outer in ('mesh l_w^2 k_Y', 'gear shaft K_g'):
             k_out = springs[outer][0]
             if held < SPRING_RATIO_MIN * k_out:
                 why = variation if 'mesh' in inner else ''
-                raise _blame(cfg, changed, springs[inner][1], why +
-                             f'the {inner} = {springs[inner][0]:.3g} N m/rad (seen at the '
-                             f'worm) is below {SPRING_RATIO_MIN:g} of the {outer} = '
-                             f'{k_out:.3g} beyond it: in double precision the drive is no '
-                             'longer held (singular stiffness matrix)')
+                raise s.blame(springs[inner][1], why +
+                              f'the {inner} = {springs[inner][0]:.3g} N m/rad (seen at the '
+                              f'worm) is below {SPRING_RATIO_MIN:g} of the {outer} = '
+                              f'{k_out:.3g} beyond it: in double precision the drive is no '
+                              'longer held (singular stiffness matrix)')
             held = 1.0 / (1.0 / held + 1.0 / k_out)      # in series, now out to `outer`
             if k_out < springs[inner][0]:
                 inner = outer                               # the weakest spring so far
+    yield from ()                           # a check in one step: no pause
 
-    # Rule 3: the modes are computable, damped as :func:`~.modal.modes` gives them to its
-    # users (the compensator's antenna mode, the diagnosis of a failing trial): an
-    # undamped eigenproblem can succeed where the damped pencil has no finite eigenvalue
+
+def _rule_modes(s: _Subject) -> Steps[None]:
+    """Rule 3: the modes are computable, damped as :func:`~.modal.modes` gives them to its
+    users (the compensator's antenna mode, the diagnosis of a failing trial): an
+    undamped eigenproblem can succeed where the damped pencil has no finite eigenvalue.
+    Rule 3b: the step resolves every mode (at least 2 steps per period).  The implicit
+    step exists beyond that (average acceleration is stable at any step) and a short trial
+    may pass, but Newton cannot follow the nonlinear mesh through a mode it steps over:
+    a set with its highest mode at 3.8 GHz passed the trial and then failed 25 893 times
+    live.  Between 2 and STEPS_PER_PERIOD steps per period is allowed with a warning."""
     from .modal import modes_steps
     yield
-    full = yield from modes_steps(model)
-    m = (full.undamped_hz, full.shapes)
-    if not np.all(np.isfinite(m[0])):
-        raise _blame(cfg, changed, (), 'the linearised natural frequencies are not finite')
-    # Rule 3b: the step resolves every mode (at least 2 steps per period).  The implicit
-    # step exists beyond that (average acceleration is stable at any step) and a short trial
-    # may pass, but Newton cannot follow the nonlinear mesh through a mode it steps over:
-    # a set with its highest mode at 3.8 GHz passed the trial and then failed 25 893 times
-    # live.  Between 2 and STEPS_PER_PERIOD steps per period is allowed with a warning.
-    hit = _unresolved_mode(cfg, m)
+    full = yield from modes_steps(s.model)
+    s.modes = (full.undamped_hz, full.shapes)
+    if not np.all(np.isfinite(s.modes[0])):
+        raise s.blame((), 'the linearised natural frequencies are not finite')
+    hit = _unresolved_mode(s.cfg, s.modes)
     if hit:
-        raise _blame(cfg, changed, ('integrator.time_step',) + hit[1], hit[0])
+        raise s.blame(('integrator.time_step',) + hit[1], hit[0])
 
-    # Rule 4: trial (equilibrium finite and in range, a short ramp integrates)
+
+def _rule_trial(s: _Subject) -> Steps[None]:
+    """Rule 4: trial (equilibrium finite and in range, a short ramp integrates)."""
     from .stepping import SimulationError, Stepper
     yield
     try:
-        sim = Stepper(model, theta1=0.0)
+        sim = Stepper(s.model, theta1=0.0)
         yield
         u0 = sim.state.theta
         if not (np.all(np.isfinite(u0)) and np.all(np.abs(u0) <= ANGLE_LIMIT)):
-            raise _blame(cfg, changed, ('load.output_torque',), f'the static equilibrium '
-                         f'(theta2, theta3, theta4) = {u0} is not finite or beyond '
-                         f'{ANGLE_LIMIT:g} rad')
+            raise s.blame(('load.output_torque',), f'the static equilibrium '
+                          f'(theta2, theta3, theta4) = {u0} is not finite or beyond '
+                          f'{ANGLE_LIMIT:g} rad')
         sim.advance_to(0.5 * TRIAL_TIME, TRIAL_ANGLE)
         yield
         sim.advance_to(TRIAL_TIME, TRIAL_ANGLE)
-        s = sim.state
-        if not (np.all(np.isfinite(s.theta)) and np.all(np.isfinite(s.omega))):
+        state = sim.state
+        if not (np.all(np.isfinite(state.theta)) and np.all(np.isfinite(state.omega))):
             raise SimulationError('non-finite state')
     except SimulationError as exc:
-        raise _trial_failure(cfg, changed, m, str(exc)) from None
-    return model
+        raise _trial_failure(s.cfg, s.changed, s.modes, str(exc)) from None
+
+
+#: the rules of the module doc, in order; each a check in steps on the set
+_RULES: tuple[Callable[[_Subject], Steps[None]], ...] = (
+    _rule_tooth_stiffness, _rule_spring_chain, _rule_modes, _rule_trial)
 
 
 def _unresolved_mode(cfg: Parameters, m: tuple[np.ndarray, np.ndarray]

@@ -3,28 +3,10 @@
 """Calibration in one call: design an excitation within the user's limits, run it on the
 drive, fit, validate on held-out moves, and say whether the result is accepted.
 
-The excitation (:func:`~.excitation.design_excitation`, within ``max_angle`` of worm angle
-around the start, ``max_rate`` and ``max_accel``): steps out and back, a small step and a
-held-out S-curve for the elastic keys; slow and fast sweeps out and back at constant rates
-and a held-out sweep when the play, the load torque or the drag is fitted (those keys then
-get direct estimates before the local fit, :mod:`.direct`); with play and load both fitted,
-the ``unload_dither`` move in reserve, fitted only when the sweeps hold one flank
-(:mod:`.unload`).  Each move is a record starting
-at rest and ending with ``RING_TIME`` of rest; the held-out move is never seen by the fit:
-the prediction error there is the acceptance test.  The result names every fitted key the
-excitation could not show (:mod:`.visibility`).
-
-Steps and reversals rather than a chirp: the antenna mode is lightly damped, so a stop
-excites it fully in one move and the ring-down is a clean free response; a chirp through
-95 Hz needs seconds of motion (beyond an antenna's allowed travel at these rates) and mixes
-the friction's stick-slip into the forced response.
-
-:func:`calibrate` runs the moves on a drive given as a callable ``run(profile, t_end) ->
-Record`` (``plant_runner`` wraps a simulated drive: a params file like the one ``-o``
-writes), fits with :func:`~.fit.identify`, validates with
-:func:`~.report.prediction_errors`, and returns a :class:`CalibrationResult`.  Nothing is
-applied anywhere: the caller writes the YAML or sets the node's parameters only when
-``accepted``.
+:func:`calibrate` runs the moves on a drive given as ``run(profile, t_end) -> Record``
+(:func:`plant_runner` wraps a simulated one), fits with ``identify``, validates with
+``prediction_errors`` and returns a :class:`CalibrationResult`; nothing is applied.  The
+excitation and its design: docs/identification.md ("Calibrate in one command").
 """
 
 from __future__ import annotations
@@ -38,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..params import Config
+from ..config.usable import Config
 from ..records import Record
 from .data import IdentificationError, record_from_model
 from .direct import LOAD, PLAY

@@ -19,13 +19,13 @@ from typing import Any
 
 import numpy as np
 
+from ..config.usable import Config
 from ..dynamics.load import LoadSignal, SampledLoad
 from ..dynamics.model import DriveModel
 from ..dynamics.profiles import Profile, SampledProfile, motion_span
 from ..dynamics.simulation import Simulator
-from ..params import Config
+from ..dynamics.spectrum import dominant_frequency
 from ..records import Record
-from ..studies import dominant_frequency
 
 __all__ = ['OUTPUTS', 'MIN_SAMPLES', 'MAX_FIT_SAMPLES', 'MAX_RECORD_ANGLE', 'FIT_EVERY',
            'RECORDED_SAMPLES', 'decimation', 'IdentificationError', 'record_name', 'check_record',

@@ -3,24 +3,10 @@
 """The global stage before the local fit: direct estimates of the play, the load torque and
 the antenna drag from the constant-rate segments of the records, then a scan of the play.
 
-Over a segment where the worm turns at a constant rate omega (after its transient), the lag
-of the antenna behind the rigid motion, e = theta4 - u theta1 (u = output_per_input), is
-steady (the antenna mode's ringing averages out):
-
-    e = -s b / 2 - (T + c u omega) C                                   (wind-up)
-
-with b the play (``mesh.backlash``), T the load torque (``load.output_torque``), c the drag
-(``load.output_viscous_coefficient``), C the compliance from the antenna to the worm (the
-gear shaft, the mesh and the bearings in series: computed by the model at the base values),
-and s = sign(T + c u omega) the flank in contact (+1 the driving flank).  Segments both
-ways at two rates give: the drag from the rate dependence (difference / 2 / rate), the load
-from their mean, and the play from the jump between the ways when the flank changes.
-:func:`direct_estimates` solves this for every flank pattern the physics allows (s rises
-with omega: T + c u omega is increasing) and keeps the consistent one with the smallest
-misfit; with one flank throughout, b and T C are one number and the play is not seen.
-The model then takes the drive's own friction into account: :func:`scan_play` evaluates the
-time-domain cost of the records on a few plays around the estimate (the others at their
-direct estimates) and keeps the best, the start of the local least-squares fit.
+On a constant-rate segment the antenna's lag is steady, e = -s b / 2 - (T + c u omega) C;
+:func:`direct_estimates` solves it over the segments (:func:`steady_segments`) for the
+consistent flank pattern, :func:`compliance` gives C, and :func:`scan_play` picks the
+best play on the time-domain cost.  docs/identification.md.
 """
 
 from __future__ import annotations
@@ -32,11 +18,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import lsq_linear
 
+from ..config.usable import Config
 from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
-from ..params import Config
 from ..records import Record
-from ..validation import ConfigError
+from ..schema.validation import ConfigError
 from .data import predict
 
 __all__ = ['PLAY', 'LOAD', 'DRAG', 'DIRECT_KEYS', 'Segment', 'steady_segments', 'compliance',

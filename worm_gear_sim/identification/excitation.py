@@ -2,30 +2,10 @@
 # Licensed under the Apache License, Version 2.0
 """The calibration's excitation: its limits, its moves and the command profiles they use.
 
-Two designs, chosen by the fitted keys (:func:`design_excitation`):
-
-* **steps** (keys of the elastic drive: stiffness, inertia, damping, friction): ``step_out``
-  (trapezoid of the full amplitude at the rate and acceleration limits: the stop rings the
-  antenna mode), ``step_back`` (the same move reversed), ``small_step`` (a quarter of the
-  amplitude: friction does not scale with the amplitude, the elastic terms do); held out:
-  ``validate_scurve`` (a jerk-limited S-curve of half the amplitude back);
-* **sweeps** (when the play ``mesh.backlash`` or the load torque ``load.output_torque`` is
-  fitted): each move goes out and back at
-  a constant worm rate, so every record holds constant-rate segments both ways and a
-  reversal: ``slow_sweep`` at a quarter of the rate limit (lost motion at low speed: the
-  flank changes while the drive is slow), ``fast_sweep`` at the rate limit with ramps at the
-  acceleration limit (the drag's wind-up is 4 x larger; the stops ring the antenna mode:
-  stiffness; a deceleration can cross the play against a load).  Held out:
-  ``validate_sweep``, out and back at half the rate limit on the other side of the start.
-  In reserve, when both the play and the load torque are fitted and the time allows:
-  ``unload_dither``, the worm rate swinging at the base's antenna mode
-  (:func:`dither_profile`, :mod:`.unload`).
-
-The rate-dependent part of the lag theta4 - u theta1 over a constant-rate segment is the
-drag's wind-up; its part common to both ways is the load's; the jump between the ways is
-the play, when the flank changes (:mod:`.direct`).  A load torque larger than the drag
-torque at the fastest rate holds one flank both ways: the play is then not crossed, which
-:mod:`.visibility` reports.
+:func:`design_excitation` chooses steps (the elastic keys: ``step_out``, ``step_back``,
+``small_step``, held-out ``validate_scurve``) or sweeps (play, load or drag fitted:
+``slow_sweep``, ``fast_sweep``, held-out ``validate_sweep``, ``unload_dither`` in reserve,
+:func:`dither_profile`).  docs/identification.md ("The excitation").
 """
 
 from __future__ import annotations
@@ -36,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config.usable import Config
 from ..dynamics.profiles import Profile, SCurveProfile, TrapezoidalProfile
-from ..params import Config
 from .data import IdentificationError
 
 __all__ = ['Limits', 'Move', 'RateSchedule', 'design_excitation', 'SWEEP_KEYS', 'RING_TIME',

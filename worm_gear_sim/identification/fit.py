@@ -1,20 +1,10 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """The robust search: :func:`identify` fits the keys to the records with
-``scipy.optimize.least_squares`` (Jacobian by finite differences in the fitted coordinate,
-:mod:`.problem`).
+``scipy.optimize.least_squares`` (Jacobian by finite differences, :mod:`.problem`).
 
-Oscillatory records defeat a plain local fit (it locks onto the wrong period).  Three
-measures, compared in docs/identification.md, make it robust:
-
-* **frequency start**: the dominant frequency of each measured output (FFT after the move) is
-  matched to the nearest linearised mode of the model
-  (:func:`worm_gear_sim.dynamics.modal.modes`) by a minimum-change Gauss-Newton step on the
-  fitted keys before the time-domain fit;
-* **growing windows**: the fit runs on the first few periods after motion starts, then on
-  longer windows, each starting from the previous estimate;
-* **multi-start**: several starts (the frequency start, the base, a scrambled Sobol set over
-  the start box) run in parallel on the Dask engine of the sweeps; the lowest cost wins.
+Oscillatory records defeat a plain local fit; a frequency start, growing windows and a
+multi-start make it robust (docs/identification.md, "Why the fit is robust").
 """
 
 from __future__ import annotations
@@ -29,13 +19,13 @@ from typing import Any
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..dynamics.batch import default_workers, map_like_serial
-from ..dynamics.forked import can_fork, fork_is_safe
+from ..config.usable import Config
 from ..dynamics.modal import modes
 from ..dynamics.stepping import SimulationError
-from ..params import Config
+from ..parallel.processes import can_fork, fork_is_safe
+from ..parallel.threads import default_workers, map_like_serial
 from ..records import Record
-from ..validation import ConfigError
+from ..schema.validation import ConfigError
 from .data import IdentificationError, measured_frequencies, normalised
 from .direct import (
     DIRECT_KEYS,
@@ -167,7 +157,7 @@ class FitOptions:
     #: the local fits run in this process (:meth:`Problem.on_processes`; the starts then run
     #: at once, on threads that wait for the processes).  None:
     #: as many as ``threads`` where forking is safe (Linux, no other thread in this process:
-    #: :func:`~worm_gear_sim.dynamics.forked.fork_is_safe`) and ``threads`` > 1, else none;
+    #: :func:`~worm_gear_sim.parallel.processes.fork_is_safe`) and ``threads`` > 1, else none;
     #: 0: none (the columns on threads).  The same numbers either way.
     processes: int | None = None
 
@@ -469,7 +459,7 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
     def start_bar() -> None:   # after the engine is up: no bar before a connection error
         nonlocal bar
         if opt.progress:
-            from ..progress import progress_bar
+            from .._support.progress import progress_bar
             bar = progress_bar(len(starts), 'identify', 'start')
 
     def done(r: dict[str, Any]) -> None:
@@ -494,10 +484,10 @@ def _run_starts(problem: Problem, starts: Sequence[np.ndarray],
                             workers=len(starts) if on_processes else threads,
                             on_result=lambda _, r: done(r))
         else:
-            from ..studies.engine import _dask_client, warm_up
-            with _dask_client(opt.client, opt.scheduler, opt.workers) as cl:
+            from ..parallel.cluster import dask_client, warm_worker
+            with dask_client(opt.client, opt.scheduler, opt.workers) as cl:
                 from distributed import as_completed
-                if len(cl.run(warm_up)) == 0:
+                if len(cl.run(warm_worker)) == 0:
                     raise ConnectionError('the Dask cluster has no workers')
                 pf = cl.scatter(problem, broadcast=True)
                 start_bar()

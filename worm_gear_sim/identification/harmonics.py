@@ -3,21 +3,10 @@
 """Identification of the periodic transmission error (``mesh.worm_error_harmonics``,
 ``mesh.gear_error_harmonics``) as linear parameters.
 
-The error enters the approach q = l_w theta2 - r_g theta3 + r_g e(theta2, theta3) linearly in
-its coefficients, and at the speeds of a record (harmonics far below the 94.5 Hz antenna
-mode) it moves the antenna by +e (docs/model-notes.md): theta4 ~ theta4(no error) + Phi c,
-with the regressors Phi = [sin k theta2, cos k theta2, ..., sin m theta3, cos m theta3] at
-the model's own theta2, theta3.  Given the nonlinear keys, the coefficients are a linear
-least-squares problem (variable projection): each pass simulates the model with the current
-coefficients and solves Phi dc = measured - predicted; the fixed point is the exact
-least-squares fit of the full model (the regressors only steer the passes), reached in 2-3
-passes.  With nonlinear keys too (:func:`identify_with_harmonics`) the two stages alternate:
-the keys by :func:`~worm_gear_sim.identification.fit.identify` with the harmonics held, the
-harmonics by this linear stage with the keys held.
-
-Verdicts as for the other keys: a 95 % interval from the linear covariance s^2 (Phi^T
-Phi)^-1 (s^2 the residual variance; it assumes white residuals), 'identified' when the
-interval is narrower than the largest coefficient's 5 %, else 'poorly determined'."""
+The coefficients are a linear least-squares problem given the nonlinear keys (variable
+projection: a few passes reach the full model's fit); :func:`identify_with_harmonics`
+alternates that with ``identify``.  docs/identification.md ("Periodic error harmonics").
+"""
 
 from __future__ import annotations
 
@@ -28,10 +17,10 @@ from typing import Any
 
 import numpy as np
 
+from ..config.usable import Config
 from ..dynamics.model import DriveModel
-from ..params import Config
 from ..records import Record
-from ..schema import MAX_ERROR_ORDERS
+from ..schema.sections import MAX_ERROR_ORDERS
 from .data import IdentificationError, predict
 
 __all__ = ['HarmonicFit', 'harmonic_names', 'harmonic_regressors', 'fit_harmonics',

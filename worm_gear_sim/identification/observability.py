@@ -1,19 +1,8 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Which measured outputs a fit can use at their sampling: an output whose motion lies
-largely above its Nyquist frequency cannot be followed by any model (the phase of a mode
-sampled below twice its frequency is lost in the aliasing), so it is named and left out of
-the fit instead of sinking it.
-
-The rule (docs/identification.md, "Which outputs are fitted"): for each measured output and
-record, the base model predicts the record at its own step (every step, over the record's
-first ``DENSE_SPAN`` seconds); the share of that output's elastic motion (the angle minus
-the rigid motion theta1 u_rigid, mean removed) whose power lies above half the record's
-sample rate is computed from its spectrum.  Above ``ALIASED_SHARE`` the output is *not
-observable at this sampling* in that record, named with the strongest mode above Nyquist
-and the sample rate it would need (2.5 times that mode).  An output not observable in any
-one record is left out of the fit (``identify(..., outputs=...)`` / ``--outputs`` chooses
-explicitly).
+"""Which measured outputs a fit can use at their sampling: an output whose elastic motion
+lies largely above its Nyquist frequency is named and left out of the fit instead of
+sinking it (:data:`ALIASED_SHARE`).  The rule: docs/identification.md ("Records").
 """
 
 from __future__ import annotations
@@ -24,10 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config.usable import Config
 from ..dynamics.modal import modes
 from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
-from ..params import Config
 from ..records import Record
 from .data import FIT_EVERY, MAX_FIT_SAMPLES, OUTPUTS, motion_times, predict, rigid_motion
 

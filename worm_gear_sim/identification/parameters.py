@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from ..params import Config
-from ..validation import suggest
+from ..config.usable import Config
+from ..schema.validation import suggest
 from .data import IdentificationError
 
 __all__ = ['FITTABLE_SECTIONS', 'FitParameter', 'fit_parameters', 'apply_values']
@@ -83,65 +83,14 @@ def fit_parameters(base: Config, keys: Sequence[str],
         if path not in flat:
             raise IdentificationError(f'--fit {key}: unknown parameter' + suggest(path, flat))
         sec = path.split('.', 1)[0]
-        value = flat[path]
-        md = meta[path]
         if sec not in FITTABLE_SECTIONS:
             raise IdentificationError(f'--fit {key}: not a parameter of the drive (section '
                                       f'{sec}); fittable sections: {", ".join(FITTABLE_SECTIONS)}')
-        if isinstance(value, list):
-            if not value or not all(isinstance(v, float) for v in value):
-                raise IdentificationError(f'--fit {key}: not a numeric parameter')
-            if idx is None:
-                raise IdentificationError(f'--fit {key}: a list of {len(value)} numbers; fit '
-                                          f'one entry, e.g. {path}[0]')
-            i = int(idx)
-            if i >= len(value):
-                raise IdentificationError(f'--fit {key}: index out of range (0..'
-                                          f'{len(value) - 1})')
-            v = float(value[i])
-        else:
-            if idx is not None:
-                raise IdentificationError(f'--fit {key}: {path} is not a list')
-            if isinstance(value, bool) or not isinstance(value, float):
-                kind = 'an integer setting' if isinstance(value, int) and not \
-                    isinstance(value, bool) else f'not numeric ({type(value).__name__})'
-                raise IdentificationError(f'--fit {key}: {kind}, cannot be fitted')
-            v = float(value)
-            i = None
-        lo = -np.inf if md.get('lo') is None else float(md['lo'])
-        hi = np.inf if md.get('hi') is None else float(md['hi'])
-        if md.get('lo_open') and lo == 0.0:
-            lo = 0.0
+        v, i = _base_value(key, path, idx, flat[path])
+        md = meta[path]
         user = bounds.pop(key, None)
-        if user is not None:
-            ulo, uhi = float(user[0]), float(user[1])
-            if not (ulo < uhi):
-                raise IdentificationError(f'--bounds {key}: need LO < HI, got {ulo:g}:{uhi:g}')
-            if ulo < lo or uhi > hi:
-                raise IdentificationError(f'--bounds {key}: {ulo:g}:{uhi:g} leaves the '
-                                          f'parameter range {lo:g}..{hi:g}')
-            lo, hi = ulo, uhi
-            if not (lo <= v <= hi):
-                v = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
-        use_log = lo >= 0.0 and v > 0.0
-        if use_log:
-            scale = 1.0
-            if user is not None and lo > 0:
-                box = (math.log(lo / v), math.log(hi / v))
-            else:
-                box = (max(-math.log(start_factor), math.log(lo / v) if lo > 0 else -np.inf),
-                       min(math.log(start_factor), math.log(hi / v)))
-        else:
-            if v != 0.0:
-                scale = abs(v)
-            elif math.isfinite(hi - lo):
-                scale = 0.1 * min(hi - lo, 1.0)
-            else:
-                scale = 0.1
-            if user is not None:
-                box = ((lo - v) / scale, (hi - v) / scale)
-            else:
-                box = (max(-1.0, (lo - v) / scale), min(1.0, (hi - v) / scale))
+        lo, hi, v = _fit_range(key, md, user, v)
+        use_log, scale, box = _start_box(lo, hi, v, user is not None, start_factor)
         out.append(FitParameter(key=key, path=path, index=i, base=v, lo=lo, hi=hi,
                                 log=use_log, scale=scale, unit=str(md.get('unit', '')),
                                 box=(float(box[0]), float(box[1]))))
@@ -150,6 +99,75 @@ def fit_parameters(base: Config, keys: Sequence[str],
     if len({p.key for p in out}) != len(out):
         raise IdentificationError('--fit: a key is given twice')
     return out
+
+
+def _base_value(key: str, path: str, idx: str | None, value: Any
+                ) -> tuple[float, int | None]:
+    """The base value of a ``--fit`` key and its list index (None for a scalar)."""
+    if isinstance(value, list):
+        if not value or not all(isinstance(v, float) for v in value):
+            raise IdentificationError(f'--fit {key}: not a numeric parameter')
+        if idx is None:
+            raise IdentificationError(f'--fit {key}: a list of {len(value)} numbers; fit '
+                                      f'one entry, e.g. {path}[0]')
+        i = int(idx)
+        if i >= len(value):
+            raise IdentificationError(f'--fit {key}: index out of range (0..'
+                                      f'{len(value) - 1})')
+        return float(value[i]), i
+    if idx is not None:
+        raise IdentificationError(f'--fit {key}: {path} is not a list')
+    if isinstance(value, bool) or not isinstance(value, float):
+        kind = 'an integer setting' if isinstance(value, int) and not \
+            isinstance(value, bool) else f'not numeric ({type(value).__name__})'
+        raise IdentificationError(f'--fit {key}: {kind}, cannot be fitted')
+    return float(value), None
+
+
+def _fit_range(key: str, md: Mapping[str, Any], user: tuple[float, float] | None,
+               v: float) -> tuple[float, float, float]:
+    """(lo, hi, base): the parameter's range, narrowed by the user's ``--bounds``; a base
+    outside them moves to their middle (geometric when positive)."""
+    lo = -np.inf if md.get('lo') is None else float(md['lo'])
+    hi = np.inf if md.get('hi') is None else float(md['hi'])
+    if md.get('lo_open') and lo == 0.0:
+        lo = 0.0
+    if user is not None:
+        ulo, uhi = float(user[0]), float(user[1])
+        if not (ulo < uhi):
+            raise IdentificationError(f'--bounds {key}: need LO < HI, got {ulo:g}:{uhi:g}')
+        if ulo < lo or uhi > hi:
+            raise IdentificationError(f'--bounds {key}: {ulo:g}:{uhi:g} leaves the '
+                                      f'parameter range {lo:g}..{hi:g}')
+        lo, hi = ulo, uhi
+        if not (lo <= v <= hi):
+            v = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
+    return lo, hi, v
+
+
+def _start_box(lo: float, hi: float, v: float, given: bool, start_factor: float
+               ) -> tuple[bool, float, tuple[float, float]]:
+    """(log scale?, scale, multi-start box in x): the fit's coordinate for the parameter."""
+    use_log = lo >= 0.0 and v > 0.0
+    if use_log:
+        scale = 1.0
+        if given and lo > 0:
+            box = (math.log(lo / v), math.log(hi / v))
+        else:
+            box = (max(-math.log(start_factor), math.log(lo / v) if lo > 0 else -np.inf),
+                   min(math.log(start_factor), math.log(hi / v)))
+    else:
+        if v != 0.0:
+            scale = abs(v)
+        elif math.isfinite(hi - lo):
+            scale = 0.1 * min(hi - lo, 1.0)
+        else:
+            scale = 0.1
+        if given:
+            box = ((lo - v) / scale, (hi - v) / scale)
+        else:
+            box = (max(-1.0, (lo - v) / scale), min(1.0, (hi - v) / scale))
+    return use_log, scale, box
 
 
 def apply_values(base: Config, params: Sequence[FitParameter],

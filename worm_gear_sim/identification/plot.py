@@ -14,9 +14,9 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..config.usable import Config
 from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
-from ..params import Config
 from ..records import Record
 from .data import OUTPUTS, predict, record_name
 

@@ -1,31 +1,11 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""The least-squares problem: records + base config + fitted keys -> the weighted residual
-vector r(x) and its Jacobian.
+"""The least-squares problem: records + base config + fitted keys -> the noise-weighted
+residual vector r(x) and its finite-difference Jacobian (:class:`Problem`).
 
-Residuals are predicted - measured of every measured output of every record, each output
-divided by its noise level (estimated from 4th differences of the measured angle, pooled over
-the records; at least 1e-3 of its *scale*, the RMS of the measured angle minus the rigid
-kinematic motion theta1 * u_rigid), so that theta2 (~0.1 rad) and theta4 (~1e-3 rad) weigh by
-their information.
-
-The Jacobian is taken by finite differences with an absolute step in the fitted coordinate x
-(DIFF_STEP = 1e-3: 0.1 % of a log-scaled value).  The step is this large on purpose: with the
-set-valued (exact stick-slip) friction law each time step decides stick or slip, and a change
-of a parameter in its last bits flips a few of those decisions; the residual then moves by a
-few 1e-8 rad (measured: 0.05-0.1 in noise-weighted units over a 0.15 s record, for a change of
-1e-12).  A step of 1e-6 sees only that (the Jacobian is noise, the fit stalls); at 1e-3 the
-parameters' effect is ~100-1000 times larger while the truncation error of the differences
-stays below 1 %.
-
-The columns are independent simulations: :meth:`Problem.jacobian` runs them on
-``Problem.threads`` threads (:func:`~worm_gear_sim.dynamics.batch.map_like_serial`; the kernel
-releases the interpreter lock), each column computed by exactly the serial call, so the
-Jacobian is the same bit for bit whatever the number of threads.  Inside
-:meth:`Problem.on_processes` they run on forked worker processes instead
-(:mod:`~worm_gear_sim.dynamics.forked`: copies of this problem, the same code; the Python of
-each candidate set, which holds the interpreter lock, then runs on every core at once), and so
-does every other evaluation: the same numbers again.
+The Jacobian's step (:data:`DIFF_STEP`) is large on purpose: the set-valued friction law
+makes a residual's last bits noise.  Its columns run on threads or, inside
+:meth:`Problem.on_processes`, on forked workers: the same numbers either way.
 """
 
 from __future__ import annotations
@@ -39,15 +19,15 @@ from typing import Any
 
 import numpy as np
 
-from ..dynamics.batch import map_like_serial
-from ..dynamics.forked import ForkedWorkers
+from ..config.usable import Config
 from ..dynamics.modal import modes
 from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
 from ..dynamics.usability import usable_model
-from ..params import Config
+from ..parallel.processes import ForkedWorkers
+from ..parallel.threads import map_like_serial
 from ..records import Record
-from ..validation import ConfigError
+from ..schema.validation import ConfigError
 from .data import (
     OUTPUTS,
     IdentificationError,
@@ -158,7 +138,7 @@ class Problem:
         runs on ``workers`` processes forked now (each a copy of this problem; the calling
         threads wait), not in the calling thread or on :attr:`threads` threads; the pool is
         closed on leaving.  Fork from a single-threaded process
-        (:func:`~worm_gear_sim.dynamics.forked.fork_is_safe`)."""
+        (:func:`~worm_gear_sim.parallel.processes.fork_is_safe`)."""
         if self._workers is not None:
             raise RuntimeError('the evaluations already run on worker processes')
         with ForkedWorkers(self, workers) as pool:

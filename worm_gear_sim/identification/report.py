@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
+from ..config.usable import Config
 from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
-from ..params import Config
 from ..records import Record
 from .data import (
     FIT_EVERY,
@@ -34,7 +34,7 @@ from .problem import DIFF_STEP, Problem, jacobian
 from .visibility import key_visibility
 
 __all__ = ['CORRELATION_WARN', 'Z95', 'FitResult', 'assess', 'residual_rms',
-           'prediction_errors', 'validate']
+           'prediction_errors', 'validate', 'jsonable']
 
 CORRELATION_WARN = 0.95
 #: Lag-1 autocorrelation of an output's residuals above which they are not white: the model
@@ -213,34 +213,9 @@ def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
     seconds)."""
     params = problem.params
     best = min(results, key=lambda r: r['cost'] if math.isfinite(r['cost']) else np.inf)
-    x = np.asarray(best['x'], float)
-    # Jacobian at the estimate (full records) for the uncertainty; least_squares' own jac is
-    # scaled by the distance to active bounds and unusable for that.
-    J, steps, step_change = resolved_jacobian(problem, x)
-    r = problem.residuals(x)
-    m, n = r.size, problem.n
-    s2 = float(r @ r) / max(m - n, 1)
     problems: list[str] = []
-    warnings: list[str] = []
-    U, sv, Vt = np.linalg.svd(J, full_matrices=False)
-    rank_tol = sv[0] * 1e-10 if sv.size and sv[0] > 0 else 0.0
-    if sv.size == 0 or sv[-1] <= rank_tol:
-        weakest = params[int(np.argmax(np.abs(Vt[-1])))].key if sv.size else '?'
-        problems.append(f'the data do not determine {weakest} (singular Jacobian)')
-        cov = np.full((n, n), np.nan)
-    else:
-        cov = s2 * (Vt.T / sv ** 2) @ Vt
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    with np.errstate(invalid='ignore', divide='ignore'):
-        corr = cov / np.outer(std, std)
-    values, ci = [], []
-    for p, xi, si in zip(params, x, std):
-        values.append(p.from_x(float(xi)))
-        if not math.isfinite(si):
-            ci.append((math.nan, math.nan))
-        else:
-            ci.append((p.from_x(xi - Z95 * si), p.from_x(xi + Z95 * si)))
-    model_fit = DriveModel(problem.config(x))
+    est = _Estimate.at(problem, np.asarray(best['x'], float), problems)
+    model_fit = DriveModel(problem.config(est.x))
     rms_before, per_before = residual_rms(problem, problem.base)
     rms_after, per_after = residual_rms(problem, model_fit)
     per_record = [{'name': a['name'],
@@ -252,6 +227,82 @@ def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
         problems.append(f'the fit did not converge within {max_nfev} evaluations '
                         f'({best["message"]}; the cost still fell by '
                         f'{best["stages"][-1]["last_decrease"]:.3g} over the last ones)')
+    warnings: list[str] = []
+    verdicts = _output_verdicts(problem, rms_before, rms_after, problems, warnings)
+    warnings += _autocorrelation_warnings(problem, est.x)
+    warnings += _correlation_warnings(problem, est.corr)
+    # which keys the records cannot show, judged with the fitted values (the play, load and
+    # drag the fit found), one line each naming the move to record
+    not_seen = key_visibility(model_fit.config, problem.records, [p.key for p in params])
+    warnings.extend(not_seen.values())
+    warnings += _parameter_warnings(problem, est)
+    warnings += _second_minimum(problem, results, best, est)
+    corr = est.corr
+    return best, dict(
+        keys=[p.key for p in params], units=[p.unit for p in params],
+        base_values=[p.base for p in params], values=est.values, ci95=est.ci,
+        std_x=[float(s) for s in est.std], log_scale=[p.log for p in params],
+        correlation=np.where(np.isfinite(corr), corr, np.nan).tolist(),
+        rms_before=rms_before, rms_after=rms_after, scale=dict(problem.scale),
+        noise=dict(problem.noise), per_record=per_record,
+        cost=float(0.5 * est.r @ est.r),
+        converged=converged, trustworthy=not problems, problems=problems,
+        warnings=warnings + list(problem.left_out.values()) + _thinning_notes(problem),
+        output_verdicts={o: verdicts.get(o) or problem.left_out[o]
+                         for o in OUTPUTS if o in verdicts or o in problem.left_out},
+        config=model_fit.config, base_config=problem.base, not_seen=not_seen,
+        step_consistency=[float(s) for s in est.step_change], jacobian_steps=est.steps)
+
+
+@dataclass
+class _Estimate:
+    """The estimate ``x`` with its Jacobian, residuals, covariance and 95 % intervals."""
+
+    x: np.ndarray
+    J: np.ndarray
+    steps: list[float]
+    step_change: list[float]
+    r: np.ndarray
+    s2: float
+    std: np.ndarray
+    corr: np.ndarray
+    values: list[float]
+    ci: list[tuple[float, float]]
+
+    @classmethod
+    def at(cls, problem: Problem, x: np.ndarray, problems: list[str]) -> _Estimate:
+        """The statistics at ``x``; a singular Jacobian is added to ``problems``."""
+        params, n = problem.params, problem.n
+        # Jacobian at the estimate (full records) for the uncertainty; least_squares' own
+        # jac is scaled by the distance to active bounds and unusable for that.
+        J, steps, step_change = resolved_jacobian(problem, x)
+        r = problem.residuals(x)
+        s2 = float(r @ r) / max(r.size - n, 1)
+        U, sv, Vt = np.linalg.svd(J, full_matrices=False)
+        rank_tol = sv[0] * 1e-10 if sv.size and sv[0] > 0 else 0.0
+        if sv.size == 0 or sv[-1] <= rank_tol:
+            weakest = params[int(np.argmax(np.abs(Vt[-1])))].key if sv.size else '?'
+            problems.append(f'the data do not determine {weakest} (singular Jacobian)')
+            cov = np.full((n, n), np.nan)
+        else:
+            cov = s2 * (Vt.T / sv ** 2) @ Vt
+        std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        with np.errstate(invalid='ignore', divide='ignore'):
+            corr = cov / np.outer(std, std)
+        values, ci = [], []
+        for p, xi, si in zip(params, x, std):
+            values.append(p.from_x(float(xi)))
+            if not math.isfinite(si):
+                ci.append((math.nan, math.nan))
+            else:
+                ci.append((p.from_x(xi - Z95 * si), p.from_x(xi + Z95 * si)))
+        return cls(x, J, steps, step_change, r, s2, std, corr, values, ci)
+
+
+def _output_verdicts(problem: Problem, rms_before: dict[str, float],
+                     rms_after: dict[str, float], problems: list[str],
+                     warnings: list[str]) -> dict[str, str]:
+    """Whether the fitted model matches each output; mismatches go to ``problems``."""
     verdicts: dict[str, str] = {}
     for o in problem.outputs:
         rel = rms_after[o] / problem.scale[o]
@@ -267,77 +318,87 @@ def assess(problem: Problem, results: Sequence[dict[str, Any]], max_nfev: int
         elif rms_after[o] > rms_before[o] * 1.0001:
             warnings.append(f'{o}: residual RMS grew ({rms_before[o]:.3g} -> '
                             f'{rms_after[o]:.3g} rad)')
-    for o, rho in residual_autocorrelation(problem, x).items():
-        if rho > RESIDUAL_AUTOCORRELATION_WARN:
-            warnings.append(f'{o}: the residuals are correlated (lag-1 autocorrelation '
-                            f'{rho:.2f}): the model misses something no fitted parameter '
-                            'covers, so the 95 % parameter intervals (which assume an exact '
-                            'model and white residuals) are too narrow and not meaningful; '
-                            'judge the fit by its held-out prediction error and the '
-                            'prediction bound (calibrate)')
-    for i in range(n):
-        for j in range(i + 1, n):
+    return verdicts
+
+
+def _autocorrelation_warnings(problem: Problem, x: np.ndarray) -> list[str]:
+    """Outputs whose residuals are correlated: the model misses something."""
+    return [f'{o}: the residuals are correlated (lag-1 autocorrelation '
+            f'{rho:.2f}): the model misses something no fitted parameter '
+            'covers, so the 95 % parameter intervals (which assume an exact '
+            'model and white residuals) are too narrow and not meaningful; '
+            'judge the fit by its held-out prediction error and the '
+            'prediction bound (calibrate)'
+            for o, rho in residual_autocorrelation(problem, x).items()
+            if rho > RESIDUAL_AUTOCORRELATION_WARN]
+
+
+def _correlation_warnings(problem: Problem, corr: np.ndarray) -> list[str]:
+    """Pairs of parameters the data can hardly separate."""
+    params, out = problem.params, []
+    for i in range(problem.n):
+        for j in range(i + 1, problem.n):
             c = corr[i, j]
             if math.isfinite(c) and abs(c) > CORRELATION_WARN:
-                warnings.append(f'{params[i].key} and {params[j].key} are correlated '
-                                f'({c:+.3f}): the data can hardly separate them')
-    # which keys the records cannot show, judged with the fitted values (the play, load and
-    # drag the fit found), one line each naming the move to record
-    not_seen = key_visibility(model_fit.config, problem.records, [p.key for p in params])
-    warnings.extend(not_seen.values())
-    for p, v, (clo, chi), si, sc, h in zip(params, values, ci, std, step_change, steps):
+                out.append(f'{params[i].key} and {params[j].key} are correlated '
+                           f'({c:+.3f}): the data can hardly separate them')
+    return out
+
+
+def _parameter_warnings(problem: Problem, est: _Estimate) -> list[str]:
+    """Each parameter on a bound, unresolved or hardly determined."""
+    out = []
+    for p, v, (clo, chi), si, sc, h in zip(problem.params, est.values, est.ci, est.std,
+                                           est.step_change, est.steps):
         bx = p.x_bounds
         xi = p.to_x(v)
         if (math.isfinite(bx[0]) and xi - bx[0] < 1e-6) or \
                 (math.isfinite(bx[1]) and bx[1] - xi < 1e-6):
-            warnings.append(f'{p.key} = {v:.6g} sits on a bound: the optimum may lie outside')
+            out.append(f'{p.key} = {v:.6g} sits on a bound: the optimum may lie outside')
         if not (sc <= STEP_CONSISTENCY_WARN):
-            warnings.append(f'{p.key}: its effect on the residuals is not resolved (the '
-                            'finite-difference sensitivity still changes by '
-                            f'{100 * sc:.0f} % between steps {h / 4:g} and {h:g}): the data '
-                            'hardly see it beside the stick-slip decisions of the friction '
-                            'law; its interval is not reliable')
+            out.append(f'{p.key}: its effect on the residuals is not resolved (the '
+                       'finite-difference sensitivity still changes by '
+                       f'{100 * sc:.0f} % between steps {h / 4:g} and {h:g}): the data '
+                       'hardly see it beside the stick-slip decisions of the friction '
+                       'law; its interval is not reliable')
         elif math.isfinite(si) and p.log and si > 0.5:
-            warnings.append(f'{p.key}: 95 % interval {clo:.3g} .. {chi:.3g} spans more than '
-                            f'a factor {math.exp(2 * Z95 * 0.5):.0f}: hardly determined by the '
-                            'data (its value in the YAML is arbitrary; fix it or record a move '
-                            'that excites it)')
+            out.append(f'{p.key}: 95 % interval {clo:.3g} .. {chi:.3g} spans more than '
+                       f'a factor {math.exp(2 * Z95 * 0.5):.0f}: hardly determined by the '
+                       'data (its value in the YAML is arbitrary; fix it or record a move '
+                       'that excites it)')
         elif math.isfinite(si) and not p.log and Z95 * si * p.scale > max(abs(v), p.scale):
-            warnings.append(f'{p.key}: 95 % interval {clo:.3g} .. {chi:.3g} is wider than the '
-                            'value: poorly determined')
-    # Another start that fits statistically as well (cost within the 95 % confidence region,
-    # 0.5 s^2 chi2(0.95, n)) but lies far outside the linearised region (Mahalanobis distance
-    # > 2 sqrt(chi2)): a second minimum, the optimum is not unique.
-    c95 = float(chi2.ppf(0.95, n))
-    JtJ = J.T @ J
+            out.append(f'{p.key}: 95 % interval {clo:.3g} .. {chi:.3g} is wider than the '
+                       'value: poorly determined')
+    return out
+
+
+def _second_minimum(problem: Problem, results: Sequence[dict[str, Any]],
+                    best: dict[str, Any], est: _Estimate) -> list[str]:
+    """Another start that fits statistically as well (cost within the 95 % confidence
+    region, 0.5 s^2 chi2(0.95, n)) but lies far outside the linearised region (Mahalanobis
+    distance > 2 sqrt(chi2)): a second minimum, the optimum is not unique."""
+    c95 = float(chi2.ppf(0.95, problem.n))
+    JtJ = est.J.T @ est.J
     for rr in results:
         if rr is best or not math.isfinite(rr['cost']):
             continue
-        dx = np.asarray(rr['x']) - x
-        if rr['cost'] - best['cost'] <= 0.5 * s2 * c95 and \
-                float(dx @ JtJ @ dx) / s2 > 4.0 * c95:
+        dx = np.asarray(rr['x']) - est.x
+        if rr['cost'] - best['cost'] <= 0.5 * est.s2 * c95 and \
+                float(dx @ JtJ @ dx) / est.s2 > 4.0 * c95:
             far = [f'{p.key} = {p.from_x(float(xi)):.4g}' for p, xi, d, si in
-                   zip(params, rr['x'], dx, std) if abs(d) > 2 * Z95 * max(si, 1e-300)]
-            warnings.append(f'start {rr["index"] + 1} fits as well with '
-                            f'{", ".join(far) or "other values"}: the data do not fix '
-                            'these values (both fit the records equally well)')
-            break
-    return best, dict(
-        keys=[p.key for p in params], units=[p.unit for p in params],
-        base_values=[p.base for p in params], values=values, ci95=ci,
-        std_x=[float(s) for s in std], log_scale=[p.log for p in params],
-        correlation=np.where(np.isfinite(corr), corr, np.nan).tolist(),
-        rms_before=rms_before, rms_after=rms_after, scale=dict(problem.scale),
-        noise=dict(problem.noise), per_record=per_record, cost=float(0.5 * r @ r),
-        converged=converged, trustworthy=not problems, problems=problems,
-        warnings=warnings + list(problem.left_out.values()) + [
-            f'{r.name}: the fit kept every {r.source[FIT_EVERY]}th sample ({len(r.t)} of '
+                   zip(problem.params, rr['x'], dx, est.std)
+                   if abs(d) > 2 * Z95 * max(si, 1e-300)]
+            return [f'start {rr["index"] + 1} fits as well with '
+                    f'{", ".join(far) or "other values"}: the data do not fix '
+                    'these values (both fit the records equally well)']
+    return []
+
+
+def _thinning_notes(problem: Problem) -> list[str]:
+    """Records the fit thinned to at most MAX_FIT_SAMPLES samples."""
+    return [f'{r.name}: the fit kept every {r.source[FIT_EVERY]}th sample ({len(r.t)} of '
             f'{r.source[RECORDED_SAMPLES]}; at most {MAX_FIT_SAMPLES} per record)'
-            for r in problem.records if r.source.get(FIT_EVERY, 1) > 1],
-        output_verdicts={o: verdicts.get(o) or problem.left_out[o]
-                         for o in OUTPUTS if o in verdicts or o in problem.left_out},
-        config=model_fit.config, base_config=problem.base, not_seen=not_seen,
-        step_consistency=[float(s) for s in step_change], jacobian_steps=steps)
+            for r in problem.records if r.source.get(FIT_EVERY, 1) > 1]
 
 
 # ---- validation on held-out records ------------------------------------------------------------
@@ -370,3 +431,17 @@ def prediction_errors(cfg: DriveModel | Config, records: Sequence[Record]
 def validate(cfg: DriveModel | Config, records: Sequence[Record]) -> list[dict[str, Any]]:
     """Alias of :func:`prediction_errors` (the ``--validate`` report)."""
     return prediction_errors(cfg, records)
+
+
+def jsonable(obj: Any) -> Any:
+    """``obj`` for ``json.dumps``: keys as strings, tuples as lists, numpy scalars as Python
+    numbers, a float that is not finite as None (a report's JSON)."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if hasattr(obj, 'item'):
+        return jsonable(obj.item())
+    return obj

@@ -1,26 +1,12 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""How sure a fitted model's prediction is: an upper bound on the RMS error of the predicted
-antenna angle over a move, meant to hold when the model is not exact.
+"""How sure a fitted model's prediction is: :func:`prediction_bound`, an upper bound U on the
+RMS error of the predicted antenna angle over a move, meant to hold when the model is not
+exact.
 
-The parameter intervals of :mod:`.report` assume the model is exact and the residuals white;
-on a drive that differs in structure (another friction law, bearings, mapping) they exclude
-the truth although the prediction is good.  What a user needs is the size of the prediction
-error, and that is measured directly: :func:`prediction_bound` combines
-
-1. **the misfit the fit leaves** (noise + everything no parameter covers): the fitted
-   model's residuals theta4_pred - theta4_meas on the training records, cut into windows as
-   long as the move to predict (every position, overlapping), the RMS of each window; its
-   ``level`` quantile over the windows, inflated by ``WINDOW_INFLATION`` for the number of
-   windows (a small-sample upper quantile is biased low); and
-2. **the parameters' own uncertainty**: ``n_draws`` parameter sets drawn from the fit's
-   covariance (in the fitted coordinates, a sandwich-free s^2 (J^T J)^-1), each simulated on
-   the move; the RMS over the move of their spread about the fitted prediction, times the
-   ``level`` normal quantile.
-
-U = sqrt(misfit^2 + spread^2).  A held-out move whose actual RMS error is <= U is covered.
-Measured (``benchmarks/bench_prediction_band.py``): coverage over drives that include
-structural mismatch; see docs/identification.md.
+U = sqrt(misfit^2 + spread^2): the misfit the fit leaves (a windowed quantile of its
+residuals) and the spread of parameter sets drawn from the fit's covariance.
+docs/identification.md.
 """
 
 from __future__ import annotations
@@ -35,7 +21,7 @@ from scipy.stats import norm
 from ..dynamics.model import DriveModel
 from ..dynamics.stepping import SimulationError
 from ..records import Record
-from ..validation import ConfigError
+from ..schema.validation import ConfigError
 from .data import normalised, predict
 from .parameters import apply_values, fit_parameters
 from .report import FitResult

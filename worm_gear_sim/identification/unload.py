@@ -2,25 +2,10 @@
 # Licensed under the Apache License, Version 2.0
 """Play and load told apart when a load holds the gear on one flank in every sweep.
 
-With one flank throughout, the sweeps show only b / 2 + T C of play b and load torque T (C:
-the compliance from the antenna to the worm, :func:`.direct.compliance`).  No constant rate
-within the limits separates them when the drag torque c u omega stays below T, and no single
-stop does when the antenna's inertia torque (J_4 + J_g) u alpha stays below T (with 0.5 rad,
-6 rad/s and 1 500 rad/s^2 of worm: 2.1 N m of inertia torque, rigid).  A move that swings the
-worm rate at the antenna mode does: at resonance the shaft torque swing grows each cycle by
-about pi times the rigid inertia torque until the mesh unloads; the gear then leaves its
-flank (into the play: it need not reach the other one) at a torque that depends on T, not on
-b / 2 + T C.  Measured on the drive with 2.80 arcmin, 4.75 N m and 14.4 N m s/rad (benchmark
-bench_calibration seed 1 drive 0): 8 cycles at 94.6 Hz with 1 500 rad/s^2 (+-2.5 rad/s of
-worm) lift the gear 12 % of the play off its flank; the model with the sweeps' one-flank fit
-(0.46 arcmin, 14.0 N m) differs from the truth by 31 urad RMS of theta4 on that move (noise 1
-urad), by 0.55 urad on the fast sweep.
-
-:func:`.excitation.dither_profile` is that move (``unload_dither``, kept in reserve by the
-excitation); :func:`split_refit` runs when the sweeps' fit says the play is hidden: a scan
-along the line b / 2 + T C = const on the time-domain cost of the sweeps and the dither, then
-the local fit from the best point with every key free.  :func:`.visibility.mesh_lifts` says
-whether a model lifts the gear off its flank in a record (what makes the split seen).
+The sweeps then show only b / 2 + T C; a worm rate swung at the antenna mode
+(``unload_dither``) lifts the gear off its flank at a torque that depends on T.
+:func:`split_refit` scans along b / 2 + T C = const on the sweeps and the dither, then
+fits every key from the best point.  docs/identification.md.
 """
 
 from __future__ import annotations
@@ -28,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 
-from ..params import Config
+from ..config.usable import Config
 from ..records import Record
 from .direct import LOAD, PLAY, best_on_family, compliance
 from .fit import PRIORS, FitOptions, identify, wind_up_only

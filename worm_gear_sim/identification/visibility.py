@@ -1,25 +1,11 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Which fitted keys the records can show, and for each one they cannot, one line naming
-the key and the move to record.
+"""Which fitted keys the records can show, and for each one they cannot, one line naming the
+key and the move to record.
 
-* ``mesh.backlash`` is seen when the gear changes flank: the fitted model, simulated on the
-  records, has the relative mesh displacement q = l_w theta2 - r_g theta3 beyond both edges
-  of the play (|q| >= r_g b / 2 on either side).  A load torque larger than the drag torque
-  at every rate, and than the antenna's inertia torque at every deceleration, holds one
-  flank: the play is then not crossed (and only b / 2 + T C of play and load is seen),
-  unless a record lifts the gear off its flank (the unloading dither, :mod:`.unload`): the
-  torque at which it lifts gives T, and b follows from b / 2 + T C.
-* ``load.output_torque`` and ``load.output_viscous_coefficient`` need constant-rate
-  segments (:func:`.direct.steady_segments`): the load both ways (or at a known play), and
-  with it the drag at two rates or both ways (one rate one way cannot tell the drag's
-  wind-up from the load's).  The drag fitted without the load is seen in any motion of the
-  antenna (the steps' trapezoids cruise 16 ms at the default limits, too short for a
-  segment, and the node's calibration test finds a drag of 5 N m s/rad within 2 %).
-* A key whose Jacobian column is (numerically) zero on the records is not seen either (the
-  report's singular-Jacobian check names it).
-
-Computed from the *fitted* values (the play, load and drag the records gave), not the base's.
+The play needs a flank change (or a lift off the flank, :mod:`.unload`), load and drag
+need constant-rate segments; judged on the fitted values.  docs/identification.md
+("Limits").
 """
 
 from __future__ import annotations

@@ -1,37 +1,12 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""What an encoder sample (a ``measured_joint_states`` message: stamp, joint names, positions)
-must pass before it is used: one rule for the live model check
-(:class:`~.model_check.ModelCheck`) and the live adaptation
-(:class:`~worm_gear_sim.adaptation.live.LiveAdaptation`), each with its own instance (its own
-prediction history, its own last sample).
+"""What an encoder sample (stamp, joint names, positions) must pass before it is used:
+:class:`EncoderAdmission`, one rule for the live model check and the live adaptation, each
+with its own instance.
 
-The checks, in this order (the cheap ones first: a flood of messages costs a few comparisons
-per message), each with the reason a sample is rejected for:
-
-* ``non_finite``: a stamp that is NaN or infinite;
-* ``out_of_order``: a stamp not after the last sample used;
-* ``surplus``: the sample would be more than one per command period (``period``).  A sample
-  is used only when its stamp has reached the *due* stamp; each sample used moves the due
-  stamp one period on from the later of the old due stamp and half a period before its own
-  stamp.  So an encoder at the command rate has every sample used even when its stamps
-  jitter by up to half a period, and a faster stream has one sample used per period (at most
-  k + 1 in any k periods); the rest cost two comparisons each;
-* ``malformed``: names and positions of unequal length, or a joint name given twice (which
-  of the two values would be the joint's?);
-* the consumer's reason for a message without any of the joints it uses (``missing``: the
-  model check's ``no_monitored_joint``, the adaptation's ``other_joint``);
-* ``non_finite``: the position of a joint used is NaN, infinite or no number;
-* ``outside_prediction``: no prediction covers the stamp (``predict`` returns None);
-* ``implausible``: a joint used is farther than ``max_residual`` [rad]
-  (``node.residual_plausible_max``) from the prediction of its stamp.  No model error of a
-  drive the model describes comes near the default bound (docs/node.md): such a sample is an
-  encoder of another drive, a wrapped or corrupted reading, and one of them would otherwise
-  poison every windowed figure computed from the residuals.
-
-The stamps are the consumer's (integer nanoseconds or float seconds, ``period`` in the same
-unit); the admission keeps only the last stamp used and the due stamp (:meth:`reset` forgets
-them: a restart of the consumer's timeline).
+The checks, cheap ones first, each with its reject reason (``non_finite``,
+``out_of_order``, ``surplus``, ``malformed``, the consumer's ``missing``,
+``outside_prediction``, ``implausible``): docs/node.md ("Bad input").
 """
 
 from __future__ import annotations

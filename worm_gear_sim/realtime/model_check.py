@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from ..topics import MEASURED_TOPIC
+from ..records.topics import MEASURED_TOPIC
 from .encoder_admission import EncoderAdmission
 
 __all__ = ['ResidualMonitor', 'SlidingSums', 'PredictionHistory', 'ModelCheck',

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..config.usable import Config
 from ..dynamics.model import DriveModel
-from ..params import Config
 from .predictor import RealtimePredictor
 
 __all__ = ['feedforward_series']

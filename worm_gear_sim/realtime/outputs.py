@@ -10,9 +10,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import StrEnum
 
-from ..compensation import Compensator
+from ..compensation.streaming import Compensator
 from ..dynamics.model import DriveModel
-from ..schema import Parameters
+from ..schema.parameters import Parameters
 
 __all__ = ['Reject', 'Correction', 'Prediction', 'Event', 'Output', 'Prepared',
            'COUNTER_NAMES']

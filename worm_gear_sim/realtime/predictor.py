@@ -8,14 +8,14 @@ are written out in the package's docstring (:mod:`worm_gear_sim.realtime`)."""
 
 from __future__ import annotations
 
-from ..compensation import Compensator
+from .._support.stepwise import run_steps
+from ..compensation.blend import unwrap
+from ..compensation.streaming import Compensator
+from ..config.usable import Config
 from ..dynamics.model import DriveModel
 from ..dynamics.simulation import Simulator
-from ..params import Config
-from ..schema import LOAD_LIMIT
-from ..stepwise import run_steps
+from ..schema.sections import LOAD_LIMIT
 from .admission import Admission
-from .blend import unwrap
 from .command_path import CommandPath
 from .command_timing import CommandQueue, StreamClock
 from .outputs import COUNTER_NAMES, Output, Prepared, Reject
@@ -105,14 +105,17 @@ class RealtimePredictor:
         In steps: :func:`~.preparation.prepare_steps`."""
         return run_steps(prepare_steps(self, config, trial))
 
-    def reconfigure(self, new: DriveModel | Config | Prepared, blend: float = 0.0) -> None:
+    def reconfigure(self, new: DriveModel | Config | Prepared, blend: float = 0.0,
+                    reseat: bool = False) -> None:
         """Swap in a validated configuration (or what :meth:`prepare` made of one),
         keeping time, state, reference history and pending corrections; ``blend`` > 0: the
-        correction hands over to the new compensator over that long [s] (:mod:`.blend`).
-        On ValueError nothing changed."""
+        correction hands over to the new compensator over that long [s] (:mod:`.blend`);
+        ``reseat``: the simulated drive's deflections move to the new set's equilibrium
+        (a return to the declared set: :meth:`~worm_gear_sim.dynamics.stepping.Stepper.
+        reconfigure`).  On ValueError nothing changed."""
         prepared = new if isinstance(new, Prepared) else self.prepare(new)
         if self.sim is not None:
-            self.sim.reconfigure(prepared.model)
+            self.sim.reconfigure(prepared.model, reseat)
         self._set_config(prepared, blend)      # no retraction to the old set
         period = float(self._samples.period_ns)
         if self._commands.stream.period0 != period:  # pragma: no cover - read-only

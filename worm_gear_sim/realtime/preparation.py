@@ -1,6 +1,6 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""A configuration made ready for the pipeline, in steps (:mod:`worm_gear_sim.stepwise`).
+"""A configuration made ready for the pipeline, in steps (:mod:`worm_gear_sim._support.stepwise`).
 
 :func:`prepare_steps` is :meth:`~.predictor.RealtimePredictor.prepare` (the model built
 once, the simulator's parameters tried on a copy, the compensator designed), cut between its
@@ -13,11 +13,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..compensation import Compensator
+from .._support.stepwise import Steps
+from ..compensation.streaming import Compensator
+from ..config.usable import Config
 from ..dynamics.model import DriveModel
 from ..dynamics.simulation import Simulator
-from ..params import Config
-from ..stepwise import Steps
 from .outputs import Prepared
 
 __all__ = ['prepare_steps', 'design_steps']

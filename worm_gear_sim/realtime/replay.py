@@ -22,9 +22,26 @@ from typing import Any
 
 import numpy as np
 
-from ..params import Config
-from ..records import Record, RecordError, read_bag, write_bag, write_csv_columns
-from ..topics import FLOAT64, JOINT_STATE
+from ..config.usable import Config
+from ..records import (
+    Record,
+    RecordError,
+    Series,
+    align_by_stamp,
+    bag_topics,
+    read_bag,
+    read_series,
+    write_bag,
+    write_csv_columns,
+)
+from ..records.topics import (
+    FEEDFORWARD_TOPIC,
+    FLOAT64,
+    JOINT_STATE,
+    POSITIONING_ERROR_TOPIC,
+    WORM_ERROR_TOPIC,
+    private_topic,
+)
 
 __all__ = ['Replay', 'replay', 'compare_with_recorded', 'REPLAY_CSV_COLUMNS']
 
@@ -81,10 +98,11 @@ class Replay:
         return self.theta1_ref + self.delta
 
     def write_bag(self, path: str | Path, *, joint_names: Sequence[str],
-                  storage: str = 'sqlite3', stamped: bool = False, namespace: str = '',
-                  overwrite: bool = False) -> Path:
+                  storage: str = 'sqlite3', float64_outputs: bool = False,
+                  namespace: str = '', overwrite: bool = False) -> Path:
         """The node's output topics (``joint_states``, errors, feed-forward and, for a
-        stamped input, ``compensated_command``) as a rosbag2 bag."""
+        stamped input, ``compensated_command``) as a rosbag2 bag; the errors and the
+        feed-forward stamped as the node publishes them (``float64_outputs``: Float64)."""
         corr = self.correction_stamps_ns.size > 0
         return write_bag(
             path, self.stamps_ns, self.position, joint_names=joint_names,
@@ -93,7 +111,8 @@ class Replay:
             feedforward=(self.correction_stamps_ns, self.delta) if corr else None,
             compensated_command=(self.correction_stamps_ns, self.compensated)
             if corr and self.info.get('input') == 'stamped' else None,
-            stamped=stamped, namespace=namespace, storage=storage, overwrite=overwrite)
+            float64_outputs=float64_outputs, namespace=namespace, storage=storage,
+            overwrite=overwrite)
 
     def write_csv(self, path: str | Path, header_comment: str = '', digits: int = 12
                   ) -> list[Path]:
@@ -140,127 +159,189 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
     after the first command]: stop feeding samples stamped later, or keep the held
     prediction going up to it after the last one (the stream paused)."""
     from . import RealtimePredictor
+    kind = _command_kind(record)
+    stream = _Stream.of(config, record, end_time)
+    feed = _Feed(RealtimePredictor(config, compensate=compensate))
+    info: dict[str, Any] = {'period_ns': stream.period}
+    if kind == JOINT_STATE:
+        _feed_stamped(feed, stream, info, use_receive_clock, hold_stamps_ns)
+    else:
+        _feed_float64(feed, stream, info, tick_stamps_ns)
+    if not feed.preds:
+        raise RecordError(f'{record.name}: the pipeline accepted no command sample '
+                          f'({_rejections(feed.pred.counters)})')
+    return _collected(record, feed, info)
+
+
+def _command_kind(record: Record) -> Any:
+    """The record's command type, or a :class:`RecordError` when there is none to replay."""
     if record.command_stamps_ns is None:
         raise RecordError(f'{record.name}: no command stream to replay (a bag is needed)')
     kind = record.source.get('command_type')
     if kind not in (FLOAT64, JOINT_STATE):
         raise RecordError(f'{record.name}: unknown command type {kind!r}')
-    stamps = np.asarray(record.command_stamps_ns, dtype=np.int64)
-    values = np.asarray(record.command_values, dtype=float)
-    receive = stamps if record.command_receive_ns is None else \
-        np.asarray(record.command_receive_ns, dtype=np.int64)
-    period = int(round(1e9 / config.node.publish_rate_hz))
-    t0 = record.t0_ns
-    stop_ns = None if end_time is None else t0 + int(round(end_time * 1e9))
-    pred = RealtimePredictor(config, compensate=compensate)
-    preds: list[Any] = []
-    corrs: list[Any] = []
-    events: list[str] = []
+    return kind
 
-    def collect(out: Any) -> None:
-        preds.extend(out.predictions)
-        corrs.extend(out.corrections)
-        events.extend(f'{e.kind}: {e.message}' for e in out.events if e.level != 'info')
 
-    info: dict[str, Any] = {'period_ns': period}
-    if kind == JOINT_STATE:
-        info['input'] = 'stamped'
-        ok = np.isfinite(values)
-        same = bool(np.median(np.abs(receive[ok] - stamps[ok])) < CLOCK_AGREEMENT_NS) \
-            if ok.any() else False
-        use_now = same if use_receive_clock is None else bool(use_receive_clock)
-        info['stamp_window'] = use_now
-        holds: list[int] = []
-        given = hold_stamps_ns is not None
-        if given:
-            holds = np.unique(np.asarray(hold_stamps_ns, dtype=np.int64)).tolist()
-            info['holds'] = f'{len(holds)} given instants'
-        elif use_now:
-            holds = list(range(int(receive[0]) + period, int(receive.max()) + 1, period))
-            info['holds'] = f'every {period} ns on the receive clock'
-        else:
-            info['holds'] = 'none (stamps and receive times on different clocks)'
+@dataclass
+class _Stream:
+    """A record's command samples as arrays, the node's timer period and the stop [ns]."""
 
-        def fire_at(h: int) -> int:
-            # a given hold is a held prediction's stamp, the stream's time: the node's
-            # clock then was later by the stream's lag (the stamps lagged their arrival)
-            return h + pred.stream_lag_ns if given else h
+    stamps: np.ndarray
+    values: np.ndarray
+    receive: np.ndarray
+    period: int
+    stop_ns: int | None
 
-        def hold_first(h: int, s: int, rx: int) -> bool:
-            """Did the node fire the hold at ``h`` before it took the sample stamped ``s``,
-            received at ``rx``?  A recorded held prediction proves the stream was stale in
-            the node; the recorder (a second subscriber) may have received ``s`` earlier."""
-            if not given:
-                return h <= rx
-            if s > h:       # taken first, it would have left no stream stale at h
-                return True
-            if s < pred.last_stamp_ns + pred.stale_after_ns:
-                return False    # no gap: after the hold it would have been a late sample
-            # a resumed stream whose stamps lag more than before: the receive clock decides
-            return not use_now or fire_at(h) <= rx + RECEIVE_SKEW_NS
+    @classmethod
+    def of(cls, config: Config, record: Record, end_time: float | None) -> _Stream:
+        stamps = np.asarray(record.command_stamps_ns, dtype=np.int64)
+        receive = stamps if record.command_receive_ns is None else \
+            np.asarray(record.command_receive_ns, dtype=np.int64)
+        stop_ns = None if end_time is None else record.t0_ns + int(round(end_time * 1e9))
+        return cls(stamps, np.asarray(record.command_values, dtype=float), receive,
+                   int(round(1e9 / config.node.publish_rate_hz)), stop_ns)
 
-        k = 0
-        last_rx = int(receive[0])
-        fired = None
-        for s, x, rx in zip(stamps.tolist(), values.tolist(), receive.tolist()):
-            if stop_ns is not None and s > stop_ns:
-                continue
-            while k < len(holds) and hold_first(holds[k], s, rx):
-                fired = fire_at(holds[k])
-                collect(pred.hold(fired))
-                k += 1
-            # (the node took the sample after the held prediction it published before it)
-            now = rx if fired is None else max(rx, fired)
-            collect(pred.push(s, x, now_ns=now if use_now else None))
-            last_rx = max(last_rx, rx)
-        # after the last sample: the node's timer keeps publishing the held prediction,
-        # stamped with its clock (the receive clock when it agrees with the stamps)
-        offset = last_rx - pred.last_stamp_ns if use_now else 0
-        until = None if stop_ns is None else stop_ns + offset
-        for h in holds[k:]:
-            if until is None or h <= until:
-                collect(pred.hold(fire_at(h)))
-        if until is not None and pred.started:
-            h = max(pred.last_stamp_ns + offset, holds[-1] if holds else 0) + period
-            while h <= until:
-                collect(pred.hold(h))
-                h += period
-        collect(pred.finish())
+
+@dataclass
+class _Feed:
+    """The pipeline being fed and what it has put out so far."""
+
+    pred: Any
+    preds: list[Any] = field(default_factory=list)
+    corrs: list[Any] = field(default_factory=list)
+    events: list[str] = field(default_factory=list)
+
+    def collect(self, out: Any) -> None:
+        self.preds.extend(out.predictions)
+        self.corrs.extend(out.corrections)
+        self.events.extend(f'{e.kind}: {e.message}' for e in out.events
+                           if e.level != 'info')
+
+
+def _feed_stamped(feed: _Feed, stream: _Stream, info: dict[str, Any],
+                  use_receive_clock: bool | None,
+                  hold_stamps_ns: Sequence[int] | np.ndarray | None) -> None:
+    """Stamped references: push in arrival order, the node's holds between, finish."""
+    pred, collect = feed.pred, feed.collect
+    stamps, values, receive = stream.stamps, stream.values, stream.receive
+    period, stop_ns = stream.period, stream.stop_ns
+    info['input'] = 'stamped'
+    ok = np.isfinite(values)
+    same = bool(np.median(np.abs(receive[ok] - stamps[ok])) < CLOCK_AGREEMENT_NS) \
+        if ok.any() else False
+    use_now = same if use_receive_clock is None else bool(use_receive_clock)
+    info['stamp_window'] = use_now
+    given = hold_stamps_ns is not None
+    holds = _hold_instants(stream, info, hold_stamps_ns, use_now)
+
+    def fire_at(h: int) -> int:
+        # a given hold is a held prediction's stamp, the stream's time: the node's
+        # clock then was later by the stream's lag (the stamps lagged their arrival)
+        return h + pred.stream_lag_ns if given else h
+
+    def hold_first(h: int, s: int, rx: int) -> bool:
+        """Did the node fire the hold at ``h`` before it took the sample stamped ``s``,
+        received at ``rx``?  A recorded held prediction proves the stream was stale in
+        the node; the recorder (a second subscriber) may have received ``s`` earlier."""
+        if not given:
+            return h <= rx
+        if s > h:       # taken first, it would have left no stream stale at h
+            return True
+        if s < pred.last_stamp_ns + pred.stale_after_ns:
+            return False    # no gap: after the hold it would have been a late sample
+        # a resumed stream whose stamps lag more than before: the receive clock decides
+        return not use_now or fire_at(h) <= rx + RECEIVE_SKEW_NS
+
+    k = 0
+    last_rx = int(receive[0])
+    fired = None
+    for s, x, rx in zip(stamps.tolist(), values.tolist(), receive.tolist()):
+        if stop_ns is not None and s > stop_ns:
+            continue
+        while k < len(holds) and hold_first(holds[k], s, rx):
+            fired = fire_at(holds[k])
+            collect(pred.hold(fired))
+            k += 1
+        # (the node took the sample after the held prediction it published before it)
+        now = rx if fired is None else max(rx, fired)
+        collect(pred.push(s, x, now_ns=now if use_now else None))
+        last_rx = max(last_rx, rx)
+    # after the last sample: the node's timer keeps publishing the held prediction,
+    # stamped with its clock (the receive clock when it agrees with the stamps)
+    offset = last_rx - pred.last_stamp_ns if use_now else 0
+    until = None if stop_ns is None else stop_ns + offset
+    for h in holds[k:]:
+        if until is None or h <= until:
+            collect(pred.hold(fire_at(h)))
+    if until is not None and pred.started:
+        h = max(pred.last_stamp_ns + offset, holds[-1] if holds else 0) + period
+        while h <= until:
+            collect(pred.hold(h))
+            h += period
+    collect(pred.finish())
+
+
+def _hold_instants(stream: _Stream, info: dict[str, Any],
+                   hold_stamps_ns: Sequence[int] | np.ndarray | None,
+                   use_now: bool) -> list[int]:
+    """When the node's timer holds: the given instants, or every period on the receive
+    clock when it agrees with the stamps, or never."""
+    period, receive = stream.period, stream.receive
+    holds: list[int] = []
+    if hold_stamps_ns is not None:
+        holds = np.unique(np.asarray(hold_stamps_ns, dtype=np.int64)).tolist()
+        info['holds'] = f'{len(holds)} given instants'
+    elif use_now:
+        holds = list(range(int(receive[0]) + period, int(receive.max()) + 1, period))
+        info['holds'] = f'every {period} ns on the receive clock'
     else:
-        info['input'] = 'float64'
-        end = int(receive.max()) + period if stop_ns is None else stop_ns
-        if tick_stamps_ns is not None and len(tick_stamps_ns):
-            ticks = np.unique(np.asarray(tick_stamps_ns, dtype=np.int64)).tolist()
-            info['ticks'] = 'recorded joint_states stamps'
-            end = max(end, ticks[-1]) if stop_ns is None else end
-        else:
-            ticks = []
-            info['ticks'] = f'every {period} ns from the first command'
-        k = 0
+        info['holds'] = 'none (stamps and receive times on different clocks)'
+    return holds
 
-        def next_tick(after: int) -> int:
-            return ticks[k] if k < len(ticks) else (
-                max(after, ticks[-1] if ticks else int(receive[0])) + period)
 
-        tick = next_tick(int(receive[0]))
-        for x, rx in zip(values.tolist(), receive.tolist()):
-            if stop_ns is not None and rx > stop_ns:
-                break
-            while tick <= rx:
-                collect(pred.tick(tick))
-                k += 1
-                tick = next_tick(tick)
-            collect(pred.push_command(rx, x))
-        while tick <= end:
+def _feed_float64(feed: _Feed, stream: _Stream, info: dict[str, Any],
+                  tick_stamps_ns: Sequence[int] | np.ndarray | None) -> None:
+    """Float64 commands: push each at its receive time, the node's ticks between."""
+    pred, collect = feed.pred, feed.collect
+    values, receive = stream.values, stream.receive
+    period, stop_ns = stream.period, stream.stop_ns
+    info['input'] = 'float64'
+    end = int(receive.max()) + period if stop_ns is None else stop_ns
+    if tick_stamps_ns is not None and len(tick_stamps_ns):
+        ticks = np.unique(np.asarray(tick_stamps_ns, dtype=np.int64)).tolist()
+        info['ticks'] = 'recorded joint_states stamps'
+        end = max(end, ticks[-1]) if stop_ns is None else end
+    else:
+        ticks = []
+        info['ticks'] = f'every {period} ns from the first command'
+    k = 0
+
+    def next_tick(after: int) -> int:
+        return ticks[k] if k < len(ticks) else (
+            max(after, ticks[-1] if ticks else int(receive[0])) + period)
+
+    tick = next_tick(int(receive[0]))
+    for x, rx in zip(values.tolist(), receive.tolist()):
+        if stop_ns is not None and rx > stop_ns:
+            break
+        while tick <= rx:
             collect(pred.tick(tick))
             k += 1
             tick = next_tick(tick)
-    if not preds:
-        raise RecordError(f'{record.name}: the pipeline accepted no command sample '
-                          f'({_rejections(pred.counters)})')
+        collect(pred.push_command(rx, x))
+    while tick <= end:
+        collect(pred.tick(tick))
+        k += 1
+        tick = next_tick(tick)
+
+
+def _collected(record: Record, feed: _Feed, info: dict[str, Any]) -> Replay:
+    """The pipeline's outputs gathered into a :class:`Replay`."""
+    preds, corrs, pred = feed.preds, feed.corrs, feed.pred
     pos = np.array([p.position for p in preds], dtype=float)
     return Replay(
-        record=record, t0_ns=t0,
+        record=record, t0_ns=record.t0_ns,
         stamps_ns=np.array([p.stamp_ns for p in preds], dtype=np.int64),
         position=pos, velocity=np.array([p.velocity for p in preds], dtype=float),
         effort=np.array([p.effort for p in preds], dtype=float),
@@ -270,7 +351,7 @@ def replay(config: Config, record: Record, *, compensate: bool = True,
         correction_stamps_ns=np.array([c.stamp_ns for c in corrs], dtype=np.int64),
         theta1_ref=np.array([c.theta1_ref for c in corrs], dtype=float),
         delta=np.array([c.delta for c in corrs], dtype=float),
-        counters=dict(pred.counters), events=events,
+        counters=dict(pred.counters), events=feed.events,
         info=info | {'compensation_error': pred.compensation_error})
 
 
@@ -287,8 +368,9 @@ def compare_with_recorded(rep: Replay, bag: str | Path, topic: str = 'joint_stat
     [rad] between them and the replay at equal stamps, per theta2..theta4 and overall,
     with the number of stamps compared, of replayed stamps inside the recorded span that
     were not recorded (``replay_only``: samples the node did not take, or recorder losses)
-    and of recorded stamps the replay did not produce (``recorded_only``).  None if the
-    bag has no such topic."""
+    and of recorded stamps the replay did not produce (``recorded_only``); ``answers``: the
+    recorded stamped answers against the replay's, stamp by stamp
+    (:func:`_compare_answers`).  None if the bag has no such topic."""
     try:
         live = read_bag(bag, command_topic=rep.record.source.get('command_topic'),
                         joint_states_topic=topic, joint_names=joint_names,
@@ -312,4 +394,28 @@ def compare_with_recorded(rep: Replay, bag: str | Path, topic: str = 'joint_stat
             out[name] = d
             worst = max(worst, d)
     out['max_abs_diff'] = worst
+    out['answers'] = _compare_answers(rep, bag)
+    return out
+
+
+def _compare_answers(rep: Replay, bag: str | Path) -> dict[str, dict[str, Any]]:
+    """The node's stamped answers the bag recorded (``~/positioning_error``,
+    ``~/worm_error`` at the predictions' stamps, ``~/feedforward`` at the corrections'),
+    each against the replay's value of the same stamp: {name: {'stamps_compared',
+    'max_abs_diff'}}.  Float64 answers (no stamp) cannot be aligned: left out."""
+    mine = {POSITIONING_ERROR_TOPIC: (rep.stamps_ns, rep.positioning_error),
+            WORM_ERROR_TOPIC: (rep.stamps_ns, rep.worm_error),
+            FEEDFORWARD_TOPIC: (rep.correction_stamps_ns, rep.delta)}
+    have = bag_topics(bag)
+    names = {private_topic(t): t for t in mine
+             if have.get('/' + private_topic(t)) == JOINT_STATE}
+    out: dict[str, dict[str, Any]] = {}
+    if not names:
+        return out
+    for name, series in read_series(bag, dict.fromkeys(names)).items():
+        stamps, values = mine[names[name]]
+        common, (live, again) = align_by_stamp(series, Series('', stamps, values, True))
+        out[names[name].removeprefix('~/')] = {
+            'stamps_compared': int(common.size),
+            'max_abs_diff': float(np.max(np.abs(live - again))) if common.size else 0.0}
     return out

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import math
 
-from ..compensation import Compensator
+from ..compensation.blend import BlendedCompensator, settled, unwrap
+from ..compensation.streaming import Compensator
 from ..dynamics.simulation import Simulator
-from .blend import BlendedCompensator, settled, unwrap
 from .drive import SimulatedDrive
 from .outputs import Correction, Event, Output, Prepared, Reject
 from .stream_state import STALE_MAX_INTERVAL, STALE_PERIODS, SavedStream, StreamState

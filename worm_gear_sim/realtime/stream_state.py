@@ -11,8 +11,8 @@ import collections
 import copy
 from dataclasses import dataclass, field
 
-from ..compensation import Compensator
-from .blend import BlendedCompensator
+from ..compensation.blend import BlendedCompensator
+from ..compensation.streaming import Compensator
 from .drive import SimulatedDrive
 
 __all__ = ['StreamState', 'SavedStream', 'STALE_PERIODS', 'STALE_MAX_INTERVAL',

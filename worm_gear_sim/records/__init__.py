@@ -2,18 +2,10 @@
 # Licensed under the Apache License, Version 2.0
 """Records of a drive: commanded and measured angles from CSV files and rosbag2 bags.
 
-One reader for every consumer (``simulate --csv/--bag``, identification): a
-:class:`Record` holds the command theta1 and the measured theta2..theta4 [rad] on one time
-base t [s] relative to ``t0_ns``, the source clock's reading at t = 0 (an absolute epoch
-stamp when the source had one).  :func:`write_bag` writes a prediction as a rosbag2 bag
-with the node's topics and message types.  Bags are read and written with the ``rosbags``
-library: no ROS installation is needed and rclpy is never imported.
-
-The package splits by job: :mod:`.record` (the :class:`Record` type), :mod:`.csv_io`
-(CSV by header, the numeric CSV writer), :mod:`.bag_io` (rosbag2 in and out); import
-from here.
-
-Formats (columns, units, topics, types): docs/data-formats.md.
+:class:`Record` (the command theta1 and the measured theta2..theta4 on one time base),
+:func:`read_record` and the readers and writers of :mod:`.csv_io` and :mod:`.bag_io`
+(``rosbags``: no ROS installation needed); :func:`write_bag` writes a prediction with the
+node's topics.  Import from here.  Formats: docs/data-formats.md.
 """
 
 from __future__ import annotations
@@ -26,9 +18,12 @@ from .bag_io import (
     DEFAULT_COMMAND_TOPICS,
     DEFAULT_MEASURED_TOPICS,
     BagStream,
+    Series,
+    align_by_stamp,
     bag_topics,
     prediction_streams,
     read_bag,
+    read_series,
     write_bag,
     write_streams,
 )
@@ -36,7 +31,8 @@ from .csv_io import ANGLE_UNITS, TIME_UNITS, read_csv, write_csv_columns, write_
 from .record import Record, RecordError
 
 __all__ = ['Record', 'RecordError', 'read_csv', 'read_bag', 'read_record', 'write_bag',
-           'BagStream', 'prediction_streams', 'write_streams', 'bag_topics',
+           'BagStream', 'prediction_streams', 'write_streams', 'bag_topics', 'Series',
+           'read_series', 'align_by_stamp',
            'ANGLE_UNITS', 'TIME_UNITS', 'DEFAULT_COMMAND_TOPICS',
            'DEFAULT_MEASURED_TOPICS', 'write_csv_header', 'write_csv_columns', 'BAG_VERSION']
 

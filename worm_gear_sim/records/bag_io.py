@@ -1,8 +1,10 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """rosbag2 bags in and out with the ``rosbags`` library (no ROS installation, never rclpy):
-a record read from the node's command and JointState topics, and a prediction written with
-the node's output topics and message types.
+a record read from the node's command and JointState topics, a prediction written with
+the node's output topics and message types, and one-value topics (references, the node's
+stamped answers) read as series that align sample by sample by their stamps
+(:func:`read_series`, :func:`align_by_stamp`).
 
 Topics and types: docs/data-formats.md.
 """
@@ -17,8 +19,15 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..guarded_io import MAX_CONFIG_BYTES, GuardedFileError, guarded_yaml_load, read_text_file
-from ..topics import (
+from .._support.guarded_io import (
+    MAX_CONFIG_BYTES,
+    GuardedFileError,
+    guarded_yaml_load,
+    read_text_file,
+)
+from .record import MEASURED_NAMES, Record, RecordError, valid_sorted
+from .topics import (
+    ANSWER_TOPICS,
     COMMAND_TOPIC,
     COMPENSATED_COMMAND_TOPIC,
     FEEDFORWARD_TOPIC,
@@ -31,10 +40,10 @@ from ..topics import (
     WORM_ERROR_TOPIC,
     private_topic,
 )
-from .record import MEASURED_NAMES, Record, RecordError, valid_sorted
 
 __all__ = ['read_bag', 'bag_topics', 'BagStream', 'write_streams', 'prediction_streams',
-           'write_bag', 'DEFAULT_COMMAND_TOPICS', 'DEFAULT_MEASURED_TOPICS', 'BAG_VERSION']
+           'write_bag', 'Series', 'read_series', 'align_by_stamp', 'DEFAULT_COMMAND_TOPICS',
+           'DEFAULT_MEASURED_TOPICS', 'BAG_VERSION']
 
 DEFAULT_COMMAND_TOPICS = (REFERENCE_TOPIC, COMMAND_TOPIC)
 DEFAULT_MEASURED_TOPICS = (MEASURED_TOPIC, JOINT_STATES_TOPIC)
@@ -139,30 +148,11 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     """
     p = Path(path)
     where = str(p)
-    if joint_names is None:
-        from ..schema import Parameters
-        joint_names = tuple(Parameters().node.joint_names)
-    joint_names = tuple(joint_names)
-    if len(joint_names) != 4:
-        raise RecordError(f'joint names: need 4 (theta1..theta4), got {list(joint_names)}')
-    if interpolation not in ('linear', 'hold'):
-        raise RecordError(f'interpolation must be linear or hold, got {interpolation!r}')
+    joint_names = _checked_joint_names(joint_names, interpolation)
     reader = _open_reader(p)
     try:
-        topics = {c.topic: c.msgtype for c in reader.connections}
-        cmd_topic = _resolve_topic(topics, command_topic, DEFAULT_COMMAND_TOPICS, 'command',
-                                   '--command-topic', where, True)
-        assert cmd_topic is not None
-        if topics[cmd_topic] not in (FLOAT64, JOINT_STATE):
-            raise RecordError(f'{where}: command topic {cmd_topic} is {topics[cmd_topic]}; '
-                              f'expected {FLOAT64} or {JOINT_STATE} (the stamped reference)')
-        meas_topic = None if joint_states_topic == '' and not require_measured else \
-            _resolve_topic(topics, joint_states_topic, DEFAULT_MEASURED_TOPICS,
-                           'measured JointState', '--joint-states-topic', where,
-                           require_measured)
-        if meas_topic is not None and topics[meas_topic] != JOINT_STATE:
-            raise RecordError(f'{where}: measured topic {meas_topic} is {topics[meas_topic]}; '
-                              f'expected {JOINT_STATE}')
+        topics, cmd_topic, meas_topic = _chosen_topics(
+            reader, where, command_topic, joint_states_topic, require_measured)
         cmd = _read_commands(reader, cmd_topic, topics[cmd_topic], joint_names[0], where)
         meas = (_read_joint_states(reader, meas_topic, joint_names[1:], where)
                 if meas_topic else None)
@@ -174,15 +164,7 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
                            'command_stamp': 'header.stamp' if topics[cmd_topic] == JOINT_STATE
                            else 'bag receive time', 'rejected_commands': n_rejected,
                            'topics': topics}
-    if stamps.size == 0:
-        raise RecordError(f'{where}: no command samples on {cmd_topic}')
-    ok = np.isfinite(vals)
-    if not ok.any():
-        raise RecordError(f'{where}: no finite command sample on {cmd_topic}')
-    t0_ns = int(stamps[ok].min())
-    tc, yc, n_dup = valid_sorted(stamps, vals, t0_ns)
-    src['non_finite_commands'] = int((~ok).sum())
-    src['duplicate_command_stamps'] = n_dup
+    t0_ns, tc, yc = _valid_commands(stamps, vals, where, cmd_topic, src)
     rec_name = name or p.stem
     if meas is None:
         if tc.size < min_samples:
@@ -204,6 +186,57 @@ def read_bag(path: str | Path, *, command_topic: str | None = None,
     measured = {k: v[keep] for k, v in m_vals.items()}
     return Record(rec_name, t, th1, measured, t0_ns, stamps, vals, src, received)
 
+
+def _checked_joint_names(joint_names: Sequence[str] | None, interpolation: str
+                         ) -> tuple[str, ...]:
+    """The four joint names (default ``node.joint_names``), the interpolation checked."""
+    if joint_names is None:
+        from ..schema.parameters import Parameters
+        joint_names = tuple(Parameters().node.joint_names)
+    joint_names = tuple(joint_names)
+    if len(joint_names) != 4:
+        raise RecordError(f'joint names: need 4 (theta1..theta4), got {list(joint_names)}')
+    if interpolation not in ('linear', 'hold'):
+        raise RecordError(f'interpolation must be linear or hold, got {interpolation!r}')
+    return joint_names
+
+
+def _chosen_topics(reader: Any, where: str, command_topic: str | None,
+                   joint_states_topic: str | None, require_measured: bool
+                   ) -> tuple[dict[str, str], str, str | None]:
+    """The bag's topics (name -> type), the command topic and the measured one (or None),
+    each checked for its type."""
+    topics = {c.topic: c.msgtype for c in reader.connections}
+    cmd_topic = _resolve_topic(topics, command_topic, DEFAULT_COMMAND_TOPICS, 'command',
+                               '--command-topic', where, True)
+    assert cmd_topic is not None
+    if topics[cmd_topic] not in (FLOAT64, JOINT_STATE):
+        raise RecordError(f'{where}: command topic {cmd_topic} is {topics[cmd_topic]}; '
+                          f'expected {FLOAT64} or {JOINT_STATE} (the stamped reference)')
+    meas_topic = None if joint_states_topic == '' and not require_measured else \
+        _resolve_topic(topics, joint_states_topic, DEFAULT_MEASURED_TOPICS,
+                       'measured JointState', '--joint-states-topic', where,
+                       require_measured)
+    if meas_topic is not None and topics[meas_topic] != JOINT_STATE:
+        raise RecordError(f'{where}: measured topic {meas_topic} is {topics[meas_topic]}; '
+                          f'expected {JOINT_STATE}')
+    return topics, cmd_topic, meas_topic
+
+
+def _valid_commands(stamps: np.ndarray, vals: np.ndarray, where: str, cmd_topic: str,
+                    src: dict[str, Any]) -> tuple[int, np.ndarray, np.ndarray]:
+    """(t0_ns, t, theta1): the first finite command's stamp and the valid samples sorted;
+    the non-finite and duplicated ones counted in ``src``."""
+    if stamps.size == 0:
+        raise RecordError(f'{where}: no command samples on {cmd_topic}')
+    ok = np.isfinite(vals)
+    if not ok.any():
+        raise RecordError(f'{where}: no finite command sample on {cmd_topic}')
+    t0_ns = int(stamps[ok].min())
+    tc, yc, n_dup = valid_sorted(stamps, vals, t0_ns)
+    src['non_finite_commands'] = int((~ok).sum())
+    src['duplicate_command_stamps'] = n_dup
+    return t0_ns, tc, yc
 
 
 def _read_commands(reader: Any, topic: str, msgtype: str, worm_joint: str, where: str
@@ -302,6 +335,82 @@ def _read_joint_states(reader: Any, topic: str, joints: Sequence[str], where: st
     return grid, out, info
 
 
+# ---- one-value series, aligned by stamp -------------------------------------------------------
+@dataclass
+class Series:
+    """One value per message of a bag topic: ``stamps_ns`` the ``header.stamp`` of a
+    JointState (``stamped``), else the bag's receive time (a Float64 has no stamp: it can
+    be aligned with nothing but its arrival); ``values`` the position of ``joint`` (the
+    first entry when no joint is asked for) or the Float64's data."""
+
+    topic: str
+    stamps_ns: np.ndarray
+    values: np.ndarray
+    stamped: bool
+    joint: str = ''
+
+
+def read_series(path: str | Path, topics: Mapping[str, str | None]) -> dict[str, Series]:
+    """The series of ``topics`` ({topic: joint or None}, names as :func:`read_bag` finds
+    them: '/ns/joint_states' for 'joint_states' when unique), keyed by the names given, in
+    bag order.  A JointState without the joint (or without a position) is skipped; a topic
+    the bag lacks, or of another type, is an error listing what the bag has."""
+    p = Path(path)
+    where = str(p)
+    reader = _open_reader(p)
+    try:
+        have = {c.topic: c.msgtype for c in reader.connections}
+        found: dict[str, str] = {}
+        for name in topics:
+            hit = _find_topic(have, name)
+            if hit is None:
+                raise RecordError(f'{where}: no topic {name} in the bag; it has: '
+                                  f'{_topic_list(have)}')
+            if have[hit] not in (FLOAT64, JOINT_STATE):
+                raise RecordError(f'{where}: {hit} is {have[hit]}; expected {FLOAT64} or '
+                                  f'{JOINT_STATE}')
+            found[hit] = name
+        ts = _typestore()
+        rows: dict[str, tuple[list[int], list[float]]] = {n: ([], []) for n in topics}
+        conns = [c for c in reader.connections if c.topic in found]
+        for conn, log_ns, raw in reader.messages(connections=conns):
+            name = found[conn.topic]
+            msg = ts.deserialize_cdr(raw, conn.msgtype)
+            if conn.msgtype == FLOAT64:
+                rows[name][0].append(int(log_ns))
+                rows[name][1].append(float(msg.data))
+                continue
+            names = list(msg.name)
+            joint = topics[name]
+            i = names.index(joint) if joint and joint in names else (0 if not joint else -1)
+            if i < 0 or i >= len(msg.position):
+                continue
+            rows[name][0].append(_stamp_ns(msg.header))
+            rows[name][1].append(float(msg.position[i]))
+    finally:
+        reader.close()
+    return {name: Series(hit, np.array(rows[name][0], dtype=np.int64),
+                         np.array(rows[name][1], dtype=float), have[hit] == JOINT_STATE,
+                         topics[name] or '')
+            for hit, name in found.items()}
+
+
+def align_by_stamp(*series: Series) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The stamps every series has (sorted) and each series' values at them: the outputs
+    that answer a sample side by side with that sample.  A stamp repeated within a series
+    (a resynchronised stream) keeps its last value."""
+    if not series:
+        return np.empty(0, dtype=np.int64), []
+    common = np.unique(series[0].stamps_ns)
+    for s in series[1:]:
+        common = np.intersect1d(common, s.stamps_ns)
+    out = []
+    for s in series:
+        last = {int(k): v for k, v in zip(s.stamps_ns.tolist(), s.values.tolist())}
+        out.append(np.array([last[int(k)] for k in common.tolist()], dtype=float))
+    return common, out
+
+
 # ---- writing -----------------------------------------------------------------------------
 @dataclass
 class BagStream:
@@ -381,32 +490,34 @@ def prediction_streams(stamps_ns: np.ndarray, position: np.ndarray, *,
                        worm_error: np.ndarray | None = None,
                        feedforward: tuple[np.ndarray, np.ndarray] | None = None,
                        compensated_command: tuple[np.ndarray, np.ndarray] | None = None,
-                       stamped: bool = False, namespace: str = '') -> list[BagStream]:
+                       float64_outputs: bool = False, namespace: str = '') -> list[BagStream]:
     """The node's output topics for a prediction: ``joint_states`` (theta1..theta4, rates,
     torques), ``worm_gear_sim/positioning_error``, ``worm_gear_sim/worm_error`` and, when
     given as (stamps_ns, values), ``worm_gear_sim/feedforward`` and
-    ``worm_gear_sim/compensated_command`` (JointState of the worm input joint).  With
-    ``stamped`` the errors and feed-forward are JointStates of one joint (antenna, worm,
-    worm input) carrying header.stamp instead of Float64.  ``namespace`` prefixes every
-    topic (e.g. 'replay' -> /replay/joint_states)."""
+    ``worm_gear_sim/compensated_command`` (JointState of the worm input joint).  The errors
+    and the feed-forward are, as the node publishes them, JointStates of one joint (antenna,
+    worm, worm input: ``topics.ANSWER_TOPICS``) with the stamp of the sample they answer;
+    ``float64_outputs`` writes them as std_msgs/Float64 (``node.float64_outputs``).
+    ``namespace`` prefixes every topic (e.g. 'replay' -> /replay/joint_states)."""
     names = tuple(joint_names)
     ns = '/' + namespace.strip('/') if namespace.strip('/') else ''
     stamps = np.asarray(stamps_ns, dtype=np.int64)
     out = [BagStream(f'{ns}/{JOINT_STATES_TOPIC}', stamps, np.asarray(position), 'joint_state',
                      names, velocity, effort)]
 
-    def scalar(topic: str, st: np.ndarray, v: np.ndarray, joint: str) -> BagStream:
+    def scalar(topic: str, st: np.ndarray, v: np.ndarray) -> BagStream:
         name = f'{ns}/{private_topic(topic)}'
-        if stamped:
-            return BagStream(name, st, np.asarray(v).reshape(-1, 1), 'joint_state', (joint,))
-        return BagStream(name, st, np.asarray(v), 'float64')
+        if float64_outputs:
+            return BagStream(name, st, np.asarray(v), 'float64')
+        return BagStream(name, st, np.asarray(v).reshape(-1, 1), 'joint_state',
+                         (names[ANSWER_TOPICS[topic]],))
 
     if positioning_error is not None:
-        out.append(scalar(POSITIONING_ERROR_TOPIC, stamps, positioning_error, names[3]))
+        out.append(scalar(POSITIONING_ERROR_TOPIC, stamps, positioning_error))
     if worm_error is not None:
-        out.append(scalar(WORM_ERROR_TOPIC, stamps, worm_error, names[1]))
+        out.append(scalar(WORM_ERROR_TOPIC, stamps, worm_error))
     if feedforward is not None:
-        out.append(scalar(FEEDFORWARD_TOPIC, feedforward[0], feedforward[1], names[0]))
+        out.append(scalar(FEEDFORWARD_TOPIC, feedforward[0], feedforward[1]))
     if compensated_command is not None:
         out.append(BagStream(f'{ns}/{private_topic(COMPENSATED_COMMAND_TOPIC)}',
                              compensated_command[0],
@@ -421,6 +532,6 @@ def write_bag(path: str | Path, stamps_ns: np.ndarray, position: np.ndarray, *,
     """Write a prediction (``position`` (n, 4) theta1..theta4 at ``stamps_ns``, absolute on
     the recording's clock) with the node's topics as a rosbag2 bag: see
     :func:`prediction_streams` for the optional topics (velocity, effort, errors,
-    feed-forward, stamped, namespace).  Storage sqlite3 (default) or mcap."""
+    feed-forward, float64_outputs, namespace).  Storage sqlite3 (default) or mcap."""
     streams = prediction_streams(stamps_ns, position, joint_names=joint_names, **topics)
     return write_streams(path, streams, storage=storage, overwrite=overwrite)

@@ -13,14 +13,15 @@ import difflib
 import math
 import re
 from array import array
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..schema import LOAD_LIMIT
+from ..schema.sections import LOAD_LIMIT
 from .record import ANGLE_NAMES, MEASURED_NAMES, Record, RecordError
 
 __all__ = ['read_csv', 'write_csv_header', 'write_csv_columns', 'ANGLE_UNITS', 'TIME_UNITS',
@@ -121,26 +122,62 @@ def _read_csv_stream(fh: Any, p: Path, columns: Mapping[str, str], name: str | N
                      min_samples: int, require_measured: bool) -> Record:
     """read_csv on an open file, one line at a time: the memory is the columns' arrays
     (8 bytes per value) plus one line, whatever the file's size."""
-    where = str(p)
-    line_no = 0
+    lines = _Lines(fh, str(p))
+    head = _read_header(lines, columns)
+    body = _read_body(lines, head)
+    return _as_record(p, head, body, name, min_samples, require_measured)
 
-    def lines() -> Any:
-        nonlocal line_no
-        while ln := fh.readline(MAX_CSV_LINE_CHARS + 1):    # bounded: never a whole
-            line_no += 1                                      # huge line in memory
+
+class _Lines:
+    """The file's data lines (not blank, not ``#`` comments), each read bounded, and the
+    number of the line last read."""
+
+    def __init__(self, fh: Any, where: str) -> None:
+        self.fh, self.where, self.line_no = fh, where, 0
+        self._rows = self._read()
+
+    def _read(self) -> Iterator[str]:
+        while ln := self.fh.readline(MAX_CSV_LINE_CHARS + 1):  # bounded: never a whole
+            self.line_no += 1                                    # huge line in memory
             if len(ln) > MAX_CSV_LINE_CHARS:
-                raise RecordError(f'{where}: line {line_no}: over {MAX_CSV_LINE_CHARS} '
-                                  f'characters; a CSV line is at most {MAX_CSV_LINE_CHARS}')
+                raise RecordError(f'{self.where}: line {self.line_no}: over '
+                                  f'{MAX_CSV_LINE_CHARS} characters; a CSV line is at most '
+                                  f'{MAX_CSV_LINE_CHARS}')
             if ln.strip() and not ln.lstrip().startswith('#'):
                 yield ln
 
-    rows = lines()
-    head = next(rows, None)
+    def __iter__(self) -> Iterator[str]:
+        return self._rows
+
+    def first(self) -> str | None:
+        return next(self._rows, None)
+
+
+@dataclass
+class _Header:
+    """The header line read: delimiter, column texts, each role's column, unit and scale."""
+
+    where: str
+    delim: str
+    header: list[str]
+    fields: list[tuple[str, str]]
+    roles: dict[str, int]
+    units: dict[str, str]
+    scale: dict[str, float]
+
+    def column(self, col: int) -> str:
+        return repr(self.header[col].strip())
+
+
+def _read_header(lines: _Lines, columns: Mapping[str, str]) -> _Header:
+    """The first data line as the header: the columns' roles and units."""
+    where = lines.where
+    head = lines.first()
     if head is None:
         raise RecordError(f'{where}: empty (no header, no data)')
     if '\x00' in head:
         raise RecordError(f'{where}: not a text CSV file')
-    head_no = line_no
+    head_no = lines.line_no
     delim = next((d for d in (',', ';', '\t') if d in head), ',')
     header = _csv_row(head, delim, where, head_no)
     if all(_is_number(h) for h in header):
@@ -148,6 +185,13 @@ def _read_csv_stream(fh: Any, p: Path, columns: Mapping[str, str], name: str | N
                           "name the columns, e.g. 't [s],theta1 [rad]'")
     fields = [_split_header(h) for h in header]
     roles = _assign_roles(fields, header, columns, where)
+    units, scale = _column_units(fields, header, roles, where)
+    return _Header(where, delim, header, fields, roles, units, scale)
+
+
+def _column_units(fields: list[tuple[str, str]], header: list[str], roles: dict[str, int],
+                  where: str) -> tuple[dict[str, str], dict[str, float]]:
+    """Each role's unit (named in the header or the default) and its scale to SI."""
     units, scale = {}, {}
     for role, col in roles.items():
         unit = fields[col][1]
@@ -169,79 +213,113 @@ def _read_csv_stream(fh: Any, p: Path, columns: Mapping[str, str], name: str | N
                                   f'unit {unit!r} (use one of {", ".join(ANGLE_UNITS)})')
             scale[role] = ANGLE_UNITS[unit]
         units[role] = unit
-    n_fields = len(header)
-    t_col = roles['t']
-    sc = TIME_UNITS[units['t']]
-    t_rel = array('d')                         # seconds after the first sample
-    values: dict[str, array] = {r: array('d') for r in roles if r != 't'}
-    value_cols = [(roles[r], scale[r], vals, r) for r, vals in values.items()]
+    return units, scale
+
+
+@dataclass
+class _Body:
+    """The data rows read: times after the first [s], each role's values, the first time."""
+
+    t_rel: array
+    values: dict[str, array]
+    first: Decimal | None = None            # seconds, exact
+    first_raw: Decimal | None = None        # in the column's unit
+    n: int = 0
+
+
+def _read_body(lines: _Lines, head: _Header) -> _Body:
+    """Every data row after the header, checked: field count, increasing times, values."""
+    where, n_fields, t_col = head.where, len(head.header), head.roles['t']
+    sc = TIME_UNITS[head.units['t']]
+    body = _Body(array('d'), {r: array('d') for r in head.roles if r != 't'})
+    value_cols = [(head.roles[r], head.scale[r], vals, r) for r, vals in body.values.items()]
     prev: Decimal | None = None
-    first: Decimal | None = None
-    first_raw: Decimal | None = None
-    n = 0
-    for ln in rows:
-        row = _csv_row(ln, delim, where, line_no)
+    for ln in lines:
+        line_no = lines.line_no
+        row = _csv_row(ln, head.delim, where, line_no)
         if len(row) == n_fields + 1 and not row[-1].strip():
             row = row[:-1]                        # trailing delimiter
         if len(row) != n_fields:
             raise RecordError(f'{where}: line {line_no}: {len(row)} fields, the header has '
                               f'{n_fields}')
-        cell = row[t_col].strip()
-        try:
-            tv = Decimal(cell)
-        except InvalidOperation:
-            tv = Decimal('NaN')
-        if not tv.is_finite():
-            raise RecordError(f'{where}: line {line_no}, column {header[t_col].strip()!r}: '
-                              f'{cell!r} is not a finite time')
-        if prev is not None and tv <= prev:
-            what = 'repeats the previous time (duplicated sample)' if tv == prev else \
-                f'goes backwards (after {prev})'
-            raise RecordError(f'{where}: line {line_no}, column {header[t_col].strip()!r}: '
-                              f'time {cell} {what}; times must increase strictly')
-        if first is None:
-            first, first_raw = tv * sc, tv          # seconds, exact
+        tv = _row_time(row[t_col].strip(), prev, head, line_no)
+        if body.first is None:
+            body.first, body.first_raw = tv * sc, tv
         prev = tv
-        n += 1
-        if n > MAX_CSV_ROWS:
+        body.n += 1
+        if body.n > MAX_CSV_ROWS:
             raise RecordError(f'{where}: more than {MAX_CSV_ROWS} data rows; a record is at '
                               f'most {MAX_CSV_ROWS} rows: decimate it first')
-        t_rel.append(float(tv * sc - first))
-        for col, k, vals, _role in value_cols:
-            cell = row[col].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                what = 'empty' if not cell else f'{cell!r} is not a number'
-                raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
-                                  f'{what}') from None
-            if not math.isfinite(v):
-                what = 'load torque' if _role == LOAD_NAME else 'angle'
-                raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
-                                  f'{cell} is not a finite {what}')
-            if _role == LOAD_NAME and abs(v * k) > LOAD_LIMIT:
-                raise RecordError(f'{where}: line {line_no}, column {header[col].strip()!r}: '
-                                  f'load torque {cell} is beyond +-{LOAD_LIMIT:g} N m')
-            vals.append(v * k)
-    if n < min_samples:
-        raise RecordError(f'{where}: {n} data row(s); a record needs at least '
+        body.t_rel.append(float(tv * sc - body.first))
+        for col, k, vals, role in value_cols:
+            vals.append(_row_value(row[col].strip(), k, role, head, col, line_no))
+    return body
+
+
+def _row_time(cell: str, prev: Decimal | None, head: _Header, line_no: int) -> Decimal:
+    """A row's time as an exact decimal, finite and after the previous one."""
+    where, column = head.where, head.column(head.roles['t'])
+    try:
+        tv = Decimal(cell)
+    except InvalidOperation:
+        tv = Decimal('NaN')
+    if not tv.is_finite():
+        raise RecordError(f'{where}: line {line_no}, column {column}: '
+                          f'{cell!r} is not a finite time')
+    if prev is not None and tv <= prev:
+        what = 'repeats the previous time (duplicated sample)' if tv == prev else \
+            f'goes backwards (after {prev})'
+        raise RecordError(f'{where}: line {line_no}, column {column}: '
+                          f'time {cell} {what}; times must increase strictly')
+    return tv
+
+
+def _row_value(cell: str, k: float, role: str, head: _Header, col: int,
+               line_no: int) -> float:
+    """A row's angle or load torque in SI units, finite (a load within its limit)."""
+    where, column = head.where, head.column(col)
+    try:
+        v = float(cell)
+    except ValueError:
+        what = 'empty' if not cell else f'{cell!r} is not a number'
+        raise RecordError(f'{where}: line {line_no}, column {column}: '
+                          f'{what}') from None
+    if not math.isfinite(v):
+        what = 'load torque' if role == LOAD_NAME else 'angle'
+        raise RecordError(f'{where}: line {line_no}, column {column}: '
+                          f'{cell} is not a finite {what}')
+    if role == LOAD_NAME and abs(v * k) > LOAD_LIMIT:
+        raise RecordError(f'{where}: line {line_no}, column {column}: '
+                          f'load torque {cell} is beyond +-{LOAD_LIMIT:g} N m')
+    return v * k
+
+
+def _as_record(p: Path, head: _Header, body: _Body, name: str | None, min_samples: int,
+               require_measured: bool) -> Record:
+    """The rows read as a :class:`Record`, checked for length, time unit and measurement."""
+    where, header, roles = head.where, head.header, head.roles
+    t_col = roles['t']
+    if body.n < min_samples:
+        raise RecordError(f'{where}: {body.n} data row(s); a record needs at least '
                           f'{min_samples} samples')
+    first, first_raw = body.first, body.first_raw
     assert first is not None and first_raw is not None
-    if not fields[t_col][1] and abs(first) > PLAUSIBLE_SECONDS:
+    if not head.fields[t_col][1] and abs(first) > PLAUSIBLE_SECONDS:
         raise RecordError(f'{where}: column {header[t_col].strip()!r}: first time {first_raw} '
                           'is not a plausible time in seconds; name its unit in the header, '
                           "e.g. 't [ns]' or 't [ms]'")
-    t = np.frombuffer(t_rel, dtype=float)
+    t = np.frombuffer(body.t_rel, dtype=float)
     t0_ns = int((first * 10 ** 9).to_integral_value())
-    cols = {r: np.frombuffer(v, dtype=float) for r, v in values.items()}
+    cols = {r: np.frombuffer(v, dtype=float) for r, v in body.values.items()}
     measured = {r: cols[r] for r in MEASURED_NAMES if r in cols}
     if require_measured and not measured:
         raise RecordError(f'{where}: no measured column (theta2, theta3 or theta4) in the '
                           f'header {", ".join(h.strip() for h in header)}')
     used = set(roles.values())
-    src = {'kind': 'csv', 'path': str(p), 'units': units,
+    src = {'kind': 'csv', 'path': str(p), 'units': head.units,
            'columns': {r: header[c].strip() for r, c in roles.items()},
-           'ignored_columns': [header[i].strip() for i in range(n_fields) if i not in used]}
+           'ignored_columns': [header[i].strip() for i in range(len(header))
+                               if i not in used]}
     return Record(name=name or p.stem, t=t, theta1=cols['theta1'],
                   measured=measured, t0_ns=t0_ns, source=src, load_torque=cols.get(LOAD_NAME))
 

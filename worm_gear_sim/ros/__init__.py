@@ -3,5 +3,5 @@
 """The ROS 2 wing: the only part of worm_gear_sim that imports rclpy.
 
 Topics, QoS, parameters, timers and diagnostics; every computation is a call into the core
-(:mod:`worm_gear_sim.params`, :mod:`worm_gear_sim.dynamics.simulation`, ...).
+(:mod:`worm_gear_sim.config.usable`, :mod:`worm_gear_sim.dynamics.simulation`, ...).
 """

@@ -2,47 +2,11 @@
 # Licensed under the Apache License, Version 2.0
 """Live adaptation in the node (``adaptation.enabled``): the wiring, no algorithm.
 
-:class:`NodeAdaptation` is a member of a drive node (:class:`~.node.WormGearSimNode`),
-there whatever ``adaptation.enabled`` says; once adaptation runs it holds the core's
-:class:`~worm_gear_sim.adaptation.live.LiveAdaptation` beside the node's real-time
-pipeline, the same object the offline twin (``worm-gear-sim adapt``) drives:
-
-* every prediction the pipeline makes goes to it (after the node has published it), then
-  its decision is taken (bounded steps, no jump in the command): a step is prepared a
-  slice of ~0.3 ms after each sample's answers (the model, the compensator design:
-  :func:`~worm_gear_sim.adaptation.live.in_slices`) and swapped in at a stamp fixed when it
-  was decided (:data:`~worm_gear_sim.adaptation.live.APPLY_LEAD` later, as in the twin);
-  the sample callback only swaps (a step prepared late moves to the next fixed stamp and is
-  counted, ``late_steps``);
-* every ``measured_joint_states`` message goes to it after the model check; a rejected
-  sample (the admission's reasons: non-finite, out of order, surplus, malformed, no antenna
-  joint, outside the predictions, implausible) is counted and logged once per
-  LOG_THROTTLE_S per reason;
-* ``~/adapted_parameters`` (std_msgs/String, JSON, transient local, depth 1): the estimate
-  and the values in use, whether the estimate is plausible (``plausible``, and why not in
-  ``plausibility``: :mod:`worm_gear_sim.adaptation.plausibility`; an implausible estimate is
-  never applied), on every applied step, every diagnostics period and at the first
-  late encoder sample and the first late step (so the last message's late counters are 0
-  only if none came late).  A JSON
-  text keeps the harmonics' arrays and the dotted names as they are in a params file;
-  diagnostic_msgs/KeyValue would carry the same as strings without a header, and a message
-  of our own would need an interface package;
-* ``~/write_adapted_parameters`` (std_srvs/Trigger): writes the model in use as a params
-  file (``adaptation.params_file``) that the node can start from (``--params-file``),
-  atomically and durably (:func:`~worm_gear_sim.guarded_io.write_text_durably`; a target
-  that is no regular file nor a new path is refused, nothing written);
-* ``~/reset_adaptation`` (std_srvs/Trigger): the explicit forgetting: the model in use
-  returns to the declared set (prepared in the parameter worker, swapped in between two
-  samples), the estimate restarts from the prior; counted (``resets``) and logged;
-* /diagnostics: a status ``adaptation`` (off, waiting, steps applied, refusals, the
-  windowed residual of the estimate, the model in use and the nominal set).
-
-What was learnt is the operator's data: a parameter set keeps it (the adapted values stay
-applied on the new set, :mod:`worm_gear_sim.adaptation.learnt` says what a set that changes
-the estimator keeps); ``adaptation.enabled`` false freezes the model in use as it is and
-stops learning, true again resumes from the estimate kept.  The node's own parameters
-keep their declared values (the nominal set); the adapted ones are on the topic and in the
-file.
+:class:`NodeAdaptation`, a member of every drive node, holds the core's ``LiveAdaptation``
+beside the node's pipeline: it hands it predictions and ``measured_joint_states``, swaps in
+the steps it decides, publishes ``~/adapted_parameters`` and serves
+``~/write_adapted_parameters`` and ``~/reset_adaptation`` and the ``adaptation`` status.
+The interface: docs/adaptation.md ("In the node").
 """
 
 from __future__ import annotations
@@ -56,13 +20,13 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
+from .._support.guarded_io import GuardedFileError, check_write_target, write_text_durably
 from ..adaptation.live import LiveAdaptation, in_slices
-from ..config_io import params_document, params_yaml_text
-from ..guarded_io import GuardedFileError, check_write_target, write_text_durably
-from ..params import Config
+from ..config.files import params_document, params_yaml_text
+from ..config.usable import Config
 from ..realtime import Output, RealtimePredictor
-from ..topics import MEASURED_TOPIC
-from ..validation import ConfigError
+from ..records.topics import MEASURED_TOPIC
+from ..schema.validation import ConfigError
 from . import diagnostics as diag
 from .statuses import HARDWARE_ID
 
@@ -91,6 +55,9 @@ class NodeAdaptation:
         self._clock = node.get_clock()
         #: the core's adaptation, once it has run (kept while it is off: frozen)
         self.live: LiveAdaptation | None = None
+        #: who else writes to a file (the pedestal's other drives: their name, or None);
+        #: a parameter set naming one such file is refused, and so is the write
+        self.file_user: Callable[[str], str | None] = lambda path: None
         self.enabled = config.adaptation.enabled
         self._reset_pending = False
         qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -157,10 +124,14 @@ class NodeAdaptation:
         ``adaptation.params_file`` is named and no file can be written there, or if the
         set is not usable with them."""
         if PARAMS_FILE in names:
+            path = declared.adaptation.params_file
             try:
-                check_write_target(declared.adaptation.params_file)
+                check_write_target(path)
             except GuardedFileError as exc:
                 raise ConfigError(PARAMS_FILE, str(exc)) from None
+            if (user := self.file_user(path)) is not None:
+                raise ConfigError(PARAMS_FILE, f'{path}: {user} writes to this file; name '
+                                  'one of this drive\'s own')
         if self.live is None or self._reset_pending:
             return declared
         carried = self.live.carried_values(declared, names)
@@ -235,6 +206,11 @@ class NodeAdaptation:
         cfg = live.params_config() if live is not None else self.rt.config
         path = cfg.adaptation.params_file
         header = '# worm_gear_sim: the model in use, written by ~/write_adapted_parameters\n'
+        if (user := self.file_user(path)) is not None:
+            response.success = False
+            response.message = f'not written: {user} writes to {path}'
+            self._warn('adaptation_write', response.message)
+            return response
         try:
             written = write_text_durably(path, header + params_yaml_text(params_document(cfg)))
         except (OSError, ValueError) as exc:       # GuardedFileError is a ValueError

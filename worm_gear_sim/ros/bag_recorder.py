@@ -5,13 +5,8 @@
 
     python -m worm_gear_sim.ros.bag_recorder -o run_bag [--storage sqlite3] [--duration 20]
 
-Subscribes to the node's command, reference and measured inputs and its predicted
-``joint_states`` (``--all``: also its errors and corrections; ``--topic``: others), takes
-each message as serialized bytes (no decoding) and writes it with its receive time on the
-node's clock (``use_sim_time`` honoured), as ``ros2 bag record`` does, with the ``rosbags``
-writer.  The result is the input of ``worm-gear-sim simulate --bag`` and ``identify``
-(docs/data-formats.md).  Ctrl-C / SIGTERM / ``--duration`` close the bag.  A Python
-recorder costs CPU per message: on a loaded machine it can fall behind and lose messages.
+Writes the messages serialized, with their receive time, with the ``rosbags`` writer; the
+bag feeds ``simulate --bag`` and ``identify`` (docs/data-formats.md).
 """
 
 from __future__ import annotations
@@ -29,37 +24,41 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from ..records import BAG_VERSION
-from ..topics import (
+from ..records.topics import (
+    ANSWER_TOPICS,
     COMMAND_TOPIC,
     COMPENSATED_COMMAND_TOPIC,
-    FEEDFORWARD_TOPIC,
     FLOAT64,
     JOINT_STATE,
     JOINT_STATES_TOPIC,
     MEASURED_TOPIC,
-    POSITIONING_ERROR_TOPIC,
     REFERENCE_TOPIC,
-    WORM_ERROR_TOPIC,
     private_topic,
 )
+from .teardown import teardown_deadline
 
-__all__ = ['BagRecorder', 'DEFAULT_TOPICS', 'ALL_TOPICS', 'main']
+__all__ = ['BagRecorder', 'DEFAULT_TOPICS', 'ALL_TOPICS', 'all_topics', 'main']
 
 #: topic -> message type recorded by default: the node's inputs and its prediction (what
-#: ``simulate --bag`` and ``identify`` read); ``--all`` adds ALL_TOPICS' errors and corrections
+#: ``simulate --bag`` and ``identify`` read); ``--all`` adds ALL_TOPICS' answers
 DEFAULT_TOPICS = {
     '/' + REFERENCE_TOPIC: JOINT_STATE,
     '/' + COMMAND_TOPIC: FLOAT64,
     '/' + JOINT_STATES_TOPIC: JOINT_STATE,
     '/' + MEASURED_TOPIC: JOINT_STATE,
 }
-ALL_TOPICS = {
-    **DEFAULT_TOPICS,
-    '/' + private_topic(POSITIONING_ERROR_TOPIC): FLOAT64,
-    '/' + private_topic(WORM_ERROR_TOPIC): FLOAT64,
-    '/' + private_topic(FEEDFORWARD_TOPIC): FLOAT64,
-    '/' + private_topic(COMPENSATED_COMMAND_TOPIC): JOINT_STATE,
-}
+
+
+def all_topics(float64_outputs: bool = False) -> dict[str, str]:
+    """DEFAULT_TOPICS and the node's answers: ``~/compensated_command`` and the scalar
+    answers (stamped JointStates; Float64 for a node with ``node.float64_outputs``)."""
+    answers = {'/' + private_topic(t): FLOAT64 if float64_outputs else JOINT_STATE
+               for t in ANSWER_TOPICS}
+    return {**DEFAULT_TOPICS, **answers,
+            '/' + private_topic(COMPENSATED_COMMAND_TOPIC): JOINT_STATE}
+
+
+ALL_TOPICS = all_topics()
 _CLASSES = {FLOAT64: Float64, JOINT_STATE: JointState}
 
 
@@ -121,8 +120,11 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     p.add_argument('-o', '--output', required=True, help='bag directory to create')
     p.add_argument('--storage', choices=('sqlite3', 'mcap'), default='mcap',
                    help='default: %(default)s')
-    p.add_argument('--all', action='store_true', help='also the errors, the feed-forward '
-                   'and the compensated command')
+    p.add_argument('--all', action='store_true', help='also the node\'s answers: the '
+                   'errors, the feed-forward, the back-drive margin and the compensated '
+                   'command')
+    p.add_argument('--float64-outputs', action='store_true', help='with --all: the node '
+                   'publishes its scalar answers as Float64 (node.float64_outputs)')
     p.add_argument('--topic', action='append', default=[], metavar='NAME:TYPE',
                    help='record NAME (TYPE Float64 or JointState) instead of the defaults '
                    '(repeatable)')
@@ -137,7 +139,7 @@ def main(args: list[str] | None = None) -> int:
     from rclpy.utilities import remove_ros_args
     argv = sys.argv if args is None else args
     opts = _parse(remove_ros_args(args=argv)[1:])
-    topics = ALL_TOPICS if opts.all else None
+    topics = all_topics(opts.float64_outputs) if opts.all else None
     if opts.topic:
         kinds = {'float64': FLOAT64, 'jointstate': JOINT_STATE, FLOAT64.lower(): FLOAT64,
                  JOINT_STATE.lower(): JOINT_STATE}
@@ -169,8 +171,10 @@ def main(args: list[str] | None = None) -> int:
             node.close()
             counts = ', '.join(f'{k} {v}' for k, v in node.counts.items() if v) or 'nothing'
             print(f'bag_recorder: wrote {opts.output}: {counts}', flush=True)
-            node.destroy_node()
-        rclpy.try_shutdown()
+        with teardown_deadline():       # Fast DDS can hang in it (.teardown)
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
     return 0
 
 

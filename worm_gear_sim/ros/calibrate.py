@@ -2,36 +2,11 @@
 # Licensed under the Apache License, Version 2.0
 """``worm_gear_sim_calibrate``: calibrate a running node against its drive in one command.
 
-    worm_gear_sim_calibrate --fit geometry.flywheel_radius,load.output_viscous_coefficient \\
-        -o fitted.yaml --servo-topic /servo/worm_angle_reference \\
-        [--measured-topic measured_joint_states] [--node /worm_gear_sim] [--dry-run]
-
-Reads the running node's parameters (its parameter service) as the starting point, designs
-the excitation within the limits (the core's :func:`~worm_gear_sim.identification.calibrate
-.design_excitation`: steps out and back, a small step, a held-out S-curve), streams each
-move to the servo as stamped references (``sensor_msgs/JointState`` on ``--servo-topic``,
-1 kHz, 50 ms ahead of the instants, the worm input joint's name), records the drive's
-encoders (``--measured-topic``, JointState by the node's ``node.joint_names``) between the
-move's first and last stamps, waits for the drive to come to rest before the next move,
-fits and validates with the core's :func:`~worm_gear_sim.identification.calibrate.calibrate`
-and writes the report FITTED.json, the before/after figure FITTED.png and, when accepted,
-FITTED.yaml.  Accepted, the fitted keys are set on the node in one atomic parameter set
-(``set_parameters_atomically``: all or none); not accepted, nothing is applied and the
-previous parameters stay in use.
-
-Before anything moves it asks (the axis, the limits of the motion; ``--yes`` skips the
-question; a stdin that is not a terminal without ``--yes``: one line, exit status 2).  It
-prints the verdict, the compensator settings it recommends and the improvement they predict
-on a sector scan, as ``worm-gear-sim calibrate`` does.
-
-Exit status: 0 accepted (and applied, unless ``--dry-run``); 1 not accepted, the node
-refused the set, or the motion not confirmed; 2 bad arguments, no node, or a drive that did
-not follow (no measured motion, motion unrelated to the command, records that stop, never
-at rest); 130
-interrupted (Ctrl-C, SIGINT) before the fitted set was sent: one line "interrupted;
-nothing applied".  While the set is being applied (one atomic request, at most 30 s)
-SIGINT is ignored, so the answer is always reported.  This module imports only the
-standard library at its top, so the handler is in place before numpy and rclpy load.
+It reads the node's parameters, streams the core's excitation to the servo, records the
+encoders, fits and validates with the core's ``calibrate``, writes FITTED.json, FITTED.png
+and (accepted) FITTED.yaml, and, accepted, sets the fitted keys on the node in one atomic
+parameter set.  Usage and exit statuses: docs/identification.md.  Only the standard library
+is imported at the top, so the SIGINT handler is in place before numpy and rclpy load.
 """
 
 from __future__ import annotations
@@ -44,6 +19,8 @@ import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from .teardown import teardown_deadline
 
 if TYPE_CHECKING:
     import numpy as np
@@ -66,7 +43,7 @@ class CalibrationAborted(Exception):
 
 
 def _args(argv: list[str]) -> argparse.Namespace:
-    from ..cli.calibrate import add_limit_options
+    from ..identification.calibration_options import add_limit_options
     ap = argparse.ArgumentParser(prog=PROG,
                                  description=__doc__.split('\n\n')[0])
     ap.add_argument('--fit', action='append', required=True, metavar='KEY[,KEY...]',
@@ -233,7 +210,7 @@ def _node_config(node: Any, executor: Any, target: str) -> Any:
     from rclpy.parameter import parameter_value_to_python
     from rclpy.parameter_client import AsyncParameterClient
 
-    from ..params import Config, config_from_mapping
+    from ..config.usable import Config, config_from_mapping
     client = AsyncParameterClient(node, target)
     if not client.wait_for_services(timeout_sec=30.0):
         raise CalibrationAborted(f'no node {target} (its parameter services did not answer '
@@ -259,12 +236,12 @@ def _exit_interrupted(signum: int, frame: Any) -> None:
 
 def bad_arguments(opts: argparse.Namespace) -> str | None:
     """The first option out of its range, as one line (None: all valid)."""
-    from ..cli.calibrate import angle_list
-    from ..cli.common import CliError
+    from ..identification.calibration_options import angle_list
+    from ..identification.data import IdentificationError
     try:
         angle_list(opts.measure, '--measure')
         angle_list(opts.outputs, '--outputs')
-    except CliError as exc:
+    except IdentificationError as exc:
         return str(exc)
     if Path(opts.output).suffix.lower() not in ('.yaml', '.yml'):
         return f'-o {opts.output}: the fitted parameter file must end in .yaml'
@@ -315,8 +292,8 @@ def main(argv: list[str] | None = None) -> int:
         import rclpy
         from rclpy.signals import SignalHandlerOptions
 
-        from ..cli import calibrate as _cli  # noqa: F401
         from ..identification import calibrate as _fit  # noqa: F401
+        from ..identification import calibration_report as _report  # noqa: F401
         rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
         try:
             # from here a Ctrl-C unwinds (KeyboardInterrupt): the node is destroyed cleanly
@@ -327,18 +304,21 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_INTERRUPTED
         finally:
             signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C: no traceback
-            rclpy.try_shutdown()
+            with teardown_deadline():   # Fast DDS can hang in it (.teardown)
+                rclpy.try_shutdown()
     finally:
         signal.signal(signal.SIGINT, previous)
 
 
 def _run(opts: argparse.Namespace, argv: list[str] | None) -> int:
-    from ..cli.calibrate import StageBar, limits_of, recommendation, report_calibration
     from ..identification import FitOptions
     from ..identification.calibrate import calibrate
+    from ..identification.calibration_options import limits_of
+    from ..identification.calibration_report import StageBar, report_calibration
     from ..identification.data import IdentificationError
     from ..identification.excitation import design_excitation
-    from ..validation import ConfigError
+    from ..schema.validation import ConfigError
+    from ..studies.recommendation import calibration_recommendation
     keys = [k.strip() for item in opts.fit for k in item.split(',') if k.strip()]
     measure = [o.strip() for o in opts.measure.split(',') if o.strip()]
     out = Path(opts.output)
@@ -366,7 +346,7 @@ def _run(opts: argparse.Namespace, argv: list[str] | None) -> int:
                             options=FitOptions(strategy='robust', serial=opts.serial),
                             outputs=opts.outputs.split(',') if opts.outputs else None,
                             accept_rel=opts.accept, progress=stages)
-            advice = recommendation(res, stages)
+            advice = calibration_recommendation(res, stages)
         except (IdentificationError, ConfigError) as exc:
             raise CalibrationAborted(str(exc)) from None
         finally:
@@ -404,8 +384,9 @@ def _run(opts: argparse.Namespace, argv: list[str] | None) -> int:
         print(f'{PROG}: {exc}; nothing applied', file=sys.stderr)
         return 2
     finally:
-        ex.shutdown()
-        node.destroy_node()
+        with teardown_deadline():       # Fast DDS can hang in it (.teardown)
+            ex.shutdown()
+            node.destroy_node()
 
 
 if __name__ == '__main__':   # pragma: no cover

@@ -1,7 +1,7 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """The node's interface beyond its topic names (those, and the message types, are the core's
-:mod:`worm_gear_sim.topics`, which the bag reader and writer share): the queue depth of the
+:mod:`worm_gear_sim.records.topics`, which the bag reader and writer share): the queue depth of the
 reference stream and the reasons the node rejects input with.  The interface itself is
 described on docs/node.md."""
 

@@ -2,53 +2,12 @@
 # Licensed under the Apache License, Version 2.0
 """ROS 2 node ``worm_gear_sim``: the worm-gear model running in real time beside a servo.
 
-An I/O shell around the core's real-time pipeline
-:class:`~worm_gear_sim.realtime.RealtimePredictor`: this module holds the topics, QoS and
-timers, and each callback hands its message to the core in a line; every number it
-publishes comes from the core (the pipeline drives
-:class:`~worm_gear_sim.dynamics.simulation.Simulator` and the feed-forward
-:class:`~worm_gear_sim.compensation.Compensator`).  Beside it: :mod:`.interface` (topic
-names), :mod:`.params_bridge` and :mod:`.param_updates` (parameters), :mod:`.statuses`
-(/diagnostics), :mod:`.publishers` (the answers' publishers and messages), :mod:`.callbacks`
-(guards, throttled logs, one-joint samples), :mod:`.run` (the process: executor, spin, exit
-codes).  The node owns its parts as members: ``publishing`` (:mod:`.publishers`),
-``adaptation`` (:mod:`.adaptation`: live adaptation, ``~/adapted_parameters``, its
-services), ``trajectories`` (:mod:`.trajectory_bridge`) and the parameter updates.
-
-Interface (SI units, rad; relative, remappable names; docs/node.md):
-
-* ``worm_angle_reference`` (in, sensor_msgs/JointState, reliable, keep last 1000): stamped
-  reference samples, ``header.stamp`` = the instant the sample applies (may be in the
-  future: a preview), ``position[0]`` = theta1_ref; ``name[0]``, when given, must be the
-  worm input joint (``node.joint_names[0]``).  Event-driven: each sample is processed in
-  its callback (``RealtimePredictor.push``); a slow timer only watches for a paused stream.
-* ``~/compensated_command`` (out, JointState, same stamp, theta1_ref + delta) and
-  ``~/feedforward`` (std_msgs/Float64, delta), one per accepted stamped sample;
-* ``worm_angle_command`` (in, std_msgs/Float64): unstamped commands, sampled as
-  ``node.command_timing`` says by a tick timer at ``node.publish_rate_hz``, which runs only
-  while this path is in use (``RealtimePredictor.push_command`` / ``tick``);
-* ``joint_states`` (out, JointState theta1..theta4, rates, shaft torques), stamped with the
-  instant it predicts, plus ``~/positioning_error`` and ``~/worm_error``;
-* ``measured_joint_states`` (in, optional, JointState from the drive's encoders, names of
-  ``node.joint_names``, sensor data QoS): the live model check
-  (:class:`~worm_gear_sim.realtime.model_check.ModelCheck`) publishes ``~/prediction_residual``
-  (JointState, the measurement's stamp, measured - predicted per measured joint) and a
-  ``model check`` status on /diagnostics that turns WARN when a joint's residual RMS over
-  ``node.residual_window`` exceeds its ``node.residual_warn_rms``;
-* ``reference_trajectory`` (in, trajectory_msgs/JointTrajectory of the worm input joint,
-  reliable, keep last 10) and ``~/compensated_trajectory`` (out, the same joint, header
-  and timing, dense at ``node.publish_rate_hz``: reference + correction, meant to be
-  remapped to a joint_trajectory_controller's ``~/joint_trajectory``; :mod:`.trajectory_bridge`,
-  the core's :class:`~worm_gear_sim.trajectory_compensation.TrajectoryCompensator`);
-* ``/diagnostics``: counters of the pipeline and of this node, stale-stream status;
-* every model parameter is a declared ROS parameter (dotted names of
-  :meth:`Config.to_flat_dict`), validated by the core (:meth:`Config.replace`, which proves
-  the set usable); the new pipeline is prepared in a worker thread and swapped in on the
-  executor thread.
-
-Run ``worm_gear_sim_node --ros-args --params-file config/worm_gear_sim.yaml`` (or
-``python -m worm_gear_sim.ros ...``; :mod:`.run`); ``--executor single_threaded``
-overrides the ``node.executor`` parameter.
+:class:`WormGearSimNode`, an I/O shell around the core's ``RealtimePredictor``: topics,
+QoS and timers, each callback handing its message to the core in a line.  It owns its
+parts as members: ``publishing`` (:mod:`.publishers`), ``adaptation`` (:mod:`.adaptation`),
+``trajectories`` (:mod:`.trajectory_bridge`) and the parameter updates
+(:mod:`.param_updates`).  Topics, parameters and diagnostics: docs/node.md; run it with
+``worm_gear_sim_node --ros-args --params-file config/worm_gear_sim.yaml``.
 """
 
 from __future__ import annotations
@@ -63,14 +22,13 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from ..adaptation.warmup import warm_up
+from ..config.usable import Config, config_from_mapping
 from ..dynamics.load import ElasticLimitCheck
 from ..dynamics.modal import StepResolutionWarning
-from ..params import Config, config_from_mapping
 from ..realtime import Output, RealtimePredictor
 from ..realtime.model_check import ModelCheck
-from ..schema import NODE_NAME
-from ..topics import (
-    BACKDRIVE_MARGIN_TOPIC,
+from ..records.topics import (
     COMMAND_TOPIC,
     DIAGNOSTICS_TOPIC,
     LOAD_TORQUE_TOPIC,
@@ -78,7 +36,7 @@ from ..topics import (
     REFERENCE_TOPIC,
     RESIDUAL_TOPIC,
 )
-from ..warmup import warm_up
+from ..schema.sections import NODE_NAME
 from . import diagnostics as diag
 from .adaptation import NodeAdaptation
 from .callbacks import (
@@ -151,7 +109,8 @@ class WormGearSimNode(Node):
         guard_clock_source(self, self._on_bad_clock)
         self._check = ModelCheck.of(cfg.node)
         self._antenna_joint = cfg.node.joint_names[3]
-        self.publishing = PredictionPublishers(self, cfg.node.joint_names, self._publish)
+        self.publishing = PredictionPublishers(self, cfg.node.joint_names, self._publish,
+                                               cfg.node.float64_outputs)
         self._create_monitoring_publishers()
         self._create_subscriptions()
         # trajectories of the worm input joint (a ros2_control joint_trajectory_controller's
@@ -171,12 +130,10 @@ class WormGearSimNode(Node):
         log_ready(self, cfg, self.kernels)
 
     def _create_monitoring_publishers(self) -> None:
-        """/diagnostics, ~/prediction_residual, ~/backdrive_margin and their messages."""
-        qos_state = QoSProfile(depth=10)
+        """/diagnostics, ~/prediction_residual and its message."""
         self._pub_diag = self.create_publisher(diag.DiagnosticArray, DIAGNOSTICS_TOPIC, 1)
-        self._pub_res = self.create_publisher(JointState, RESIDUAL_TOPIC, qos_state)
-        self._pub_margin = self.create_publisher(Float64, BACKDRIVE_MARGIN_TOPIC, qos_state)
-        self._res, self._f_margin = JointState(), Float64()
+        self._pub_res = self.create_publisher(JointState, RESIDUAL_TOPIC, QoSProfile(depth=10))
+        self._res = JointState()
 
     def _create_subscriptions(self) -> None:
         """The inputs: Float64 commands, encoder angles, load torques, stamped references."""
@@ -471,9 +428,7 @@ class WormGearSimNode(Node):
 
     def publish_diagnostics(self) -> None:
         self._params.swap_prepared()
-        if self._pub_margin.get_subscription_count():
-            self._f_margin.data = self.backdrive_margins()[0]
-            self._publish(self._pub_margin, self._f_margin)
+        self.publishing.backdrive_margin(lambda: self.backdrive_margins()[0], self.rt.started)
         self._publish(self._pub_diag, diag.array(self._clock.now().to_msg(),
                                                  self.diagnostic_statuses()))
         if self.adaptation is not None:

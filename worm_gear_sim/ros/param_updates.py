@@ -23,10 +23,11 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from ..adaptation.live import swap_back
+from ..config.usable import Config
 from ..dynamics.load import elastic_load_warning
-from ..params import Config
 from ..realtime import RealtimePredictor
-from ..validation import ConfigError
+from ..schema.validation import ConfigError
 from .params_bridge import coerce_parameter, is_model_parameter, to_core_value
 
 __all__ = ['ParameterUpdates', 'SWAP_POLL_PERIOD']
@@ -60,6 +61,7 @@ class ParameterUpdates:
             max_workers=1, thread_name_prefix='worm_gear_sim_params')
         self._building: concurrent.futures.Future | None = None
         self._running: tuple[Config, tuple] | None = None     # (pipeline's set, names)
+        self._returning: Config | None = None   # the set a reset returns to (swap_back)
         #: the names of the sets accepted since the last swap (a set superseded before it
         #: was swapped in still counts as set)
         self._unswapped: tuple[str, ...] = ()
@@ -150,6 +152,7 @@ class ParameterUpdates:
             self._warn('parameters', f'could not rebuild the parameter set: {exc}')
             return
         self._build(run, self._unswapped)
+        self._returning = run
 
     def _build(self, run: Config, names: tuple) -> None:
         self._running = (run, names)
@@ -169,7 +172,11 @@ class ParameterUpdates:
             assert self._running is not None
             run, names = self._running
             if prepared.config is run:           # else a newer set superseded it
-                self.rt.reconfigure(prepared)
+                if run is self._returning:       # a reset: reseated and blended
+                    swap_back(self.rt, prepared)
+                else:
+                    self.rt.reconfigure(prepared)
+                self._returning = None
                 self._unswapped = ()
                 self._swapped(self.config, names)
                 note = elastic_load_warning(self.rt.model)   # allowed, not plausible

@@ -5,8 +5,8 @@
 Every model parameter is declared under its dotted name (``mesh.stiffness_model``) with a
 ``ParameterDescriptor`` built from the field metadata (description with unit and choices,
 ``FloatingPointRange``/``IntegerRange`` where the core gives lo/hi, ``read_only``).  Values
-are converted back into a :class:`~worm_gear_sim.params.Config` by the core itself
-(:func:`~worm_gear_sim.params.config_from_mapping` / :meth:`Config.replace`), so the node
+are converted back into a :class:`~worm_gear_sim.config.usable.Config` by the core itself
+(:func:`~worm_gear_sim.config.usable.config_from_mapping` / :meth:`Config.replace`), so the node
 validates exactly as the core and the CLI do.
 """
 
@@ -24,11 +24,11 @@ from rcl_interfaces.msg import (
 )
 from rclpy.parameter import Parameter
 
-from ..config_io import ROS_RESERVED, load_config
-from ..params import Config
-from ..schema import SECTIONS
-from ..validation import ConfigError, unknown_name, value_kind
-from ..validation import suggest as suggest_name
+from ..config.files import ROS_RESERVED, load_config
+from ..config.usable import Config
+from ..schema.sections import SECTIONS
+from ..schema.validation import ConfigError, unknown_name, value_kind
+from ..schema.validation import suggest as suggest_name
 
 __all__ = ['parameter_type', 'descriptor_for', 'declare_config', 'to_core_value',
            'coerce_parameter', 'is_model_parameter', 'check_overrides',
@@ -118,7 +118,7 @@ def declare_config(node: Any, defaults: Config) -> dict[str, Any]:
 
 def check_overrides(node: Any) -> None:
     """Parameters given to ``node`` (params file, ``-p``, ``parameter_overrides``) that it
-    does not declare, by the core's rule (:func:`~worm_gear_sim.validation.unknown_name`,
+    does not declare, by the core's rule (:func:`~worm_gear_sim.schema.validation.unknown_name`,
     the one the command line applies to a params file): a misspelt model key, an unknown
     section or a QoS override of a topic it does not have raises :class:`ConfigError`
     naming it, with the closest declared name; a plain name unlike ours (another node's, in
@@ -154,7 +154,7 @@ def coerce_parameter(param: Parameter, declared_type: int) -> Parameter:
     ``--set`` takes it: an integer (or integer array) for a double (array) parameter, an
     integral double for an integer one; any other type is returned unchanged (rclpy
     rejects it).  Params files are strict (the type as written), in the node and in the
-    CLI alike (:func:`~worm_gear_sim.validation.coerce`)."""
+    CLI alike (:func:`~worm_gear_sim.schema.validation.coerce`)."""
     if declared_type == ParameterType.PARAMETER_DOUBLE and \
             param.type_ == Parameter.Type.INTEGER:
         return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))

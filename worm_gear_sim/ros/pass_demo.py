@@ -21,8 +21,11 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+from .teardown import teardown_deadline
 
 __all__ = ['main']
 
@@ -47,24 +50,42 @@ def main(argv: list[str] | None = None) -> int:
         print('pass_demo: --duration in (0, 1200] s, --max-elevation in (0, 90) deg',
               file=sys.stderr)
         return 2
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from trajectory_msgs.msg import JointTrajectory
+    models, sent = _planned_pass(opts)
+    exchanged = _exchange(opts, sent)
+    if exchanged is None:
+        return 1
+    sent, got, answered = exchanged
+    if len(got) < len(sent):
+        print(f'pass_demo: {len(got)} of {len(sent)} trajectories came back', file=sys.stderr)
+        return 1
+    return _report(opts, models, sent, got, answered)
 
-    from ..cli.tracking_pass import pass_table, write_pass
-    from ..pedestal import load_pedestal
-    from ..studies.tracking_pass import evaluate_pass, pass_window, stream_pass
-    from ..topics import PEDESTAL_TRAJECTORY_TOPIC, private_topic
-    from ..trajectory_compensation import TrajectoryCompensator
-    from .pedestal import PEDESTAL_NODE_NAME
-    from .trajectory_bridge import from_message, to_message
 
+def _planned_pass(opts: argparse.Namespace) -> tuple[dict[str, Any], list[Any]]:
+    """The pedestal's drive models and the pass as trajectories to send."""
+    from ..config.pedestal import load_pedestal
+    from ..studies.tracking_pass import pass_window, stream_pass
     drives = load_pedestal(opts.pedestal)
     models = {d.joint: d.config for d in drives}
     az_joint, el_joint = (d.joint for d in drives[:2])
     t, az, el = pass_window(opts.duration, max_elevation=math.radians(opts.max_elevation))
     sent, _ = stream_pass(models, {az_joint: az - az[0], el_joint: el}, t)
+    return models, sent
+
+
+def _exchange(opts: argparse.Namespace, sent: list[Any]
+              ) -> tuple[list[Any], list[Any], float] | None:
+    """Send the pass to the pedestal node, re-stamped a moment ahead on the ROS clock, and
+    collect its answers: (sent, answers, seconds until the last came), or None when no
+    pedestal answers."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from trajectory_msgs.msg import JointTrajectory
+
+    from ..records.topics import PEDESTAL_TRAJECTORY_TOPIC, private_topic
+    from .pedestal import PEDESTAL_NODE_NAME
+    from .trajectory_bridge import to_message
 
     rclpy.init(args=[])
     node = rclpy.create_node('pass_planner')
@@ -91,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
                           opts.timeout):
             print('pass_demo: no pedestal answers (is worm_gear_sim_pedestal running on '
                   'this ROS_DOMAIN_ID?)', file=sys.stderr)
-            return 1
+            return None
         shift = node.get_clock().now().nanoseconds + int(LEAD * 1e9) - sent[0].stamp_ns
         sent = [dataclasses.replace(s, stamp_ns=s.stamp_ns + shift) for s in sent]
         t0 = time.perf_counter()
@@ -100,15 +121,24 @@ def main(argv: list[str] | None = None) -> int:
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(s.stamp_ns, 10**9)
             msg.header.frame_id = 'pedestal'
             pub.publish(msg)
-        ok = spin_until(lambda: len(got) >= len(sent), opts.timeout)
+        spin_until(lambda: len(got) >= len(sent), opts.timeout)
         answered = time.perf_counter() - t0
     finally:
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    if not ok:
-        print(f'pass_demo: {len(got)} of {len(sent)} trajectories came back', file=sys.stderr)
-        return 1
+        with teardown_deadline():       # Fast DDS can hang in it (.teardown)
+            ex.shutdown()
+            node.destroy_node()
+            rclpy.try_shutdown()
+    return sent, got, answered
+
+
+def _report(opts: argparse.Namespace, models: dict[str, Any], sent: list[Any],
+            got: list[Any], answered: float) -> int:
+    """Each answer against its offline twin, the pass's pointing error (table, CSV,
+    figure); the exit status."""
+    from ..joint_trajectory.compensate import TrajectoryCompensator
+    from ..studies.pass_report import pass_table, write_pass
+    from ..studies.tracking_pass import evaluate_pass
+    from .trajectory_bridge import from_message
     received = [from_message(m) for m in got]
     twin = TrajectoryCompensator(models)
     worst = 0.0

@@ -1,17 +1,10 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""A pedestal in one process (``worm_gear_sim_pedestal``): one
-:class:`~.node.WormGearSimNode` per drive of ``config/pedestal.yaml``, each in its own
-namespace with its own parameters (``/azimuth/worm_gear_sim``, ...: every topic, parameter
-and counter of a single-drive node), plus :class:`PedestalNode` (``/pedestal``), which takes
-``/pedestal/reference_trajectory`` (its own ``~/`` topic: a drive node in the root
-namespace listens on ``/reference_trajectory``, and must not take the pedestal's)
-naming any of the drives' worm input joints, splits it by joint,
-compensates each with its drive's live model (parameter sets apply) and publishes the
-merged trajectory, joints in the input's order, on ``/pedestal/compensated_trajectory``
-(to be remapped to the controller's ``joint_trajectory``), and reports its trajectory
-counters on /diagnostics (status ``pedestal: trajectories``).  Why one process with a node
-per drive: docs/pedestal.md.
+"""A pedestal in one process (``worm_gear_sim_pedestal``): one ``WormGearSimNode`` per drive
+of ``config/pedestal.yaml``, each in its own namespace with its own parameters, plus
+:class:`PedestalNode` (``/pedestal``), which splits ``/pedestal/reference_trajectory`` by
+joint, compensates each with its drive's live model and publishes the merged
+``/pedestal/compensated_trajectory``.  docs/pedestal.md.
 """
 
 from __future__ import annotations
@@ -21,8 +14,10 @@ from typing import Any
 
 from rclpy.node import Node
 
-from ..pedestal import load_pedestal
-from ..topics import DIAGNOSTICS_TOPIC, PEDESTAL_TRAJECTORY_TOPIC
+from .._support.guarded_io import resolved_target
+from ..config.pedestal import PARAMS_FILE_KEY, load_pedestal, shared_params_files
+from ..records.topics import DIAGNOSTICS_TOPIC, PEDESTAL_TRAJECTORY_TOPIC
+from ..schema.validation import ConfigError
 from . import diagnostics as diag
 from .callbacks import LogThrottle
 from .node import LOG_THROTTLE_S, WormGearSimNode
@@ -95,6 +90,31 @@ class PedestalNode(Node):
 def build_pedestal(path: str | Path | None = None, **kwargs: Any) -> list[Node]:
     """The drive nodes of the pedestal file ``path`` (namespaces = drive names) and the
     pedestal node after them; ``kwargs`` (e.g. ``context``) go to every node."""
-    drives = [WormGearSimNode(namespace=d.name, defaults=d.config, adaptation=False,
-                              **kwargs) for d in load_pedestal(path)]
+    drives: list[WormGearSimNode] = []
+    try:
+        for d in load_pedestal(path):
+            drives.append(WormGearSimNode(namespace=d.name, defaults=d.config, **kwargs))
+        shared = shared_params_files({n.get_namespace().strip('/'):
+                                      n.config.adaptation.params_file for n in drives})
+        if shared is not None:     # the start's own parameters (-p, --params-file) did it
+            raise ConfigError(PARAMS_FILE_KEY, shared[1])
+    except BaseException:
+        for n in drives:
+            n.destroy_node()
+        raise
+    for n in drives:
+        assert n.adaptation is not None       # every drive node has its adaptation member
+        n.adaptation.file_user = _other_user(n, drives)
     return [*drives, PedestalNode(drives, **kwargs)]
+
+
+def _other_user(node: WormGearSimNode, drives: list[WormGearSimNode]) -> Any:
+    """For ``node``'s adaptation: which other drive's declared ``adaptation.params_file``
+    is the file a path names (its node's name), or None."""
+    def user(path: str) -> str | None:
+        target = resolved_target(path)
+        for d in drives:
+            if d is not node and resolved_target(d.config.adaptation.params_file) == target:
+                return d.get_fully_qualified_name()
+        return None
+    return user

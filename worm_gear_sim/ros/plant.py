@@ -1,45 +1,13 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """A simulated drive as a ROS node: the live stand-in for the real one when the node adapts
-(the wiring only; the plant is the core's :class:`~worm_gear_sim.adaptation.plant.
-EncoderPlant`, the one the offline twin ``worm-gear-sim adapt`` steps).
+(the wiring only; the plant is the core's ``EncoderPlant``, the one the offline twin steps).
 
-    python -m worm_gear_sim.ros.plant --plant PLANT.yaml [--noise RAD]
-        [--encoder-bits N] [--seed N] [--record OUT.npz] [--node-name worm_gear_sim]
-        [--ros-args ...]
+    python -m worm_gear_sim.ros.plant --plant PLANT.yaml [--noise RAD] [--record OUT.npz]
 
-* ``worm_angle_reference`` (sensor_msgs/JointState, in): the servo's stream; its first
-  sample once the plant is connected sets the plant's t = 0 and the worm angle it starts
-  from, at rest under its load (as the twin's plant).  Connected: its encoder publisher
-  matched with ``--subscribers`` readers (the node; the live harness adds itself) and its
-  command subscription with the node's writer, both for READY_SAMPLES references in a row
-  (so no command or encoder sample after t = 0 is lost to a connection still being made;
-  earlier references are counted, ``before_ready``);
-  A reference stamped more than RESTART_BACK_NS before the newest one seen (the clock went
-  back: the live harness's start after its handshake, a restarted simulation) restarts the
-  plant there, as at its first start: at rest under its load, the encoder's noise from its
-  seed again, the record emptied (``restarts`` counted), as the node's pipeline and
-  adaptation restart on the clock going back;
-* ``<node>/compensated_command`` (JointState, in): the node's command theta1_ref + delta for
-  each stamp; the plant is stepped to that stamp with it held (commands not after the last
-  one are counted and dropped; commands stamped before the plant's start wait, up to
-  MAX_EARLY, for a restart that they may belong to, and are counted ``before_start`` when
-  it does not take them);
-* ``measured_joint_states`` (JointState, out, reliable, keep last 1000): the encoder's
-  theta4 (noise, steps) under ``node.joint_names[3]`` of the plant's file, stamped with the
-  command's stamp.  Start the node with ``-p qos_overrides./measured_joint_states.
-  subscription.reliability:=reliable -p qos_overrides./measured_joint_states.subscription.
-  depth:=1000`` so that no encoder sample is lost (its default is the sensor-data profile,
-  best effort, keep last 5).
-
-Start-up errors (a plant file the core refuses, an encoder noise that is not a number >= 0,
-a ``--record`` path where no file can be written, a malformed option): one line on stderr,
-exit code 2, before any ROS entity exists (:mod:`.config_errors`).
-
-``--record``: on exit (SIGINT/SIGTERM) writes OUT.npz with, per command since the last
-(re)start, ``stamp_ns``, ``command``, ``theta4`` (the plant's, without noise) and
-``measured``, plus ``base_ns`` and ``theta1_start`` (the reference it started at) and the
-counters.
+It takes ``worm_angle_reference`` (start and restarts) and the node's
+``~/compensated_command``, and publishes the encoder on ``measured_joint_states`` stamped
+with the command's stamp; start-up errors end it with one line and exit code 2.
 """
 
 from __future__ import annotations
@@ -57,15 +25,21 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 
+from .._support.guarded_io import GuardedFileError, check_write_target
 from ..adaptation.plant import EncoderPlant
-from ..config_io import load_config
-from ..guarded_io import GuardedFileError, check_write_target
-from ..params import Config
-from ..topics import COMPENSATED_COMMAND_TOPIC, MEASURED_TOPIC, REFERENCE_TOPIC, private_topic
-from ..validation import ConfigError
+from ..config.files import load_config
+from ..config.usable import Config
+from ..records.topics import (
+    COMPENSATED_COMMAND_TOPIC,
+    MEASURED_TOPIC,
+    REFERENCE_TOPIC,
+    private_topic,
+)
+from ..schema.validation import ConfigError
 from .callbacks import stamp_ns
 from .config_errors import clean_rcl_message, config_error
 from .interface import REFERENCE_DEPTH
+from .teardown import teardown_deadline
 
 __all__ = ['PlantNode', 'main', 'PLANT_NODE_NAME']
 
@@ -278,8 +252,10 @@ def main(args: list[str] | None = None) -> int:
             if opts.record:
                 node.write_record(Path(opts.record))
             print(f'plant: {node.counters}', flush=True)
-            node.destroy_node()
-        rclpy.try_shutdown()
+        with teardown_deadline():       # Fast DDS can hang in it (.teardown)
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
     return leave(0)
 
 

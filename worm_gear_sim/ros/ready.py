@@ -1,17 +1,17 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """The node's start-up lines: "ready" (once every kernel its configuration runs is compiled
-or loaded, :mod:`worm_gear_sim.warmup`) and the warnings that go with it."""
+or loaded, :mod:`worm_gear_sim.adaptation.warmup`) and the warnings that go with it."""
 
 from __future__ import annotations
 
 from typing import Any
 
+from ..adaptation.warmup import Warmed
+from ..config.usable import Config
 from ..dynamics.load import elastic_load_warning
 from ..dynamics.modal import step_resolution_warning
-from ..params import Config
-from ..topics import COMMAND_TOPIC, REFERENCE_TOPIC
-from ..warmup import Warmed
+from ..records.topics import COMMAND_TOPIC, REFERENCE_TOPIC
 
 __all__ = ['log_ready']
 

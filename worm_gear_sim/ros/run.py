@@ -25,10 +25,11 @@ from rclpy.signals import install_signal_handlers as install_rclpy_signal_handle
 from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
 
-from ..validation import ConfigError
+from ..schema.validation import ConfigError
 from . import signals
 from .config_errors import check_params_files, clean_rcl_message, config_error
 from .node import WormGearSimNode
+from .teardown import teardown_deadline
 
 RCLError = _rclpy_impl.RCLError          # RCLInvalidROSArgsError derives from it
 
@@ -121,7 +122,9 @@ def main(args: list[str] | None = None, pedestal: bool = False) -> int:
         rc = 0
     finally:
         signals.set_phase('stopping')
-        _quietly(rclpy.try_shutdown)
+        with teardown_deadline():
+            _quietly(rclpy.try_shutdown)
+        signals.ignore_from_now()
     return leave(rc)
 
 
@@ -147,7 +150,7 @@ def _run(opts: argparse.Namespace, pedestal: bool = False) -> int:
     # Move everything allocated so far (numba, scipy, rclpy: a large heap) out of the
     # cyclic GC's reach: full collections of it took milliseconds and showed up as missed
     # ticks.  The nodes' warm-up collected the garbage of compiling before they said
-    # "ready" (worm_gear_sim.warmup): another full collection here, after "ready", took
+    # "ready" (worm_gear_sim.adaptation.warmup): another full collection here, after "ready", took
     # 0.6 s with 380 000 objects on a loaded machine.
     gc.freeze()
     for n in nodes:
@@ -172,9 +175,10 @@ def _run(opts: argparse.Namespace, pedestal: bool = False) -> int:
             raise
     finally:
         signals.set_phase('stopping')
-        _quietly(executor.shutdown, 1.0)
-        for n in nodes:
-            _quietly(n.destroy_node)
+        with teardown_deadline():       # Fast DDS can hang in it (.teardown)
+            _quietly(executor.shutdown, 1.0)
+            for n in nodes:
+                _quietly(n.destroy_node)
     return 0
 
 

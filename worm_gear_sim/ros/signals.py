@@ -1,25 +1,12 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """The node process's signal handling in phases (SIGINT and SIGTERM); standard library only,
-so that :func:`worm_gear_sim.ros.startup.node_main` installs it before the heavy imports.
+so that ``startup.node_main`` installs it before the heavy imports.
 
-* ``starting`` (imports, argument and params-file checks, before ``rclpy.init``): flush
-  stdout/stderr and end the process at once with exit code 0 (``os._exit``).  Nothing needs
-  cleaning up yet, and unwinding instead (raising ``SystemExit``) can interrupt the
-  initialisation of a C extension module (numba, llvmlite, rclpy's pybind11 module) whose
-  half-built state the interpreter then frees at exit: "free(): double free detected",
-  SIGABRT, seen once in 30 signals during the imports under CI load;
-* ``init`` (``rclpy.init`` and the node's construction): record the signal only.  rclpy is
-  initialised without its signal handlers, so nothing shuts the context down under the
-  construction; :mod:`.run` checks :func:`signalled` when the node is built and ends with
-  exit code 0 (node destroyed, ``rclpy.try_shutdown``);
-* ``ros`` (the node is built; :mod:`.run` then installs rclpy's handlers in front of this
-  one): nothing here.  rclpy's handler shuts the context down and wakes the executor; the
-  spin loop ends on that (an exception raised here could cross a C++ frame of rclpy's
-  executor, which aborts the process);
-* ``stopping``: ignored (a second Ctrl-C must not interrupt the clean-up).
-
-:mod:`.startup` installs the handlers, :mod:`.run` moves the phase on.
+The phases: ``starting`` (exit 0 at once, no unwinding through half-imported extension
+modules), ``init`` (the signal recorded, :func:`signalled`), ``ros`` (rclpy's handlers in
+front), ``stopping`` (ignored).  :mod:`.startup` installs the handlers, :mod:`.run` moves
+the phase on.
 """
 
 from __future__ import annotations
@@ -29,7 +16,7 @@ import signal
 import sys
 from typing import Any
 
-__all__ = ['install_signal_handlers', 'set_phase', 'phase', 'signalled']
+__all__ = ['install_signal_handlers', 'set_phase', 'phase', 'signalled', 'ignore_from_now']
 
 PHASES = ('starting', 'init', 'ros', 'stopping')
 
@@ -74,3 +61,11 @@ def phase() -> str:
 def signalled() -> bool:
     """True once SIGINT/SIGTERM arrived before the ``ros`` phase (during ``rclpy.init``)."""
     return bool(_state.get('signalled'))
+
+
+def ignore_from_now() -> None:
+    """The process is ending (rclpy shut down): SIGINT and SIGTERM ignored from now on, by
+    the OS, through the interpreter's exit."""
+    _state['phase'] = 'stopping'
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)

@@ -14,7 +14,7 @@ from typing import Any
 
 from ..realtime import RealtimePredictor
 from ..realtime.model_check import ModelCheck
-from ..topics import COMMAND_TOPIC, REFERENCE_TOPIC
+from ..records.topics import COMMAND_TOPIC, REFERENCE_TOPIC
 from . import diagnostics as diag
 from .interface import NODE_REJECT_REASONS, REJECT_REASONS
 

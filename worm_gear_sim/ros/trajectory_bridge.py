@@ -1,29 +1,13 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """``reference_trajectory`` in, ``~/compensated_trajectory`` out: the I/O of the core's
-:class:`~worm_gear_sim.trajectory_compensation.TrajectoryCompensator` for the drives of a
-node (one drive: :class:`~.node.WormGearSimNode`; several: :mod:`.pedestal`, on
-``~/reference_trajectory``).
+``TrajectoryCompensator`` for the drives of a node (one drive: the node; several:
+:mod:`.pedestal`).
 
-A ``trajectory_msgs/JointTrajectory`` is turned into the core's
-:class:`~worm_gear_sim.trajectory_compensation.Trajectory` in the callback (one line per
-rule broken, counted as ``rejected_trajectory_<reason>``, nothing forwarded) and queued;
-one worker thread takes the queue in arrival order.  A queued trajectory that a later one
-replaces before it could run (every joint named again by a later trajectory that starts by
-now) is dropped before it is compensated (``trajectories_superseded``), so a flood of
-replacements costs one compensation per pass of the worker, not one each.  The worker
-compensates and publishes the dense trajectory with the input's joint names, header and
-timing, serialized by :mod:`.trajectory_cdr` (numpy, milliseconds for 100 000 points)
-instead of a message object of 100 000 points, whose construction and conversion held the
-interpreter lock for 120-680 ms and stalled the per-sample path.  A trajectory of
-:data:`PROCESS_POINTS` compensated points or more is compensated in a worker process,
-started by the first such trajectory (not with the node: most nodes never need it); the
-same core function, so the same numbers.  The per-sample correction loop of a 100 s
-trajectory takes the interpreter ~1.5 s, and sharing the lock with the executor for that
-long left samples too_old.  While the thread works the interpreter's switch interval is
-lowered (``realtime.switch_interval``, shared with the adaptation's worker), so the executor
-waits less for the lock.
-:func:`trajectory_status` is its /diagnostics status.
+A message is checked in the callback and queued; one worker thread compensates in
+arrival order (superseded ones dropped), long trajectories in a worker process, and
+publishes through :mod:`.trajectory_cdr`.  :func:`trajectory_status` is its /diagnostics
+status.  docs/pedestal.md.
 """
 
 from __future__ import annotations
@@ -43,9 +27,7 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from ..realtime.switch_interval import short_switch_interval
-from ..topics import COMPENSATED_TRAJECTORY_TOPIC, TRAJECTORY_TOPIC
-from ..trajectory_compensation import (
+from ..joint_trajectory.compensate import (
     TRAJECTORY_REJECT_REASONS,
     JointTrajectoryData,
     TrajectoryCompensator,
@@ -53,6 +35,8 @@ from ..trajectory_compensation import (
     TrajectoryResult,
     compensate_trajectory,
 )
+from ..realtime.switch_interval import short_switch_interval
+from ..records.topics import COMPENSATED_TRAJECTORY_TOPIC, TRAJECTORY_TOPIC
 from . import diagnostics as diag
 from .trajectory_cdr import parse_trajectory, serialize_trajectory
 

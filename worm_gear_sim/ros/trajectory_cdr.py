@@ -7,7 +7,7 @@ points, where building the message object point by point and converting it held 
 interpreter lock for 120-680 ms.  Every point has the same fields, so
 a point's layout depends only on its start modulo 8 (a cycle of one or two points);
 deserialized, :func:`serialize_trajectory`'s bytes are the message object
-(test_hostile_node.py).
+(test/ros/test_hostile_node.py).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ..trajectory_compensation import JointTrajectoryData
+from ..joint_trajectory.compensate import JointTrajectoryData
 
 __all__ = ['serialize_trajectory', 'parse_trajectory']
 

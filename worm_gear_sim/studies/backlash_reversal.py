@@ -1,29 +1,12 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """The feed-forward across the mesh play, measured on reversal moves (``worm-gear-sim sweep
-reversal``; docs/compensation.md, "Across the mesh play").
+reversal``).
 
-Each case is a reversal move (:func:`~.compensation_eval.radar_slew_scenario`: track, reverse
-at the acceleration limit, track back, stop, hold) on the base drive with
-``REVERSAL_PLAY_ARCMIN`` of play and ``REVERSAL_DAMPING`` (3 % modal damping: an undamped
-drive rings for seconds after each impact of the teeth, and the figure would then measure
-the damping, not the compensation), under one of ``REVERSAL_LOADS`` (``drag``: the antenna's
-bearing drag only, so the mesh changes flank where the reversal starts; ``load``: also a
-steady 2 N m, so the teeth change flank twice, to the coast flank at the start of the
-reversal and back at its end).  Series, on the same plant:
-
-* ``uncompensated``; ``blind``: today's feed-forward without the backlash inverse
-  (``compensation.backlash_inverse: false``); ``compensated``: with it;
-* ``play -30%`` / ``play +30%``: the compensator designed with a play 30 % smaller / larger
-  than the plant's;
-* ``no play``: the same drive without play, compensated (the floor the play is measured
-  against).
-
-Each with the causal filter and with a centring preview (:func:`centring_preview`: the
-reference streamed half the smoothing kernel ahead, so the flank change is decided when the
-move's torque changes sign, not after).  Metric: RMS of the antenna error theta4 - theta1_ref
-l_w / r_g over the reversal window (:func:`reversal_window`: 50 ms before the reversal starts
-to 100 ms after it ends) and the improvement uncompensated / series.
+Reversal moves on the base drive with play and 3 % modal damping, under ``REVERSAL_LOADS``;
+series uncompensated, ``blind``, compensated, with the play mis-sized by 30 %, and without
+play; the RMS antenna error over :func:`reversal_window`.  docs/compensation.md ("Across
+the mesh play").
 """
 
 from __future__ import annotations
@@ -34,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from ..compensation import centring_preview
-from ..dynamics.batch import map_like_serial
-from ..params import Config
+from ..compensation.streaming import centring_preview
+from ..config.usable import Config
+from ..parallel.threads import map_like_serial
 from .compensation_eval import CompensationRun, Scenario, radar_slew_scenario, run_scenario
 
 __all__ = ['ARCMIN', 'REVERSAL_PLAY_ARCMIN', 'REVERSAL_DAMPING', 'REVERSAL_LOADS',
@@ -116,7 +99,7 @@ def reversal_rows(base: Config, moves: Sequence[str] = tuple(REVERSAL_MOVES),
                   previews: Sequence[bool] = (False, True),
                   workers: int | None = None) -> list[dict]:
     """Rows of the whole study: every move x load x preview case, the cases on ``workers``
-    threads (:func:`~worm_gear_sim.dynamics.batch.map_like_serial`; 1: in order in this
+    threads (:func:`~worm_gear_sim.parallel.threads.map_like_serial`; 1: in order in this
     thread), the same rows either way."""
     cases = [(m, ld, pv) for m in moves for ld in loads for pv in previews]
     per_case = map_like_serial(lambda c: reversal_case(base, *c), cases, workers=workers)

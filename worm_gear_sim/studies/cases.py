@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..params import Config
+from ..config.usable import Config
 
 __all__ = ['Case', 'Study', 'PAPER_STUDIES', 'paper_study', 'param_study', 'module_overrides',
            'parse_values', 'envelope_rows', 'ENVELOPE_COLUMNS', 'COMPARE_SEP']

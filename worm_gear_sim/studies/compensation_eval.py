@@ -2,7 +2,7 @@
 # Licensed under the Apache License, Version 2.0
 """Evaluation of the feed-forward compensator: reference scenarios (the paper's 18-step move,
 a radar slew) streamed at the node's command rate, runs of a (possibly detuned) plant with
-and without :class:`~worm_gear_sim.compensation.Compensator`, and the move metrics
+and without :class:`~worm_gear_sim.compensation.streaming.Compensator`, and the move metrics
 (residual oscillation, settling time, static error, constant-rate tracking error)."""
 
 from __future__ import annotations
@@ -13,13 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from ..derived import derive
+from ..config.usable import Config
+from ..dynamics.derived import derive
 from ..dynamics.load import LoadSignal
 from ..dynamics.modal import modes
 from ..dynamics.model import DriveModel
 from ..dynamics.profiles import SampledProfile, TrapezoidalProfile, motion_span
 from ..dynamics.simulation import simulate
-from ..params import Config
 from ..realtime import feedforward_series
 
 __all__ = ['Scenario', 'paper_step_scenario', 'radar_slew_scenario', 'run_scenario',
@@ -97,8 +97,7 @@ def paper_step_scenario(cfg: Config, start: float = 0.01, t_end: float = 0.5,
     T, ta, A = inp.move_time, inp.accel_time, inp.target_angle
     move = TrapezoidalProfile(A, T, ta, t0=start)
     times = _sample_times(t_end, period)
-    return Scenario('paper_18_step', times, move.theta1(times), start + T,
-                    ((start + ta, start + T - ta),),
+    return Scenario('paper_18_step', times, move.theta1(times), start + T, (move.cruise,),
                     f'18-step move {A:.6g} rad in {T * 1e3:g} ms ({ta * 1e3:g} ms ramps) '
                     f'from t = {start * 1e3:g} ms')
 

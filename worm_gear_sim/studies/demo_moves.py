@@ -14,17 +14,18 @@ ROS side (streaming, subscriptions) is :mod:`worm_gear_sim.ros.demo_commander`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..config.usable import Config
 from ..dynamics.modal import modes
 from ..dynamics.model import DriveModel
 from ..dynamics.profiles import TrapezoidalProfile
-from ..params import Config
-from .compensation_eval import Scenario, move_metrics, run_scenario
+from .compensation_eval import SETTLE_HOLD, Scenario, move_metrics, run_scenario
 
 __all__ = ['PAPER_LEAD', 'command_pattern', 'Segments', 'pattern_segments', 'MoveSummary',
            'MoveTracker', 'offline_moves', 'first_mode_hz', 'DemoPlan', 'demo_plan']
@@ -61,21 +62,27 @@ def command_pattern(name: str, cfg: Config, move_period: float = 0.5,
 class Segments:
     """Moves of a pattern: move k spans [first + k period, first + (k+1) period); its
     reference moves until ``motion`` after its start, then rests (paper) or keeps a
-    constant rate (slew, ``constant_rate``)."""
+    constant rate (slew, ``constant_rate``).  ``rate_spans``: the intervals, from the move's
+    start, where the reference moves at a constant rate (the tracking RMS is taken there,
+    as the offline evaluation does)."""
 
     first: float
     period: float
     motion: float
     constant_rate: bool
     labels: tuple[str, str]
+    rate_spans: tuple[tuple[float, float], ...] = ()
 
 
 def pattern_segments(name: str, cfg: Config, move_period: float = 0.5,
                      slew_period: float = 2.0) -> Segments:
     if name == 'paper':
-        return Segments(PAPER_LEAD, move_period, cfg.input.move_time, False, ('fwd', 'back'))
+        inp = cfg.input
+        cruise = TrapezoidalProfile(inp.target_angle, inp.move_time, inp.accel_time).cruise
+        return Segments(PAPER_LEAD, move_period, inp.move_time, False, ('fwd', 'back'),
+                        (cruise,))
     if name == 'slew':
-        return Segments(0.0, slew_period, 0.0, True, ('up', 'down'))
+        return Segments(0.0, slew_period, 0.0, True, ('up', 'down'), ((0.0, slew_period),))
     raise ValueError(f'unknown pattern {name!r} (paper | slew)')
 
 
@@ -86,9 +93,19 @@ class MoveSummary:
     start: float                  # s of pattern time
     peak: float                   # max |e| over the move [rad]
     ringing: float                # max |e - static| once the applied command rests [rad]
-    settling: float               # s from the end of the motion into +-10 urad (inf: never)
-    tracking_rms: float           # rad, slew legs (nan for paper moves)
+    settling: float               # s from the end of the motion into +-10 urad (inf: not
+    #                               within the move, see settling_bound)
+    tracking_rms: float           # rad: RMS of e where the reference moves at a constant
+    #                               rate (Segments.rate_spans)
     samples: int
+    watched: float = math.nan     # s from the end of the motion to the move's last sample
+
+    @property
+    def settling_bound(self) -> float:
+        """The settling time, or, when the move did not settle (``settling`` inf), the
+        lower bound it is known to exceed: the error still left the band within the last
+        SETTLE_HOLD of the ``watched`` span."""
+        return self.settling if math.isfinite(self.settling) else self.watched - SETTLE_HOLD
 
 
 class MoveTracker:
@@ -111,6 +128,12 @@ class MoveTracker:
         self._moving: dict[int, float] = {}     # move -> last instant its command moved
         self._last_cmd: tuple[float, float] | None = None
         self.use_commands = True                # False: the command is the reference
+
+    @property
+    def next_index(self) -> int:
+        """The move whose samples are being collected: every move before it is closed (in
+        ``moves``, or counted ``incomplete``)."""
+        return self._k
 
     def _bounds(self, k: int) -> tuple[float, float]:
         a = self.seg.first + k * self.seg.period
@@ -155,15 +178,14 @@ class MoveTracker:
         tr = t - a
         seg = self.seg
         sc = Scenario(name='demo move', times=tr, theta1_ref=np.zeros_like(tr),
-                      move_end=seg.motion,
-                      constant_rate=((seg.motion, seg.period),) if seg.constant_rate else ())
+                      move_end=seg.motion, constant_rate=seg.rate_spans)
         command_end = seg.motion
         if moved is not None and self.use_commands and not seg.constant_rate:
             command_end = min(max(moved - a, seg.motion), float(tr[-1]))
         m = move_metrics(tr, e, sc, self.mode_hz, command_end)
         summary = MoveSummary(self._k, seg.labels[self._k % 2], a, float(np.max(np.abs(e))),
                               m['residual_peak'], m['settling_time'], m['tracking_rms'],
-                              int(t.size))
+                              int(t.size), float(tr[-1]) - seg.motion)
         self.moves.append(summary)
         return summary
 

@@ -1,31 +1,31 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """Running study cases: one case in this process, many cases serially, on threads in this
-process (the default: :func:`worm_gear_sim.dynamics.batch.map_batch`) or on Dask (a remote
+process (the default: :func:`worm_gear_sim.parallel.threads.map_batch`) or on Dask (a remote
 scheduler, a given Client, or a LocalCluster of processes)."""
 
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from ..dynamics.batch import map_like_serial
+from ..config.usable import Config, config_from_mapping
 from ..dynamics.modal import amplitude_time_step, static_equilibrium
 from ..dynamics.model import DriveModel
 from ..dynamics.profiles import Profile, make_profile
 from ..dynamics.simulation import Simulator
 from ..dynamics.stepping import SimulationError
-from ..params import Config, config_from_mapping
+from ..parallel.cluster import dask_client, warm_worker
+from ..parallel.threads import map_like_serial
 from .cases import Case
 from .metrics import move_end_time, oscillation_metrics
 
-__all__ = ['run_case', 'run_cases', 'case_config', 'warm_up', 'local_cluster_client',
-           'WORKER_ENV', 'ENGINES', 'DEFAULT_ENGINE', 'ENGINE_TEXT', 'CASE_ERRORS', 'case_error']
+__all__ = ['run_case', 'run_cases', 'case_config', 'ENGINES', 'DEFAULT_ENGINE', 'ENGINE_TEXT',
+           'CASE_ERRORS', 'case_error']
 
 #: Engines of :func:`run_cases` on this machine: threads of this process or a Dask
 #: LocalCluster of processes; the default is :data:`DEFAULT_ENGINE`.
@@ -137,7 +137,7 @@ def _run_chunk(base: Mapping[str, Any], items: Sequence[tuple]) -> list[dict[str
 def _progress(total: int, enabled: bool, desc: str):
     if not enabled:
         return None
-    from ..progress import progress_bar
+    from .._support.progress import progress_bar
     return progress_bar(total, desc, 'case')
 
 
@@ -153,7 +153,7 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
     a given dask.distributed Client; ``scheduler`` connects to a running Dask scheduler
     (``tcp://host:8786``: many machines); otherwise ``engine='threads'`` (default) runs the
     cases on ``workers`` threads of this process (default: all cores;
-    :func:`~worm_gear_sim.dynamics.batch.map_batch`: the kernel releases the interpreter lock,
+    :func:`~worm_gear_sim.parallel.threads.map_batch`: the kernel releases the interpreter lock,
     nothing starts up, nothing is pickled) and ``engine='dask'`` starts a Dask LocalCluster
     of ``workers`` processes, one thread each.  On Dask the base config goes to every worker
     once (as a plain dict); each task carries a chunk of cases (their overrides; default
@@ -192,28 +192,43 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
             map_like_serial(lambda it: _run_payload((it[0], base_map, *it[1:])), items,
                             workers=workers, on_result=lambda _, r: done(r))
         else:
-            with _dask_client(client, scheduler, workers) as cl:
-                from distributed import as_completed
-                n_workers = len(cl.run(warm_up))
-                if n_workers == 0:
-                    raise ConnectionError('the Dask cluster has no workers')
-                size = chunk_size if chunk_size else \
-                    max(1, min(16, math.ceil(len(items) / (16 * n_workers))))
-                chunks = [items[k:k + size] for k in range(0, len(items), size)]
-                base_future = cl.scatter(base_map, broadcast=True)
-                futures = [cl.submit(_run_chunk, base_future, ch, pure=False)
-                           for ch in chunks]
-                start_bar()
-                try:
-                    for fut in as_completed(futures):
-                        for r in fut.result():
-                            done(r)
-                finally:
-                    for f in futures:
-                        f.cancel()
+            _run_on_dask(client, scheduler, workers, chunk_size, base_map, items,
+                         start_bar, done)
     finally:
         if bar:
             bar.close()
+    return _case_rows(cases, results)
+
+
+def _run_on_dask(client: Any, scheduler: str | None, workers: int | None,
+                 chunk_size: int | None, base_map: dict[str, Any], items: list[tuple],
+                 start_bar: Callable[[], None], done: Callable[[dict], None]) -> None:
+    """The cases on Dask: the base config to every worker once, the cases in chunks;
+    ``done`` gets each result as it comes."""
+    with dask_client(client, scheduler, workers) as cl:
+        from distributed import as_completed
+        n_workers = len(cl.run(warm_worker))
+        if n_workers == 0:
+            raise ConnectionError('the Dask cluster has no workers')
+        size = chunk_size if chunk_size else \
+            max(1, min(16, math.ceil(len(items) / (16 * n_workers))))
+        chunks = [items[k:k + size] for k in range(0, len(items), size)]
+        base_future = cl.scatter(base_map, broadcast=True)
+        futures = [cl.submit(_run_chunk, base_future, ch, pure=False)
+                   for ch in chunks]
+        start_bar()
+        try:
+            for fut in as_completed(futures):
+                for r in fut.result():
+                    done(r)
+        finally:
+            for f in futures:
+                f.cancel()
+
+
+def _case_rows(cases: Sequence[Case], results: Sequence[dict[str, Any] | None]
+               ) -> list[dict[str, Any]]:
+    """One row per case: its study, series, x, label, results and overrides."""
     out = []
     for c, r in zip(cases, results):
         assert r is not None
@@ -222,72 +237,3 @@ def run_cases(base: Config, cases: Sequence[Case], *, workers: int | None = None
         row['overrides'] = dict(c.overrides)
         out.append(row)
     return out
-
-
-# Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in its workers, which also switches off glibc's
-# dynamic mmap threshold: every ~1 MB record array of a case is then mmap'ed and unmapped
-# (8000 page faults, ~10 ms of system time per 0.5 s case, a third of the kernel time).
-# A fixed 16 MB mmap threshold keeps them in the heap.  Set the same variables on the
-# workers of a remote cluster (see docs/studies.md).
-WORKER_ENV = {
-    'distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_': 1 << 24,
-    'distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_': 1 << 28,
-}
-
-
-def warm_up() -> float:
-    """Import the model and load its compiled (cached) kernels in this process; returns the
-    seconds it took.  Run on every Dask worker before the cases so that the first case of each
-    worker does not pay for imports and numba cache loading."""
-    t0 = time.perf_counter()
-    cfg = Config()
-    model = DriveModel(cfg)
-    Simulator(model).run(make_profile(cfg.input), 10 * cfg.integrator.time_step)
-    static_equilibrium(model, 0.0)
-    return time.perf_counter() - t0
-
-
-class _dask_client:
-    """Context manager yielding a Client: the given one, a remote scheduler, or a
-    LocalCluster of ``workers`` processes (closed on exit)."""
-
-    def __init__(self, client: Any, scheduler: str | None, workers: int | None):
-        self.client, self.scheduler, self.workers = client, scheduler, workers
-        self._own: list[Any] = []
-
-    def __enter__(self):
-        if self.client is not None:
-            return self.client
-        import logging
-
-        from distributed import Client, LocalCluster
-        if self.scheduler:
-            try:
-                cl = Client(self.scheduler, timeout='5s')
-            except OSError as exc:
-                raise ConnectionError(f'cannot reach Dask scheduler {self.scheduler}: '
-                                      f'{exc}') from None
-            self._own.append(cl)
-            return cl
-        import dask
-        n = self.workers or os.cpu_count() or 1
-        with dask.config.set(WORKER_ENV):
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=logging.ERROR)
-        self._own.append(cluster)
-        cl = Client(cluster)
-        self._own.insert(0, cl)
-        return cl
-
-    def __exit__(self, *exc):
-        for obj in self._own:
-            try:
-                obj.close()
-            except Exception:  # noqa: BLE001 - best effort shutdown
-                pass
-        return False
-
-
-def local_cluster_client(workers: int | None = None):
-    """A started LocalCluster client (caller closes client and cluster); for benchmarks."""
-    return _dask_client(None, None, workers)

@@ -8,9 +8,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from ..config.usable import Config
 from ..dynamics.profiles import Profile
 from ..dynamics.trajectory import Trajectory
-from ..params import Config
 from .engine import case_config, run_case
 from .metrics import zero_crossing_frequency
 

@@ -1,27 +1,9 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""Oscillation metrics of one run and the CSV rows of a study.
+"""Oscillation metrics of one run and the rows of a study: as CSV, as a text table.
 
-Definitions used everywhere (docs/studies.md):
-
-Definitions used everywhere (docs/studies.md):
-
-* **end of the move** ``t_move``: the time after which the command theta1 no longer changes
-  (start_time + move_time for ramp/trapezoidal/s-curve, start_time for a step, the last
-  change of a sampled series); the post-move window starts at the first recorded step at
-  or after ``t_move`` at which theta1 has its final value.
-* **equilibrium** ``theta_eq``: the static equilibrium of the drive at the final command
-  (:func:`worm_gear_sim.dynamics.modal.static_equilibrium`; at rest the regularised friction is
-  zero, so this is the rest point the ringing decays to; it includes shaft/mesh wind-up from an
-  external load, if any).
-* **oscillation amplitude** of theta_i: ``max |theta_i(t) - theta_i_eq|`` over
-  ``t >= t_move`` (every integration step is inspected, not a decimated record).
-  ``half_pp`` is half the peak-to-peak range over the same window (independent of the
-  reference level), ``mean`` the time average over it.
-* **dynamic error** (whole run): ``max |theta2 - theta1|`` and ``max |theta4 - theta1 l_w/r_g|``.
-* **frequency**: the dominant spectral peak of theta_i - mean after the move (Hann window,
-  zero padding x2, parabolic interpolation of the log magnitude); for theta4 also the
-  zero-crossing rate of theta4 - mean.
+The end of the move, the equilibrium, the oscillation amplitude, the dynamic error and the
+frequency, as defined in docs/studies.md.
 """
 
 from __future__ import annotations
@@ -32,14 +14,15 @@ from typing import Any
 
 import numpy as np
 
+from ..config.usable import Config
 from ..dynamics.modal import static_equilibrium
 from ..dynamics.model import DriveModel
 from ..dynamics.profiles import Profile, SampledProfile, motion_span
+from ..dynamics.spectrum import dominant_frequency
 from ..dynamics.trajectory import Trajectory
-from ..params import Config
 
 __all__ = ['METRIC_COLUMNS', 'move_end_time', 'equilibrium', 'oscillation_metrics',
-           'dominant_frequency', 'zero_crossing_frequency', 'rows_to_csv']
+           'zero_crossing_frequency', 'rows_to_csv', 'fmt_table']
 
 
 def move_end_time(cfg: Config, profile: Profile | None = None) -> float:
@@ -57,30 +40,6 @@ def equilibrium(model: DriveModel | Config, theta1_final: float) -> np.ndarray:
     """Static equilibrium (theta2, theta3, theta4) of ``model`` (a :class:`DriveModel` or a
     Config) at the final command."""
     return static_equilibrium(DriveModel.of(model), theta1_final)
-
-
-def dominant_frequency(t: np.ndarray, y: np.ndarray, f_min: float = 1.0) -> float:
-    """Frequency [Hz] of the largest spectral peak of y - mean (Hann window, zero
-    padding x2, parabolic interpolation of the log magnitude). NaN when the series is too
-    short or flat."""
-    n = y.size
-    if n < 16:
-        return math.nan
-    dt = float(t[1] - t[0])
-    yy = (y - y.mean()) * np.hanning(n)
-    if not np.any(yy):
-        return math.nan
-    nfft = 1 << int(math.ceil(math.log2(2 * n)))
-    mag = np.abs(np.fft.rfft(yy, nfft))
-    freqs = np.fft.rfftfreq(nfft, dt)
-    mag[freqs < f_min] = 0.0
-    k = int(np.argmax(mag))
-    if 0 < k < mag.size - 1 and mag[k - 1] > 0 and mag[k + 1] > 0:
-        a, b, c = np.log(mag[k - 1]), np.log(mag[k]), np.log(mag[k + 1])
-        den = a - 2 * b + c
-        off = 0.5 * (a - c) / den if den != 0 else 0.0
-        return float((k + off) * (freqs[1] - freqs[0]))
-    return float(freqs[k])
 
 
 def zero_crossing_frequency(t: np.ndarray, y: np.ndarray) -> float:
@@ -143,6 +102,21 @@ def rows_to_csv(rows: Iterable[Mapping[str, Any]], columns: Sequence[str], path)
         w.writerow(columns)
         for r in rows:
             w.writerow([_fmt(r.get(c, '')) for c in columns])
+
+
+def fmt_table(rows: Sequence[Mapping[str, Any]], cols: Sequence[tuple[str, str, str]]) -> str:
+    """A right-aligned text table: ``cols`` are (key, heading, float format)."""
+    head = [h for _, h, _ in cols]
+    body = []
+    for r in rows:
+        line = []
+        for key, _, fmt in cols:
+            v = r.get(key, '')
+            line.append(format(v, fmt) if isinstance(v, float) else str(v))
+        body.append(line)
+    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
+    fmt_line = lambda cells: '  '.join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
+    return '\n'.join([fmt_line(head)] + [fmt_line(b) for b in body])
 
 
 def _fmt(v: Any) -> str:

@@ -1,33 +1,12 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """What the feed-forward gains on a drive with play, known or not (``worm-gear-sim sweep
-crossing`` and ``sweep mismatch``; docs/compensation.md, "A soft crossing of the play" and
-"On a drive that differs from the model").
+crossing`` and ``sweep mismatch``).
 
-Moves (known trajectories, streamed at ``node.publish_rate_hz``):
-
-* :func:`sector_scan`: the antenna sweeps a sector, theta4 = -A cos(2 pi t / T) (from rest at
-  one edge), ±5° with a 4 s period by default, for one period;
-* :func:`slew_reversals`: the worm slews at ±``rate`` (2 rad/s by default), reversing at
-  ``accel`` between cruises: out, back, out again, stop, hold.
-
-:func:`benefit` compensates a move with a model (the known-trajectory path of
-:mod:`worm_gear_sim.trajectory_compensation`: centring preview and, with play, the soft crossing of
-:mod:`worm_gear_sim.play_crossing`), runs the drive on the raw and on the compensated
-command, and returns the antenna error RMS over the whole move (start to end of the hold)
-and the improvement raw / compensated.
-
-Studies:
-
-* :func:`crossing_rows`: perfect knowledge on a grid of (play, load torque, drag): the
-  sector scan uncompensated, with the causal streaming feed-forward (no preview: a live
-  stream), with the centring preview and the step crossing (the trajectory path before the
-  soft crossing) and with the soft crossing;
-* :func:`mismatch_rows`: one model error at a time (play, load, teeth, bearings; ±30 %) on
-  a base drive, both moves;
-* :func:`random_drives` and :func:`calibration_rows`: calibrate-then-compensate on N seeded
-  random drives with :func:`worm_gear_sim.identification.calibrate.calibrate` (the
-  calibration as it is), both moves.
+Moves :func:`sector_scan` and :func:`slew_reversals`; :func:`benefit` compensates a move
+on the known-trajectory path and measures the improvement; the studies
+:func:`crossing_rows`, :func:`mismatch_rows`, :func:`random_drives` and
+:func:`calibration_rows`.  docs/compensation.md.
 """
 
 from __future__ import annotations
@@ -41,12 +20,12 @@ from typing import Any
 
 import numpy as np
 
-from ..dynamics.batch import map_like_serial
+from ..compensation.play_crossing import soft_feedforward_series
+from ..config.usable import Config
 from ..dynamics.model import DriveModel
-from ..params import Config
-from ..play_crossing import soft_feedforward_series, trajectory_feedforward
+from ..joint_trajectory.compensate import antenna_error, trajectory_feedforward, trajectory_model
+from ..parallel.threads import map_like_serial
 from ..realtime import feedforward_series
-from ..trajectory_compensation import antenna_error, trajectory_model
 from .backlash_reversal import ARCMIN
 from .compensation_eval import _piecewise_accel_profile
 
@@ -152,7 +131,7 @@ def crossing_rows(base: Config, plays: Sequence[float] = CROSSING_PLAYS,
                   workers: int | None = None) -> list[dict]:
     """The sector scan (after ``rest`` s at rest) with perfect knowledge on every (play,
     load, drag) case: raw, causal, step crossing and soft crossing (module docstring).  The
-    cases run on ``workers`` threads (:func:`~worm_gear_sim.dynamics.batch.map_like_serial`;
+    cases run on ``workers`` threads (:func:`~worm_gear_sim.parallel.threads.map_like_serial`;
     1: in order in this thread), the same rows either way; ``progress`` sees each row as it
     is done (on threads, in the order they finish)."""
     cases = [(play, load, drag) for play in plays for load in loads for drag in drags]

@@ -1,25 +1,8 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
 """Antenna error against the mesh play and against the gust intensity, with and without the
-feed-forward (``worm-gear-sim sweep play gust``).
-
-Both run the radar slew of :func:`~.compensation_eval.radar_slew_scenario` (track, reverse at
-the acceleration limit, track back, stop, hold) on a plant that is the base config with the
-play or the wind, uncompensated and with the compensator designed on that same plant's
-config (it knows the play's size only as a parameter it does not use, and the wind's mean
-torque as ``load.output_torque``).  Metrics of the antenna error theta4 - theta1_ref l_w /
-r_g: RMS over the whole run, RMS over the reversal (from the end of the first tracking
-phase to 100 ms into the second), and the mean over the last 50 ms (the static error).
-
-* Play: ``mesh.backlash`` over ``PLAYS_ARCMIN`` under ``PLAY_LOAD`` (a load torque smaller
-  than the reversal's inertia torque, so the mesh changes flank at the reversal), with the
-  3 % modal damping of the reversal study (:mod:`.backlash_reversal`: undamped, every
-  impact of the teeth rings for seconds); series uncompensated, ``blind`` (the
-  feed-forward without its backlash inverse), compensated (with it) and ``compensated,
-  preview`` (with it and the centring preview,
-  :func:`~worm_gear_sim.compensation.centring_preview`).
-* Gusts: the wind model of :mod:`worm_gear_sim.dynamics.load` with mean ``GUST_MEAN`` and time
-  scale ``GUST_TIME_SCALE`` over ``GUST_INTENSITIES``, averaged over ``GUST_SEEDS``.
+feed-forward (``worm-gear-sim sweep play gust``): the radar slew on a plant with play
+(``PLAYS_ARCMIN``) or wind (``GUST_INTENSITIES``).  docs/compensation.md.
 """
 
 from __future__ import annotations
@@ -29,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from ..compensation import centring_preview
-from ..dynamics.batch import map_like_serial
+from ..compensation.streaming import centring_preview
+from ..config.usable import Config
 from ..dynamics.load import WindLoad
-from ..params import Config
+from ..parallel.threads import map_like_serial
 from .backlash_reversal import ARCMIN, REVERSAL_DAMPING
 from .compensation_eval import radar_slew_scenario, run_scenario
 
@@ -61,7 +44,7 @@ def _metrics(run: Any) -> dict[str, float]:
 
 def _run_all(jobs: Sequence[tuple], workers: int | None) -> list[dict[str, float]]:
     """The metrics of ``run_scenario(*job)`` for every job, on ``workers`` threads
-    (:func:`~worm_gear_sim.dynamics.batch.map_like_serial`; 1: in order in this thread): the
+    (:func:`~worm_gear_sim.parallel.threads.map_like_serial`; 1: in order in this thread): the
     same numbers either way; a failed run raises its own error."""
     return map_like_serial(lambda job: _metrics(run_scenario(*job)), jobs, workers=workers)
 

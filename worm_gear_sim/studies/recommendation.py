@@ -20,11 +20,12 @@ from typing import Any
 
 import numpy as np
 
-from ..params import Config
-from ..trajectory_compensation import antenna_error
+from ..config.usable import Config
+from ..joint_trajectory.compensate import antenna_error
 from .mismatch import benefit, sector_scan
 
-__all__ = ['Recommendation', 'recommend_compensator', 'COMPENSATOR_KEYS']
+__all__ = ['Recommendation', 'recommend_compensator', 'calibration_recommendation',
+           'COMPENSATOR_KEYS']
 
 #: The settings a recommendation names (the compensation section's choices).
 COMPENSATOR_KEYS = ('compensation.enabled', 'compensation.backlash_inverse',
@@ -109,3 +110,15 @@ def recommend_compensator(fitted: Config) -> Recommendation:
     flat = fitted.to_flat_dict()
     return Recommendation(settings, raw, rms, move.description, tried,
                           tuple(k for k, v in settings.items() if flat[k] != v))
+
+
+def calibration_recommendation(res: Any, stage: Any = None) -> Recommendation | None:
+    """The compensator settings recommended for an accepted calibration (a
+    :class:`~worm_gear_sim.identification.calibrate.CalibrationResult`) and the improvement
+    they predict on a sector scan (:func:`recommend_compensator`); None when not accepted.
+    ``stage``: the calibration's progress callback, told the stage's name."""
+    if not res.accepted:
+        return None
+    if stage is not None:
+        stage('predict a sector scan')
+    return recommend_compensator(res.config)

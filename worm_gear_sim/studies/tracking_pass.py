@@ -1,27 +1,11 @@
 # Copyright 2026 worm_gear_sim developers
 # Licensed under the Apache License, Version 2.0
-"""A tracking pass over a two-axis pedestal: a low-orbit satellite's azimuth / elevation
-versus time, streamed as trajectories of the drives' worm input joints, with and without
-compensation (``worm-gear-sim pass``, ``scripts/run_pass.sh``; docs/pedestal.md).
+"""A tracking pass over a two-axis pedestal (``worm-gear-sim pass``, ``scripts/run_pass.sh``).
 
-Pass model (:func:`satellite_pass`): a circular orbit of altitude ``altitude`` [m] about a
-spherical Earth (radius 6 371 km, mu = 3.986e14 m^3/s^2), Earth's rotation neglected, the
-ground track passing the station at the central angle that gives ``max_elevation``; the
-satellite's position in the station's east-north-up frame gives azimuth (from north towards
-east, unwrapped) and elevation.  A high pass (85 deg) swings the azimuth by ~180 deg around
-culmination, where its rate peaks (the pedestal's hardest moment; the keyhole of an az/el
-mount).  :func:`pass_window` keeps the part around culmination the demo runs.
-
-Streaming (:func:`stream_pass`): the pass is sent the way a tracking planner sends it, as
-overlapping trajectories (waypoints every ``waypoint_period`` s with positions and
-velocities, ``chunk`` s long, a new one every ``every`` s replacing the last in the middle
-of its move), the first with a lead-in from rest, the last with a lead-out to rest
-(LEAD_IN s each: the antenna is parked before and after the pass).  Every trajectory
-goes through the same :class:`~worm_gear_sim.trajectory_compensation.TrajectoryCompensator` as the
-node's; the command each drive executes is stitched from the dense compensated
-trajectories the way the controller switches (each from its start until the next one's),
-and the drive is simulated on it and on the raw reference: antenna pointing error
-theta4 - theta1_ref l_w / r_g per axis.
+:func:`satellite_pass` (a circular orbit's azimuth and elevation), :func:`pass_window`,
+and :func:`stream_pass` (the pass sent as overlapping trajectories through the node's
+``TrajectoryCompensator``, the drives simulated on the stitched commands).
+docs/pedestal.md.
 """
 
 from __future__ import annotations
@@ -32,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config.usable import Config
 from ..dynamics.model import DriveModel
-from ..params import Config
-from ..trajectory_compensation import (
+from ..joint_trajectory.compensate import (
     JointTrajectoryData,
     TrajectoryCompensator,
     antenna_error,
