@@ -10,7 +10,7 @@ run with three layouts measured one after the other on the same traffic:
 * ``processes``: two ``worm_gear_sim_node`` processes (namespaces /azimuth, /elevation).
 
 The probe (this process) publishes both axes' stamped references at 1 kHz (the slew of
-bench_node.py, 2 rad/s with reversals) and subscribes only to each axis'
+bench_node.py, 2 rad/s with reversals; ``--traffic pass``: a satellite pass) and subscribes only to each axis'
 ``~/compensated_command`` (what a servo needs per sample; the monitoring topics have no
 subscriber, so the nodes do not publish them; ``--monitor`` adds a joint_states
 subscriber per axis: the drives publish it at ``node.monitor_rate_hz`` = 50 Hz).
@@ -19,6 +19,8 @@ time), answered fraction, publish -> compensated_command latency p50 / p99 / max
 axis.  Targets: <= 0.20 core per axis, p99 <= 1 ms.
 
     python benchmarks/bench_pedestal.py --duration 15
+    python benchmarks/bench_pedestal.py --layouts floor,pedestal,pedestal@adaptive \
+        --traffic pass
 """
 
 from __future__ import annotations
@@ -49,14 +51,35 @@ PEDESTAL = ('import sys; from worm_gear_sim.ros.startup import pedestal_main; '
 
 
 def commands(layout: str) -> list[list[str]]:
+    """The processes of ``layout``; ``pedestal@adaptive`` / ``processes@adaptive``: the same
+    with every drive on the variable step (``-p integrator.method:=adaptive``)."""
     py = sys.executable
+    layout, _, method = layout.partition('@')
+    extra = ['-p', f'integrator.method:={method}'] if method else []
     if layout == 'floor':
         return [[py, str(Path(__file__).resolve().parent / 'relay_node.py'), *AXES]]
     if layout == 'pedestal':
-        return [[py, '-c', PEDESTAL, '--ros-args', '--log-level', 'warn']]
+        return [[py, '-c', PEDESTAL, '--ros-args', '--log-level', 'warn', *extra]]
     return [[py, '-m', 'worm_gear_sim.ros', '--ros-args', '--params-file', str(PARAMS_FILE),
-             '-r', f'__ns:=/{ns}', '-p', 'node.monitor_rate_hz:=50.0', '--log-level', 'warn']
-            for ns in AXES]
+             '-r', f'__ns:=/{ns}', '-p', 'node.monitor_rate_hz:=50.0', '--log-level', 'warn',
+             *extra] for ns in AXES]
+
+
+def traffic(kind: str, n: int) -> dict[str, np.ndarray]:
+    """Each axis' worm command every ms: ``slew``, the 2 rad/s slew with reversals of
+    bench_node.py (elevation at half the amplitude); ``pass``, a satellite pass around
+    culmination after a 2 s lead-in from rest (bench_method.py's stream), then held."""
+    if kind == 'slew':
+        x = np.array([slew(k * 1e-3, 2.0) for k in range(n)])
+        return {'azimuth': x, 'elevation': 0.5 * x}
+    from bench_method import lead_in
+
+    from worm_gear_sim import Config
+    from worm_gear_sim.dynamics.model import DriveModel
+    from worm_gear_sim.studies.tracking_pass import pass_window
+    ratio = DriveModel(Config()).output_per_input
+    _, az, el = pass_window(40.0)
+    return {'azimuth': lead_in((az - az[0]) / ratio), 'elevation': lead_in((el - el[0]) / ratio)}
 
 
 def measure(layout: str, args: argparse.Namespace, logs: Path) -> dict[str, Any]:
@@ -91,9 +114,10 @@ def measure(layout: str, args: argparse.Namespace, logs: Path) -> dict[str, Any]
             probe.create_subscription(JointState, f'/{ax}/joint_states',
                                       lambda m: None, QoSProfile(depth=10))
     joints = {'azimuth': 'azimuth_worm_input_joint', 'elevation': 'elevation_worm_input_joint'}
-    if layout != 'pedestal':
+    if layout.partition('@')[0] != 'pedestal':
         joints = dict.fromkeys(AXES, 'worm_input_joint')
     msgs = {ax: JointState(name=[joints[ax]], position=[0.0]) for ax in AXES}
+    path = traffic(args.traffic, n_max)
     run: dict[str, Any] = {'phase': 'wait', 'error': '', 'k': 0}
     done = Future()
     t_start = time.monotonic()
@@ -126,11 +150,10 @@ def measure(layout: str, args: argparse.Namespace, logs: Path) -> dict[str, Any]
         k = run['k']
         while k <= due and k < n_max:
             st = base['ns'] + k * 1_000_000
-            x = slew(k * 1e-3, 2.0)
             for ax in AXES:
                 m = msgs[ax]
                 m.header.stamp.sec, m.header.stamp.nanosec = divmod(st, 10**9)
-                m.position[0] = x if ax == 'azimuth' else 0.5 * x
+                m.position[0] = float(path[ax][min(k, path[ax].size - 1)])
                 t_pub[ax][k] = time.monotonic()
                 pubs[ax].publish(m)
             k += 1
@@ -169,6 +192,8 @@ def main() -> int:
     ap.add_argument('--duration', type=float, default=15.0, help='measured s per layout')
     ap.add_argument('--warmup', type=float, default=3.0)
     ap.add_argument('--layouts', default='floor,pedestal,processes')
+    ap.add_argument('--traffic', choices=('slew', 'pass'), default='slew',
+                    help='the commands (traffic()): the slew with reversals, or a pass')
     ap.add_argument('--monitor', action='store_true',
                     help='also subscribe to each axis\' joint_states (published at '
                     'node.monitor_rate_hz = 50 Hz by the pedestal\'s drives)')
@@ -182,7 +207,8 @@ def main() -> int:
         for layout in args.layouts.split(','):
             results[layout] = measure(layout, args, Path(d))
     load1 = os.getloadavg()
-    print(f'two axes at 1 kHz stamped, a correction per sample, {args.duration:g} s per '
+    print(f'two axes at 1 kHz stamped ({args.traffic}), a correction per sample, '
+          f'{args.duration:g} s per '
           f'layout after {args.warmup:g} s warm-up; load average {load0[0]:.2f} before, '
           f'{load1[0]:.2f} after (2 cores; the probe shares them)')
     print(f'  targets: <= {TARGETS["cpu_per_axis"]:g} core per axis, p99 <= '
@@ -196,12 +222,11 @@ def main() -> int:
         axes = '; '.join(f'{ax} answered {100 * r[ax]["answered"]:.2f} %, p50 '
                          f'{r[ax]["p50"]:.3f} ms, p99 {r[ax]["p99"]:.3f} ms, max '
                          f'{r[ax]["max"]:.1f} ms' for ax in AXES)
-        print(f'  {layout:9s}: {r["cpu_per_axis"]:.3f} core per axis; {axes}')
+        print(f'  {layout:17s}: {r["cpu_per_axis"]:.3f} core per axis; {axes}')
     if 'floor' in results and 'error' not in results['floor']:
         f = results['floor']['cpu_per_axis']
-        for layout in ('pedestal', 'processes'):
-            r = results.get(layout)
-            if r and 'error' not in r:
+        for layout, r in results.items():
+            if layout != 'floor' and 'error' not in r:
                 print(f'  {layout}: {r["cpu_per_axis"] / f:.2f}x the floor per axis '
                       f'(+{r["cpu_per_axis"] - f:.3f} core per axis above it)')
     return rc
