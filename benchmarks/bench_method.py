@@ -22,8 +22,10 @@ beside the load average).
 * ``calibrate``: ``--drives`` drives of bench_calibration.py's draw (seed 1), each
   calibrated with each method (one process, serial fit): wall time, accepted, the fitted
   play and load, the worst held-out error.
+* ``steps``: what decides it, the variable step's mean step and located events per second at a
+  constant worm rate, the drive unloaded and under a steady load.
 
-    python benchmarks/bench_method.py                        # all three
+    python benchmarks/bench_method.py                        # all four
     python benchmarks/bench_method.py --only pipeline --rounds 5
 """
 
@@ -184,9 +186,37 @@ def calibrate_rows(n: int) -> None:
     print(f'  {_load()}')
 
 
+def steps_at_a_constant_rate() -> None:
+    """What decides it: the variable step's mean step and located events per second over
+    [1, 3] s of a constant worm rate (reached by a 0.5 s half-cosine ramp from rest), the
+    drive unloaded and under a steady load (the kernel alone: adaptive_steps.kernel_run)."""
+    from adaptive_steps import ADAPTIVE, kernel_run
+
+    from worm_gear_sim.dynamics.integrator import S_ADAPTIVE_STEPS, S_EVENTS
+    from worm_gear_sim.dynamics.profiles import SampledProfile
+    print('the variable step at a constant worm rate, over [1, 3] s: mean step [us] / '
+          'located events per s')
+    loads = {'unloaded': {}, '5 N m': {'load.output_torque': 5.0},
+             '20 N m s/rad': {'load.output_viscous_coefficient': 20.0}}
+    rates = (0.5, 2.0, 5.0, 10.0, 20.0)
+    print(f'  {"load":<14}' + ''.join(f'{f"{r:g} rad/s":>20}' for r in rates))
+    t = np.arange(0.0, 3.0, 1e-3)
+    for name, load in loads.items():
+        cfg = Config().replace({**ADAPTIVE, **load})
+        cells = []
+        for rate in rates:
+            r = rate * np.where(t < 0.5, 0.5 - 0.5 * np.cos(np.pi * t / 0.5), 1.0)
+            w = np.concatenate(([0.0], np.cumsum((r[1:] + r[:-1]) / 2 * 1e-3)))
+            prof = SampledProfile(t, w)
+            (_, a), (_, b) = kernel_run(cfg, prof, 1.0), kernel_run(cfg, prof, 2.999)
+            n, ev = b[S_ADAPTIVE_STEPS] - a[S_ADAPTIVE_STEPS], b[S_EVENTS] - a[S_EVENTS]
+            cells.append(f'{2e6 / max(n, 1):8.2f} / {ev / 2:8.0f}')
+        print(f'  {name:<14}' + ''.join(f'{c:>20}' for c in cells), flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--only', choices=('pipeline', 'identify', 'calibrate'))
+    ap.add_argument('--only', choices=('pipeline', 'identify', 'calibrate', 'steps'))
     ap.add_argument('--rounds', type=int, default=3, help='rounds of pipeline and identify')
     ap.add_argument('--drives', type=int, default=2, help='drives of calibrate')
     a = ap.parse_args(argv)
@@ -196,6 +226,8 @@ def main(argv: list[str] | None = None) -> int:
         identify_rows(a.rounds)
     if a.only in (None, 'calibrate'):
         calibrate_rows(a.drives)
+    if a.only in (None, 'steps'):
+        steps_at_a_constant_rate()
     return 0
 
 
