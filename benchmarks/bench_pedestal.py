@@ -10,10 +10,10 @@ run with three layouts measured one after the other on the same traffic:
 * ``processes``: two ``worm_gear_sim_node`` processes (namespaces /azimuth, /elevation).
 
 The probe (this process) publishes both axes' stamped references at 1 kHz (the slew of
-bench_node.py, 2 rad/s with reversals; ``--traffic pass``: a satellite pass) and subscribes only to each axis'
-``~/compensated_command`` (what a servo needs per sample; the monitoring topics have no
-subscriber, so the nodes do not publish them; ``--monitor`` adds a joint_states
-subscriber per axis: the drives publish it at ``node.monitor_rate_hz`` = 50 Hz).
+bench_node.py, 2 rad/s with reversals; ``--traffic pass``: a satellite pass) and subscribes
+only to each axis' ``~/compensated_command`` (what a servo needs per sample; the monitoring
+topics have no subscriber, so the nodes do not publish them; ``--monitor`` adds a
+joint_states subscriber per axis: the drives publish it at ``node.monitor_rate_hz`` = 50 Hz).
 Reported per layout: CPU of the node process(es) per axis (utime + stime over wall
 time), answered fraction, publish -> compensated_command latency p50 / p99 / max per
 axis.  Targets: <= 0.20 core per axis, p99 <= 1 ms.
