@@ -23,22 +23,29 @@ if [ ! -x "$VENV/bin/python" ]; then
     echo "[setup] creating $VENV ($ROS_DISTRO) with $($PY --version)"
     "$PY" -m venv "$VENV"
 fi
+# pip, its warnings about an index or a find-links folder in the machine's pip configuration
+# that does not exist left out (one line per package for such a machine, not this project's);
+# every other line, and pip's exit status, kept.
+pip_install() {
+    "$VENV/bin/python" -m pip install --quiet "$@" 2>&1 \
+        | { grep -v -F 'is ignored: it is neither a file nor a directory' || true; }
+}
 stamp="$VENV/.worm_gear_sim_installed"
 if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ "$ROS_REQUIREMENTS" -nt "$stamp" ] \
         || [ setup.py -nt "$stamp" ] || [ package.xml -nt "$stamp" ]; then
     echo "[setup] installing requirements into $VENV (PyPI: numpy, scipy, numba, ROS 2" \
          "$ROS_DISTRO wheels; first run: about two minutes)"
-    "$VENV/bin/python" -m pip install --quiet --upgrade pip 'setuptools>=61,<80' wheel
-    "$VENV/bin/python" -m pip install --quiet -r requirements.txt -r "$ROS_REQUIREMENTS"
+    pip_install --upgrade pip 'setuptools>=61,<80' wheel
+    pip_install -r requirements.txt -r "$ROS_REQUIREMENTS"
     # Editable install: no data_files; the package finds config/ in the source tree.
-    "$VENV/bin/python" -m pip install --quiet --no-deps --no-build-isolation -e .
+    pip_install --no-deps --no-build-isolation -e .
     touch "$stamp"
 fi
 dev_stamp="$VENV/.worm_gear_sim_dev_installed"
 if [ "$DEV" = 1 ] && { [ ! -f "$dev_stamp" ] || [ requirements/dev.txt -nt "$dev_stamp" ] \
         || [ "$stamp" -nt "$dev_stamp" ]; }; then
     echo "[setup] installing the developer's tools into $VENV (requirements/dev.txt)"
-    "$VENV/bin/python" -m pip install --quiet -r requirements/dev.txt
+    pip_install -r requirements/dev.txt
     touch "$dev_stamp"
 fi
 # The PyPI ROS wheels re-exec Python once to set LD_LIBRARY_PATH; check that rclpy works.
