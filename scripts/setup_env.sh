@@ -37,8 +37,10 @@ if [ ! -f "$stamp" ] || [ requirements.txt -nt "$stamp" ] || [ "$ROS_REQUIREMENT
          "$ROS_DISTRO wheels; first run: about two minutes)"
     pip_install --upgrade pip 'setuptools>=61,<80' wheel
     pip_install -r requirements.txt -r "$ROS_REQUIREMENTS"
-    # Editable install: no data_files; the package finds config/ in the source tree.
-    pip_install --no-deps --no-build-isolation -e .
+    # Editable install: no data_files; the package finds config/ in the source tree.  (Python's
+    # warnings off for it: setuptools warns, in a 12-line banner, that a folder named like the
+    # package in the working directory may shadow it; here that folder is the package.)
+    PYTHONWARNINGS=ignore pip_install --no-deps --no-build-isolation -e .
     touch "$stamp"
 fi
 dev_stamp="$VENV/.worm_gear_sim_dev_installed"
