@@ -23,7 +23,9 @@ beside the load average).
   calibrated with each method (one process, serial fit): wall time, accepted, the fitted
   play and load, the worst held-out error.
 * ``steps``: what decides it, the variable step's mean step and located events per second at a
-  constant worm rate, the drive unloaded and under a steady load.
+  constant worm rate, the drive unloaded and under a steady load; and the worm's speed under
+  the same loads with the fixed step at 4 and 1 us (the stick-slip is the model's, not the
+  variable step's).
 
     python benchmarks/bench_method.py                        # all four
     python benchmarks/bench_method.py --only pipeline --rounds 5
@@ -45,6 +47,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from worm_gear_sim import Config, make_profile  # noqa: E402
 from worm_gear_sim.dynamics.model import DriveModel  # noqa: E402
+from worm_gear_sim.dynamics.simulation import Simulator  # noqa: E402
 from worm_gear_sim.realtime import RealtimePredictor  # noqa: E402
 
 METHODS = ('fixed', 'adaptive')
@@ -212,6 +215,17 @@ def steps_at_a_constant_rate() -> None:
             n, ev = b[S_ADAPTIVE_STEPS] - a[S_ADAPTIVE_STEPS], b[S_EVENTS] - a[S_EVENTS]
             cells.append(f'{2e6 / max(n, 1):8.2f} / {ev / 2:8.0f}')
         print(f'  {name:<14}' + ''.join(f'{c:>20}' for c in cells), flush=True)
+    print('the fixed step at 5 rad/s, the worm speed omega2 over [1.09, 1.1] s (min, max) '
+          '[rad/s]:')
+    r = 5.0 * np.where(t < 0.5, 0.5 - 0.5 * np.cos(np.pi * t / 0.5), 1.0)
+    prof = SampledProfile(t, np.concatenate(([0.0], np.cumsum((r[1:] + r[:-1]) / 2 * 1e-3))))
+    for name, load in loads.items():
+        for dt in (4e-6, 1e-6):
+            cfg = Config().replace({**load, 'integrator.time_step': dt})
+            tr = Simulator(cfg).run(prof, 1.1)
+            w2 = tr.omega[tr.t >= 1.09, 0]
+            print(f'  {name:<14} time step {dt * 1e6:g} us: {w2.min():7.3f} {w2.max():7.3f}',
+                  flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
