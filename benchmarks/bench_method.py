@@ -199,7 +199,8 @@ def steps_at_a_constant_rate() -> None:
     from worm_gear_sim.dynamics.profiles import SampledProfile
     print('the variable step at a constant worm rate, over [1, 3] s: mean step [us] / '
           'located events per s')
-    loads = {'unloaded': {}, '5 N m': {'load.output_torque': 5.0},
+    loads = {'unloaded': {}, '0.01 N m': {'load.output_torque': 0.01},
+             '0.1 N m': {'load.output_torque': 0.1}, '5 N m': {'load.output_torque': 5.0},
              '20 N m s/rad': {'load.output_viscous_coefficient': 20.0}}
     rates = (0.5, 2.0, 5.0, 10.0, 20.0)
     print(f'  {"load":<14}' + ''.join(f'{f"{r:g} rad/s":>20}' for r in rates))
