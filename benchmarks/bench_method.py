@@ -7,7 +7,7 @@ the kernel, side by side in one run: the same work with each method, in alternat
 beside the load average).
 
 * ``pipeline``: the node's per-sample work, ``RealtimePredictor.push`` per stamped 1 kHz
-  sample (the correction, 1 ms of physics, a prediction), on four streams: the paper's
+  sample (the correction, 1 ms of physics, a prediction), on five streams: the paper's
   18-step move, the +-5 deg sector scan at the antenna, the 2 rad/s worm slew with
   reversals under a 5 N m load (bench_realtime.py's stream) and 20 s of a satellite pass
   around culmination on both axes of the pedestal, each after a 2 s lead-in from rest
