@@ -189,6 +189,14 @@ def calibrate_rows(n: int) -> None:
     print(f'  {_load()}')
 
 
+def constant_rate(t: np.ndarray, rate: float):
+    """The worm command on the 1 ms grid ``t``: from rest to ``rate`` [rad/s] over 0.5 s
+    (the rate rising as a half cosine), then constant."""
+    from worm_gear_sim.dynamics.profiles import SampledProfile
+    r = rate * np.where(t < 0.5, 0.5 - 0.5 * np.cos(np.pi * t / 0.5), 1.0)
+    return SampledProfile(t, np.concatenate(([0.0], np.cumsum((r[1:] + r[:-1]) / 2 * 1e-3))))
+
+
 def steps_at_a_constant_rate() -> None:
     """What decides it: the variable step's mean step and located events per second over
     [1, 3] s of a constant worm rate (reached by a 0.5 s half-cosine ramp from rest), the
@@ -196,7 +204,6 @@ def steps_at_a_constant_rate() -> None:
     from adaptive_steps import ADAPTIVE, kernel_run
 
     from worm_gear_sim.dynamics.integrator import S_ADAPTIVE_STEPS, S_EVENTS
-    from worm_gear_sim.dynamics.profiles import SampledProfile
     print('the variable step at a constant worm rate, over [1, 3] s: mean step [us] / '
           'located events per s')
     loads = {'unloaded': {}, '0.01 N m': {'load.output_torque': 0.01},
@@ -209,17 +216,14 @@ def steps_at_a_constant_rate() -> None:
         cfg = Config().replace({**ADAPTIVE, **load})
         cells = []
         for rate in rates:
-            r = rate * np.where(t < 0.5, 0.5 - 0.5 * np.cos(np.pi * t / 0.5), 1.0)
-            w = np.concatenate(([0.0], np.cumsum((r[1:] + r[:-1]) / 2 * 1e-3)))
-            prof = SampledProfile(t, w)
+            prof = constant_rate(t, rate)
             (_, a), (_, b) = kernel_run(cfg, prof, 1.0), kernel_run(cfg, prof, 2.999)
             n, ev = b[S_ADAPTIVE_STEPS] - a[S_ADAPTIVE_STEPS], b[S_EVENTS] - a[S_EVENTS]
             cells.append(f'{2e6 / max(n, 1):8.2f} / {ev / 2:8.0f}')
         print(f'  {name:<14}' + ''.join(f'{c:>20}' for c in cells), flush=True)
     print('the fixed step at 5 rad/s, the worm speed omega2 over [1.09, 1.1] s (min, max) '
           '[rad/s]:')
-    r = 5.0 * np.where(t < 0.5, 0.5 - 0.5 * np.cos(np.pi * t / 0.5), 1.0)
-    prof = SampledProfile(t, np.concatenate(([0.0], np.cumsum((r[1:] + r[:-1]) / 2 * 1e-3))))
+    prof = constant_rate(t, 5.0)
     for name, load in loads.items():
         for dt in (4e-6, 1e-6):
             cfg = Config().replace({**load, 'integrator.time_step': dt})

@@ -153,13 +153,19 @@ def radau_set_valued(cfg: Config, times: np.ndarray, t_end: float):
     if key not in _SET_VALUED_REFS:
         _SET_VALUED_REFS[key] = _radau_set_valued_segments(cfg, t_end)
     segments, n_events = _SET_VALUED_REFS[key]
-    out = np.full((len(times), 3), np.nan)
+    return _sample(segments, times, 3), n_events
+
+
+def _sample(segments: list, times: np.ndarray, rows: int) -> np.ndarray:
+    """The first ``rows`` of the state (theta2..theta4, omega2..omega4) of an event-driven
+    solution's segments at ``times``."""
+    out = np.full((len(times), rows), np.nan)
     for t, t_stop, dense in segments:
         sel = (times >= t) & (times <= t_stop)
         if sel.any():
-            out[sel] = dense(times[sel])[:3].T
+            out[sel] = dense(times[sel])[:rows].T
     assert not np.isnan(out).any()
-    return out, n_events
+    return out
 
 
 def _radau_set_valued_segments(cfg: Config, t_end: float, y0: np.ndarray | None = None):
@@ -312,12 +318,7 @@ def test_set_valued_friction_under_a_load_agrees_with_event_driven_radau(method)
             cfg, t_end, np.r_[tr.theta[0], tr.omega[0]])
     segments, n_events = _LOADED_REF[5.0]
     assert sum(b > 0.006 for _, b, _ in segments[:-1]) > 100    # events after 6 ms
-    ref = np.full((tr.t.size, 4), np.nan)
-    for a, b, dense in segments:
-        sel = (tr.t >= a) & (tr.t <= b)
-        if sel.any():
-            ref[sel] = dense(tr.t[sel])[:4].T
-    assert not np.isnan(ref).any()
+    ref = _sample(segments, tr.t, 4)
     late = tr.t >= 0.006
     w2 = ref[late, 3]
     assert w2.min() < 0.01 * w2.max() and w2.max() > 1.8 * np.median(w2), (w2.min(), w2.max())
